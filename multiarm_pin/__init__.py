@@ -1,0 +1,1 @@
+"""multiarm_pin."""

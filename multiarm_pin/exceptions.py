@@ -1,0 +1,116 @@
+"""Exception hierarchy of multiarm_pin.
+
+Every error raised on purpose by the package derives from :class:`MultiArmError`, so a
+caller can catch them all at once. Exceptions carry the data a user needs to fix the
+input (valid names, the shape that was expected, the gap that was measured).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+
+class MultiArmError(Exception):
+    """Root of every error raised on purpose by multiarm_pin."""
+
+
+class InputError(MultiArmError, ValueError):
+    """An argument has the wrong shape, type or value (e.g. a non-unit quaternion)."""
+
+
+class RobotNotFoundError(MultiArmError, KeyError):
+    """A robot name is not known.
+
+    Attributes:
+        name: the name that was asked for.
+        available: the names that would have worked.
+    """
+
+    def __init__(self, name: str, available: Sequence[str]):
+        self.name = name
+        self.available = sorted(available)
+        super().__init__(
+            f"unknown robot {name!r}; available robots: {', '.join(self.available)}"
+        )
+
+    def __str__(self) -> str:  # KeyError would otherwise quote the message
+        return str(self.args[0])
+
+
+class URDFError(MultiArmError):
+    """A URDF file cannot be read or is not a valid robot description.
+
+    Attributes:
+        path: the file.
+    """
+
+    def __init__(self, path: str, reason: str):
+        self.path = str(path)
+        self.reason = reason
+        super().__init__(f"{self.path}: {reason}")
+
+
+class FrameNotFoundError(MultiArmError, KeyError):
+    """A frame name does not exist in a model.
+
+    Attributes:
+        frame: the missing frame name.
+        available: the frame names the model has.
+        source: where the model came from (URDF path or robot name).
+    """
+
+    def __init__(self, frame: str, available: Sequence[str], source: str = ""):
+        self.frame = frame
+        self.available = list(available)
+        self.source = source
+        where = f" in {source}" if source else ""
+        super().__init__(
+            f"frame {frame!r} not found{where}; frames available: {', '.join(self.available)}"
+        )
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+class SingularityError(MultiArmError, ArithmeticError):
+    """A quantity that needs an invertible matrix was asked for at a singularity.
+
+    Attributes:
+        what: the matrix that is singular (e.g. ``"J M^-1 J^T"``).
+        condition: its condition number (``inf`` when exactly singular).
+    """
+
+    def __init__(self, what: str, condition: float, hint: str = ""):
+        self.what = what
+        self.condition = float(condition)
+        msg = f"{what} is singular or badly conditioned (condition number {condition:.3g})"
+        if hint:
+            msg += f": {hint}"
+        super().__init__(msg)
+
+
+class GraspError(MultiArmError, ValueError):
+    """A grasp or contact definition is invalid (point off its face, bad face index...)."""
+
+
+class ConstraintError(MultiArmError, ValueError):
+    """A joint or contact definition is invalid or violated beyond tolerance."""
+
+
+class DynamicsError(MultiArmError, ArithmeticError):
+    """The equations of motion have no solution, or the state is invalid (NaN, inconsistent)."""
+
+
+class ScenarioError(MultiArmError, ValueError):
+    """A scenario file is invalid.
+
+    Attributes:
+        file: the scenario file.
+        key: the key path, e.g. ``"arms[1].joint.type"``.
+    """
+
+    def __init__(self, file: str, key: str, message: str):
+        self.file = str(file)
+        self.key = key
+        self.message = message
+        super().__init__(f"{self.file}: {key}: {message}" if key else f"{self.file}: {message}")
