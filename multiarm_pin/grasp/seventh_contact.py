@@ -1,0 +1,482 @@
+"""Where on a flat face a further contact completes form closure (thesis Sec 2.2.2).
+
+Two methods give the region, both as a convex polygon in the face's own 2-D coordinates
+(``Polyhedron.face_frame``: a face point is ``origin + s u + t v``):
+
+* :func:`region_by_inverse` (Eq 2.3): with six independent contacts ``W6``, a seventh contact
+  at ``p7`` with inward normal ``e7`` closes the grasp iff every entry of
+  ``W6^-1 [e7; p7 × e7]`` is negative. ``p7 × e7 = (e7×)ᵀ p7`` is linear in ``p7``, so on the
+  face this is an intersection of (up to six) open half-planes ``A s < b``. The inverse is
+  formed with the blocks of Eq 2.2.
+* :func:`region_by_generators` (Eq 2.4), which accepts any number K >= 6 of fixed contacts:
+  closure needs ``e7 = -Σ λ_k e_k`` and ``p7 × e7 = -Σ λ_k (p_k × e_k)`` with all ``λ_k > 0``.
+  The ``λ`` with ``Σ λ_k e_k = -e7, λ >= 0`` form a polyhedron whose vertices (the thesis's
+  ``b_i``) and extreme rays (its ``c_j``) map to generators of the admissible moments; Eq 2.4
+  keeps the combinations perpendicular to ``e7`` (a double-description step), and
+  ``p7 = proj + e7 × m`` (Appendix A.3: the moment is the in-plane offset from the projected
+  origin turned by -90° about ``e7``) turns moments into face points.
+
+The region is open (strict inequalities); the polygon returned is its closure clipped to the
+face, and it is reported empty when it has no area.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import combinations
+
+import numpy as np
+from scipy.optimize import linprog
+from scipy.spatial import ConvexHull, QhullError
+
+from multiarm_pin.exceptions import GraspError
+from multiarm_pin.grasp.contacts import Grasp
+from multiarm_pin.grasp.independence import block_decomposition
+from multiarm_pin.polyhedron import Polyhedron
+from multiarm_pin.spatial import skew
+
+AREA_TOLERANCE = 1e-12
+"""Regions with less area than this times the face's area count as empty."""
+
+
+@dataclass(frozen=True)
+class ContactRegion:
+    """The region of a face where one more contact completes form closure.
+
+    Attributes:
+        face: face index.
+        face_name: face name (or ``#k``).
+        origin: (3,) origin of the face coordinates (object frame) [m].
+        axes: (3, 3) columns ``u, v, n``: in-face axes and the outward normal.
+        polygon: (V, 2) closure of the region clipped to the face, counter-clockwise in
+            face coordinates ``(s, t)`` [m]; shape (0, 2) when empty.
+        bounded: the region on the whole (unbounded) plane of the face is bounded.
+        method: ``"inverse"`` (Eq 2.3) or ``"generators"`` (Eq 2.4).
+        halfplanes: ``(A (m, 2), b (m,))`` with the region ``A s < b`` on the plane
+            (method ``"inverse"``; also derived for ``"generators"`` from the polygon's edges
+            when bounded), or ``None``.
+        points: (k, 2) generator points (method ``"generators"``), face coordinates [m].
+        rays: (r, 2) generator directions (method ``"generators"``), unit length.
+        reason: why the region is empty, or ``""``.
+    """
+
+    face: int
+    face_name: str
+    origin: np.ndarray
+    axes: np.ndarray
+    polygon: np.ndarray
+    bounded: bool
+    method: str
+    halfplanes: tuple[np.ndarray, np.ndarray] | None = None
+    points: np.ndarray | None = None
+    rays: np.ndarray | None = None
+    reason: str = ""
+
+    @property
+    def empty(self) -> bool:
+        """True when no point of the face completes form closure."""
+        return len(self.polygon) == 0
+
+    @property
+    def vertices_3d(self) -> np.ndarray:
+        """(V, 3) polygon vertices in the object frame [m], in order around the polygon."""
+        return self.to_object(self.polygon)
+
+    @property
+    def area(self) -> float:
+        """Area of the clipped region [m^2]."""
+        return polygon_area(self.polygon)
+
+    def to_object(self, s: np.ndarray) -> np.ndarray:
+        """Face coordinates (k, 2) -> object-frame points (k, 3) [m]."""
+        s = np.asarray(s, dtype=float).reshape(-1, 2)
+        return self.origin + s @ self.axes[:, :2].T
+
+    def to_face(self, p: np.ndarray) -> np.ndarray:
+        """Object-frame points (k, 3) -> face coordinates (k, 2) [m] (projected on the face)."""
+        p = np.asarray(p, dtype=float).reshape(-1, 3)
+        return (p - self.origin) @ self.axes[:, :2]
+
+    def contains(self, s: np.ndarray, margin: float = 0.0) -> np.ndarray:
+        """Whether face points (k, 2) lie inside the clipped polygon by more than ``margin`` m.
+
+        Returns:
+            (k,) bool.
+        """
+        s = np.asarray(s, dtype=float).reshape(-1, 2)
+        if self.empty:
+            return np.zeros(len(s), dtype=bool)
+        return signed_inside_distance(self.polygon, s) > margin
+
+
+def region_by_inverse(grasp: Grasp, face: int | str, fixed=(0, 1, 2, 3, 4, 5)) -> ContactRegion:
+    """Region for a seventh contact on ``face`` by Eq 2.3.
+
+    Args:
+        grasp: grasp with a polyhedron; ``fixed`` selects its six independent contacts.
+        face: face index or name for the new contact.
+        fixed: indices of the six fixed contacts.
+
+    Returns:
+        A :class:`ContactRegion` (method ``"inverse"``) whose ``halfplanes`` are the six
+        inequalities of Eq 2.3 restricted to the face's plane.
+
+    Raises:
+        GraspError: no polyhedron, not six fixed contacts, or the six are not independent.
+    """
+    poly, k, origin, R = _face_setup(grasp, face)
+    idx = list(fixed)
+    if len(idx) != 6:
+        raise GraspError(f"Eq 2.3 needs exactly six fixed contacts, got {len(idx)}")
+    _check_indices(grasp, idx)
+    dec = block_decomposition(grasp.points[idx], grasp.normals[idx])
+    if not dec.independent:
+        raise GraspError(
+            "Eq 2.3 needs six independent contacts: e_A or a = a_A T1 + a_B is singular "
+            f"(cond e_A = {dec.cond_e_A:.3g}, cond a = {dec.cond_a:.3g})"
+        )
+    Winv = dec.inverse()
+    e7 = -poly.normals[k]
+    U = R[:, :2]
+    S = skew(e7).T  # (e7×)ᵀ p = p × e7
+    A = Winv[:, 3:] @ S @ U
+    b = -(Winv @ np.concatenate([e7, S @ origin]))
+    return _region_from_halfplanes(poly, k, origin, R, A, b)
+
+
+def region_by_generators(grasp: Grasp, face: int | str, fixed=None) -> ContactRegion:
+    """Region for one more contact on ``face`` by the polyhedral method (Eq 2.4).
+
+    Args:
+        grasp: grasp with a polyhedron.
+        face: face index or name for the new contact.
+        fixed: indices of the fixed contacts (any number >= 6; default: all of them).
+
+    Returns:
+        A :class:`ContactRegion` (method ``"generators"``) with the generator points and rays
+        in face coordinates.
+
+    Raises:
+        GraspError: no polyhedron or fewer than six fixed contacts.
+    """
+    poly, k, origin, R = _face_setup(grasp, face)
+    idx = list(range(len(grasp))) if fixed is None else list(fixed)
+    if len(idx) < 6:
+        raise GraspError(f"the region needs at least six fixed contacts, got {len(idx)}")
+    _check_indices(grasp, idx)
+    p, n = grasp.points[idx], grasp.normals[idx]
+    E, M = n.T, np.cross(p, n).T
+    e7 = -poly.normals[k]
+    name = _name(poly, k)
+    W = np.vstack([E, M])
+    scale = max(1.0, float(np.abs(p).max()))
+
+    def empty(reason: str) -> ContactRegion:
+        return ContactRegion(
+            k,
+            name,
+            origin,
+            R,
+            np.zeros((0, 2)),
+            True,
+            "generators",
+            None,
+            np.zeros((0, 2)),
+            np.zeros((0, 2)),
+            reason,
+        )
+
+    if np.linalg.matrix_rank(W, tol=1e-9 * max(1.0, np.abs(W).max())) < 6:
+        return empty("the fixed contacts' wrenches have rank < 6")
+    if not _strictly_positive_force_solution(E, e7):
+        return empty(
+            f"the normal of face {name} is not a strictly negative combination of the "
+            "fixed contacts' normals with all of them pushing"
+        )
+    verts, rays = _force_generators(E, e7)
+    Q_pts = [-(M @ lam) for lam in verts]
+    Q_rays = [-(M @ rho) for rho in rays]
+    pts, dirs = _cut_with_plane(Q_pts, Q_rays, e7, 1e-12 * scale)
+    proj = poly.offsets[k] * poly.normals[k]  # projection of the frame origin on the plane
+    U = R[:, :2]
+    s_pts = np.array([U.T @ (proj + np.cross(e7, m) - origin) for m in pts]).reshape(-1, 2)
+    s_dirs = np.array([U.T @ np.cross(e7, r) for r in dirs]).reshape(-1, 2)
+    norms = np.linalg.norm(s_dirs, axis=1)
+    s_dirs = s_dirs[norms > 1e-12] / norms[norms > 1e-12, None] if len(s_dirs) else s_dirs
+    s_dirs = _unique_rows(s_dirs, 1e-9)
+    s_pts = _unique_rows(s_pts, 1e-12 * scale)
+    face2d = _face_polygon(poly, k, origin, R)
+    if len(s_pts) == 0:
+        return empty("no admissible moment lies in the face's plane (Eq 2.4 has no solution)")
+    reach = 10.0 * (np.abs(face2d).max() + np.abs(s_pts).max() + 1.0)
+    big = np.vstack([s_pts] + [s_pts + 1e3 * reach * d for d in s_dirs])
+    hull = _hull2d(big)
+    polygon = _clip(face2d, _edges_to_halfplanes(hull)) if len(hull) >= 3 else np.zeros((0, 2))
+    face_area = polygon_area(face2d)
+    reason = ""
+    if len(polygon) < 3 or polygon_area(polygon) <= AREA_TOLERANCE * face_area:
+        polygon = np.zeros((0, 2))
+        reason = "the admissible region does not meet the face with positive area"
+    halfplanes = _edges_to_halfplanes(hull) if len(s_dirs) == 0 and len(hull) >= 3 else None
+    return ContactRegion(
+        k,
+        name,
+        origin,
+        R,
+        polygon,
+        len(s_dirs) == 0,
+        "generators",
+        halfplanes,
+        s_pts,
+        s_dirs,
+        reason,
+    )
+
+
+def box_corner_region_lines(a: float, b: float, c: float, d: float, e: float, f: float):
+    """Closed form of Example 2.1 for the top face of a box.
+
+    Contacts at ``(l_x, a, b)`` on +x, ``(c, l_y, d)`` on +y, ``(e, f, l_z)`` on +z and the
+    mirrored points ``-p1, -p2, -p3`` on the opposite faces; a seventh contact at
+    ``(x, y, l_z)`` closes the grasp iff ``(f x - e y) / det < 0`` and
+    ``(ad x - bc y) / det < -1``, ``det = det(a_A) = ade - bcf``.
+
+    Returns:
+        ``(A (2, 2), rhs (2,))`` with the region ``A [x; y] < rhs`` in the object's x-y
+        coordinates [m].
+    """
+    det = a * d * e - b * c * f
+    if abs(det) < 1e-15:
+        raise GraspError("Example 2.1: det(a_A) = ade - bcf is zero; the contacts are dependent")
+    return np.array([[f, -e], [a * d, -b * c]]) / det, np.array([0.0, -1.0])
+
+
+def polygon_area(poly2d: np.ndarray) -> float:
+    """Signed area [m^2] of a polygon (V, 2) (positive when counter-clockwise)."""
+    P = np.asarray(poly2d, dtype=float).reshape(-1, 2)
+    if len(P) < 3:
+        return 0.0
+    x, y = P[:, 0], P[:, 1]
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def signed_inside_distance(poly2d: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """For a convex CCW polygon (V, 2): min over edges of the distance inside (k,) [m]."""
+    A, b = _edges_to_halfplanes(poly2d)
+    s = np.asarray(s, dtype=float).reshape(-1, 2)
+    return np.min(b[None, :] - s @ A.T, axis=1)
+
+
+# --- helpers ---------------------------------------------------------------------------------
+
+
+def _face_setup(grasp: Grasp, face):
+    poly = grasp.polyhedron
+    if poly is None:
+        raise GraspError("the contact region needs the object's polyhedron (grasp.polyhedron)")
+    try:
+        k = poly.face_index(face)
+    except Exception as exc:  # InputError from the polyhedron
+        raise GraspError(f"seventh-contact face: {exc}") from exc
+    origin, R = poly.face_frame(k)
+    return poly, k, origin, R
+
+
+def _check_indices(grasp: Grasp, idx) -> None:
+    if len(set(idx)) != len(idx) or not all(0 <= i < len(grasp) for i in idx):
+        raise GraspError(
+            f"fixed contacts: expected distinct indices in 0..{len(grasp) - 1}, got {list(idx)}"
+        )
+
+
+def _name(poly: Polyhedron, k: int) -> str:
+    return poly.face_names[k] if poly.face_names else f"#{k}"
+
+
+def _face_polygon(poly: Polyhedron, k: int, origin, R) -> np.ndarray:
+    V = poly.vertices[list(poly.faces[k])]
+    P = (V - origin) @ R[:, :2]
+    return P if polygon_area(P) > 0 else P[::-1]
+
+
+def _region_from_halfplanes(poly, k, origin, R, A, b) -> ContactRegion:
+    name = _name(poly, k)
+    row = np.linalg.norm(A, axis=1)
+    scale = max(1.0, float(np.abs(b).max(initial=0.0)))
+    const = row <= 1e-12 * scale
+    if np.any(b[const] <= 0):
+        polygon = np.zeros((0, 2))
+        reason = "a constant inequality of Eq 2.3 fails: the face's normal cannot close the grasp"
+        return ContactRegion(
+            k, name, origin, R, polygon, True, "inverse", (A, b), None, None, reason
+        )
+    An, bn = A[~const] / row[~const, None], b[~const] / row[~const]
+    face2d = _face_polygon(poly, k, origin, R)
+    polygon = _clip(face2d, (An, bn))
+    reason = ""
+    if len(polygon) < 3 or polygon_area(polygon) <= AREA_TOLERANCE * polygon_area(face2d):
+        polygon = np.zeros((0, 2))
+        reason = "the half-planes of Eq 2.3 do not meet inside the face"
+    bounded = _halfplanes_bounded(An)
+    return ContactRegion(
+        k, name, origin, R, polygon, bounded, "inverse", (An, bn), None, None, reason
+    )
+
+
+def _halfplanes_bounded(A: np.ndarray) -> bool:
+    """Whether {s: A s <= b} is bounded (when non-empty): its recession cone is {0}."""
+    if len(A) == 0:
+        return False
+    for a in A:
+        for d in (np.array([-a[1], a[0]]), np.array([a[1], -a[0]])):
+            if np.all(A @ d <= 1e-12):
+                return False
+    return True
+
+
+def _clip(polygon: np.ndarray, halfplanes) -> np.ndarray:
+    """Sutherland-Hodgman: convex polygon (V, 2) ∩ {s: A s <= b}."""
+    A, b = halfplanes
+    P = np.asarray(polygon, dtype=float)
+    for a, beta in zip(A, b, strict=True):
+        if len(P) == 0:
+            break
+        val = P @ a - beta
+        out = []
+        for i in range(len(P)):
+            j = (i + 1) % len(P)
+            vi, vj = val[i], val[j]
+            if vi <= 0:
+                out.append(P[i])
+            if (vi < 0 < vj) or (vj < 0 < vi):
+                t = vi / (vi - vj)
+                out.append(P[i] + t * (P[j] - P[i]))
+        P = np.array(out).reshape(-1, 2)
+    return _unique_rows_ordered(P, 1e-12)
+
+
+def _edges_to_halfplanes(poly2d: np.ndarray):
+    """Half-planes ``A s <= b`` (unit rows) of a CCW convex polygon's edges."""
+    P = np.asarray(poly2d, dtype=float)
+    d = np.roll(P, -1, axis=0) - P
+    normals = np.column_stack([d[:, 1], -d[:, 0]])  # outward for CCW
+    lens = np.linalg.norm(normals, axis=1)
+    keep = lens > 1e-15
+    normals = normals[keep] / lens[keep, None]
+    return normals, np.einsum("ij,ij->i", normals, P[keep])
+
+
+def _hull2d(points: np.ndarray) -> np.ndarray:
+    pts = np.asarray(points, dtype=float)
+    if len(pts) < 3:
+        return np.zeros((0, 2))
+    try:
+        hull = ConvexHull(pts)
+    except QhullError:
+        return np.zeros((0, 2))
+    return pts[hull.vertices]  # CCW in 2-D
+
+
+def _unique_rows(X: np.ndarray, tol: float) -> np.ndarray:
+    out: list[np.ndarray] = []
+    for x in np.asarray(X, dtype=float).reshape(len(X), -1):
+        if not any(np.linalg.norm(x - y) <= tol for y in out):
+            out.append(x)
+    return np.array(out).reshape(-1, np.asarray(X).shape[1] if np.ndim(X) == 2 else 2)
+
+
+def _unique_rows_ordered(P: np.ndarray, tol: float) -> np.ndarray:
+    out: list[np.ndarray] = []
+    for x in P:
+        if not out or np.linalg.norm(x - out[-1]) > tol:
+            out.append(x)
+    if len(out) > 1 and np.linalg.norm(out[0] - out[-1]) <= tol:
+        out.pop()
+    return np.array(out).reshape(-1, 2)
+
+
+def _strictly_positive_force_solution(E: np.ndarray, e7: np.ndarray) -> bool:
+    """Exists ``λ > 0`` with ``E λ = -e7`` (the forces of Eq 2.1 with every contact pushing)."""
+    K = E.shape[1]
+    # max t  s.t.  E λ + e7 s = 0, λ >= t, s >= t, Σλ + s = 1
+    c = np.zeros(K + 2)
+    c[-1] = -1.0
+    A_eq = np.zeros((4, K + 2))
+    A_eq[:3, :K] = E
+    A_eq[:3, K] = e7
+    A_eq[3, : K + 1] = 1.0
+    b_eq = np.array([0.0, 0.0, 0.0, 1.0])
+    A_ub = np.hstack([-np.eye(K + 1), np.ones((K + 1, 1))])
+    res = linprog(
+        c,
+        A_ub=A_ub,
+        b_ub=np.zeros(K + 1),
+        A_eq=A_eq,
+        b_eq=b_eq,
+        bounds=[(0, None)] * (K + 1) + [(None, None)],
+        method="highs",
+    )
+    return bool(res.status == 0 and res.x[-1] > 1e-10)
+
+
+def _force_generators(E: np.ndarray, e7: np.ndarray):
+    """Vertices and extreme rays of ``{λ >= 0 : E λ = -e7}`` (E is 3 x K).
+
+    Vertices are basic solutions on 3 independent columns; rays are the non-negative null
+    vectors of minimal supports (2 to 4 columns). These are the thesis's ``B̃`` and ``C̃``.
+    """
+    K = E.shape[1]
+    verts: list[np.ndarray] = []
+    for S in combinations(range(K), 3):
+        ES = E[:, S]
+        if np.linalg.cond(ES) > 1e10:
+            continue
+        lam_S = np.linalg.solve(ES, -e7)
+        if np.all(lam_S >= -1e-12):
+            lam = np.zeros(K)
+            lam[list(S)] = np.maximum(lam_S, 0.0)
+            if not any(np.allclose(lam, v, atol=1e-12) for v in verts):
+                verts.append(lam)
+    rays: list[np.ndarray] = []
+    for size in (2, 3, 4):
+        for S in combinations(range(K), size):
+            ES = E[:, S]
+            _, sv, Vt = np.linalg.svd(ES)
+            rank = int(np.sum(sv > 1e-10))
+            if rank != size - 1:
+                continue
+            v = Vt[-1]
+            if np.all(v < 0):
+                v = -v
+            if np.all(v > 1e-12):
+                rho = np.zeros(K)
+                rho[list(S)] = v / v.sum()
+                if not any(np.allclose(rho, r, atol=1e-10) for r in rays):
+                    rays.append(rho)
+    return verts, rays
+
+
+def _cut_with_plane(points, rays, h, tol):
+    """Generators of (conv(points) + cone(rays)) ∩ {x : h·x = 0} (one double-description step)."""
+    hp = [float(h @ q) for q in points]
+    hr = [float(h @ r) for r in rays]
+    out_pts, out_rays = [], []
+    for q, v in zip(points, hp, strict=True):
+        if abs(v) <= tol:
+            out_pts.append(q)
+    for (qi, vi), (qj, vj) in combinations(list(zip(points, hp, strict=True)), 2):
+        if (vi > tol and vj < -tol) or (vi < -tol and vj > tol):
+            out_pts.append((vi * qj - vj * qi) / (vi - vj))
+    for q, v in zip(points, hp, strict=True):
+        for r, w in zip(rays, hr, strict=True):
+            if (v > tol and w < -tol) or (v < -tol and w > tol):
+                out_pts.append(q - (v / w) * r)
+    for r, w in zip(rays, hr, strict=True):
+        if abs(w) <= tol:
+            out_rays.append(r)
+    for (ri, wi), (rj, wj) in combinations(list(zip(rays, hr, strict=True)), 2):
+        if (wi > tol and wj < -tol) or (wi < -tol and wj > tol):
+            out_rays.append(
+                (wi * rj - wj * ri) / (wi - wj) if wi > 0 else (wj * ri - wi * rj) / (wj - wi)
+            )
+    return out_pts, out_rays
