@@ -29,9 +29,7 @@ class RobotNotFoundError(MultiArmError, KeyError):
     def __init__(self, name: str, available: Sequence[str]):
         self.name = name
         self.available = sorted(available)
-        super().__init__(
-            f"unknown robot {name!r}; available robots: {', '.join(self.available)}"
-        )
+        super().__init__(f"unknown robot {name!r}; available robots: {', '.join(self.available)}")
 
     def __str__(self) -> str:  # KeyError would otherwise quote the message
         return str(self.args[0])

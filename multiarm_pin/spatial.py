@@ -52,7 +52,9 @@ def skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
-def as_unit_quaternion(q, name: str = "quaternion", tol: float = QUATERNION_TOLERANCE) -> np.ndarray:
+def as_unit_quaternion(
+    q, name: str = "quaternion", tol: float = QUATERNION_TOLERANCE
+) -> np.ndarray:
     """Check a user quaternion ``[x, y, z, w]`` and return it normalised, shape (4,).
 
     Raises:
@@ -118,7 +120,9 @@ def integrate_quaternion(q: np.ndarray, omega_world: np.ndarray, dt: float) -> n
     return rotation_to_quaternion(dR @ quaternion_to_rotation(q))
 
 
-def se3_from(position, rotation=None, quaternion=None, rpy=None, name: str = "placement") -> pin.SE3:
+def se3_from(
+    position, rotation=None, quaternion=None, rpy=None, name: str = "placement"
+) -> pin.SE3:
     """Build a ``pin.SE3`` from a position [m] and one of rotation (3x3), quaternion or rpy."""
     p = as_array(position, (3,), f"{name}.position")
     given = [x is not None for x in (rotation, quaternion, rpy)]
@@ -147,3 +151,14 @@ def wrench_transform(R: np.ndarray, x: np.ndarray) -> np.ndarray:
     out[3:, 3:] = R
     out[3:, :3] = skew(x) @ R
     return out
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product along the last axis of broadcastable (..., 3) arrays.
+
+    Same result as ``np.cross(a, b)`` at a fraction of its Python overhead (it matters in
+    the per-step hot path).
+    """
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)

@@ -1,0 +1,215 @@
+"""All arms of a system evaluated together as one combined Pinocchio model.
+
+Per-arm Python calls would dominate the cost of every dynamics evaluation. :class:`ArmSet`
+appends every arm's model (base already baked in, names prefixed with ``<arm name>/``) into one
+Pinocchio model with ``pin.appendModel``, so each Pinocchio algorithm (CRBA, nonlinear effects,
+Jacobians and their time variation) is a single call whatever the number of arms. The per-arm
+results are then gathered into stacked, padded arrays with a few numpy operations.
+
+State layout: ``q`` is the concatenation of the arms' configurations in arm order
+(``ArmSet.q_slices``), ``v`` likewise (``ArmSet.v_slices``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from multiarm_pin.arm import Arm
+from multiarm_pin.exceptions import InputError
+from multiarm_pin.kinematics import BodyKinematics
+from multiarm_pin.spatial import as_array, cross
+
+
+@dataclass(frozen=True)
+class ArmSetTerms:
+    """Stacked terms of n arms at one state; padded to ``nv_max`` degrees of freedom.
+
+    Padded entries are zero, except ``M`` which has ones on its padded diagonal so that every
+    block stays invertible.
+
+    Attributes:
+        M: (n, nv_max, nv_max) joint-space mass matrices [kg m^2].
+        nle: (n, nv_max) nonlinear effects ``C v + g`` [N m].
+        J: (n, 6, nv_max) tool Jacobians, LOCAL_WORLD_ALIGNED.
+        Jdot_qdot: (n, 6) classical tool accelerations at zero joint acceleration, world axes.
+        tools: :class:`BodyKinematics` of the n tool frames (world placements, LWA twists).
+        v: (n, nv_max) joint velocities, padded.
+    """
+
+    M: np.ndarray
+    nle: np.ndarray
+    J: np.ndarray
+    Jdot_qdot: np.ndarray
+    tools: BodyKinematics
+    v: np.ndarray
+
+
+class ArmSet:
+    """The arms of one system as a single combined Pinocchio model.
+
+    Args:
+        arms: the arms; their names must be unique.
+    """
+
+    def __init__(self, arms: list[Arm]):
+        if not arms:
+            raise InputError("an ArmSet needs at least one arm")
+        names = [a.name for a in arms]
+        if len(set(names)) != len(names):
+            raise InputError(f"arm names must be unique, got {names}")
+        self.arms = list(arms)
+        model = pin.Model()
+        model.gravity = arms[0].model.gravity
+        for arm in arms:
+            model = pin.appendModel(
+                model, _prefixed(arm.model, f"{arm.name}/"), 0, pin.SE3.Identity()
+            )
+        self.model = model
+        self.data = model.createData()
+        self.n = len(arms)
+        self.nq = model.nq
+        self.nv = model.nv
+        self.tool_frame_ids = np.array(
+            [model.getFrameId(f"{a.name}/{a.model.frames[a.tool_frame_id].name}") for a in arms]
+        )
+        q_starts, v_starts, q0, v0 = [], [], 0, 0
+        for a in arms:
+            q_starts.append(q0)
+            v_starts.append(v0)
+            q0 += a.nq
+            v0 += a.nv
+        self.q_slices = [slice(s, s + a.nq) for s, a in zip(q_starts, arms, strict=True)]
+        self.v_slices = [slice(s, s + a.nv) for s, a in zip(v_starts, arms, strict=True)]
+        self.nv_arm = np.array([a.nv for a in arms])
+        self.nv_max = int(self.nv_arm.max())
+        # gather indices into the combined velocity vector, padded with index 0 and masked
+        idx = np.zeros((self.n, self.nv_max), dtype=int)
+        mask = np.zeros((self.n, self.nv_max), dtype=bool)
+        support = np.zeros((self.n, self.nv_max), dtype=bool)
+        for i, a in enumerate(arms):
+            idx[i, : a.nv] = np.arange(v_starts[i], v_starts[i] + a.nv)
+            mask[i, : a.nv] = True
+            parent = model.frames[int(self.tool_frame_ids[i])].parentJoint
+            for j in model.supports[parent]:
+                if j == 0:
+                    continue
+                jm = model.joints[j]
+                support[i, jm.idx_v - v_starts[i] : jm.idx_v - v_starts[i] + jm.nv] = True
+        self._idx = idx
+        self.dof_mask = mask
+        self._support = support.astype(float)
+        self._eye_pad = np.zeros((self.n, self.nv_max, self.nv_max))
+        for i in range(self.n):
+            pad = ~mask[i]
+            self._eye_pad[i, pad, pad] = 1.0
+        self._mask2 = (mask[:, :, None] & mask[:, None, :]).astype(float)
+        self._mask_f = mask.astype(float)
+
+    # ------------------------------------------------------------------ state helpers
+    def neutral(self) -> np.ndarray:
+        """(nq,) neutral configuration of all arms."""
+        return pin.neutral(self.model)
+
+    def stack_q(self, qs: list) -> np.ndarray:
+        """Concatenate per-arm configurations into the combined ``q`` (nq,)."""
+        if len(qs) != self.n:
+            raise InputError(f"expected {self.n} configurations, got {len(qs)}")
+        return np.concatenate(
+            [as_array(q, (a.nq,), f"{a.name}: q") for q, a in zip(qs, self.arms, strict=True)]
+        )
+
+    def stack_v(self, vs: list) -> np.ndarray:
+        """Concatenate per-arm velocities into the combined ``v`` (nv,)."""
+        if len(vs) != self.n:
+            raise InputError(f"expected {self.n} velocity vectors, got {len(vs)}")
+        return np.concatenate(
+            [as_array(v, (a.nv,), f"{a.name}: v") for v, a in zip(vs, self.arms, strict=True)]
+        )
+
+    def pad_v(self, v: np.ndarray) -> np.ndarray:
+        """Combined (nv,) vector -> stacked, zero-padded (n, nv_max)."""
+        return v[self._idx] * self._mask_f
+
+    def unpad_v(self, x: np.ndarray) -> np.ndarray:
+        """Stacked (n, nv_max) -> combined (nv,) (padding dropped)."""
+        return x[self.dof_mask]
+
+    # ------------------------------------------------------------------ evaluation
+    def evaluate(self, q: np.ndarray, v: np.ndarray) -> ArmSetTerms:
+        """All arms' dynamic terms at the combined state ``(q, v)`` in one Pinocchio pass.
+
+        Args:
+            q: (nq,) combined configuration.
+            v: (nv,) combined velocity.
+
+        Returns:
+            :class:`ArmSetTerms`, world frame, tool quantities LOCAL_WORLD_ALIGNED.
+        """
+        model, data = self.model, self.data
+        pin.computeJointJacobiansTimeVariation(model, data, q, v)  # FK, J and dJ (world)
+        pin.crba(model, data, q)
+        pin.nonLinearEffects(model, data, q, v)
+        oMf = [pin.updateFramePlacement(model, data, int(f)) for f in self.tool_frame_ids]
+        p = np.array([m.translation for m in oMf])  # (n, 3)
+        R = np.array([m.rotation for m in oMf])  # (n, 3, 3)
+        idx, sup = self._idx, self._support
+        Jw = np.moveaxis(data.J[:, idx], 1, 0) * sup[:, None, :]  # (n, 6, nv_max) world, at origin
+        dJw = np.moveaxis(data.dJ[:, idx], 1, 0) * sup[:, None, :]
+        vp = v[idx] * self._mask_f  # (n, nv_max)
+        J = Jw.copy()
+        # velocity of the tool point: v_O + ω × p  ->  linear rows minus p × angular rows
+        w = Jw[:, 3:, :]
+        px, py, pz = p[:, 0, None], p[:, 1, None], p[:, 2, None]
+        J[:, 0, :] -= py * w[:, 2] - pz * w[:, 1]
+        J[:, 1, :] -= pz * w[:, 0] - px * w[:, 2]
+        J[:, 2, :] -= px * w[:, 1] - py * w[:, 0]
+        twist = np.einsum("nij,nj->ni", J, vp)
+        a0 = np.einsum("nij,nj->ni", dJw, vp)  # world spatial acceleration at q̈ = 0
+        # classical acceleration of the tool point: a_O + α × p + ω × v_p
+        lin = a0[:, :3] + cross(a0[:, 3:], p) + cross(twist[:, 3:], twist[:, :3])
+        Jdot_qdot = np.concatenate([lin, a0[:, 3:]], axis=1)
+        M = data.M[idx[:, :, None], idx[:, None, :]] * self._mask2 + self._eye_pad
+        nle = data.nle[idx] * self._mask_f
+        return ArmSetTerms(
+            M=M,
+            nle=nle,
+            J=J,
+            Jdot_qdot=Jdot_qdot,
+            tools=BodyKinematics(p, R, twist),
+            v=vp,
+        )
+
+    def gravity(self, q: np.ndarray) -> np.ndarray:
+        """(n, nv_max) gravity torques of all arms at the combined configuration ``q`` [N m]."""
+        g = pin.computeGeneralizedGravity(self.model, self.data, q)
+        return g[self._idx] * self._mask_f
+
+    def tool_kinematics(self, q: np.ndarray, v: np.ndarray | None = None) -> BodyKinematics:
+        """World placements and LWA twists of the n tools at ``(q, v)``."""
+        v = np.zeros(self.nv) if v is None else v
+        pin.forwardKinematics(self.model, self.data, q, v)
+        LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        p, R, tw = [], [], []
+        for f in self.tool_frame_ids:
+            m = pin.updateFramePlacement(self.model, self.data, int(f))
+            p.append(m.translation.copy())
+            R.append(m.rotation.copy())
+            tw.append(pin.getFrameVelocity(self.model, self.data, int(f), LWA).vector.copy())
+        return BodyKinematics(np.array(p), np.array(R), np.array(tw))
+
+
+def _prefixed(model: pin.Model, prefix: str) -> pin.Model:
+    """Copy of ``model`` with every joint and frame name (but the universe) prefixed."""
+    out = pin.Model(model)
+    for j in range(1, out.njoints):
+        out.names[j] = prefix + out.names[j]
+    for k in range(out.nframes):
+        f = out.frames[k]
+        if f.name == "universe":
+            continue
+        f.name = prefix + f.name
+        out.frames[k] = f
+    return out

@@ -1,0 +1,69 @@
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from multiarm_pin.exceptions import InputError
+from multiarm_pin.spatial import (
+    as_array,
+    as_unit_quaternion,
+    cross,
+    integrate_quaternion,
+    quaternion_derivative,
+    quaternion_to_rotation,
+    rotation_to_quaternion,
+    rpy_to_rotation,
+    se3_from,
+    skew,
+    wrench_transform,
+)
+
+
+def test_quaternion_conventions_match_pinocchio(rng):
+    for _ in range(20):
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        R = pin.Quaternion(q).toRotationMatrix()  # pin takes coeffs [x, y, z, w]
+        assert np.allclose(quaternion_to_rotation(q), R)
+        q2 = rotation_to_quaternion(R)
+        assert np.allclose(q2, q) or np.allclose(q2, -q)
+
+
+def test_quaternion_derivative_matches_integration(rng):
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    w = rng.normal(size=3)
+    dt = 1e-6
+    fd = (integrate_quaternion(q, w, dt) - integrate_quaternion(q, w, -dt)) / (2 * dt)
+    qd = quaternion_derivative(q, w)
+    if np.dot(integrate_quaternion(q, w, dt), q) < 0:
+        fd = -fd
+    assert np.allclose(fd, qd, atol=1e-6) or np.allclose(-fd, qd, atol=1e-6)
+
+
+def test_cross_skew_rpy_and_wrench_transform(rng):
+    a, b = rng.normal(size=(5, 3)), rng.normal(size=(5, 3))
+    assert np.allclose(cross(a, b), np.cross(a, b))
+    assert np.allclose(skew(a[0]) @ b[0], np.cross(a[0], b[0]))
+    r, p, y = 0.1, -0.4, 1.2
+    Rx = pin.utils.rotate("x", r)
+    Ry = pin.utils.rotate("y", p)
+    Rz = pin.utils.rotate("z", y)
+    assert np.allclose(rpy_to_rotation([r, p, y]), Rz @ Ry @ Rx)
+    R = rpy_to_rotation([r, p, y])
+    x = rng.normal(size=3)
+    f = pin.Force(rng.normal(size=6))
+    M = pin.SE3(R, x)
+    assert np.allclose(wrench_transform(R, x) @ f.vector, M.act(f).vector)
+
+
+def test_validation_messages():
+    with pytest.raises(InputError, match=r"position: expected shape \(3,\), got shape \(2,\)"):
+        as_array([1, 2], (3,), "position")
+    with pytest.raises(InputError, match="expected numbers"):
+        as_array(["a", "b"], (2,), "x")
+    with pytest.raises(InputError, match="norm 2"):
+        as_unit_quaternion([0, 0, 0, 2])
+    with pytest.raises(InputError, match="only one of"):
+        se3_from([0, 0, 0], rpy=[0, 0, 0], quaternion=[0, 0, 0, 1])
+    with pytest.raises(InputError, match="rotation matrix"):
+        se3_from([0, 0, 0], rotation=np.ones((3, 3)))
