@@ -1,0 +1,72 @@
+"""Command line of the grasp analysis: ``multiarm-pin grasp FILE.yaml`` (or this module).
+
+``configure_parser`` adds the arguments to a parser given by the main command line and
+``run`` executes them; ``python -m multiarm_pin.grasp.cli FILE`` runs them stand-alone.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from multiarm_pin.exceptions import MultiArmError, ScenarioError
+from multiarm_pin.grasp.report import analyse, draw_grasp, format_report, load_grasp_file
+
+
+def configure_parser(parser: argparse.ArgumentParser) -> None:
+    """Add the grasp command's arguments: FILE, ``--json``, ``--picture``, ``--no-picture``."""
+    parser.add_argument("file", metavar="FILE", help="grasp YAML file")
+    parser.add_argument("--json", action="store_true", help="print the report as JSON")
+    parser.add_argument(
+        "--picture",
+        metavar="PATH",
+        default=None,
+        help="where to save the picture (default: <stem>_grasp.png next to FILE)",
+    )
+    parser.add_argument("--no-picture", action="store_true", help="do not draw the picture")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Analyse ``args.file`` and print the report.
+
+    Returns:
+        0 on success; 2 when the file or the grasp is invalid (message on stderr naming the
+        file and the key).
+    """
+    try:
+        gf = load_grasp_file(args.file)
+        rep, region = analyse(gf)
+    except ScenarioError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except MultiArmError as exc:
+        print(f"error: {args.file}: {exc}", file=sys.stderr)
+        return 2
+    if not getattr(args, "no_picture", False):
+        path = (
+            Path(args.picture) if args.picture else gf.path.with_name(f"{gf.path.stem}_grasp.png")
+        )
+        try:
+            draw_grasp(gf.grasp, region, path, title=gf.path.name)
+            rep["picture"] = str(path)
+        except OSError as exc:
+            print(f"error: cannot write the picture {path}: {exc}", file=sys.stderr)
+            return 2
+    if args.json:
+        print(json.dumps(rep, indent=2))
+    else:
+        print(format_report(rep))
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Stand-alone entry point (``python -m multiarm_pin.grasp.cli``)."""
+    parser = argparse.ArgumentParser(prog="multiarm-pin grasp", description=__doc__)
+    configure_parser(parser)
+    return run(parser.parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
