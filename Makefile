@@ -1,24 +1,37 @@
-# Two commands for a fresh machine with Python 3.11: `make demo` and `make test`.
+# Two commands for a fresh machine with only Python 3.11: `make demo` and `make test`.
+# Each creates or updates the local virtual environment .venv by itself.
 PYTHON ?= python3.11
 VENV := .venv
-STAMP := $(VENV)/.installed
+STAMP := $(VENV)/.installed-$(shell cksum pyproject.toml | cut -d' ' -f1)
 
-.PHONY: demo test lint venv clean
+.PHONY: demo test lint browser venv clean
 
 $(STAMP): pyproject.toml
-	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "$(PYTHON) not found: set PYTHON=/path/to/python3.11"; exit 1; }
-	test -d $(VENV) || $(PYTHON) -m venv $(VENV)
+	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "$(PYTHON) not found: install Python 3.11 or run make PYTHON=/path/to/python3.11"; exit 1; }
+	test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
 	$(VENV)/bin/python -m pip install --quiet --upgrade pip
 	$(VENV)/bin/python -m pip install --quiet -e '.[dev]'
+	rm -f $(VENV)/.installed-*
 	touch $(STAMP)
 
 venv: $(STAMP)
 
+## The main job: run the default scenario, write results and a replay page.
 demo: $(STAMP)
-	$(VENV)/bin/multiarm-pin demo
+	$(VENV)/bin/multiarm-pin info
 
-test: $(STAMP)
+## The whole test suite (installs headless Chromium for the browser test when it can).
+test: $(STAMP) browser
 	$(VENV)/bin/python -m pytest -q
+
+## Headless Chromium for the replay-page browser test (Debian package; needs root/apt).
+browser:
+	@command -v chromium >/dev/null 2>&1 || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing chromium for the browser test (apt-get)"; \
+	    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null) \
+	      || echo "chromium could not be installed: the browser test will be skipped"; \
+	  else echo "chromium not found and not root: the browser test will be skipped"; fi; }
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
