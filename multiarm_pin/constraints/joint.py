@@ -351,9 +351,14 @@ class Joint:
         xt = tool.position[0]
         w = np.array([np.concatenate([s.normal, np.cross(s.tip_center - xt, s.normal)])
                       for s in states])
-        # reference: object frame = world, so W_mi_o = wᵀ
+        # reference: object frame = world, so W_mi_o = wᵀ. Twists are compared as
+        # [v; L ω] with L the largest lever arm about the tool origin, so that metres and
+        # radians weigh alike.
+        L = max(float(np.max(np.linalg.norm([s.tip_center - xt for s in states], axis=1))),
+                1e-9)
+        w = np.hstack([w[:, :3], w[:, 3:] / L])
         _, _, vh = np.linalg.svd(w)
-        basis = vh[self.rank:].T  # (6, k) orthonormal null space of W_mi_oᵀ
+        basis = vh[self.rank:].T  # (6, k) orthonormal null space (scaled twists)
         if alpha_rows is not None:
             rows = tuple(_twist_row(r, self.name) for r in alpha_rows)
             if len(rows) != k or len(set(rows)) != k:
@@ -416,7 +421,7 @@ def _independent_subset(G: np.ndarray) -> tuple[tuple[int, ...], tuple[int, ...]
     for k in range(len(Gs)):
         trial = Gs[kept + [k]]
         s = np.linalg.svd(trial, compute_uv=False)
-        if s[-1] > RANK_TOLERANCE * max(1.0, s[0]):
+        if len(trial) <= 6 and s[-1] > RANK_TOLERANCE * max(1.0, s[0]):
             kept.append(k)
         else:
             dropped.append(k)
