@@ -10,7 +10,8 @@ default); the two coincide when the joint is assembled. In J:
   (6 contacts, rank 5), 1 DOF;
 - cylindrical along/about z: the revolute without its end contact, 2 DOF;
 - universal, rotations about x and y: 3 contacts on a sphere (mutually perpendicular
-  normals) + 1 on a plane of normal y, at a point of the x axis, 2 DOF;
+  normals) + 1 on a plane of normal y with its tip centre on the x axis, 2 DOF
+  (the allowed motions are ``Ry(b) Rx(a)`` of the tool side);
 - spherical about the origin: 3 contacts on a sphere, 3 DOF;
 - corner gripper (Example 3.1): J at a corner of a box occupying x, y, z <= 0; contacts 1 and
   3 on the face z = 0, 2 on y = 0, 4 on x = 0; 2 DOF.
@@ -248,13 +249,14 @@ def universal(joint_in_object, joint_in_tool=None, size: float = DEFAULT_SIZE,
               tip_radius: float = 0.0, points_on: str = "tool", name: str = "") -> Joint:
     """Rotations about J's x and y axes: 3 contacts on a ball + 1 on the plane y = 0, 2 DOF."""
     L = _size(size)
-    spec = _sphere_spec(L) + [_plane_at([2 * L, 0, 0], _EY)]
+    # the plane contact's tip centre sits on the x axis, so both rotations keep it closed
+    spec = _sphere_spec(L) + [_plane_at([2 * L, -float(tip_radius), 0], _EY)]
     return _build("universal", spec, joint_in_object, joint_in_tool, tip_radius, points_on, 2,
                   name)
 
 
 def corner_gripper(joint_in_object, joint_in_tool=None, points=None, size: float = DEFAULT_SIZE,
-                   tip_radius: float = 0.0, name: str = "") -> Joint:
+                   tip_radius: float = 0.0, name: str = "", alpha_rows=None) -> Joint:
     """Example 3.1: a gripper holding a box corner with 4 contacts, 2 DOF.
 
     Args:
@@ -267,10 +269,13 @@ def corner_gripper(joint_in_object, joint_in_tool=None, points=None, size: float
         size: scale of the default pattern [m].
         tip_radius: fingertip radius [m].
         name: label.
+        alpha_rows: motion coordinates (e.g. ``["vx", "vy"]`` as in Example 3.1); chosen
+            automatically when None.
 
     Raises:
-        ConstraintError: a point off its face or outside the box, or a pattern with
-            ``adf + bce = 0`` (fewer than 4 independent constraints).
+        ConstraintError: a point off its face or outside the box, contacts giving fewer than
+            4 independent constraints, or ``alpha_rows`` that cannot parametrise the motion
+            (``["vx", "vy"]`` needs ``adf + bce != 0``, letters of Example 3.1).
     """
     L = _size(size)
     if points is None:
@@ -290,7 +295,7 @@ def corner_gripper(joint_in_object, joint_in_tool=None, points=None, size: float
             )
     spec = [_plane_at(p, np.eye(3)[f]) for p, f in zip(pts, faces, strict=True)]
     return _build("corner_gripper", spec, joint_in_object, joint_in_tool, tip_radius, "tool", 2,
-                  name)
+                  name, alpha_rows)
 
 
 def fingertips_on_faces(
@@ -404,7 +409,7 @@ def _rigid_fit(tips_in_tool: np.ndarray, centres_in_object: np.ndarray) -> pin.S
 
 
 def custom(contacts: Sequence[Mapping], joint_in_object, joint_in_tool=None,
-           expected_dof: int | None = None, name: str = "") -> Joint:
+           expected_dof: int | None = None, name: str = "", alpha_rows=None) -> Joint:
     """A joint from explicit contacts defined in the joint frame J.
 
     Args:
@@ -415,6 +420,7 @@ def custom(contacts: Sequence[Mapping], joint_in_object, joint_in_tool=None,
         joint_in_tool: placement of J in the tool frame (identity when None).
         expected_dof: if given, the DOF the contacts must leave.
         name: label.
+        alpha_rows: motion coordinates (names of ``TWIST_NAMES``); automatic when None.
     """
     J_o = as_placement(joint_in_object, "custom joint_in_object")
     J_t = pin.SE3.Identity() if joint_in_tool is None else as_placement(
@@ -435,7 +441,7 @@ def custom(contacts: Sequence[Mapping], joint_in_object, joint_in_tool=None,
                      float(c.get("tip_radius", 0.0)), c.get("points_on", "tool"))
         )
     return Joint(built, J_o * J_t.inverse(), kind="custom", name=name or "custom",
-                 expected_dof=expected_dof)
+                 expected_dof=expected_dof, alpha_rows=alpha_rows)
 
 
 JOINT_TYPES: dict[str, Callable[..., Joint]] = {
