@@ -1,0 +1,468 @@
+"""Assembly: arms + object + joints + a state -> the coefficient blocks of the dynamics.
+
+:class:`MultiArmSystem` owns one :class:`~multiarm_pin.arm_set.ArmSet` (all arms as one
+combined Pinocchio model, with the system's gravity) and one
+:class:`~multiarm_pin.constraints.ConstraintSet`. For a :class:`SystemState` it computes, with
+one Pinocchio pass, one vectorised constraint evaluation and a few ``einsum`` calls (no Python
+loop over arms), the padded :class:`~multiarm_pin.dynamics.SystemBlocks` of
+``docs/ARCHITECTURE.md``::
+
+    W_i = J_iᵀ G_tool,iᵀ        W_o,i = G_object,iᵀ        h_i = τ_i - nle_i
+    c_i = -G_tool,i J̇q̇_i - κ_i  (Baumgarte: - 2α φ̇_i - β² φ_i)
+    M_o = diag(m I, R I_c Rᵀ)   h_o = [m g; -ω × I_w ω]
+
+Joints whose geometry is "where the tool is at t = 0" need the initial tool and object
+placements: :func:`joints_from_initial_state` (or :meth:`MultiArmSystem.from_initial_state`)
+builds them from the arms' initial configurations and the object's initial pose.
+
+State layout: ``q`` (nq,) and ``v`` (nv,) are the arms' configurations and velocities
+concatenated in arm order (``system.arm_set.q_slices`` / ``v_slices``); the object has its
+own :class:`~multiarm_pin.rigid_object.ObjectState` (COM position, quaternion ``[x, y, z, w]``,
+twist ``[ẋ; ω]`` in world axes).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from multiarm_pin.arm import Arm
+from multiarm_pin.arm_set import ArmSet, ArmSetTerms
+from multiarm_pin.constraints import (
+    JOINT_DOF,
+    ConstraintSet,
+    ConstraintTerms,
+    Joint,
+    fingertips_from_placements,
+    make_joint_from_placements,
+)
+from multiarm_pin.dynamics import Solution, SystemBlocks, solve
+from multiarm_pin.exceptions import ConstraintError, DynamicsError, InputError
+from multiarm_pin.kinematics import BodyKinematics
+from multiarm_pin.rigid_object import ObjectState, RigidObject
+from multiarm_pin.spatial import as_array, as_unit_quaternion, cross
+
+UNILATERAL_JOINT_KINDS = frozenset({"fingertips"})
+"""Joint kinds whose contacts are unilateral (a frictionless fingertip can only push).
+
+The joint library has no per-contact flag; fingertip grasps (``Joint.kind == "fingertips"``)
+are the unilateral ones, every other joint (weld, revolute, ...) is bilateral."""
+
+VELOCITY_TOLERANCE = 1e-6
+"""Default largest accepted initial ``|φ̇|`` [m/s] (:meth:`MultiArmSystem.check_initial_state`)."""
+
+
+@dataclass(frozen=True)
+class SystemState:
+    """State of the whole system.
+
+    Attributes:
+        q: (nq,) arms' joint positions, concatenated in arm order [rad or m].
+        v: (nv,) arms' joint velocities, same order [rad/s or m/s].
+        obj: the object's pose and twist (:class:`ObjectState`).
+    """
+
+    q: np.ndarray
+    v: np.ndarray
+    obj: ObjectState
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Everything computed for one state (and torque).
+
+    Attributes:
+        blocks: the padded coefficient blocks (``h`` includes the torque given, if any).
+        arms: the arms' stacked Pinocchio terms (mass matrices, tool Jacobians, ...).
+        constraints: the constraint rows (``φ``, ``φ̇``, ``G``, ``κ``, contact points ...).
+    """
+
+    blocks: SystemBlocks
+    arms: ArmSetTerms
+    constraints: ConstraintTerms
+
+
+JointSpec = Joint | str | Mapping | Callable[[pin.SE3, pin.SE3], Joint]
+"""What :func:`joints_from_initial_state` accepts for one arm (see there)."""
+
+
+def joints_from_initial_state(
+    arms: Sequence[Arm],
+    obj: RigidObject,
+    q0: Sequence,
+    object_position,
+    object_quaternion,
+    specs: Sequence[JointSpec],
+) -> list[Joint]:
+    """Build each arm's joint from where its tool is at t = 0.
+
+    Args:
+        arms: the n arms.
+        obj: the object (its shape is used by fingertip grasps).
+        q0: n initial configurations, ``q0[i]`` of shape (nq_i,).
+        object_position: (3,) initial COM position [m].
+        object_quaternion: (4,) initial orientation ``[x, y, z, w]``.
+        specs: one per arm, each either a ready :class:`Joint`; a joint type name of
+            ``JOINT_DOF`` (``"weld"``, ``"revolute"``, ...; the joint frame is the tool frame at
+            t = 0); a mapping ``{"type": name, **params}`` (extra parameters such as ``size``;
+            for ``"fingertips"``: ``contacts`` = ``[(face, point_in_object), ...]`` and
+            ``radius`` [m]); or a callable ``f(tool_placement, object_placement) -> Joint``.
+
+    Returns:
+        The n joints.
+
+    Raises:
+        InputError: wrong counts or a spec that is none of the above.
+        ConstraintError: from the joint library (unknown type, bad parameters).
+    """
+    if len(arms) != len(specs) or len(arms) != len(q0):
+        raise InputError(
+            f"joints_from_initial_state: {len(arms)} arms, {len(q0)} configurations and "
+            f"{len(specs)} joint specs; expected one of each per arm"
+        )
+    oMo = pin.SE3(
+        pin.Quaternion(as_unit_quaternion(object_quaternion, "object quaternion"))
+        .toRotationMatrix(),
+        as_array(object_position, (3,), "object position"),
+    )
+    joints = []
+    for i, (arm, q, spec) in enumerate(zip(arms, q0, specs, strict=True)):
+        oMt = arm.tool_placement(q)
+        if isinstance(spec, Joint):
+            joints.append(spec)
+        elif isinstance(spec, str):
+            joints.append(make_joint_from_placements(spec, oMt, oMo, name=f"{arm.name}:{spec}"))
+        elif isinstance(spec, Mapping):
+            params = dict(spec)
+            kind = params.pop("type", None)
+            params.setdefault("name", f"{arm.name}:{kind}")
+            if kind == "fingertips":
+                joints.append(fingertips_from_placements(obj.shape, tool_placement=oMt,
+                                                         object_placement=oMo, **params))
+            elif kind in JOINT_DOF:
+                joints.append(make_joint_from_placements(kind, oMt, oMo, **params))
+            else:
+                raise ConstraintError(
+                    f"arm {i} ({arm.name}): joint type {kind!r} cannot be built from the "
+                    f"initial state; known: {', '.join(sorted([*JOINT_DOF, 'fingertips']))}"
+                )
+        elif callable(spec):
+            joints.append(spec(oMt, oMo))
+        else:
+            raise InputError(
+                f"arm {i} ({arm.name}): joint spec must be a Joint, a type name, a mapping "
+                f"with 'type', or a callable(tool_placement, object_placement); got "
+                f"{type(spec).__name__}"
+            )
+    return joints
+
+
+class MultiArmSystem:
+    """n arms holding one rigid object through joints made of frictionless point contacts.
+
+    Args:
+        arms: the arms (unique names); ``joints[i]`` connects arm i's tool and the object.
+        obj: the object.
+        joints: one :class:`Joint` per arm.
+        gravity: (3,) gravity acceleration in the world [m/s²]; set on the combined
+            Pinocchio model too.
+
+    Attributes:
+        n_arms, nq, nv: numbers of arms, configuration variables and joint velocities.
+        arm_set: the combined Pinocchio model of the arms (:class:`ArmSet`).
+        constraint_set: the joints, vectorised (:class:`ConstraintSet`).
+        obj: the object; joints: the joints; gravity: (3,) [m/s²].
+        unilateral: (n, N_max) bool, True on constraint rows that are unilateral
+            (fingertip contacts), False on bilateral rows and padding.
+    """
+
+    def __init__(self, arms: list[Arm], obj: RigidObject, joints: list[Joint],
+                 gravity=(0.0, 0.0, -9.81)):
+        if not isinstance(obj, RigidObject):
+            raise InputError(f"obj: expected a RigidObject, got {type(obj).__name__}")
+        if len(arms) != len(joints):
+            raise InputError(
+                f"MultiArmSystem: {len(arms)} arms but {len(joints)} joints; expected one "
+                "joint per arm"
+            )
+        self.gravity = as_array(gravity, (3,), "gravity [m/s^2]")
+        self.arm_set = ArmSet(list(arms))
+        self.arm_set.model.gravity = pin.Motion(self.gravity, np.zeros(3))
+        self.constraint_set = ConstraintSet(joints)
+        self.obj = obj
+        self.joints = list(joints)
+        self.arms = list(arms)
+        self.n_arms = self.arm_set.n
+        self.nq = self.arm_set.nq
+        self.nv = self.arm_set.nv
+        self._nv_arm = self.arm_set.nv_arm.copy()
+        self._N = self.constraint_set.N.copy()
+        self.N_max = self.constraint_set.N_max
+        kinds = np.array([j.kind in UNILATERAL_JOINT_KINDS for j in self.joints])
+        self.unilateral = self.constraint_set.mask & kinds[:, None]
+        self.unilateral.setflags(write=False)
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_initial_state(cls, arms: list[Arm], obj: RigidObject, specs: Sequence[JointSpec],
+                           q0: Sequence, object_position, object_quaternion=(0, 0, 0, 1),
+                           gravity=(0.0, 0.0, -9.81)) -> tuple[MultiArmSystem, SystemState]:
+        """A system whose joints hold the tools where they are at t = 0, and that state at rest.
+
+        Args:
+            arms: the arms.
+            obj: the object.
+            specs: one joint spec per arm (see :func:`joints_from_initial_state`).
+            q0: n initial configurations (nq_i,).
+            object_position: (3,) initial COM position [m].
+            object_quaternion: (4,) initial orientation ``[x, y, z, w]``.
+            gravity: (3,) [m/s²].
+
+        Returns:
+            ``(system, state)`` with zero velocities.
+        """
+        joints = joints_from_initial_state(arms, obj, q0, object_position, object_quaternion,
+                                           specs)
+        system = cls(arms, obj, joints, gravity)
+        state = system.state(system.arm_set.stack_q(list(q0)), None, object_position,
+                             object_quaternion)
+        return system, state
+
+    def state(self, q, v=None, object_position=(0, 0, 0), object_quaternion=(0, 0, 0, 1),
+              object_twist=None) -> SystemState:
+        """A validated :class:`SystemState`.
+
+        Args:
+            q: (nq,) combined configuration.
+            v: (nv,) combined velocity (zero when None).
+            object_position: (3,) COM [m].
+            object_quaternion: (4,) ``[x, y, z, w]``.
+            object_twist: (6,) ``[ẋ; ω]`` world axes (zero when None).
+
+        Raises:
+            InputError: wrong shape, NaN, or a non-unit quaternion.
+        """
+        return SystemState(
+            as_array(q, (self.nq,), "arms' q"),
+            np.zeros(self.nv) if v is None else as_array(v, (self.nv,), "arms' v"),
+            ObjectState.create(object_position, object_quaternion, object_twist),
+        )
+
+    # ------------------------------------------------------------------ validation
+    def check_state(self, state: SystemState) -> None:
+        """Raise if the state has wrong shapes or NaN/infinite entries.
+
+        Raises:
+            InputError: wrong type or shape.
+            DynamicsError: NaN or infinity, naming the field (``q``, ``v``, object ...).
+        """
+        if not isinstance(state, SystemState):
+            raise InputError(f"state: expected a SystemState, got {type(state).__name__}")
+        o = state.obj
+        fields = (("arms' q", state.q, (self.nq,)), ("arms' v", state.v, (self.nv,)),
+                  ("object position", o.position, (3,)), ("object quaternion", o.quaternion, (4,)),
+                  ("object twist", o.twist, (6,)))
+        for name, value, shape in fields:
+            arr = np.asarray(value)
+            if arr.shape != shape:
+                raise InputError(f"state: {name} expected shape {shape}, got {arr.shape}")
+            if not np.all(np.isfinite(arr)):
+                bad = np.flatnonzero(~np.isfinite(arr)).tolist()
+                raise DynamicsError(
+                    f"state: {name} contains NaN or infinity at index(es) {bad}: {arr.tolist()}"
+                )
+
+    def check_initial_state(self, state: SystemState, tol: float = 1e-6,
+                            velocity_tol: float = VELOCITY_TOLERANCE) -> None:
+        """Check that an initial state satisfies every joint at position and velocity level.
+
+        Args:
+            state: the initial state.
+            tol: largest accepted ``|φ|`` [m] of any contact (dropped redundant ones too).
+            velocity_tol: largest accepted ``|φ̇|`` [m/s] of any kept contact.
+
+        Raises:
+            DynamicsError / InputError: NaN or wrong shapes (:meth:`check_state`).
+            ConstraintError: a gap or gap rate beyond tolerance, naming the arm, joint,
+                contact and value (use :meth:`project_velocities` to fix velocities).
+        """
+        self.check_state(state)
+        tools = self.arm_set.tool_kinematics(state.q, state.v)
+        objk = state.obj.kinematics()
+        self.constraint_set.check_initial(tools, objk, tol=tol)
+        ct = self.constraint_set.evaluate(tools, objk)
+        rate = np.where(ct.mask, np.abs(ct.phi_dot), 0.0)
+        i, k = np.unravel_index(int(np.argmax(rate)), rate.shape)
+        if rate[i, k] > velocity_tol:
+            j = self.joints[i]
+            raise ConstraintError(
+                f"inconsistent initial velocities: arm {i} ({self.arms[i].name}) joint "
+                f"{j.name!r} ({j.kind}) contact {k}: gap rate φ̇ = {ct.phi_dot[i, k]:.6g} m/s "
+                f"exceeds the tolerance {velocity_tol:g} m/s ({int((rate > velocity_tol).sum())} "
+                "contact(s) violated); use MultiArmSystem.project_velocities(state)"
+            )
+
+    def constraint_jacobian(self, state: SystemState) -> np.ndarray:
+        """Velocity-level constraint matrix ``A`` with ``φ̇ = A [v; v_o]`` (real rows only).
+
+        Args:
+            state: positions are used (velocities are ignored).
+
+        Returns:
+            (Σ N_i, nv + 6): row block i is ``[0 .. W_iᵀ .. 0, W_o,iᵀ]`` (``W_iᵀ`` on arm i's
+            velocity slice, ``W_o,iᵀ = G_object,i`` on the object twist ``[ẋ; ω]``).
+        """
+        ev = self.blocks(state)
+        b = ev.blocks
+        A = np.zeros((b.n_constraints, self.nv + 6))
+        row = 0
+        for i, sl in enumerate(self.arm_set.v_slices):  # not a hot path
+            Ni, nvi = int(b.N[i]), int(b.nv[i])
+            A[row:row + Ni, sl] = b.W[i, :nvi, :Ni].T
+            A[row:row + Ni, self.nv:] = b.W_o[i, :, :Ni].T
+            row += Ni
+        return A
+
+    def project_velocities(self, state: SystemState) -> SystemState:
+        """The state with the least-norm velocity correction that makes every ``φ̇ = 0``.
+
+        Solves ``min ‖δ‖`` subject to ``A ([v; v_o] + δ) = 0`` (``A`` from
+        :meth:`constraint_jacobian`; Euclidean norm on ``[v; ẋ_o; ω_o]``), i.e. projects
+        ``[v; v_o]`` onto the null space of ``A``. Positions are unchanged.
+        """
+        self.check_state(state)
+        A = self.constraint_jacobian(state)
+        x = np.concatenate([state.v, state.obj.twist])
+        x_new = x - np.linalg.pinv(A, rcond=1e-12) @ (A @ x)
+        o = state.obj
+        return SystemState(state.q.copy(), x_new[: self.nv],
+                           ObjectState(o.position.copy(), o.quaternion.copy(), x_new[self.nv:]))
+
+    # ------------------------------------------------------------------ the hot path
+    def pad(self, x: np.ndarray) -> np.ndarray:
+        """Combined joint vector (nv,) -> stacked, zero-padded (n, nv_max)."""
+        return self.arm_set.pad_v(x)
+
+    def unpad(self, x: np.ndarray) -> np.ndarray:
+        """Stacked (n, nv_max) -> combined (nv,)."""
+        return self.arm_set.unpad_v(x)
+
+    def blocks(self, state: SystemState, tau: np.ndarray | None = None,
+               baumgarte: tuple[float, float] | None = None) -> Evaluation:
+        """The coefficient blocks of the equations of motion at a state.
+
+        Args:
+            state: the system state (validated: NaN raises :class:`DynamicsError`).
+            tau: (nv,) joint torques [N m or N], zero when None.
+            baumgarte: ``(α, β)`` [1/s]: ``c_i ← c_i - 2α φ̇_i - β² φ_i`` (thesis Sec 4.3).
+
+        Returns:
+            :class:`Evaluation` (blocks, arm terms, constraint terms).
+        """
+        self.check_state(state)
+        arms = self.arm_set.evaluate(state.q, state.v)
+        o = state.obj
+        R = o.rotation
+        ct = self.constraint_set.evaluate(
+            arms.tools, _single_body(o.position, R, o.twist)
+        )
+        Gt = ct.G_tool
+        W = np.einsum("niv,nki->nvk", arms.J, Gt)
+        W_o = ct.G_object.transpose(0, 2, 1).copy()
+        c = -np.einsum("nki,ni->nk", Gt, arms.Jdot_qdot) - ct.kappa
+        if baumgarte is not None:
+            a, b = _baumgarte(baumgarte)
+            c -= 2.0 * a * ct.phi_dot + b * b * ct.phi
+        h = -arms.nle
+        if tau is not None:
+            t = np.asarray(tau, dtype=float)
+            if t.shape != (self.nv,):
+                raise InputError(f"tau: expected shape ({self.nv},), got {t.shape}")
+            if not np.all(np.isfinite(t)):
+                raise DynamicsError(f"tau contains NaN or infinity: {t.tolist()}")
+            h = h + self.arm_set.pad_v(t)
+        M_o = self.obj.mass_matrix(R)
+        h_o = self.obj.bias_wrench(R, o.twist, self.gravity)
+        blocks = SystemBlocks(arms.M, h, W, W_o, c, M_o, h_o, self._nv_arm, self._N)
+        return Evaluation(blocks, arms, ct)
+
+    def forward_dynamics(self, state: SystemState, tau: np.ndarray | None = None,
+                         solver: str = "auto",
+                         baumgarte: tuple[float, float] | None = None
+                         ) -> tuple[Solution, Evaluation]:
+        """Accelerations and contact multipliers at a state.
+
+        Args:
+            state: the state.
+            tau: (nv,) joint torques [N m] (zero when None).
+            solver: a name of :data:`multiarm_pin.dynamics.SOLVERS`.
+            baumgarte: ``(α, β)`` [1/s] or None.
+
+        Returns:
+            ``(solution, evaluation)``: ``solution.a_o`` (6,) ``[ẍ; ω̇]`` world at the COM,
+            ``solution.qdd`` (n, nv_max) (use :meth:`unpad`), ``solution.mu`` (n, N_max) [N].
+
+        Raises:
+            DynamicsError: NaN in the state, or no solution (inconsistent constraints).
+            InputError: unknown solver (lists the known ones).
+        """
+        ev = self.blocks(state, tau, baumgarte)
+        return solve(ev.blocks, solver), ev
+
+    # ------------------------------------------------------------------ physics
+    def gravity_torques(self, q: np.ndarray) -> np.ndarray:
+        """(nv,) joint torques that hold the arms (alone) against gravity [N m]."""
+        return pin.computeGeneralizedGravity(self.arm_set.model, self.arm_set.data, q).copy()
+
+    def kinetic_energy(self, state: SystemState) -> float:
+        """Arms' ``½ vᵀ M v`` plus the object's ``½ m |ẋ|² + ½ ωᵀ I_w ω`` [J]."""
+        model, data = self.arm_set.model, self.arm_set.data
+        e = pin.computeKineticEnergy(model, data, state.q, state.v)
+        return float(e) + self.obj.kinetic_energy(state.obj)
+
+    def potential_energy(self, state: SystemState) -> float:
+        """Gravitational potential energy ``-Σ m g·c`` of arms and object [J] (zero at z = 0)."""
+        model, data = self.arm_set.model, self.arm_set.data
+        e = pin.computePotentialEnergy(model, data, state.q)
+        return float(e) - self.obj.mass * float(self.gravity @ state.obj.position)
+
+    def momentum(self, state: SystemState) -> np.ndarray:
+        """(6,) total ``[linear; angular]`` momentum of arms and object about the world origin.
+
+        Arms: ``pin.computeCentroidalMomentum`` (about their COM) shifted to the origin;
+        object: ``[m ẋ; I_w ω + x × m ẋ]``. Units [kg m/s, kg m²/s], world axes.
+        """
+        model, data = self.arm_set.model, self.arm_set.data
+        hg = pin.computeCentroidalMomentum(model, data, state.q, state.v)
+        com = data.com[0]
+        lin = hg.linear + self.obj.mass * state.obj.twist[:3]
+        ho = self.obj.momentum(state.obj)
+        ang = (hg.angular + cross(com, hg.linear) + ho[3:]
+               + cross(state.obj.position, ho[:3]))
+        return np.concatenate([lin, ang])
+
+
+def _single_body(position, rotation, twist) -> BodyKinematics:
+    return BodyKinematics(position[None], rotation[None], twist[None])
+
+
+def _baumgarte(value) -> tuple[float, float]:
+    try:
+        a, b = (float(x) for x in value)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"baumgarte: expected (alpha, beta) [1/s], got {value!r}") from exc
+    if not (np.isfinite(a) and np.isfinite(b) and a >= 0 and b >= 0):
+        raise InputError(f"baumgarte: expected finite (alpha, beta) >= 0 [1/s], got {value!r}")
+    return a, b
+
+
+__all__ = [
+    "UNILATERAL_JOINT_KINDS",
+    "Evaluation",
+    "MultiArmSystem",
+    "SystemState",
+    "joints_from_initial_state",
+]
