@@ -1,0 +1,569 @@
+"""Meshcat replay of a simulation: an offline HTML page or a live viewer.
+
+The scene has three parts, all animated on one Meshcat timeline:
+
+- ``arms/<name>/visuals/<geometry>``: each arm's visual geometry (real meshes from its
+  URDF, loaded through :class:`pinocchio.visualize.MeshcatVisualizer`), placed at
+  ``base_placement * oMg(q)`` for every frame;
+- ``object``: the manipulated object's polyhedron, a semi-transparent triangle mesh posed
+  by its COM position and quaternion ``[x, y, z, w]``;
+- ``contacts/point_<k>`` and ``contacts/force_<k>``: a small sphere at each contact point
+  and a tapered rod for the force on the object, whose tip touches the contact point and
+  whose length is ``force_scale * |f|``.
+
+Samples are subsampled to ``fps`` frames per second (nearest sample in time, no
+interpolation), so a page's size grows with the duration, not with the integrator step.
+All positions are in the world frame [m]; forces [N].
+"""
+
+from __future__ import annotations
+
+import math
+import webbrowser
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import meshcat
+import meshcat.animation
+import meshcat.geometry as mg
+import numpy as np
+import pinocchio as pin
+import umsgpack
+
+from multiarm_pin.exceptions import InputError
+from multiarm_pin.polyhedron import Polyhedron
+from multiarm_pin.spatial import as_array, quaternion_to_rotation
+
+OBJECT_COLOR = 0xE63946
+"""Colour of the object (RGB as an int): a red that stays distinct from Meshcat's blue sky."""
+OBJECT_OPACITY = 0.6
+CONTACT_COLOR = 0xFFD60A
+"""Colour of contact-point spheres: yellow."""
+FORCE_COLOR = 0x2DC653
+"""Colour of force arrows: green."""
+CONTACT_RADIUS = 0.012
+"""Radius [m] of the contact-point spheres."""
+FORCE_RADIUS = 0.01
+"""Base radius [m] of the tapered force rods."""
+AUTO_FORCE_LENGTH = 0.25
+"""Length [m] of the longest force arrow when ``force_scale`` is chosen automatically."""
+CAMERA_FOV_DEG = 75.0
+"""Meshcat's default vertical field of view [deg], used to frame the scene."""
+CAMERA_DIRECTION = np.array([1.0, -1.6, 0.9])
+"""Direction from the scene centre to the camera (world axes), normalised when used."""
+_MIN_SCALE = 1e-6  # a zero-length arrow would make a singular transform
+
+
+@dataclass
+class ReplayArm:
+    """One arm to draw.
+
+    Attributes:
+        name: unique name; its geometry goes under the Meshcat path ``arms/<name>``.
+        model: the arm's Pinocchio model (fixed base at the model's origin).
+        visual_model: its visual geometry (e.g. ``example_robot_data.load(n).visual_model``
+            or the VISUAL model of ``pin.buildModelsFromUrdf``); ``None`` draws a sphere
+            at each joint instead.
+        base_placement: pose of the model's origin in the world.
+        q: (T, nq) joint positions over time [rad or m].
+        color: optional RGBA in [0, 1] for all of the arm's geometry; ``None`` keeps each
+            geometry's own colour (``GeometryObject.meshColor``, from the URDF material).
+    """
+
+    name: str
+    model: pin.Model
+    visual_model: pin.GeometryModel | None
+    base_placement: pin.SE3
+    q: np.ndarray
+    color: tuple[float, float, float, float] | None = None
+
+    def __post_init__(self):
+        if not isinstance(self.name, str) or not self.name or "/" in self.name:
+            raise InputError(f"ReplayArm.name: expected a non-empty string without '/', "
+                             f"got {self.name!r}")
+        if not isinstance(self.model, pin.Model):
+            raise InputError(f"ReplayArm {self.name!r}: model must be a pin.Model, "
+                             f"got {type(self.model).__name__}")
+        if self.visual_model is not None and not isinstance(self.visual_model, pin.GeometryModel):
+            raise InputError(f"ReplayArm {self.name!r}: visual_model must be a "
+                             f"pin.GeometryModel or None, got {type(self.visual_model).__name__}")
+        if not isinstance(self.base_placement, pin.SE3):
+            raise InputError(f"ReplayArm {self.name!r}: base_placement must be a pin.SE3, "
+                             f"got {type(self.base_placement).__name__}")
+        self.q = as_array(self.q, (None, self.model.nq), f"ReplayArm {self.name!r}.q (T, nq)")
+        if self.color is not None:
+            rgba = as_array(self.color, (4,), f"ReplayArm {self.name!r}.color (RGBA)")
+            if np.any(rgba < 0) or np.any(rgba > 1):
+                raise InputError(f"ReplayArm {self.name!r}.color: expected RGBA values in "
+                                 f"[0, 1], got {rgba.tolist()}")
+            self.color = tuple(float(c) for c in rgba)
+
+
+@dataclass
+class ReplayObject:
+    """The manipulated object over time.
+
+    Attributes:
+        polyhedron: its shape in the object frame (origin at the COM) [m].
+        position: (T, 3) COM position in the world [m].
+        quaternion: (T, 4) orientation ``[x, y, z, w]`` (object axes to world axes);
+            normalised here, a norm far from 1 is an error.
+    """
+
+    polyhedron: Polyhedron
+    position: np.ndarray
+    quaternion: np.ndarray
+
+    def __post_init__(self):
+        if not isinstance(self.polyhedron, Polyhedron):
+            raise InputError(f"ReplayObject.polyhedron: expected a Polyhedron, "
+                             f"got {type(self.polyhedron).__name__}")
+        self.position = as_array(self.position, (None, 3), "ReplayObject.position (T, 3)")
+        quat = as_array(self.quaternion, (len(self.position), 4),
+                        "ReplayObject.quaternion (T, 4) [x, y, z, w]")
+        norms = np.linalg.norm(quat, axis=1)
+        if np.any(np.abs(norms - 1.0) > 1e-3):
+            bad = int(np.argmax(np.abs(norms - 1.0)))
+            raise InputError(f"ReplayObject.quaternion: row {bad} has norm {norms[bad]:.6g}, "
+                             "expected unit quaternions [x, y, z, w]")
+        self.quaternion = quat / norms[:, None]
+
+
+@dataclass
+class ReplayContacts:
+    """Contact points and forces over time (K contacts, fixed count).
+
+    Attributes:
+        points: (T, K, 3) contact points in the world [m].
+        forces: (T, K, 3) force applied *on the object* at each point, world axes [N].
+    """
+
+    points: np.ndarray
+    forces: np.ndarray
+
+    def __post_init__(self):
+        self.points = as_array(self.points, (None, None, 3), "ReplayContacts.points (T, K, 3)")
+        self.forces = as_array(self.forces, self.points.shape, "ReplayContacts.forces (T, K, 3)")
+
+
+# ----------------------------------------------------------------------------- helpers
+def frame_indices(t: np.ndarray, fps: float) -> np.ndarray:
+    """Sample index shown at each animation frame.
+
+    Args:
+        t: (T,) strictly increasing sample times [s].
+        fps: frames per second of the replay.
+
+    Returns:
+        (F,) int indices into ``t``: for frame ``k`` the sample nearest to
+        ``t[0] + k / fps``, ``F = floor((t[-1] - t[0]) fps) + 1``.
+    """
+    duration = float(t[-1] - t[0])
+    n_frames = int(math.floor(duration * fps + 1e-9)) + 1
+    times = t[0] + np.arange(n_frames) / fps
+    right = np.clip(np.searchsorted(t, times), 1, max(len(t) - 1, 1))
+    left = right - 1
+    if len(t) == 1:
+        return np.zeros(n_frames, dtype=int)
+    nearer_left = (times - t[left]) <= (t[right] - times)
+    return np.where(nearer_left, left, right)
+
+
+def polyhedron_triangles(poly: Polyhedron) -> np.ndarray:
+    """(M, 3) int vertex indices of a fan triangulation of every face, outward-facing."""
+    tris = []
+    for face in poly.faces:
+        for j in range(1, len(face) - 1):
+            tris.append((face[0], face[j], face[j + 1]))
+    return np.array(tris, dtype=np.uint32)
+
+
+def _check_inputs(arms, obj, contacts, t, fps) -> np.ndarray:
+    t = as_array(t, (None,), "t (T,) [s]")
+    if len(t) == 0:
+        raise InputError("t: expected at least one sample time, got an empty array")
+    if np.any(np.diff(t) <= 0):
+        raise InputError("t: sample times must be strictly increasing")
+    if not (isinstance(fps, int | float) and fps > 0 and math.isfinite(fps)):
+        raise InputError(f"fps: expected a positive number of frames per second, got {fps!r}")
+    if isinstance(arms, ReplayArm) or not isinstance(arms, Sequence):
+        raise InputError("arms: expected a list of ReplayArm")
+    names = set()
+    for arm in arms:
+        if not isinstance(arm, ReplayArm):
+            raise InputError(f"arms: expected ReplayArm items, got {type(arm).__name__}")
+        if arm.name in names:
+            raise InputError(f"arms: duplicate arm name {arm.name!r}")
+        names.add(arm.name)
+        if len(arm.q) != len(t):
+            raise InputError(f"arm {arm.name!r}: q has {len(arm.q)} rows, t has {len(t)} samples")
+    if obj is not None:
+        if not isinstance(obj, ReplayObject):
+            raise InputError(f"obj: expected a ReplayObject or None, got {type(obj).__name__}")
+        if len(obj.position) != len(t):
+            raise InputError(f"obj: position has {len(obj.position)} rows, "
+                             f"t has {len(t)} samples")
+    if contacts is not None:
+        if not isinstance(contacts, ReplayContacts):
+            raise InputError(f"contacts: expected ReplayContacts or None, "
+                             f"got {type(contacts).__name__}")
+        if len(contacts.points) != len(t):
+            raise InputError(f"contacts: points have {len(contacts.points)} rows, "
+                             f"t has {len(t)} samples")
+    return t
+
+
+def _pose(R: np.ndarray, p: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = p
+    return T
+
+
+def _rotation_y_to(direction: np.ndarray) -> np.ndarray:
+    """A rotation (3, 3) whose y axis is the unit vector ``direction``."""
+    y = direction
+    helper = np.array([1.0, 0.0, 0.0]) if abs(y[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
+    x = np.cross(y, helper)
+    x /= np.linalg.norm(x)
+    z = np.cross(x, y)
+    return np.column_stack([x, y, z])
+
+
+class _CompactMesh(mg.TriangularMeshGeometry):
+    """A triangle mesh whose index buffer is 16-bit when it can be (halves its size)."""
+
+    def lower(self, object_data):
+        out = super().lower(object_data)
+        if len(self.vertices) < 2**16:
+            index = out["data"]["index"]
+            index["type"] = "Uint16Array"  # msgpack extension 0x14 in meshcat's viewer
+            index["array"] = umsgpack.Ext(0x14, self.faces.astype(np.uint16).tobytes("C"))
+        return out
+
+
+def _rgba_to_int(rgba) -> int:
+    r, g, b = (int(round(255 * float(c))) for c in rgba[:3])
+    return (r << 16) + (g << 8) + b
+
+
+def _material(rgba) -> mg.MeshLambertMaterial:
+    opacity = float(rgba[3])
+    return mg.MeshLambertMaterial(color=_rgba_to_int(rgba), transparent=opacity < 1.0,
+                                  opacity=opacity)
+
+
+def _mesh_arrays(geometry_object, cache: dict):
+    """(vertices (V, 3) float32 [m], faces (F, 3)) of a triangle-mesh geometry, or None.
+
+    Meshes are sent as binary arrays rather than as their COLLADA text: a page with two
+    UR5s shrinks from about 19 MB to a few MB. The mesh scale is applied to the vertices.
+    """
+    try:
+        import coal
+    except ImportError:  # pragma: no cover - pinocchio wheels ship coal
+        return None
+    geom = geometry_object.geometry
+    if not isinstance(geom, coal.BVHModelBase) or geom.num_tris == 0:
+        return None
+    scale = np.asarray(geometry_object.meshScale, dtype=float)
+    key = (geometry_object.meshPath, tuple(scale), geom.num_vertices, geom.num_tris)
+    if key not in cache:
+        vertices = (np.asarray(geom.vertices(), dtype=float) * scale).astype(np.float32)
+        faces = np.empty((geom.num_tris, 3), dtype=np.uint32)
+        for k in range(geom.num_tris):
+            tri = geom.tri_indices(k)
+            faces[k] = (tri[0], tri[1], tri[2])
+        cache[key] = (vertices, faces)
+    return cache[key]
+
+
+class _ArmDrawer:
+    """Loads one arm's geometry into Meshcat and computes its node poses for a q."""
+
+    def __init__(self, vis: meshcat.Visualizer, arm: ReplayArm, mesh_cache: dict):
+        self.arm = arm
+        self.root = f"arms/{arm.name}"
+        self.data = arm.model.createData()
+        self.base = arm.base_placement.homogeneous
+        if arm.visual_model is not None:
+            from pinocchio.visualize import MeshcatVisualizer
+
+            self.geom = arm.visual_model
+            self.geom_data = pin.GeometryData(self.geom)
+            viz = MeshcatVisualizer(arm.model, None, self.geom)
+            viz.initViewer(viewer=vis)
+            viz.viewerRootNodeName = self.root
+            viz.viewerVisualGroupName = f"{self.root}/visuals"
+            self.nodes = []
+            self.scales = []
+            for g in self.geom.geometryObjects:
+                node = viz.getViewerNodeName(g, pin.GeometryType.VISUAL)
+                rgba = arm.color if arm.color is not None else g.meshColor
+                arrays = _mesh_arrays(g, mesh_cache)
+                if arrays is not None:  # scale already applied to the vertices
+                    vis[node].set_object(_CompactMesh(*arrays), _material(rgba))
+                    self.scales.append(np.ones(3))
+                else:  # primitives and other formats: Pinocchio's own loader
+                    viz.loadViewerGeometryObject(g, pin.GeometryType.VISUAL, arm.color)
+                    self.scales.append(np.asarray(g.meshScale, dtype=float))
+                self.nodes.append(node)
+        else:
+            self.geom = None
+            self.nodes = [f"{self.root}/joints/{arm.model.names[j]}"
+                          for j in range(1, arm.model.njoints)]
+            self.scales = [np.ones(3)] * len(self.nodes)
+            rgba = arm.color if arm.color is not None else (0.55, 0.55, 0.55, 1.0)
+            for node in self.nodes:
+                vis[node].set_object(mg.Sphere(0.04), _material(rgba))
+
+    def poses(self, q: np.ndarray) -> list[np.ndarray]:
+        """World poses (4, 4), pure rotation + translation, of this arm's nodes at ``q``."""
+        model = self.arm.model
+        pin.forwardKinematics(model, self.data, q)
+        if self.geom is None:
+            return [self.base @ self.data.oMi[j].homogeneous for j in range(1, model.njoints)]
+        pin.updateGeometryPlacements(model, self.data, self.geom, self.geom_data)
+        return [self.base @ M.homogeneous for M in self.geom_data.oMg]
+
+
+def _scaled(T: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    out = T.copy()
+    out[:3, :3] = T[:3, :3] * scale[None, :]
+    return out
+
+
+def _scene_points(drawers, obj, contacts, index0) -> np.ndarray:
+    pts = [np.zeros((1, 3))]
+    for d in drawers:
+        pts.append(np.array([T[:3, 3] for T in d.poses(d.arm.q[index0])]).reshape(-1, 3))
+        pts.append(d.base[None, :3, 3])
+    if obj is not None:
+        R = quaternion_to_rotation(obj.quaternion[index0])
+        pts.append(obj.position[index0] + obj.polyhedron.vertices @ R.T)
+    if contacts is not None:
+        pts.append(contacts.points[index0])
+    return np.vstack(pts)
+
+
+def set_camera(vis: meshcat.Visualizer, target, eye) -> None:
+    """Point Meshcat's default camera from ``eye`` (3,) at ``target`` (3,), world [m].
+
+    Meshcat 0.3.2 orbits around the origin of ``/Cameras/default``; the camera itself sits
+    under a node rotated from three.js's y-up axes to z-up, so its local position is
+    ``(dx, dz, -dy)`` for a world offset ``d = eye - target``.
+    """
+    target = as_array(target, (3,), "camera target [m]")
+    d = as_array(eye, (3,), "camera eye [m]") - target
+    vis["/Cameras/default"].set_transform(_pose(np.eye(3), target))
+    vis["/Cameras/default/rotated/<object>"].set_property("position", [d[0], d[2], -d[1]])
+
+
+def _frame_camera(vis, points: np.ndarray) -> None:
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    centre = 0.5 * (lo + hi)
+    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 0.5)
+    distance = 1.1 * radius / math.sin(math.radians(CAMERA_FOV_DEG) / 2)
+    direction = CAMERA_DIRECTION / np.linalg.norm(CAMERA_DIRECTION)
+    set_camera(vis, centre, centre + distance * direction)
+
+
+# ----------------------------------------------------------------------------- public API
+def build_animation(
+    vis: meshcat.Visualizer,
+    arms: Sequence[ReplayArm],
+    obj: ReplayObject | None,
+    contacts: ReplayContacts | None,
+    t,
+    fps: float = 30,
+    force_scale: float | None = None,
+) -> meshcat.animation.Animation:
+    """Load the scene into ``vis`` and record its motion on a Meshcat timeline.
+
+    The scene is also posed at the first frame (static transforms) and the camera framed on
+    it, so a viewer shows it before the animation plays. Call ``vis.set_animation(anim)``
+    to send the timeline.
+
+    Args:
+        vis: the Meshcat visualizer (its server holds the scene).
+        arms: arms to draw; each ``q`` has T rows.
+        obj: the object (``position`` (T, 3), ``quaternion`` (T, 4)), or ``None``.
+        contacts: contact points and forces on the object ((T, K, 3) each), or ``None``.
+        t: (T,) strictly increasing sample times [s].
+        fps: frames per second of the replay; samples are subsampled to it.
+        force_scale: arrow length per newton [m/N]; ``None`` makes the largest force
+            ``AUTO_FORCE_LENGTH`` m long.
+
+    Returns:
+        The animation, one frame every ``1 / fps`` s from ``t[0]`` to ``t[-1]``.
+
+    Raises:
+        InputError: inconsistent sample counts, non-increasing times, bad fps or scale.
+    """
+    t = _check_inputs(arms, obj, contacts, t, fps)
+    if force_scale is not None and not (force_scale > 0 and math.isfinite(force_scale)):
+        raise InputError(f"force_scale: expected a positive length per newton [m/N] or None, "
+                         f"got {force_scale!r}")
+    indices = frame_indices(t, fps)
+    anim = meshcat.animation.Animation(default_framerate=fps)
+
+    mesh_cache: dict = {}
+    drawers = [_ArmDrawer(vis, arm, mesh_cache) for arm in arms]
+
+    if obj is not None:
+        poly = obj.polyhedron
+        vis["object"].set_object(
+            mg.TriangularMeshGeometry(poly.vertices, polyhedron_triangles(poly)),
+            mg.MeshLambertMaterial(color=OBJECT_COLOR, transparent=True,
+                                   opacity=OBJECT_OPACITY),
+        )
+
+    n_contacts = 0 if contacts is None else contacts.points.shape[1]
+    if contacts is not None:
+        if force_scale is None:
+            fmax = float(np.max(np.linalg.norm(contacts.forces, axis=2), initial=0.0))
+            force_scale = AUTO_FORCE_LENGTH / fmax if fmax > 0 else 1.0
+        for k in range(n_contacts):
+            vis[f"contacts/point_{k}"].set_object(
+                mg.Sphere(CONTACT_RADIUS), mg.MeshLambertMaterial(color=CONTACT_COLOR))
+            # Unit-length rod along local y from -1 to 0, pointed (radius 0) at 0.
+            rod = vis[f"contacts/force_{k}/rod"]
+            rod.set_object(mg.Cylinder(1.0, radiusTop=0.0, radiusBottom=FORCE_RADIUS),
+                           mg.MeshLambertMaterial(color=FORCE_COLOR))
+            rod.set_transform(_pose(np.eye(3), [0.0, -0.5, 0.0]))
+
+    def contact_pose(i: int, k: int) -> tuple[np.ndarray, float]:
+        f = contacts.forces[i, k]
+        norm = float(np.linalg.norm(f))
+        R = _rotation_y_to(f / norm) if norm > 0 else np.eye(3)
+        return _pose(R, contacts.points[i, k]), max(norm * force_scale, _MIN_SCALE)
+
+    for frame, i in enumerate(indices):
+        at = anim.at_frame(vis, frame)
+        for d in drawers:
+            for node, T, s in zip(d.nodes, d.poses(d.arm.q[i]), d.scales, strict=True):
+                at[node].set_transform(T)
+                if not np.allclose(s, 1.0):
+                    at[node].set_property("scale", "vector3", s.tolist())
+        if obj is not None:
+            R = quaternion_to_rotation(obj.quaternion[i])
+            at["object"].set_transform(_pose(R, obj.position[i]))
+        for k in range(n_contacts):
+            at[f"contacts/point_{k}"].set_transform(_pose(np.eye(3), contacts.points[i, k]))
+            T, length = contact_pose(i, k)
+            at[f"contacts/force_{k}"].set_transform(T)
+            at[f"contacts/force_{k}"].set_property("scale", "vector3", [1.0, length, 1.0])
+
+    # Static pose at the first frame, for viewers before (or without) the animation.
+    i0 = int(indices[0])
+    for d in drawers:
+        for node, T, s in zip(d.nodes, d.poses(d.arm.q[i0]), d.scales, strict=True):
+            vis[node].set_transform(_scaled(T, s))
+    if obj is not None:
+        vis["object"].set_transform(
+            _pose(quaternion_to_rotation(obj.quaternion[i0]), obj.position[i0]))
+    for k in range(n_contacts):
+        T, length = contact_pose(i0, k)
+        vis[f"contacts/point_{k}"].set_transform(_pose(np.eye(3), contacts.points[i0, k]))
+        vis[f"contacts/force_{k}"].set_transform(_scaled(T, np.array([1.0, length, 1.0])))
+
+    _frame_camera(vis, _scene_points(drawers, obj, contacts, i0))
+    return anim
+
+
+def close_visualizer(vis: meshcat.Visualizer) -> None:
+    """Stop the Meshcat server process that ``vis`` started and close its socket.
+
+    (``meshcat.Visualizer.close`` is broken in meshcat 0.3.2: its window has no ``close``.)
+    """
+    window = vis.window
+    proc = getattr(window, "server_proc", None)
+    if proc is not None and proc.poll() is None:
+        proc.kill()
+        proc.wait(timeout=10)
+    socket = getattr(window, "zmq_socket", None)
+    if socket is not None:
+        socket.close(linger=0)
+
+
+def _new_visualizer() -> meshcat.Visualizer:
+    return meshcat.Visualizer()
+
+
+def write_replay_html(
+    path,
+    arms: Sequence[ReplayArm],
+    obj: ReplayObject | None,
+    t,
+    contacts: ReplayContacts | None = None,
+    fps: float = 30,
+) -> Path:
+    """Write a self-contained HTML page that replays the motion offline.
+
+    A temporary Meshcat server builds the scene and is stopped afterwards. The page
+    inlines three.js and all meshes; it needs no network.
+
+    Args:
+        path: output file (``.html``); its folder must exist.
+        arms: arms to draw, each with (T, nq) ``q``.
+        obj: the object ((T, 3) positions, (T, 4) quaternions ``[x, y, z, w]``) or None.
+        t: (T,) strictly increasing sample times [s].
+        contacts: optional (T, K, 3) contact points [m] and forces on the object [N].
+        fps: frames per second of the replay.
+
+    Returns:
+        The path written.
+
+    Raises:
+        InputError: invalid replay data or a folder that does not exist.
+    """
+    path = Path(path)
+    if not path.parent.is_dir():
+        raise InputError(f"write_replay_html: folder {path.parent} does not exist")
+    t = _check_inputs(arms, obj, contacts, t, fps)
+    vis = _new_visualizer()
+    try:
+        anim = build_animation(vis, arms, obj, contacts, t, fps=fps)
+        vis.set_animation(anim, play=True, repetitions=1)
+        html = vis.static_html()
+    finally:
+        close_visualizer(vis)
+    path.write_text(html, encoding="utf-8")
+    return path
+
+
+def serve_replay(
+    arms: Sequence[ReplayArm],
+    obj: ReplayObject | None,
+    t,
+    contacts: ReplayContacts | None = None,
+    fps: float = 30,
+    open_browser: bool = False,
+) -> tuple[str, meshcat.Visualizer]:
+    """Start a live Meshcat server on localhost showing the replay.
+
+    Args:
+        arms: arms to draw, each with (T, nq) ``q``.
+        obj: the object or None.
+        t: (T,) strictly increasing sample times [s].
+        contacts: optional contact points and forces.
+        fps: frames per second of the replay.
+        open_browser: open the page in the default browser.
+
+    Returns:
+        ``(url, vis)``: the page's URL and the visualizer; stop the server with
+        :func:`close_visualizer` ``(vis)`` when done.
+    """
+    t = _check_inputs(arms, obj, contacts, t, fps)
+    vis = _new_visualizer()
+    try:
+        anim = build_animation(vis, arms, obj, contacts, t, fps=fps)
+        vis.set_animation(anim, play=True, repetitions=1)
+    except BaseException:
+        close_visualizer(vis)
+        raise
+    url = vis.url()
+    if open_browser:
+        webbrowser.open(url, new=2)
+    return url, vis
