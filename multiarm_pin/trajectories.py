@@ -1,0 +1,152 @@
+"""Minimum-jerk pose trajectories through waypoints, for the object (or any rigid body).
+
+Between consecutive waypoints ``(t_k, p_k, R_k)`` and ``(t_{k+1}, p_{k+1}, R_{k+1})`` the
+motion is the rest-to-rest minimum-jerk profile ``s(τ) = 10τ³ - 15τ⁴ + 6τ⁵``,
+``τ = (t - t_k) / (t_{k+1} - t_k)``, applied to
+
+- the position: ``p(t) = p_k + s (p_{k+1} - p_k)``;
+- the orientation, along the geodesic (slerp): ``R(t) = R_k exp(s θ u)`` with
+  ``θ u = log(R_kᵀ R_{k+1})`` (shortest rotation, ``θ <= π``). The angular velocity is then
+  ``ω = ṡ θ R_k u`` and the angular acceleration ``ω̇ = s̈ θ R_k u`` (world axes), since ``u``
+  is fixed by ``exp(s θ u)``.
+
+Velocities and accelerations are zero at every waypoint. Before the first time the pose is
+held at the first waypoint, after the last time at the last one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from multiarm_pin.exceptions import InputError
+from multiarm_pin.spatial import as_array, as_unit_quaternion, rotation_to_quaternion
+
+
+def minimum_jerk(tau: float) -> tuple[float, float, float]:
+    """The rest-to-rest minimum-jerk profile and its first two derivatives in ``τ``.
+
+    Args:
+        tau: normalised time, clipped to [0, 1].
+
+    Returns:
+        ``(s, ds/dτ, d²s/dτ²)``: ``s = 10τ³ - 15τ⁴ + 6τ⁵``.
+    """
+    t = min(max(float(tau), 0.0), 1.0)
+    t2 = t * t
+    s = t2 * t * (10.0 - 15.0 * t + 6.0 * t2)
+    ds = 30.0 * t2 * (1.0 - 2.0 * t + t2)
+    dds = 60.0 * t * (1.0 - 3.0 * t + 2.0 * t2)
+    return s, ds, dds
+
+
+@dataclass(frozen=True)
+class PoseSample:
+    """A pose with its velocity and acceleration at one time.
+
+    Attributes:
+        position: (3,) [m], world.
+        quaternion: (4,) ``[x, y, z, w]`` (body axes -> world axes).
+        rotation: (3, 3) the same orientation as a matrix.
+        twist: (6,) ``[ṗ; ω]`` world axes [m/s, rad/s].
+        acceleration: (6,) classical ``[p̈; ω̇]`` world axes [m/s², rad/s²].
+    """
+
+    position: np.ndarray
+    quaternion: np.ndarray
+    rotation: np.ndarray
+    twist: np.ndarray
+    acceleration: np.ndarray
+
+
+class MinimumJerkTrajectory:
+    """Rest-to-rest minimum-jerk segments through pose waypoints.
+
+    Args:
+        times: (K,) strictly increasing waypoint times [s], K >= 1.
+        positions: (K, 3) waypoint positions [m].
+        quaternions: (K, 4) waypoint orientations ``[x, y, z, w]`` (unit; identity if None).
+
+    Raises:
+        InputError: wrong shapes, non-increasing times, NaN, non-unit quaternions.
+    """
+
+    def __init__(self, times, positions, quaternions=None):
+        t = np.atleast_1d(as_array(times, (None,), "trajectory times [s]"))
+        K = len(t)
+        if K < 1:
+            raise InputError("trajectory: expected at least one waypoint")
+        if np.any(np.diff(t) <= 0):
+            raise InputError(f"trajectory times: expected strictly increasing, got {t.tolist()}")
+        p = as_array(positions, (K, 3), f"trajectory positions ({K} waypoints)")
+        if quaternions is None:
+            q = np.tile([0.0, 0.0, 0.0, 1.0], (K, 1))
+        else:
+            q = as_array(quaternions, (K, 4), f"trajectory quaternions ({K} waypoints)")
+            q = np.array([as_unit_quaternion(x, f"trajectory quaternion {k}")
+                          for k, x in enumerate(q)])
+        self.times = t
+        self.positions = p
+        self.quaternions = q
+        self._R = np.array([pin.Quaternion(x).toRotationMatrix() for x in q])
+        # body-frame rotation vector of each segment: R_{k+1} = R_k exp(log_k)
+        self._log = np.array([pin.log3(self._R[k].T @ self._R[k + 1]) for k in range(K - 1)])
+
+    @classmethod
+    def hold(cls, position, quaternion=(0.0, 0.0, 0.0, 1.0)) -> MinimumJerkTrajectory:
+        """A constant pose (one waypoint at t = 0)."""
+        return cls([0.0], [position], [quaternion])
+
+    @property
+    def duration(self) -> float:
+        """Time of the last waypoint [s]."""
+        return float(self.times[-1])
+
+    def __call__(self, t: float) -> PoseSample:
+        """Sample at time ``t`` [s] (see :class:`PoseSample`)."""
+        return self.sample(t)
+
+    def sample(self, t: float) -> PoseSample:
+        """Pose, twist and classical acceleration at time ``t`` [s].
+
+        Returns:
+            :class:`PoseSample`; held constant before the first and after the last waypoint.
+        """
+        t = float(t)
+        if not np.isfinite(t):
+            raise InputError(f"trajectory time: expected a finite number [s], got {t}")
+        times = self.times
+        if t <= times[0] or len(times) == 1:
+            return self._still(0)
+        if t >= times[-1]:
+            return self._still(len(times) - 1)
+        k = int(np.searchsorted(times, t, side="right")) - 1
+        T = times[k + 1] - times[k]
+        s, ds, dds = minimum_jerk((t - times[k]) / T)
+        ds /= T
+        dds /= T * T
+        dp = self.positions[k + 1] - self.positions[k]
+        log = self._log[k]
+        R = self._R[k] @ pin.exp3(s * log)
+        axis_world = self._R[k] @ log
+        twist = np.concatenate([ds * dp, ds * axis_world])
+        acc = np.concatenate([dds * dp, dds * axis_world])
+        return PoseSample(self.positions[k] + s * dp, rotation_to_quaternion(R), R, twist, acc)
+
+    def _still(self, k: int) -> PoseSample:
+        return PoseSample(self.positions[k].copy(), self.quaternions[k].copy(),
+                          self._R[k].copy(), np.zeros(6), np.zeros(6))
+
+
+def pose_error(position_ref, rotation_ref, position, rotation) -> np.ndarray:
+    """(6,) pose error ``[p_ref - p; log(R_ref Rᵀ)]`` in world axes [m, rad].
+
+    The angular part is the world-axes rotation vector taking ``R`` to ``R_ref``.
+    """
+    return np.concatenate([np.asarray(position_ref) - np.asarray(position),
+                           pin.log3(np.asarray(rotation_ref) @ np.asarray(rotation).T)])
+
+
+__all__ = ["MinimumJerkTrajectory", "PoseSample", "minimum_jerk", "pose_error"]
