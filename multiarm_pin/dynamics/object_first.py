@@ -15,18 +15,65 @@ conditioning test, one solve with ``S`` (right-hand sides ``[W_oᵀ r]`` togethe
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import lapack
 
 from multiarm_pin.dynamics.blocks import Solution, SystemBlocks
 from multiarm_pin.exceptions import DynamicsError, InputError, SingularityError
+
+try:  # numpy's batched LAPACK gufuncs without the np.linalg wrapper (4 µs a call saved).
+    from numpy.linalg import _umath_linalg as _ul
+
+    _ul.solve(np.eye(2)[None], np.ones((1, 2, 1)), signature="dd->d")
+    _ul.cholesky_lo(np.eye(2)[None], signature="d->d")
+
+    def _batched_solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+        """``A⁻¹ B`` for stacks (n, k, k), (n, k, p); NaN for arms whose ``A`` is singular."""
+        return _ul.solve(A, B, signature="dd->d")
+
+    def _batched_cholesky(A: np.ndarray) -> np.ndarray:
+        """Lower Cholesky factors of a stack (n, k, k); NaN where not positive definite."""
+        return _ul.cholesky_lo(A, signature="d->d")
+
+except (ImportError, AttributeError, TypeError):  # pragma: no cover - other numpy versions
+
+    def _batched_solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+        """``A⁻¹ B`` for stacks (n, k, k), (n, k, p); NaN for arms whose ``A`` is singular."""
+        try:
+            return np.linalg.solve(A, B)
+        except np.linalg.LinAlgError:
+            out = np.full(np.broadcast_shapes(A.shape[:-2], B.shape[:-2]) + B.shape[-2:], np.nan)
+            for i in range(A.shape[0]):
+                try:
+                    out[i] = np.linalg.solve(A[i], B[i])
+                except np.linalg.LinAlgError:
+                    pass
+            return out
+
+    def _batched_cholesky(A: np.ndarray) -> np.ndarray:
+        """Lower Cholesky factors of a stack (n, k, k); NaN where not positive definite."""
+        try:
+            return np.linalg.cholesky(A)
+        except np.linalg.LinAlgError:
+            out = np.full(A.shape, np.nan)
+            for i in range(A.shape[0]):
+                try:
+                    out[i] = np.linalg.cholesky(A[i])
+                except np.linalg.LinAlgError:
+                    pass
+            return out
+
+
+_QUIET = {"invalid": "ignore", "divide": "ignore"}
 
 DEFAULT_RCOND_TOL = 1e-10
 """An arm whose ``S_i`` has an estimated reciprocal condition number below this is singular."""
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class ArmReduction:
     """Per-arm quantities shared by the object-first and singular-arm solvers.
 
@@ -35,10 +82,11 @@ class ArmReduction:
         S: (n, N_max, N_max) ``W_iᵀ M_i⁻¹ W_i``, with a positive value on the padded diagonal
             (the arm's largest diagonal entry, or 1) so that padded multipliers solve to 0.
         r: (n, N_max) ``c_i - W_iᵀ M_i⁻¹ h_i`` (zero on padding).
-        rcond: (n,) estimate of the reciprocal condition number of each ``S_i``: from the
-            Cholesky factor ``L``, ``min_j L_jj² / max_j S_jj`` (an upper bound of the true
-            reciprocal condition number, so a small value proves bad conditioning); from
-            the eigenvalues when the Cholesky factorisation fails.
+        rcond: (n,) estimate of the reciprocal condition number of each ``S_i`` from its
+            Cholesky factor ``L``: ``(min_j L_jj / max_j L_jj)²``. It is an upper bound of
+            the true reciprocal condition number (``L_jj² <= S_jj <= λ_max`` and
+            ``L_jj² >= λ_min``), so a small value proves bad conditioning. 0 where the
+            factorisation fails (``S_i`` not positive definite).
     """
 
     X: np.ndarray
@@ -60,43 +108,42 @@ def reduce_arms(blocks: SystemBlocks) -> ArmReduction:
         InputError: a block contains NaN or infinity.
         DynamicsError: some ``M_i`` is singular.
     """
-    b = blocks
-    m = b.N_max
-    try:
-        X = np.linalg.solve(b.M, np.concatenate((b.W, b.h[:, :, None]), axis=2))
-    except np.linalg.LinAlgError:
-        b.check_finite()
-        _raise_singular_mass(b)
-    WtX = np.matmul(b.W.transpose(0, 2, 1), X)
-    S = WtX[:, :, :m]
-    r = b.c - WtX[:, :, m]
-    ar = np.arange(m)
-    diag = S[:, ar, ar]
-    scale = diag.max(axis=1)
-    if b.has_constraint_padding:
-        pad = np.where(scale > 0.0, scale, 1.0)
-        S[:, ar, ar] = np.where(b.constraint_mask, diag, pad[:, None])
-        scale = pad
-    try:
-        L = np.linalg.cholesky(S)
-        d = L[:, ar, ar]
-        rcond = (d * d).min(axis=1) / scale
-    except np.linalg.LinAlgError:
-        if not (np.isfinite(S).all() and np.isfinite(r).all()):
-            b.check_finite()
-        w = np.linalg.eigvalsh(S)
-        top = w[:, -1]
-        rcond = np.where(top > 0.0, np.maximum(w[:, 0], 0.0) / np.where(top > 0, top, 1.0), 0.0)
+    with np.errstate(**_QUIET):
+        X, S, r, root = _reduce(blocks)
+    rcond = _check_reduction(blocks, X, root * root)
     return ArmReduction(X, S, r, rcond)
 
 
-def _raise_singular_mass(b: SystemBlocks) -> None:
-    w = np.linalg.eigvalsh(b.M)
-    bad = np.flatnonzero(w[:, 0] <= 1e-14 * np.maximum(np.abs(w[:, -1]), 1e-300))
-    raise DynamicsError(
-        f"joint-space mass matrix M_i of arm(s) {bad.tolist()} is singular; "
-        "a mass matrix must be symmetric positive definite"
-    )
+def _reduce(b: SystemBlocks) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Hot path of :func:`reduce_arms` (call inside ``np.errstate(invalid="ignore")``)."""
+    m = b.N_max
+    X = _batched_solve(b.M, np.concatenate((b.W, b.h[:, :, None]), axis=2))
+    WtX = np.matmul(b.W.transpose(0, 2, 1), X)
+    S = WtX[:, :, :m]
+    r = b.c - WtX[:, :, m]
+    if b.has_constraint_padding:
+        ar = np.arange(m)
+        diag = S[:, ar, ar]
+        scale = diag.max(axis=1)
+        pad = np.where(scale > 0.0, scale, 1.0)
+        S[:, ar, ar] = np.where(b.constraint_mask, diag, pad[:, None])
+    d = np.diagonal(_batched_cholesky(S), axis1=1, axis2=2)
+    return X, S, r, d.min(axis=1) / d.max(axis=1)  # sqrt of the rcond estimate
+
+
+def _check_reduction(b: SystemBlocks, X: np.ndarray, rcond: np.ndarray) -> np.ndarray:
+    """Rare path: NaN in the inputs, singular ``M_i``; failed Cholesky -> rcond 0."""
+    bad = np.isnan(rcond)
+    if bad.any():
+        b.check_finite()
+        badM = ~np.isfinite(X).reshape(b.n, -1).all(axis=1)
+        if badM.any():
+            raise DynamicsError(
+                f"joint-space mass matrix M_i of arm(s) {np.flatnonzero(badM).tolist()} is "
+                "singular; a mass matrix must be symmetric positive definite"
+            )
+        rcond = np.where(bad, 0.0, rcond)
+    return rcond
 
 
 def singular_arm_mask(reduction: ArmReduction, rcond_tol: float = DEFAULT_RCOND_TOL) -> np.ndarray:
@@ -129,39 +176,55 @@ def solve_object_first(
     """
     _check_tol(rcond_tol)
     b = blocks
-    red = reduce_arms(b)
-    X, S, r, rcond = red.X, red.S, red.r, red.rcond
-    singular = rcond < rcond_tol
-    if singular.any():
-        arms = tuple(int(i) for i in np.flatnonzero(singular))
-        if fallback:
-            from multiarm_pin.dynamics.singular import finish_singular
-
-            return finish_singular(b, red, singular)
-        worst = float(rcond[singular].min())
-        raise SingularityError(
-            f"S_i = W_iᵀ M_i⁻¹ W_i of arm(s) {list(arms)}",
-            np.inf if worst <= 0 else 1.0 / worst,
-            "the arm is at a singularity or has fewer independent joint directions than "
-            "constraints; use solver='auto' or solver='singular'",
-        )
     m = b.N_max
-    Z = np.linalg.solve(S, np.concatenate((b.W_o.transpose(0, 2, 1), r[:, :, None]), axis=2))
+    with np.errstate(**_QUIET):
+        X, S, r, root = _reduce(b)
+        if not (root >= math.sqrt(rcond_tol)).all():
+            rcond = _check_reduction(b, X, root * root)
+            singular = rcond < rcond_tol
+            if fallback:
+                from multiarm_pin.dynamics.singular import finish_singular
+
+                return finish_singular(b, ArmReduction(X, S, r, rcond), singular)
+            arms = np.flatnonzero(singular).tolist()
+            worst = float(rcond[singular].min())
+            raise SingularityError(
+                f"S_i = W_iᵀ M_i⁻¹ W_i of arm(s) {arms}",
+                np.inf if worst <= 0 else 1.0 / worst,
+                "the arm is at a singularity or has fewer independent joint directions than "
+                "constraints; use solver='auto' or solver='singular'",
+            )
+        Z = _batched_solve(S, np.concatenate((b.W_o.transpose(0, 2, 1), r[:, :, None]), axis=2))
     AB = b.W_o.transpose(1, 0, 2).reshape(6, -1) @ Z.reshape(-1, 7)
-    try:
-        a_o = np.linalg.solve(b.M_o + AB[:, :6], b.h_o + AB[:, 6])
-    except np.linalg.LinAlgError:
-        b.check_finite()
-        raise DynamicsError(
-            "object matrix M_o + Σ W_o,i S_i⁻¹ W_o,iᵀ is singular; M_o must be the positive "
-            "definite spatial inertia of the object"
-        ) from None
+    a_o = solve_object_system(b, b.M_o + AB[:, :6], b.h_o + AB[:, 6])
     mu = Z[:, :, 6] - Z[:, :, :6] @ a_o
     qdd = X[:, :, m] + np.matmul(X[:, :, :m], mu[:, :, None])[:, :, 0]
-    if not np.isfinite(a_o).all():
-        b.check_finite()
-        raise DynamicsError("object-first solve produced a non-finite object acceleration")
     return Solution(a_o, qdd, mu, "object_first", (), b)
+
+
+def solve_object_system(b: SystemBlocks, A: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Solve the reduced 6 x 6 object system ``A a_o = rhs`` (A symmetric positive definite).
+
+    Also checks that ``M_o`` itself is positive definite and that the result is finite.
+
+    Raises:
+        InputError: ``M_o`` not positive definite, NaN or infinity in the blocks.
+        DynamicsError: ``A`` not positive definite.
+    """
+    if lapack.dpotrf(b.M_o)[1] != 0:
+        b.check_finite()
+        raise InputError(
+            "SystemBlocks.M_o: the object spatial inertia must be symmetric positive definite, "
+            f"got eigenvalues {np.linalg.eigvalsh(b.M_o).round(12).tolist()}"
+        )
+    _, x, info = lapack.dposv(A, rhs)
+    if info != 0 or not math.isfinite(x.sum()):
+        b.check_finite()
+        raise DynamicsError(
+            f"reduced object matrix M_o + Σ W_o,i S_i⁻¹ W_o,iᵀ is not positive definite "
+            f"(LAPACK info {info}); the equations of motion have no unique solution"
+        )
+    return x
 
 
 def _check_tol(rcond_tol: float) -> None:

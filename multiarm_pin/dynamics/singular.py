@@ -30,6 +30,7 @@ from multiarm_pin.dynamics.object_first import (
     ArmReduction,
     _check_tol,
     reduce_arms,
+    solve_object_system,
 )
 from multiarm_pin.exceptions import DynamicsError, InputError
 
@@ -98,14 +99,7 @@ def finish_singular(blocks: SystemBlocks, red: ArmReduction, mask: np.ndarray) -
     cm_s = b.constraint_mask[sg]  # (s, m)
     W_flat = b.W_o[sg].transpose(1, 0, 2).reshape(6, -1)[:, cm_s.ravel()]  # (6, p)
     p = W_flat.shape[1]
-    try:
-        Y = np.linalg.solve(M_t, np.concatenate((W_flat, h_t[:, None]), axis=1))
-    except np.linalg.LinAlgError:
-        b.check_finite()
-        raise DynamicsError(
-            "reduced object matrix M̃_o is singular; M_o must be the positive definite "
-            "spatial inertia of the object"
-        ) from None
+    Y = solve_object_system(b, M_t, np.concatenate((W_flat, h_t[:, None]), axis=1))
     F = W_flat.T @ Y[:, :p]
     offsets = np.concatenate(([0], np.cumsum(b.N[sg])))
     for j, i in enumerate(sg):  # loop over singular arms only (the rare path)
