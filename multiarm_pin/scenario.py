@@ -1,0 +1,833 @@
+"""Scenario files: schema, validation (with did-you-mean) and building the system.
+
+A scenario is a YAML file describing the object, the arms and how each is joined to the
+object, the controller and the simulation settings (format in the README and issue 6)::
+
+    name: two_ur5_box
+    gravity: [0, 0, -9.81]                   # m/s^2, world
+    object:
+      shape: {type: box, size: [0.8, 0.4, 0.3]}     # or {type: polyhedron, vertices: [...]}
+      mass: 4.0                              # kg; `inertia` (3x3 about the COM) optional
+      pose: {position: [0.6, 0, 0.4], quaternion: [0, 0, 0, 1]}   # [x, y, z, w] or rpy
+      twist: [0, 0, 0, 0, 0, 0]              # optional, [v; w] world axes
+    arms:
+      - name: left
+        robot: ur5                           # or `urdf: path` (relative to this file)
+        tool_frame: tool0
+        base: {position: [0, 0.5, 0], rpy: [0, 0, 0]}
+        q0: [...]                            # optional when the joint is placed in the object
+        q_seed: [...]                        # IK seed when q0 is omitted
+        joint: {type: weld}                  # or with placement_in_object: {...}
+    controller: {type: none}
+    simulation: {duration: 2.0, integrator: rk4, dt: 0.001, solver: object_first,
+                 baumgarte: {alpha: 5.0, beta: 5.0}}
+
+Joint types: ``weld``, ``revolute``, ``prismatic``, ``cylindrical``, ``universal``,
+``spherical`` (parameters ``size``, ``tip_radius``, ``points_on``, and optionally
+``placement_in_object`` / ``placement_in_tool`` of the joint frame), and ``contacts``
+(spherical fingertips on named faces: ``tip_radius`` and ``contacts: [{tip: frame, face:
++x, point: [..]}, ...]``). Without ``placement_in_object`` a joint is built where the tool is
+at ``q0``. Without ``q0`` the arm is placed by inverse kinematics (:mod:`multiarm_pin.ik`)
+from ``q_seed``: its tool at the joint's placement, or each fingertip touching its face, as
+near to the given point as the gripper allows.
+
+Every error is a :class:`~multiarm_pin.exceptions.ScenarioError` naming the file, the key
+path (``arms[1].joint.type``) and what was expected.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import yaml
+
+from multiarm_pin.exceptions import (
+    FrameNotFoundError,
+    MultiArmError,
+    RobotNotFoundError,
+    ScenarioError,
+    URDFError,
+)
+
+PLACED_JOINT_TYPES = ("weld", "revolute", "prismatic", "cylindrical", "universal", "spherical")
+"""Joint types defined by a joint frame (placed in the object and in the tool)."""
+JOINT_TYPE_NAMES = (*PLACED_JOINT_TYPES, "contacts")
+"""Every joint type a scenario may name."""
+CONTROLLER_TYPES = ("none", "gravity_compensation", "joint_pd", "object_pd")
+"""Controller types a scenario may name."""
+INTEGRATORS = ("rk45", "rk4", "semi_implicit")
+"""Integrators a scenario may name."""
+SOLVER_NAMES = ("object_first", "dense_kkt", "auto", "singular")
+"""Forward-dynamics solvers a scenario may name."""
+INITIAL_GAP_TOLERANCE = 1e-6
+"""Largest gap [m] of any contact in the initial state."""
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
+
+# ----------------------------------------------------------------------------- data
+@dataclass(frozen=True)
+class ObjectSpec:
+    """The object as read from a scenario.
+
+    Attributes:
+        shape_type: ``"box"`` or ``"polyhedron"``.
+        size: (3,) box edge lengths [m] (box only).
+        vertices: (V, 3) vertices in the object (COM) frame [m] (polyhedron only).
+        mass: [kg].
+        inertia: (3, 3) about the COM in object axes [kg m^2], or None (uniform density).
+        position: (3,) initial COM position in the world [m].
+        quaternion: (4,) initial orientation ``[x, y, z, w]``.
+        twist: (6,) initial ``[ẋ; ω]`` in world axes [m/s, rad/s].
+    """
+
+    shape_type: str
+    size: np.ndarray | None
+    vertices: np.ndarray | None
+    mass: float
+    inertia: np.ndarray | None
+    position: np.ndarray
+    quaternion: np.ndarray
+    twist: np.ndarray
+
+    @property
+    def placement(self) -> pin.SE3:
+        """Initial world placement of the object (COM) frame."""
+        return pin.SE3(pin.Quaternion(self.quaternion).toRotationMatrix(), self.position)
+
+
+@dataclass(frozen=True)
+class ContactSpec:
+    """One fingertip contact of a ``contacts`` joint.
+
+    Attributes:
+        tip: frame name of the fingertip's sphere centre in the arm's model.
+        face: face name (``+x`` ...) or index of the object's polyhedron.
+        point: (3,) desired contact point on that face, object frame [m], or None (the
+            face's centre is used as a preference).
+    """
+
+    tip: str
+    face: str | int
+    point: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class JointSpec:
+    """How an arm is joined to the object.
+
+    Attributes:
+        type: one of :data:`JOINT_TYPE_NAMES`.
+        params: extra parameters of the joint library (``size``, ``tip_radius``, ...).
+        placement_in_object: joint frame in the object frame, or None (tool at ``q0``).
+        placement_in_tool: joint frame in the tool frame, or None (identity).
+        contacts: fingertip contacts (``contacts`` type only).
+    """
+
+    type: str
+    params: dict = field(default_factory=dict)
+    placement_in_object: pin.SE3 | None = None
+    placement_in_tool: pin.SE3 | None = None
+    contacts: tuple[ContactSpec, ...] = ()
+
+
+@dataclass(frozen=True)
+class ArmSpec:
+    """One arm as read from a scenario.
+
+    Attributes:
+        name: unique name.
+        robot: ``example_robot_data`` name, or None.
+        urdf: absolute URDF path, or None.
+        tool_frame: frame the tool is attached to (None: the robot's default).
+        tool_offset: tool placement relative to ``tool_frame`` (None: identity).
+        base: world placement of the robot's root.
+        locked_joints: joints locked at their neutral value (URDF arms).
+        q0: (nq,) initial configuration, or None (inverse kinematics).
+        q_seed: (nq,) seed of the inverse kinematics, or None (neutral).
+        v0: (nv,) initial joint velocities, or None (zero).
+        joint: the joint to the object.
+        index: position in the file's ``arms`` list.
+    """
+
+    name: str
+    robot: str | None
+    urdf: str | None
+    tool_frame: str | None
+    tool_offset: pin.SE3 | None
+    base: pin.SE3
+    locked_joints: tuple[str, ...]
+    q0: np.ndarray | None
+    q_seed: np.ndarray | None
+    v0: np.ndarray | None
+    joint: JointSpec
+    index: int
+
+
+@dataclass(frozen=True)
+class ControllerSpec:
+    """Controller type and its parameters (passed to ``make_controller``)."""
+
+    type: str
+    params: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SimulationSpec:
+    """Simulation settings.
+
+    Attributes:
+        duration: [s]. integrator: one of :data:`INTEGRATORS`. dt: step and output sampling
+        period [s]. solver: one of :data:`SOLVER_NAMES`. baumgarte: ``(α, β)`` [1/s].
+    """
+
+    duration: float = 2.0
+    integrator: str = "rk4"
+    dt: float = 1e-3
+    solver: str = "object_first"
+    baumgarte: tuple[float, float] = (5.0, 5.0)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario file.
+
+    Attributes:
+        name: scenario name. file: where it was read from. description: free text.
+        gravity: (3,) [m/s^2] world. object: :class:`ObjectSpec`. arms: the arms.
+        controller: :class:`ControllerSpec`. simulation: :class:`SimulationSpec`.
+        data: the parsed YAML mapping (URDF paths made absolute), for copying the scenario.
+    """
+
+    name: str
+    file: str
+    description: str
+    gravity: np.ndarray
+    object: ObjectSpec
+    arms: tuple[ArmSpec, ...]
+    controller: ControllerSpec
+    simulation: SimulationSpec
+    data: dict
+
+
+# ----------------------------------------------------------------------------- validation
+def did_you_mean(word: str, options: Sequence[str]) -> str:
+    """`` (did you mean 'x'?)`` for the closest of ``options``, or an empty string."""
+    close = difflib.get_close_matches(str(word), [str(o) for o in options], n=1, cutoff=0.6)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+class _Reader:
+    """Reads one YAML value with its key path; every failure is a ScenarioError."""
+
+    def __init__(self, file: str, path: str, value):
+        self.file, self.path, self.value = file, path, value
+
+    def error(self, message: str, key: str | None = None) -> ScenarioError:
+        return ScenarioError(self.file, key if key is not None else self.path, message)
+
+    def child(self, key, value) -> _Reader:
+        if isinstance(key, int):
+            return _Reader(self.file, f"{self.path}[{key}]", value)
+        return _Reader(self.file, f"{self.path}.{key}" if self.path else str(key), value)
+
+    def mapping(self, allowed: Sequence[str], required: Sequence[str] = ()) -> dict:
+        if not isinstance(self.value, Mapping):
+            raise self.error(f"expected a mapping with keys {', '.join(allowed)}, got "
+                             f"{_describe(self.value)}")
+        for k in self.value:
+            if k not in allowed:
+                raise self.error(
+                    f"unknown key {k!r}{did_you_mean(k, allowed)}; expected keys: "
+                    f"{', '.join(allowed)}",
+                    self.child(k, None).path,
+                )
+        for k in required:
+            if k not in self.value:
+                raise self.error(f"missing required key {k!r}", self.child(k, None).path)
+        return dict(self.value)
+
+    def get(self, key: str) -> _Reader:
+        return self.child(key, self.value.get(key) if isinstance(self.value, Mapping) else None)
+
+    def string(self, choices: Sequence[str] | None = None) -> str:
+        if not isinstance(self.value, str):
+            what = f"one of {', '.join(choices)}" if choices else "a string"
+            raise self.error(f"expected {what}, got {_describe(self.value)}")
+        if choices is not None and self.value not in choices:
+            raise self.error(f"unknown value {self.value!r}{did_you_mean(self.value, choices)}; "
+                             f"expected one of {', '.join(choices)}")
+        return self.value
+
+    def number(self, positive: bool = False, nonnegative: bool = False) -> float:
+        v = self.value
+        if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v):
+            raise self.error(f"expected a number, got {_describe(v)}")
+        if positive and v <= 0:
+            raise self.error(f"expected a positive number, got {v}")
+        if nonnegative and v < 0:
+            raise self.error(f"expected a number >= 0, got {v}")
+        return float(v)
+
+    def array(self, shape: Sequence[int | None], meaning: str = "") -> np.ndarray:
+        exp = _shape_text(shape) + (f" ({meaning})" if meaning else "")
+        v = self.value
+        if isinstance(v, str | bytes | Mapping) or v is None or isinstance(v, bool):
+            raise self.error(f"expected a list of numbers of shape {exp}, got {_describe(v)}")
+        try:
+            arr = np.asarray(v, dtype=float)
+        except (TypeError, ValueError):
+            raise self.error(f"expected numbers of shape {exp}, got {_describe(v)}") from None
+        if arr.ndim != len(shape) or any(
+            s is not None and s != n for s, n in zip(shape, arr.shape, strict=False)
+        ):
+            if len(shape) == 1 and arr.ndim == 1:
+                raise self.error(f"expected {shape[0]} numbers {exp}, got {arr.shape[0]}: "
+                                 f"{arr.tolist()}")
+            raise self.error(f"expected shape {exp}, got shape {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise self.error(f"expected finite numbers, got {arr.tolist()}")
+        return arr
+
+    def quaternion(self) -> np.ndarray:
+        q = self.array((4,), "[x, y, z, w]")
+        n = float(np.linalg.norm(q))
+        if abs(n - 1.0) > 1e-6:
+            raise self.error(f"expected a unit quaternion [x, y, z, w], got norm {n:.9g}: "
+                             f"{q.tolist()}")
+        return q / n
+
+    def placement(self) -> pin.SE3:
+        d = self.mapping(("position", "quaternion", "rpy"))
+        if "quaternion" in d and "rpy" in d:
+            raise self.error("give only one of quaternion [x, y, z, w] or rpy")
+        p = self.get("position").array((3,), "m") if "position" in d else np.zeros(3)
+        if "quaternion" in d:
+            R = pin.Quaternion(self.get("quaternion").quaternion()).toRotationMatrix()
+        elif "rpy" in d:
+            r = self.get("rpy").array((3,), "roll, pitch, yaw [rad]")
+            R = pin.rpy.rpyToMatrix(*r)
+        else:
+            R = np.eye(3)
+        return pin.SE3(R, p)
+
+
+def _describe(v) -> str:
+    if isinstance(v, Mapping):
+        return f"a mapping with keys {list(v)}"
+    if isinstance(v, list | tuple):
+        return f"a list of {len(v)}: {v!r}"[:120]
+    return f"{type(v).__name__} {v!r}"[:120]
+
+
+def _shape_text(shape) -> str:
+    inner = ", ".join("n" if s is None else str(s) for s in shape)
+    return f"({inner},)" if len(shape) == 1 else f"({inner})"
+
+
+_TOP_KEYS = ("name", "description", "gravity", "object", "arms", "controller", "simulation")
+_OBJECT_KEYS = ("shape", "mass", "inertia", "pose", "twist")
+_ARM_KEYS = ("name", "robot", "urdf", "tool_frame", "tool_offset", "base", "locked_joints",
+             "q0", "q_seed", "v0", "joint")
+_JOINT_KEYS = ("type", "size", "tip_radius", "points_on", "placement_in_object",
+               "placement_in_tool", "contacts")
+_SIM_KEYS = ("duration", "integrator", "dt", "solver", "baumgarte")
+
+
+def load_scenario(path) -> Scenario:
+    """Read and validate a scenario YAML file.
+
+    Args:
+        path: the file.
+
+    Returns:
+        The :class:`Scenario` (no robot loaded yet; see :func:`build_scenario`).
+
+    Raises:
+        ScenarioError: unreadable file, YAML syntax error, or invalid content (names the key
+            path and what was expected).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ScenarioError(str(path), "", "file not found")
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.YAMLError as exc:
+        raise ScenarioError(str(path), "", f"YAML syntax error: {exc}") from exc
+    return parse_scenario(data, str(path))
+
+
+def parse_scenario(data, file: str = "<scenario>") -> Scenario:
+    """Validate a parsed scenario mapping.
+
+    Args:
+        data: the mapping read from YAML.
+        file: the file it came from (for messages and to resolve relative URDF paths).
+
+    Raises:
+        ScenarioError: invalid content.
+    """
+    root = _Reader(file, "", data)
+    d = root.mapping(_TOP_KEYS, required=("object", "arms"))
+    name = root.get("name").string() if "name" in d else Path(file).stem
+    description = root.get("description").string() if "description" in d else ""
+    gravity = (root.get("gravity").array((3,), "m/s^2") if "gravity" in d
+               else np.array([0.0, 0.0, -9.81]))
+    obj = _parse_object(root.get("object"))
+    arms_r = root.get("arms")
+    if not isinstance(arms_r.value, list) or not arms_r.value:
+        raise arms_r.error(f"expected a non-empty list of arms, got {_describe(arms_r.value)}")
+    base_dir = Path(file).resolve().parent
+    arms = tuple(_parse_arm(arms_r.child(i, a), i, base_dir) for i, a in enumerate(arms_r.value))
+    names = [a.name for a in arms]
+    for i, n in enumerate(names):
+        if names.index(n) != i:
+            raise arms_r.child(i, None).error(f"duplicate arm name {n!r}; names must be unique",
+                                              f"arms[{i}].name")
+    controller = _parse_controller(root.get("controller")) if "controller" in d else \
+        ControllerSpec("none")
+    sim = _parse_simulation(root.get("simulation")) if "simulation" in d else SimulationSpec()
+    clean = dict(d)
+    clean["arms"] = [dict(a) for a in d["arms"]]
+    for a, spec in zip(clean["arms"], arms, strict=True):
+        if spec.urdf is not None:
+            a["urdf"] = spec.urdf
+    return Scenario(name, file, description, gravity, obj, arms, controller, sim, clean)
+
+
+def _parse_object(r: _Reader) -> ObjectSpec:
+    d = r.mapping(_OBJECT_KEYS, required=("shape", "mass"))
+    sr = r.get("shape")
+    sd = sr.mapping(("type", "size", "vertices"), required=("type",))
+    kind = sr.get("type").string(("box", "polyhedron"))
+    size = vertices = None
+    if kind == "box":
+        if "size" not in sd:
+            raise sr.error("missing required key 'size' (3 edge lengths [m])", f"{sr.path}.size")
+        size = sr.get("size").array((3,), "edge lengths [m]")
+        if np.any(size <= 0):
+            raise sr.get("size").error(f"expected three positive lengths [m], got {size.tolist()}")
+    else:
+        if "vertices" not in sd:
+            raise sr.error("missing required key 'vertices' ((V, 3) [m])", f"{sr.path}.vertices")
+        vertices = sr.get("vertices").array((None, 3), "vertices [m]")
+    mass = r.get("mass").number(positive=True)
+    inertia = r.get("inertia").array((3, 3), "kg m^2 about the COM") if "inertia" in d else None
+    position, quaternion = np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0])
+    if "pose" in d:
+        pr = r.get("pose")
+        M = pr.placement()
+        position = M.translation.copy()
+        quaternion = pin.Quaternion(M.rotation).coeffs().copy()
+    twist = r.get("twist").array((6,), "[v; w] world axes") if "twist" in d else np.zeros(6)
+    return ObjectSpec(kind, size, vertices, mass, inertia, position, quaternion, twist)
+
+
+def _parse_arm(r: _Reader, index: int, base_dir: Path) -> ArmSpec:
+    d = r.mapping(_ARM_KEYS, required=("joint",))
+    name = r.get("name").string() if "name" in d else f"arm{index}"
+    if "/" in name or not name:
+        raise r.get("name").error(f"expected a non-empty name without '/', got {name!r}")
+    if ("robot" in d) == ("urdf" in d):
+        raise r.error("give exactly one of 'robot' (an example_robot_data name) or 'urdf' "
+                      "(a path)")
+    robot = r.get("robot").string() if "robot" in d else None
+    urdf = None
+    if "urdf" in d:
+        raw = Path(r.get("urdf").string())
+        candidates = [raw] if raw.is_absolute() else [base_dir / raw, REPO_ROOT / raw]
+        found = next((c for c in candidates if c.is_file()), None)
+        if found is None:
+            raise r.get("urdf").error(
+                f"URDF file not found (looked at {', '.join(str(c) for c in candidates)})")
+        urdf = str(found.resolve())
+    tool_frame = r.get("tool_frame").string() if "tool_frame" in d else None
+    if urdf is not None and tool_frame is None:
+        raise r.error("a URDF arm needs 'tool_frame'", f"{r.path}.tool_frame")
+    tool_offset = r.get("tool_offset").placement() if "tool_offset" in d else None
+    base = r.get("base").placement() if "base" in d else pin.SE3.Identity()
+    locked = ()
+    if "locked_joints" in d:
+        lr = r.get("locked_joints")
+        if not isinstance(lr.value, list):
+            raise lr.error(f"expected a list of joint names, got {_describe(lr.value)}")
+        locked = tuple(lr.child(k, v).string() for k, v in enumerate(lr.value))
+    q0 = r.get("q0").array((None,), "joint positions [rad]") if "q0" in d else None
+    q_seed = r.get("q_seed").array((None,), "joint positions [rad]") if "q_seed" in d else None
+    v0 = r.get("v0").array((None,), "joint velocities [rad/s]") if "v0" in d else None
+    joint = _parse_joint(r.get("joint"))
+    if q0 is None and joint.placement_in_object is None and joint.type != "contacts":
+        raise r.error(
+            "give q0, or place the joint in the object (joint.placement_in_object) so that "
+            "inverse kinematics can put the arm there", f"{r.path}.q0")
+    return ArmSpec(name, robot, urdf, tool_frame, tool_offset, base, locked, q0, q_seed, v0,
+                   joint, index)
+
+
+def _parse_joint(r: _Reader) -> JointSpec:
+    d = r.mapping(_JOINT_KEYS, required=("type",))
+    kind = r.get("type").string(JOINT_TYPE_NAMES)
+    params = {}
+    for key in ("size", "tip_radius"):
+        if key in d:
+            params[key] = r.get(key).number(positive=(key == "size"), nonnegative=True)
+    if "points_on" in d:
+        if kind == "contacts":
+            raise r.get("points_on").error("not a parameter of 'contacts' joints")
+        params["points_on"] = r.get("points_on").string(("tool", "object"))
+    if kind == "contacts":
+        for key in ("placement_in_object", "placement_in_tool", "size"):
+            if key in d:
+                raise r.get(key).error(
+                    "not a parameter of 'contacts' joints (expected contacts, tip_radius)")
+        if "contacts" not in d:
+            raise r.error("missing required key 'contacts' (list of {tip, face, point})",
+                          f"{r.path}.contacts")
+        cr = r.get("contacts")
+        if not isinstance(cr.value, list) or not cr.value:
+            raise cr.error(f"expected a non-empty list of {{tip, face, point}}, got "
+                           f"{_describe(cr.value)}")
+        contacts = []
+        for k, c in enumerate(cr.value):
+            cc = cr.child(k, c)
+            cd = cc.mapping(("tip", "face", "point"), required=("tip", "face"))
+            face = cd["face"]
+            if isinstance(face, bool) or not isinstance(face, str | int):
+                raise cc.get("face").error(f"expected a face name (e.g. +x) or index, got "
+                                           f"{_describe(face)}")
+            point = cc.get("point").array((3,), "object frame [m]") if "point" in cd else None
+            contacts.append(ContactSpec(cc.get("tip").string(), face, point))
+        return JointSpec(kind, params, contacts=tuple(contacts))
+    if "contacts" in d:
+        raise r.get("contacts").error(f"only 'contacts' joints take contacts, not {kind!r}")
+    J_o = r.get("placement_in_object").placement() if "placement_in_object" in d else None
+    J_t = r.get("placement_in_tool").placement() if "placement_in_tool" in d else None
+    return JointSpec(kind, params, J_o, J_t)
+
+
+def _parse_controller(r: _Reader) -> ControllerSpec:
+    if not isinstance(r.value, Mapping):
+        raise r.error(f"expected a mapping with 'type', got {_describe(r.value)}")
+    if "type" not in r.value:
+        raise r.error("missing required key 'type'", f"{r.path}.type")
+    kind = r.get("type").string(CONTROLLER_TYPES)
+    params = {k: v for k, v in r.value.items() if k != "type"}
+    return ControllerSpec(kind, params)
+
+
+def _parse_simulation(r: _Reader) -> SimulationSpec:
+    d = r.mapping(_SIM_KEYS)
+    s = SimulationSpec()
+    duration = r.get("duration").number(positive=True) if "duration" in d else s.duration
+    integrator = r.get("integrator").string(INTEGRATORS) if "integrator" in d else s.integrator
+    dt = r.get("dt").number(positive=True) if "dt" in d else s.dt
+    solver = r.get("solver").string(SOLVER_NAMES) if "solver" in d else s.solver
+    baum = s.baumgarte
+    if "baumgarte" in d:
+        br = r.get("baumgarte")
+        bd = br.mapping(("alpha", "beta"), required=("alpha", "beta"))
+        del bd
+        baum = (br.get("alpha").number(nonnegative=True), br.get("beta").number(nonnegative=True))
+    if dt > duration:
+        raise r.get("dt").error(f"dt = {dt} s is longer than the duration {duration} s")
+    return SimulationSpec(duration, integrator, dt, solver, baum)
+
+
+# ----------------------------------------------------------------------------- building
+def build_object(scenario: Scenario):
+    """The :class:`~multiarm_pin.rigid_object.RigidObject` of a scenario.
+
+    Raises:
+        ScenarioError: invalid shape/inertia (key ``object.*``).
+    """
+    from multiarm_pin.rigid_object import RigidObject
+
+    o = scenario.object
+    try:
+        if o.shape_type == "box":
+            return RigidObject.box(o.size, o.mass, o.inertia)
+        return RigidObject.from_vertices(o.vertices, o.mass, o.inertia)
+    except MultiArmError as exc:
+        key = "object.inertia" if o.inertia is not None and "inertia" in str(exc) else \
+            "object.shape"
+        raise ScenarioError(scenario.file, key, str(exc)) from exc
+
+
+def build_arm(scenario: Scenario, spec: ArmSpec, load_visuals: bool = True):
+    """Load one arm (:class:`~multiarm_pin.arm.Arm`) with its base placement and tool frame.
+
+    Raises:
+        ScenarioError: unknown robot (``arms[i].robot``, did-you-mean), missing tool frame
+            (``arms[i].tool_frame``), bad URDF (``arms[i].urdf``) or locked joints.
+    """
+    from multiarm_pin.arm import Arm, available_robots
+
+    key = f"arms[{spec.index}]"
+    try:
+        if spec.robot is not None:
+            return Arm.from_robot_name(spec.robot, spec.tool_frame, name=spec.name,
+                                       base_placement=spec.base, tool_offset=spec.tool_offset,
+                                       load_visuals=load_visuals)
+        return Arm.from_urdf(spec.urdf, spec.tool_frame, name=spec.name,
+                             base_placement=spec.base, tool_offset=spec.tool_offset,
+                             locked_joints=spec.locked_joints, load_visuals=load_visuals)
+    except RobotNotFoundError as exc:
+        raise ScenarioError(
+            scenario.file, f"{key}.robot",
+            f"unknown robot {spec.robot!r}{did_you_mean(spec.robot, available_robots())}; "
+            f"available robots: {', '.join(available_robots())} (or give 'urdf: path')",
+        ) from exc
+    except FrameNotFoundError as exc:
+        frames = [f for f in exc.available if f != "universe"]
+        raise ScenarioError(
+            scenario.file, f"{key}.tool_frame",
+            f"frame {exc.frame!r} not found in {exc.source}{did_you_mean(exc.frame, frames)}; "
+            f"frames: {', '.join(frames)}",
+        ) from exc
+    except URDFError as exc:
+        raise ScenarioError(scenario.file, f"{key}.urdf", str(exc)) from exc
+    except MultiArmError as exc:
+        raise ScenarioError(scenario.file, key, str(exc)) from exc
+
+
+@dataclass
+class BuiltScenario:
+    """A scenario turned into a system ready to simulate.
+
+    Attributes:
+        scenario: the validated file.
+        arms: the loaded arms (base placements baked in).
+        obj: the rigid object.
+        joints: one joint per arm.
+        system: the :class:`~multiarm_pin.system.MultiArmSystem`.
+        initial_state: the validated initial :class:`~multiarm_pin.system.SystemState`.
+        q0: per-arm initial configurations (nq_i,), given or found by inverse kinematics.
+        ik: per-arm :class:`~multiarm_pin.ik.IKResult` (None where ``q0`` was given).
+    """
+
+    scenario: Scenario
+    arms: list
+    obj: object
+    joints: list
+    system: object
+    initial_state: object
+    q0: list
+    ik: list
+
+
+def _placed_target(spec: ArmSpec, oMo: pin.SE3) -> pin.SE3:
+    J_t = spec.joint.placement_in_tool or pin.SE3.Identity()
+    return oMo * spec.joint.placement_in_object * J_t.inverse()
+
+
+def _tips_in_tool(scenario, spec: ArmSpec, arm) -> np.ndarray:
+    """(K, 3) fingertip centres in the tool frame, from the arm's (rigid) tip frames."""
+    q = arm.neutral()
+    oMt = arm.tool_placement(q)
+    out = []
+    for k, c in enumerate(spec.joint.contacts):
+        if not arm.model.existFrame(c.tip):
+            frames = [f for f in arm.frame_names if f != "universe"]
+            raise ScenarioError(
+                scenario.file, f"arms[{spec.index}].joint.contacts[{k}].tip",
+                f"frame {c.tip!r} not found in {arm.source}{did_you_mean(c.tip, frames)}; "
+                f"frames: {', '.join(frames)}")
+        out.append(oMt.actInv(arm.frame_placement(q, c.tip).translation))
+    return np.array(out)
+
+
+def _contact_targets(scenario, spec: ArmSpec, poly, oMo: pin.SE3):
+    """IK targets for fingertips on faces: a plane per tip (primary), a point (preference)."""
+    from multiarm_pin.ik import PlaneTarget, PointTarget
+
+    r = spec.joint.params.get("tip_radius", 0.0)
+    targets = []
+    for k, c in enumerate(spec.joint.contacts):
+        key = f"arms[{spec.index}].joint.contacts[{k}]"
+        try:
+            f = poly.face_index(c.face)
+        except MultiArmError as exc:
+            raise ScenarioError(scenario.file, f"{key}.face", str(exc)) from exc
+        n_o, d_o = poly.normals[f], poly.offsets[f]
+        if c.point is not None:
+            if not poly.point_on_face(c.point, f, 1e-6):
+                raise ScenarioError(
+                    scenario.file, f"{key}.point",
+                    f"point {c.point.tolist()} is not on face {c.face!r} (distance to its "
+                    f"plane {poly.signed_distance_to_face(c.point, f):.3g} m) or lies outside")
+            p_o = c.point
+        else:
+            p_o = poly.vertices[list(poly.faces[f])].mean(axis=0)
+        n_w = oMo.rotation @ n_o
+        # sphere centre on the plane offset by the radius along the outward normal
+        d_w = float(n_w @ oMo.translation) + d_o + r
+        targets.append(PlaneTarget(c.tip, n_w, d_w))
+        targets.append(PointTarget(c.tip, oMo.act(p_o + r * n_o), primary=False))
+    return targets
+
+
+def _solve_arm_ik(scenario, spec: ArmSpec, arm, poly, oMo):
+    from multiarm_pin.ik import PoseTarget, UnreachableError, solve_ik
+
+    if spec.joint.type == "contacts":
+        targets = _contact_targets(scenario, spec, poly, oMo)
+        what = f"arm {spec.name!r}: fingertips on faces"
+        key = f"arms[{spec.index}].joint.contacts"
+    else:
+        tool = arm.model.frames[arm.tool_frame_id].name
+        targets = [PoseTarget(tool, _placed_target(spec, oMo))]
+        what = f"arm {spec.name!r}: tool at joint.placement_in_object"
+        key = f"arms[{spec.index}].joint.placement_in_object"
+    seed = spec.q_seed
+    if seed is not None and len(seed) != arm.nq:
+        raise ScenarioError(scenario.file, f"arms[{spec.index}].q_seed",
+                            f"expected {arm.nq} numbers (nq of {arm.source}), got {len(seed)}")
+    try:
+        return solve_ik(arm.model, targets, seed, what=what)
+    except UnreachableError as exc:
+        raise ScenarioError(scenario.file, key,
+                            f"{exc} (try another q_seed, or move the arm's base)") from exc
+
+
+def _build_joint(scenario, spec: ArmSpec, arm, obj, q, oMo):
+    from multiarm_pin.constraints import fingertips_on_faces, make_joint, relative_placement
+
+    key = f"arms[{spec.index}].joint"
+    j = spec.joint
+    label = f"{spec.name}:{j.type}"
+    try:
+        if j.type == "contacts":
+            tips = _tips_in_tool(scenario, spec, arm)
+            M = relative_placement(arm.tool_placement(q), oMo)
+            r = j.params.get("tip_radius", 0.0)
+            contacts = []
+            for k, (c, tip) in enumerate(zip(j.contacts, tips, strict=True)):
+                f = obj.shape.face_index(c.face)
+                centre = M.act(tip)
+                point = centre - r * obj.shape.normals[f]
+                gap = obj.shape.signed_distance_to_face(point, f)
+                # touching point: project onto the face plane; the initial-state check
+                # reports the gap if the arm does not touch
+                point = point - gap * obj.shape.normals[f]
+                if not obj.shape.contains(point, 1e-6):
+                    raise ScenarioError(
+                        scenario.file, f"{key}.contacts[{k}]",
+                        f"fingertip {c.tip!r} touches the plane of face {c.face!r} at "
+                        f"{np.round(point, 4).tolist()} (object frame), outside the face")
+                contacts.append((f, point))
+            return fingertips_on_faces(obj.shape, contacts, r, tips, M, name=label, tol=1e-5)
+        if j.placement_in_object is not None:
+            return make_joint(j.type, joint_in_object=j.placement_in_object,
+                              joint_in_tool=j.placement_in_tool, name=label, **j.params)
+        J_t = j.placement_in_tool or pin.SE3.Identity()
+        M = relative_placement(arm.tool_placement(q), oMo) * J_t
+        return make_joint(j.type, joint_in_object=M, joint_in_tool=j.placement_in_tool,
+                          name=label, **j.params)
+    except ScenarioError:
+        raise
+    except MultiArmError as exc:
+        raise ScenarioError(scenario.file, key, str(exc)) from exc
+
+
+def build_scenario(scenario: Scenario, load_visuals: bool = False) -> BuiltScenario:
+    """Load the arms, place them (given ``q0`` or inverse kinematics), build joints and system.
+
+    Args:
+        scenario: a validated :class:`Scenario`.
+        load_visuals: also load the arms' meshes (only the replay needs them).
+
+    Returns:
+        :class:`BuiltScenario` with a consistent initial state (velocities projected onto the
+        constraints when ``v0``/``twist`` are given).
+
+    Raises:
+        ScenarioError: unknown robot, missing frame, wrong ``q0`` length, an unreachable
+            placement (with the IK residual), or an initial state that violates a joint
+            (key ``arms[i].q0``, with the gap).
+    """
+    from multiarm_pin.kinematics import BodyKinematics
+    from multiarm_pin.system import MultiArmSystem
+
+    obj = build_object(scenario)
+    oMo = scenario.object.placement
+    arms, q0s, iks, joints = [], [], [], []
+    for spec in scenario.arms:
+        arm = build_arm(scenario, spec, load_visuals)
+        key = f"arms[{spec.index}]"
+        if spec.q0 is not None:
+            if len(spec.q0) != arm.nq:
+                raise ScenarioError(scenario.file, f"{key}.q0",
+                                    f"expected {arm.nq} numbers (nq of {arm.source}), got "
+                                    f"{len(spec.q0)}")
+            q, ik = spec.q0.copy(), None
+        else:
+            ik = _solve_arm_ik(scenario, spec, arm, obj.shape, oMo)
+            q = ik.q
+        if spec.v0 is not None and len(spec.v0) != arm.nv:
+            raise ScenarioError(scenario.file, f"{key}.v0",
+                                f"expected {arm.nv} numbers (nv of {arm.source}), got "
+                                f"{len(spec.v0)}")
+        joint = _build_joint(scenario, spec, arm, obj, q, oMo)
+        # initial state must satisfy the joint: report the gap against the key q0
+        oMt = arm.tool_placement(q)
+        tool = BodyKinematics.single(oMt.translation, oMt.rotation, np.zeros(6))
+        objk = BodyKinematics.single(oMo.translation, oMo.rotation, np.zeros(6))
+        gaps = np.array([s.phi for s in joint.contact_states(tool, objk, active_only=False)])
+        worst = int(np.argmax(np.abs(gaps)))
+        if abs(gaps[worst]) > INITIAL_GAP_TOLERANCE:
+            where = "q0" if spec.q0 is not None else "q_seed"
+            raise ScenarioError(
+                scenario.file, f"{key}.{where}",
+                f"inconsistent initial state: the {spec.joint.type} joint of arm "
+                f"{spec.name!r} is violated at the initial configuration: contact {worst} "
+                f"({joint.contacts[worst].name}) has gap {gaps[worst]:.6g} m (tolerance "
+                f"{INITIAL_GAP_TOLERANCE:g} m, {int((np.abs(gaps) > INITIAL_GAP_TOLERANCE).sum())}"
+                f" of {len(gaps)} contacts violated); the tool is at "
+                f"{np.round(oMt.translation, 4).tolist()} m",
+            )
+        arms.append(arm)
+        q0s.append(q)
+        iks.append(ik)
+        joints.append(joint)
+    try:
+        system = MultiArmSystem(arms, obj, joints, scenario.gravity)
+        v = np.concatenate([a.v0 if a.v0 is not None else np.zeros(arm.nv)
+                            for a, arm in zip(scenario.arms, arms, strict=True)])
+        state = system.state(np.concatenate(q0s), v, scenario.object.position,
+                             scenario.object.quaternion, scenario.object.twist)
+        if np.any(v != 0) or np.any(scenario.object.twist != 0):
+            state = system.project_velocities(state)
+        system.check_initial_state(state)
+    except ScenarioError:
+        raise
+    except MultiArmError as exc:
+        raise ScenarioError(scenario.file, "arms", f"inconsistent initial state: {exc}") from exc
+    return BuiltScenario(scenario, arms, obj, joints, system, state, q0s, iks)
+
+
+__all__ = [
+    "CONTROLLER_TYPES",
+    "INTEGRATORS",
+    "JOINT_TYPE_NAMES",
+    "PLACED_JOINT_TYPES",
+    "SOLVER_NAMES",
+    "ArmSpec",
+    "BuiltScenario",
+    "ContactSpec",
+    "ControllerSpec",
+    "JointSpec",
+    "ObjectSpec",
+    "Scenario",
+    "SimulationSpec",
+    "build_arm",
+    "build_object",
+    "build_scenario",
+    "did_you_mean",
+    "load_scenario",
+    "parse_scenario",
+]
