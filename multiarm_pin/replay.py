@@ -18,6 +18,8 @@ All positions are in the world frame [m]; forces [N].
 
 from __future__ import annotations
 
+import contextlib
+import io
 import math
 import webbrowser
 from collections.abc import Sequence
@@ -364,7 +366,8 @@ def _frame_camera(vis, points: np.ndarray) -> None:
     lo, hi = points.min(axis=0), points.max(axis=0)
     centre = 0.5 * (lo + hi)
     radius = max(0.5 * float(np.linalg.norm(hi - lo)), 0.5)
-    distance = 1.1 * radius / math.sin(math.radians(CAMERA_FOV_DEG) / 2)
+    # 1.3: margin for geometry that extends past the node origins the points come from.
+    distance = 1.3 * radius / math.sin(math.radians(CAMERA_FOV_DEG) / 2)
     direction = CAMERA_DIRECTION / np.linalg.norm(CAMERA_DIRECTION)
     set_camera(vis, centre, centre + distance * direction)
 
@@ -488,7 +491,8 @@ def close_visualizer(vis: meshcat.Visualizer) -> None:
 
 
 def _new_visualizer() -> meshcat.Visualizer:
-    return meshcat.Visualizer()
+    with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints its URL
+        return meshcat.Visualizer()
 
 
 def write_replay_html(
