@@ -1,0 +1,181 @@
+"""Result plots of a run (matplotlib, Agg backend: PNG files, no display needed).
+
+Every function takes plain arrays (as stored in ``trajectory.npz``) and writes one PNG.
+Units: time [s], positions [m], orientation as a rotation vector [rad], forces [N],
+gaps [m].
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pinocchio as pin  # noqa: E402
+
+from multiarm_pin.exceptions import InputError  # noqa: E402
+from multiarm_pin.spatial import as_array, quaternion_to_rotation  # noqa: E402
+
+DPI = 110
+
+
+def rotation_vectors(quaternions: np.ndarray) -> np.ndarray:
+    """(T, 3) rotation vectors ``log3(R)`` [rad] of (T, 4) quaternions ``[x, y, z, w]``.
+
+    Consecutive vectors are kept continuous (no jump of 2π at |θ| = π) by choosing, at each
+    sample, the equivalent vector nearest to the previous one.
+    """
+    quats = as_array(quaternions, (None, 4), "quaternions (T, 4) [x, y, z, w]")
+    out = np.zeros((len(quats), 3))
+    for k, q in enumerate(quats):
+        r = pin.log3(quaternion_to_rotation(q / np.linalg.norm(q)))
+        if k > 0:
+            theta = np.linalg.norm(r)
+            if theta > 1e-9:
+                axis = r / theta
+                alt = r - 2 * np.pi * axis
+                if np.linalg.norm(alt - out[k - 1]) < np.linalg.norm(r - out[k - 1]):
+                    r = alt
+        out[k] = r
+    return out
+
+
+def _save(fig, path) -> Path:
+    path = Path(path)
+    if not path.parent.is_dir():
+        plt.close(fig)
+        raise InputError(f"plot: folder {path.parent} does not exist")
+    fig.tight_layout()
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+    return path
+
+
+def _times(t) -> np.ndarray:
+    t = as_array(t, (None,), "t (T,) [s]")
+    if len(t) < 1:
+        raise InputError("t: needs at least one sample")
+    return t
+
+
+def plot_object_pose(path, t, position, quaternion, title: str = "") -> Path:
+    """Object COM position and orientation (rotation vector) against time.
+
+    Args:
+        path: PNG file to write.
+        t: (T,) times [s].
+        position: (T, 3) COM in the world [m].
+        quaternion: (T, 4) orientation ``[x, y, z, w]``.
+        title: figure title.
+
+    Returns:
+        The path written.
+    """
+    t = _times(t)
+    p = as_array(position, (len(t), 3), "object position (T, 3)")
+    r = rotation_vectors(as_array(quaternion, (len(t), 4), "object quaternion (T, 4)"))
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 5.5), sharex=True)
+    for k, lab in enumerate("xyz"):
+        a1.plot(t, p[:, k], label=lab)
+        a2.plot(t, r[:, k], label=f"θ{lab}")
+    a1.set_ylabel("COM position [m]")
+    a2.set_ylabel("rotation vector [rad]")
+    a2.set_xlabel("time [s]")
+    a1.legend(loc="best")
+    a2.legend(loc="best")
+    a1.grid(alpha=0.3)
+    a2.grid(alpha=0.3)
+    a1.set_title(title or "object pose")
+    return _save(fig, path)
+
+
+def plot_contact_forces(path, t, mu: Mapping[str, np.ndarray], title: str = "") -> Path:
+    """Contact multipliers (forces, positive = pushing) of each arm against time.
+
+    Args:
+        path: PNG file.
+        t: (T,) times [s].
+        mu: arm name -> (T, N_A) multipliers [N].
+        title: figure title.
+    """
+    t = _times(t)
+    if not mu:
+        raise InputError("plot_contact_forces: no arms given")
+    n = len(mu)
+    fig, axes = plt.subplots(n, 1, figsize=(7, 2.2 + 1.8 * n), sharex=True, squeeze=False)
+    for ax, (name, m) in zip(axes[:, 0], mu.items(), strict=True):
+        m = as_array(m, (len(t), None), f"mu_{name} (T, N)")
+        for k in range(m.shape[1]):
+            ax.plot(t, m[:, k], lw=1.0, label=f"{k}")
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_ylabel(f"{name}: μ [N]")
+        ax.grid(alpha=0.3)
+        if 0 < m.shape[1] <= 8:
+            ax.legend(loc="upper right", fontsize=7, ncol=m.shape[1], title="contact",
+                      title_fontsize=7)
+    axes[-1, 0].set_xlabel("time [s]")
+    axes[0, 0].set_title(title or "contact forces (positive = pushing)")
+    return _save(fig, path)
+
+
+def plot_constraint_violation(path, t, violation, title: str = "") -> Path:
+    """``max |φ|`` over all contacts against time, log scale.
+
+    Args:
+        path: PNG file.
+        t: (T,) times [s].
+        violation: (T,) [m].
+        title: figure title.
+    """
+    t = _times(t)
+    v = as_array(violation, (len(t),), "constraint violation (T,)")
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    ax.semilogy(t, np.maximum(np.abs(v), 1e-16))
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("max |φ| [m]")
+    ax.grid(alpha=0.3, which="both")
+    ax.set_title(title or "constraint violation")
+    return _save(fig, path)
+
+
+def write_plots(out_dir, trajectory: Mapping[str, np.ndarray], arm_names, title: str = ""
+                ) -> list[Path]:
+    """All standard plots of a run from its ``trajectory.npz`` arrays.
+
+    Args:
+        out_dir: existing folder.
+        trajectory: mapping with ``t``, ``object_position``, ``object_quaternion``,
+            ``constraint_violation`` and ``mu_<arm>`` for each arm.
+        arm_names: the arms' names.
+        title: scenario name, prefixed to the titles.
+
+    Returns:
+        The PNG files written: ``object_pose.png``, ``contact_forces.png``,
+        ``constraint_violation.png``.
+    """
+    out = Path(out_dir)
+    pre = f"{title}: " if title else ""
+    t = trajectory["t"]
+    return [
+        plot_object_pose(out / "object_pose.png", t, trajectory["object_position"],
+                         trajectory["object_quaternion"], pre + "object pose"),
+        plot_contact_forces(out / "contact_forces.png", t,
+                            {a: trajectory[f"mu_{a}"] for a in arm_names},
+                            pre + "contact forces (positive = pushing)"),
+        plot_constraint_violation(out / "constraint_violation.png", t,
+                                  trajectory["constraint_violation"],
+                                  pre + "constraint violation"),
+    ]
+
+
+__all__ = [
+    "plot_constraint_violation",
+    "plot_contact_forces",
+    "plot_object_pose",
+    "rotation_vectors",
+    "write_plots",
+]

@@ -1,0 +1,464 @@
+"""The ``run`` and ``replay`` commands: simulate a scenario, write its results, replay them.
+
+``multiarm-pin run SCENARIO.yaml [--out DIR] [--solver NAME] [--duration S]`` writes into DIR:
+
+- ``trajectory.npz``: ``t`` (T,), ``object_position`` (T, 3), ``object_quaternion`` (T, 4,
+  ``[x, y, z, w]``), ``object_twist`` (T, 6, ``[ẋ; ω]`` world axes), for each arm A
+  ``q_A`` (T, nq), ``v_A`` (T, nv), ``tau_A`` (T, nv), ``mu_A`` (T, N_A) (contact multipliers
+  [N], positive = pushing), ``phi_A`` (T, N_A) (gaps [m]); ``constraint_violation`` (T,)
+  = max |φ| over all contacts [m]; ``contact_points`` (T, K, 3) [m] and ``contact_forces``
+  (T, K, 3) [N] (force on the object, world axes) of the K contacts of all arms in order;
+  ``kinetic_energy``, ``potential_energy`` (T,) [J]; ``momentum`` (T, 6).
+- ``summary.json``: scenario name, solver, steps, wall time, max constraint violation,
+  min contact force, warnings (contact separations, solver switches), per-arm details.
+- ``object_pose.png``, ``contact_forces.png``, ``constraint_violation.png``.
+- ``replay.html``: a self-contained Meshcat page replaying the run offline.
+- ``scenario.yaml``: the scenario (URDF paths absolute), so that ``multiarm-pin replay DIR``
+  can rebuild the arms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import urllib.request
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import yaml
+
+from multiarm_pin.exceptions import InputError, MultiArmError, ScenarioError
+from multiarm_pin.scenario import (
+    BuiltScenario,
+    Scenario,
+    build_arm,
+    build_object,
+    build_scenario,
+    load_scenario,
+)
+
+REPLAY_FPS = 30
+"""Frames per second of the replay page."""
+
+
+# ----------------------------------------------------------------------------- progress
+class ProgressBar:
+    """A one-line text progress bar on a stream (stderr by default).
+
+    Redraws at most every ``min_interval`` seconds; shows nothing for runs shorter than
+    ``delay`` seconds of wall time (short runs stay quiet).
+    """
+
+    def __init__(self, label: str, total_time: float, stream=None, width: int = 30,
+                 delay: float = 0.5, min_interval: float = 0.1):
+        self.label, self.total_time, self.width = label, float(total_time), width
+        self.stream = sys.stderr if stream is None else stream
+        self.delay, self.min_interval = delay, min_interval
+        self.start = time.perf_counter()
+        self._last = -1.0
+        self.shown = False
+
+    def __call__(self, fraction: float) -> None:
+        """Update with the fraction done (0..1)."""
+        now = time.perf_counter()
+        elapsed = now - self.start
+        if elapsed < self.delay and fraction < 1.0:
+            return
+        if fraction < 1.0 and now - self._last < self.min_interval:
+            return
+        self._last = now
+        f = min(max(float(fraction), 0.0), 1.0)
+        n = int(round(f * self.width))
+        eta = elapsed * (1 - f) / f if f > 0 else float("nan")
+        self.stream.write(
+            f"\r{self.label} [{'#' * n}{'-' * (self.width - n)}] {100 * f:5.1f}% "
+            f"t = {f * self.total_time:.3f}/{self.total_time:.3f} s, "
+            f"{elapsed:.1f} s elapsed, ~{eta:.1f} s left "
+        )
+        self.stream.flush()
+        self.shown = True
+
+    def close(self) -> None:
+        """End the line if anything was drawn."""
+        if self.shown:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+# ----------------------------------------------------------------------------- running
+@dataclass
+class RunOutput:
+    """What :func:`run_scenario` produced.
+
+    Attributes:
+        out_dir: the results folder.
+        built: the built scenario (system, initial state...).
+        result: the :class:`~multiarm_pin.simulation.SimulationResult`.
+        trajectory: the arrays written to ``trajectory.npz``.
+        summary: the content of ``summary.json``.
+        files: every file written, by role (``trajectory``, ``summary``, ``replay``...).
+    """
+
+    out_dir: Path
+    built: BuiltScenario
+    result: object
+    trajectory: dict
+    summary: dict
+    files: dict = field(default_factory=dict)
+
+
+def make_controller(built: BuiltScenario):
+    """The scenario's controller, built by ``multiarm_pin.controllers.make_controller``.
+
+    Returns:
+        A callable ``controller(t, state, evaluation) -> tau`` or None (``type: none``).
+
+    Raises:
+        ScenarioError: unknown or bad controller parameters (key ``controller``).
+    """
+    spec = built.scenario.controller
+    try:
+        from multiarm_pin.controllers import make_controller as factory
+    except ImportError:
+        if spec.type == "none":
+            return None
+        raise ScenarioError(built.scenario.file, "controller.type",
+                            f"controller {spec.type!r} needs multiarm_pin.controllers, which is "
+                            "not available in this checkout") from None
+    try:
+        return factory(spec.type, built.system, **spec.params)
+    except TypeError as exc:  # unknown keyword
+        raise ScenarioError(built.scenario.file, "controller",
+                            f"bad parameters for {spec.type!r}: {exc}") from exc
+    except MultiArmError as exc:
+        raise ScenarioError(built.scenario.file, "controller", str(exc)) from exc
+
+
+def trajectory_arrays(built: BuiltScenario, result) -> dict[str, np.ndarray]:
+    """The ``trajectory.npz`` arrays of a run (see the module docstring for keys/shapes)."""
+    system = built.system
+    aset = system.arm_set
+    out = {
+        "t": result.t,
+        "object_position": result.object_position,
+        "object_quaternion": result.object_quaternion,
+        "object_twist": result.object_twist,
+        "constraint_violation": result.constraint_violation,
+        "kinetic_energy": result.kinetic_energy,
+        "potential_energy": result.potential_energy,
+        "momentum": result.momentum,
+    }
+    points, forces = [], []
+    for i, arm in enumerate(built.arms):
+        N = int(system.constraint_set.N[i])
+        out[f"q_{arm.name}"] = result.q[:, aset.q_slices[i]]
+        out[f"v_{arm.name}"] = result.v[:, aset.v_slices[i]]
+        out[f"tau_{arm.name}"] = result.tau[:, aset.v_slices[i]]
+        out[f"mu_{arm.name}"] = result.mu[:, i, :N]
+        out[f"phi_{arm.name}"] = result.phi[:, i, :N]
+        points.append(result.contact_points[:, i, :N])
+        forces.append(result.mu[:, i, :N, None] * result.normals[:, i, :N])
+    out["contact_points"] = np.concatenate(points, axis=1)
+    out["contact_forces"] = np.concatenate(forces, axis=1)
+    return {k: np.ascontiguousarray(v) for k, v in out.items()}
+
+
+def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> dict:
+    """The ``summary.json`` content: run settings, physical checks and warnings."""
+    system = built.system
+    mask = np.asarray(system.constraint_set.mask)
+    uni = np.asarray(system.unilateral)
+    mu = result.mu
+    real = mu[:, mask]
+    uni_mu = mu[:, uni]
+    e = result.kinetic_energy + result.potential_energy
+    arms = []
+    for i, (arm, spec) in enumerate(zip(built.arms, built.scenario.arms, strict=True)):
+        ik = built.ik[i]
+        arms.append({
+            "name": arm.name,
+            "source": arm.source,
+            "nq": arm.nq,
+            "joint": spec.joint.type,
+            "constraints": int(system.constraint_set.N[i]),
+            "q0": [float(x) for x in built.q0[i]],
+            "q0_from": "q0" if ik is None else "inverse kinematics",
+            "ik_residual": None if ik is None else float(ik.residual),
+            "min_contact_force": float(mu[:, i, mask[i]].min()),
+            "max_contact_force": float(mu[:, i, mask[i]].max()),
+        })
+    warnings = list(result.warnings)
+    if uni_mu.size and uni_mu.min() < 0:
+        warnings.append(
+            f"a unilateral (fingertip) contact pulls: min contact force {uni_mu.min():.4g} N "
+            "(the contact would separate)")
+    if result.solver_switches:
+        warnings.append(f"solver switched to the singular-arm variant at t = "
+                        f"{[round(float(x), 6) for x in result.solver_switches]} s")
+    sim = built.scenario.simulation
+    return {
+        "scenario": built.scenario.name,
+        "scenario_file": str(Path(built.scenario.file).resolve()),
+        "solver": solver,
+        "solvers_used": sorted({str(s) for s in np.asarray(result.solver)}),
+        "integrator": result.integrator,
+        "dt": float(result.dt),
+        "duration": float(result.t[-1] - result.t[0]),
+        "steps": int(len(result.t) - 1),
+        "samples": int(len(result.t)),
+        "wall_time": float(wall_time),
+        "baumgarte": None if result.baumgarte is None else list(result.baumgarte),
+        "controller": built.scenario.controller.type,
+        "max_constraint_violation": float(np.max(result.constraint_violation)),
+        "min_contact_force": float(real.min()) if real.size else None,
+        "max_contact_force": float(real.max()) if real.size else None,
+        "min_unilateral_contact_force": float(uni_mu.min()) if uni_mu.size else None,
+        "energy_change": float(e[-1] - e[0]),
+        "object_displacement": float(np.linalg.norm(result.object_position[-1]
+                                                    - result.object_position[0])),
+        "finite": bool(all(np.all(np.isfinite(a)) for a in
+                           (result.q, result.v, result.mu, result.object_position,
+                            result.object_twist))),
+        "arms": arms,
+        "warnings": warnings,
+        "requested": {"duration": sim.duration, "dt": sim.dt},
+    }
+
+
+def replay_parts(arms, obj, trajectory: dict):
+    """Replay inputs (:mod:`multiarm_pin.replay`) from arms, object and trajectory arrays.
+
+    Returns:
+        ``(replay_arms, replay_object, replay_contacts)``.
+    """
+    from multiarm_pin.replay import ReplayArm, ReplayContacts, ReplayObject
+
+    rarms = [ReplayArm(a.name, a.model, a.visual_model, pin.SE3.Identity(),
+                       trajectory[f"q_{a.name}"]) for a in arms]
+    robj = ReplayObject(obj.shape, trajectory["object_position"], trajectory["object_quaternion"])
+    rc = None
+    if trajectory["contact_points"].shape[1] > 0:
+        rc = ReplayContacts(trajectory["contact_points"], trajectory["contact_forces"])
+    return rarms, robj, rc
+
+
+def _scenario_copy(scenario: Scenario, duration: float, solver: str) -> str:
+    data = dict(scenario.data)
+    head = (f"# copy of {Path(scenario.file).resolve()} as run (URDF paths made absolute)\n"
+            f"# run with solver={solver}, duration={duration} s\n")
+    return head + yaml.safe_dump(data, sort_keys=False, default_flow_style=None)
+
+
+def run_scenario(scenario, out=None, solver: str | None = None, duration: float | None = None,
+                 quiet: bool = True, html: bool = True, plots: bool = True) -> RunOutput:
+    """Simulate a scenario and write its results.
+
+    Args:
+        scenario: a path to a YAML file, or a :class:`Scenario`.
+        out: results folder (created; default ``results/<scenario name>``).
+        solver: overrides ``simulation.solver``.
+        duration: overrides ``simulation.duration`` [s].
+        quiet: no progress bar.
+        html: write ``replay.html`` (starts a temporary Meshcat server, a few seconds).
+        plots: write the PNG plots.
+
+    Returns:
+        :class:`RunOutput`.
+
+    Raises:
+        ScenarioError: invalid scenario or overrides.
+        DynamicsError: the simulation failed.
+    """
+    from multiarm_pin.simulation import simulate
+
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    sim = sc.simulation
+    if solver is not None:
+        from multiarm_pin.scenario import SOLVER_NAMES, did_you_mean
+
+        if solver not in SOLVER_NAMES:
+            raise ScenarioError(sc.file, "--solver", f"unknown solver {solver!r}"
+                                f"{did_you_mean(solver, SOLVER_NAMES)}; expected one of "
+                                f"{', '.join(SOLVER_NAMES)}")
+    if duration is not None and not (np.isfinite(duration) and duration > 0):
+        raise ScenarioError(sc.file, "--duration", f"expected a positive duration [s], got "
+                            f"{duration}")
+    solver = solver or sim.solver
+    T = float(duration) if duration is not None else sim.duration
+    dt = min(sim.dt, T)
+    built = build_scenario(sc, load_visuals=html)
+    controller = make_controller(built)
+    out_dir = Path(out) if out is not None else Path("results") / sc.name
+    out_dir.mkdir(parents=True, exist_ok=True)
+    bar = None if quiet else ProgressBar(f"{sc.name}", T)
+    t0 = time.perf_counter()
+    try:
+        result = simulate(built.system, built.initial_state, controller, T, dt,
+                          integrator=sim.integrator, solver=solver, baumgarte=sim.baumgarte,
+                          progress=bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    wall = time.perf_counter() - t0
+    traj = trajectory_arrays(built, result)
+    files = {}
+    files["trajectory"] = out_dir / "trajectory.npz"
+    np.savez_compressed(files["trajectory"], **traj)
+    summary = summarize(built, result, solver, wall)
+    files["scenario"] = out_dir / "scenario.yaml"
+    files["scenario"].write_text(_scenario_copy(sc, T, solver), encoding="utf-8")
+    if plots:
+        from multiarm_pin.plots import write_plots
+
+        for p in write_plots(out_dir, traj, [a.name for a in built.arms], sc.name):
+            files[p.stem] = p
+    if html:
+        from multiarm_pin.replay import write_replay_html
+
+        rarms, robj, rc = replay_parts(built.arms, built.obj, traj)
+        files["replay"] = write_replay_html(out_dir / "replay.html", rarms, robj, traj["t"],
+                                            rc, fps=REPLAY_FPS)
+    files["summary"] = out_dir / "summary.json"
+    summary["files"] = {k: p.name for k, p in files.items()}
+    files["summary"].write_text(json.dumps(summary, indent=2), encoding="utf-8")
+    return RunOutput(out_dir, built, result, traj, summary, files)
+
+
+# ----------------------------------------------------------------------------- replay
+def load_run(run_dir) -> tuple[Scenario, dict, dict]:
+    """Read a results folder: its scenario copy, trajectory arrays and summary.
+
+    Raises:
+        InputError: the folder or one of its files is missing.
+    """
+    d = Path(run_dir)
+    missing = [f for f in ("scenario.yaml", "trajectory.npz") if not (d / f).is_file()]
+    if not d.is_dir() or missing:
+        raise InputError(f"{d}: not a results folder of 'multiarm-pin run' (missing "
+                         f"{', '.join(missing) or 'folder'})")
+    sc = load_scenario(d / "scenario.yaml")
+    with np.load(d / "trajectory.npz") as z:
+        traj = {k: z[k] for k in z.files}
+    summary = {}
+    if (d / "summary.json").is_file():
+        summary = json.loads((d / "summary.json").read_text(encoding="utf-8"))
+    return sc, traj, summary
+
+
+def serve_run(run_dir, fps: float = REPLAY_FPS, open_browser: bool = False):
+    """Serve a finished run from a Meshcat server (arms with their meshes, object, contacts).
+
+    Args:
+        run_dir: a folder written by :func:`run_scenario`.
+        fps: frames per second of the replay.
+        open_browser: open the page in the default browser.
+
+    Returns:
+        ``(url, vis)``; stop with :func:`multiarm_pin.replay.close_visualizer` ``(vis)``.
+    """
+    from multiarm_pin.replay import serve_replay
+
+    sc, traj, _ = load_run(run_dir)
+    arms = [build_arm(sc, spec, load_visuals=True) for spec in sc.arms]
+    obj = build_object(sc)
+    rarms, robj, rc = replay_parts(arms, obj, traj)
+    return serve_replay(rarms, robj, traj["t"], rc, fps=fps, open_browser=open_browser)
+
+
+def http_status(url: str, timeout: float = 10.0) -> int:
+    """HTTP status code of a GET on ``url`` (used to check the replay server answers)."""
+    with urllib.request.urlopen(url, timeout=timeout) as resp:  # noqa: S310 (localhost)
+        return int(resp.status)
+
+
+# ----------------------------------------------------------------------------- CLI
+def configure_run_parser(p: argparse.ArgumentParser) -> None:
+    """Arguments of ``multiarm-pin run``."""
+    p.add_argument("scenario", help="scenario YAML file")
+    p.add_argument("--out", default=None, help="results folder (default results/<name>)")
+    p.add_argument("--solver", default=None,
+                   help="forward-dynamics solver: object_first, dense_kkt, auto, singular")
+    p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--no-html", dest="html", action="store_false",
+                   help="skip the replay page (faster)")
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """``multiarm-pin run``: simulate, write results, print where they are."""
+    html = getattr(args, "html", True)
+    res = run_scenario(args.scenario, args.out, args.solver, args.duration,
+                       quiet=bool(args.quiet), html=html)
+    s = res.summary
+    out = res.out_dir.resolve()
+    print(f"scenario {s['scenario']}: {s['steps']} steps of {s['dt']:g} s "
+          f"({s['integrator']}, solver {s['solver']}) in {s['wall_time']:.2f} s wall time")
+    print(f"  max constraint violation {s['max_constraint_violation']:.3g} m, contact forces "
+          f"{s['min_contact_force']:.4g} .. {s['max_contact_force']:.4g} N")
+    for w in s["warnings"][:10]:
+        print(f"  warning: {w}")
+    if len(s["warnings"]) > 10:
+        print(f"  ... {len(s['warnings']) - 10} more warnings in summary.json")
+    print(f"results: {out}")
+    print(f"  trajectory: {out / 'trajectory.npz'}")
+    print(f"  summary:    {out / 'summary.json'}")
+    pngs = ("object_pose.png", "contact_forces.png", "constraint_violation.png")
+    print("  plots:      " + ", ".join(str(out / f) for f in pngs))
+    if "replay" in res.files:
+        print(f"replay (open in a browser, works offline): {out / 'replay.html'}")
+    print(f"live replay: multiarm-pin replay {out}")
+    return 0
+
+
+def configure_replay_parser(p: argparse.ArgumentParser) -> None:
+    """Arguments of ``multiarm-pin replay``."""
+    p.add_argument("dir", help="results folder written by 'multiarm-pin run'")
+    p.add_argument("--fps", type=float, default=REPLAY_FPS, help="frames per second")
+    p.add_argument("--open", action="store_true", help="open the page in the browser")
+    p.add_argument("--no-block", "--once", dest="block", action="store_false",
+                   help="check that the server answers, then stop (for scripts and tests)")
+
+
+def replay_command(args: argparse.Namespace) -> int:
+    """``multiarm-pin replay DIR``: serve the run and print its URL until Ctrl-C."""
+    from multiarm_pin.replay import close_visualizer
+
+    url, vis = serve_run(args.dir, fps=args.fps, open_browser=bool(getattr(args, "open", False)))
+    try:
+        print(f"replay of {Path(args.dir).resolve()} served at {url}", flush=True)
+        if not getattr(args, "block", True):
+            status = http_status(url)
+            print(f"server answered HTTP {status}; stopping (--no-block)")
+            return 0 if status == 200 else 1
+        print("press Ctrl-C to stop", flush=True)
+        try:
+            while True:
+                time.sleep(1.0)
+        except KeyboardInterrupt:
+            print("stopped")
+        return 0
+    finally:
+        close_visualizer(vis)
+
+
+__all__ = [
+    "REPLAY_FPS",
+    "ProgressBar",
+    "RunOutput",
+    "configure_replay_parser",
+    "configure_run_parser",
+    "http_status",
+    "load_run",
+    "make_controller",
+    "replay_command",
+    "replay_parts",
+    "run_command",
+    "run_scenario",
+    "serve_run",
+    "summarize",
+    "trajectory_arrays",
+]
