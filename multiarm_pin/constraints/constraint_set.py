@@ -75,43 +75,45 @@ class ConstraintSet:
         mask.setflags(write=False)
         self.mask = mask
 
-        planes, curved = [], []
-        for i, joint in enumerate(self.joints):
-            for k, c in enumerate(joint.active_contacts):
-                (planes if c.surface.kind == "plane" else curved).append((i, k, c))
-        ordered = planes + curved
-        self._n_planes = len(planes)
+        ordered = [
+            (i, k, c)
+            for i, joint in enumerate(self.joints)
+            for k, c in enumerate(joint.active_contacts)
+        ]
         arm = np.array([i for i, _, _ in ordered])
         slot = np.array([k for _, k, _ in ordered])
         on_tool = np.array([c.tip_on_tool for _, _, c in ordered])
-        # bodies: 0..n-1 tools, n the object
-        self._carrier = np.where(on_tool, arm, n)
-        self._holder = np.where(on_tool, n, arm)
+        # bodies 0..n-1 are the tools, n the object; row 0 the carrier, row 1 the surface's
+        self._bodies = np.stack([np.where(on_tool, arm, n), np.where(on_tool, n, arm)])
         self._on_tool = on_tool[:, None]
         self._push_sign = np.where(on_tool, -1.0, 1.0)[:, None]
-        self._tip = np.array([c.point for _, _, c in ordered])
+        self._tip = np.array([c.point for _, _, c in ordered])[:, :, None]
         self._radius = np.array([c.radius for _, _, c in ordered])
         self._flat = arm * self.N_max + slot
-        self._plane_point = (
-            np.array([c.surface.point for _, _, c in planes]) if planes else np.zeros((0, 3))
-        )
-        self._plane_normal = (
-            np.array([c.surface.normal for _, _, c in planes]) if planes else np.zeros((0, 3))
-        )
-        self._center = (
-            np.array([c.surface.center for _, _, c in curved]) if curved else np.zeros((0, 3))
-        )
-        self._axis = (
-            np.array(
-                [c.surface.axis if c.surface.kind == "cylinder" else np.zeros(3)
-                 for _, _, c in curved]
-            )
-            if curved
-            else np.zeros((0, 3))
-        )
-        self._curv_radius = np.array([c.surface.radius for _, _, c in curved], dtype=float)
-        self._curv_sign = np.array([c.surface.sign for _, _, c in curved], dtype=float)
+        self._dense = len(ordered) == n * self.N_max  # every slot used: no scatter needed
+        # surfaces, one formula per kind selected by mask: planes use (normal, point),
+        # spheres (0, centre), cylinders (axis, point of the axis)
+        kinds = [c.surface.kind for _, _, c in ordered]
+        self._is_plane = np.array([k == "plane" for k in kinds])
+        self._is_plane_col = self._is_plane[:, None]
+        local = np.zeros((len(ordered), 3, 2))
+        radius = np.zeros(len(ordered))
+        sign = np.ones(len(ordered))
+        for m, (_, _, c) in enumerate(ordered):
+            surf = c.surface
+            if surf.kind == "plane":
+                local[m, :, 0], local[m, :, 1] = surf.normal, surf.point
+            else:
+                local[m, :, 0] = surf.axis if surf.kind == "cylinder" else 0.0
+                local[m, :, 1] = surf.center
+                radius[m], sign[m] = surf.radius, surf.sign
+        self._surface_local = local
+        self._curv_radius = radius
+        self._curv_sign = sign
         self._K = len(ordered)
+        self._sigma = np.array([1.0, -1.0])[:, None, None]
+        self._tool_first = np.stack([np.where(on_tool, 0, 1), np.where(on_tool, 1, 0)])
+        self._arange = np.arange(len(ordered))[None, :]
 
     def evaluate(self, tools: BodyKinematics, obj: BodyKinematics) -> ConstraintTerms:
         """All constraint rows at a state, vectorised over arms and contacts.
@@ -122,7 +124,7 @@ class ConstraintSet:
             obj: kinematics of the object, one body at its COM.
 
         Returns:
-            :class:`ConstraintTerms`.
+            :class:`ConstraintTerms` (its arrays may be views of one buffer).
 
         Raises:
             InputError: wrong number of tools or object bodies.
@@ -133,63 +135,69 @@ class ConstraintSet:
                 f"ConstraintSet.evaluate: expected {n} tools and 1 object, got "
                 f"{len(tools.position)} tools and {len(obj.position)} object bodies"
             )
-        X = np.concatenate([tools.position, obj.position])
-        R = np.concatenate([tools.rotation, obj.rotation])
-        V = np.concatenate([tools.twist, obj.twist])
-        ci, si = self._carrier, self._holder
-        Rc, Rs = R[ci], R[si]
-        xc, xs = X[ci], X[si]
-        tc, ts = V[ci], V[si]
-        wc, ws = tc[:, 3:], ts[:, 3:]
-        rc = np.einsum("kij,kj->ki", Rc, self._tip)
-        c = xc + rc
-        rs = c - xs
-        u = tc[:, :3] + _cross(wc, rc) - ts[:, :3] - _cross(ws, rs)
+        b = self._bodies
+        X = np.take(np.concatenate([tools.position, obj.position]), b, axis=0)  # (2, K, 3)
+        R = np.take(np.concatenate([tools.rotation, obj.rotation]), b, axis=0)  # (2, K, 3, 3)
+        V = np.take(np.concatenate([tools.twist, obj.twist]), b, axis=0)  # (2, K, 6)
+        W = V[:, :, 3:]
+        c = X[0] + (R[0] @ self._tip)[:, :, 0]  # tip centres
+        r = c - X  # (2, K, 3) lever arms from the carrier's and the surface body's origins
+        w_r = _cross(W, r)
+        vel = V[:, :, :3] + w_r  # velocities of both bodies' material points at c
+        u = vel[0] - vel[1]
 
-        m = self._n_planes
-        # planes: g = ν·(c - p0)
-        nu_p = np.einsum("kij,kj->ki", Rs[:m], self._plane_normal)
-        p0 = xs[:m] + np.einsum("kij,kj->ki", Rs[:m], self._plane_point)
-        g_p = np.einsum("ki,ki->k", nu_p, c[:m] - p0)
-        # spheres / cylinders: g = s (|y⊥| - R)
-        a = np.einsum("kij,kj->ki", Rs[m:], self._axis)
-        y = c[m:] - xs[m:] - np.einsum("kij,kj->ki", Rs[m:], self._center)
-        yp = y - np.einsum("ki,ki->k", a, y)[:, None] * a
-        rho = np.sqrt(np.einsum("ki,ki->k", yp, yp))
+        # surfaces: planes g = ν·y; spheres/cylinders g = s (|y⊥| - R), ν = s y⊥/|y⊥|
+        S = R[1] @ self._surface_local  # (K, 3, 2): world direction and point
+        a = S[:, :, 0]
+        y = c - X[1] - S[:, :, 1]
+        ay = _dot(a, y)
+        yp = y - ay[:, None] * a
+        rho = np.maximum(np.sqrt(_dot(yp, yp)), 1e-300)
         e = yp / rho[:, None]
         sgn = self._curv_sign
-        nu_c = sgn[:, None] * e
-        g_c = sgn * (rho - self._curv_radius)
-        uc = u[m:]
-        up = uc - np.einsum("ki,ki->k", a, uc)[:, None] * a
-        quad_c = sgn * (np.einsum("ki,ki->k", up, up) - np.einsum("ki,ki->k", e, uc) ** 2) / rho
+        nu = np.where(self._is_plane_col, a, sgn[:, None] * e)
+        g = np.where(self._is_plane, ay, sgn * (rho - self._curv_radius))
+        au, eu = _dot(a, u), _dot(e, u)
+        quad = np.where(self._is_plane, 0.0, sgn * (_dot(u, u) - au * au - eu * eu) / rho)
 
-        nu = np.concatenate([nu_p, nu_c])
-        g = np.concatenate([g_p, g_c])
-        quad = np.concatenate([np.zeros(m), quad_c])
-        phi = g - self._radius
-        phi_dot = np.einsum("ki,ki->k", nu, u)
-        acc = _cross(wc, _cross(wc, rc)) - _cross(ws, _cross(ws, rs)) - 2.0 * _cross(ws, u)
-        kappa = quad + np.einsum("ki,ki->k", nu, acc)
-        Gc = np.concatenate([nu, _cross(rc, nu)], axis=1)
-        Gs = -np.concatenate([nu, _cross(rs, nu)], axis=1)
-        G_tool = np.where(self._on_tool, Gc, Gs)
-        G_object = np.where(self._on_tool, Gs, Gc)
-        points = c - g[:, None] * nu
-        normals = self._push_sign * nu
-
-        shape = (n, self.N_max)
-        flat = self._flat
+        # κ = uᵀHu + ν·(ω_C×(ω_C×r_C) - ω_S×(ω_S×r_S + 2u))
+        B = w_r.copy()
+        B[1] += 2.0 * u
+        t = _cross(W, B)
+        kappa = quad + _dot(nu, t[0] - t[1])
+        G = np.empty((2, self._K, 6))
+        G[:, :, :3] = nu
+        G[:, :, 3:] = _cross(r, nu)
+        G *= self._sigma  # +1 carrier, -1 surface body
+        G = G[self._tool_first, self._arange]  # rows: tool, object
+        packed = np.concatenate(
+            [
+                (g - self._radius)[:, None],
+                _dot(nu, u)[:, None],
+                kappa[:, None],
+                G[0],
+                G[1],
+                c - g[:, None] * nu,
+                self._push_sign * nu,
+            ],
+            axis=1,
+        )
+        if self._dense:
+            out = packed.reshape(n, self.N_max, 21)
+        else:
+            out = np.zeros((n * self.N_max, 21))
+            out[self._flat] = packed
+            out = out.reshape(n, self.N_max, 21)
         return ConstraintTerms(
-            phi=_scatter(phi, flat, shape),
-            phi_dot=_scatter(phi_dot, flat, shape),
-            G_tool=_scatter(G_tool, flat, shape),
-            G_object=_scatter(G_object, flat, shape),
-            kappa=_scatter(kappa, flat, shape),
+            phi=out[:, :, 0],
+            phi_dot=out[:, :, 1],
+            kappa=out[:, :, 2],
+            G_tool=out[:, :, 3:9],
+            G_object=out[:, :, 9:15],
             N=self.N,
             mask=self.mask,
-            contact_points=_scatter(points, flat, shape),
-            normals=_scatter(normals, flat, shape),
+            contact_points=out[:, :, 15:18],
+            normals=out[:, :, 18:21],
         )
 
     def check_initial(self, tools: BodyKinematics, obj: BodyKinematics, tol: float = 1e-6) -> None:
@@ -213,13 +221,18 @@ class ConstraintSet:
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of (K, 3) arrays (cheaper than ``np.cross`` for small K)."""
-    a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
-    b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=1)
+    """Cross product along the last axis (broadcasting; cheaper than ``np.cross``).
+
+    Appending the first two components makes both cyclic shifts plain slices.
+    """
+    a = np.concatenate([a, a[..., :2]], axis=-1)
+    b = np.concatenate([b, b[..., :2]], axis=-1)
+    return a[..., 1:4] * b[..., 2:5] - a[..., 2:5] * b[..., 1:4]
 
 
-def _scatter(values: np.ndarray, flat: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    out = np.zeros((shape[0] * shape[1],) + values.shape[1:])
-    out[flat] = values
-    return out.reshape(shape + values.shape[1:])
+if hasattr(np, "vecdot"):
+    _dot = np.vecdot
+else:  # numpy < 2.0
+
+    def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return np.einsum("...i,...i->...", a, b)
