@@ -233,22 +233,43 @@ def region_by_generators(grasp: Grasp, face: int | str, fixed=None) -> ContactRe
     )
 
 
-def box_corner_region_lines(a: float, b: float, c: float, d: float, e: float, f: float):
+def box_corner_region_lines(
+    a: float, b: float, c: float, d: float, e: float, f: float, thesis_form: bool = False
+):
     """Closed form of Example 2.1 for the top face of a box.
 
     Contacts at ``(l_x, a, b)`` on +x, ``(c, l_y, d)`` on +y, ``(e, f, l_z)`` on +z and the
-    mirrored points ``-p1, -p2, -p3`` on the opposite faces; a seventh contact at
-    ``(x, y, l_z)`` closes the grasp iff ``(f x - e y) / det < 0`` and
-    ``(ad x - bc y) / det < -1``, ``det = det(a_A) = ade - bcf``.
+    mirrored points ``-p1, -p2, -p3`` on the opposite faces; ``det = det(a_A) = ade - bcf``.
+    Solving ``a_A z = p7 × e7`` (Eq 2.3 reduces to ``z1 < 0, z2 < 0, z3 < -1`` here) gives
+    ``z1 = c (f x - e y) / det``, ``z2 = a (f x - e y) / det``, ``z3 = (ad x - bc y) / det``.
+    The thesis states ``(f x - e y) / det < 0`` and ``(ad x - bc y) / det < -1``, which is the
+    same only when ``a > 0`` and ``c > 0`` (contacts on the corner's side of the centre, as in
+    its figures); in general the factors ``c`` and ``a`` matter (and ``a c < 0`` makes the
+    region empty).
+
+    Args:
+        a: y coordinate [m] of the +x contact ``(l_x, a, b)``.
+        b: z coordinate [m] of the +x contact.
+        c: x coordinate [m] of the +y contact ``(c, l_y, d)``.
+        d: z coordinate [m] of the +y contact.
+        e: x coordinate [m] of the +z contact ``(e, f, l_z)``.
+        f: y coordinate [m] of the +z contact.
+        thesis_form: return the thesis's two rows instead of the general three.
 
     Returns:
-        ``(A (2, 2), rhs (2,))`` with the region ``A [x; y] < rhs`` in the object's x-y
-        coordinates [m].
+        ``(A (3, 2), rhs (3,))`` (or (2, 2), (2,)) with the region ``A [x; y] < rhs`` in the
+        object's x-y coordinates [m].
+
+    Raises:
+        GraspError: ``det(a_A) = 0`` (the six contacts are dependent).
     """
     det = a * d * e - b * c * f
     if abs(det) < 1e-15:
         raise GraspError("Example 2.1: det(a_A) = ade - bcf is zero; the contacts are dependent")
-    return np.array([[f, -e], [a * d, -b * c]]) / det, np.array([0.0, -1.0])
+    if thesis_form:
+        return np.array([[f, -e], [a * d, -b * c]]) / det, np.array([0.0, -1.0])
+    A = np.array([[c * f, -c * e], [a * f, -a * e], [a * d, -b * c]]) / det
+    return A, np.array([0.0, 0.0, -1.0])
 
 
 def polygon_area(poly2d: np.ndarray) -> float:
@@ -352,7 +373,23 @@ def _clip(polygon: np.ndarray, halfplanes) -> np.ndarray:
                 t = vi / (vi - vj)
                 out.append(P[i] + t * (P[j] - P[i]))
         P = np.array(out).reshape(-1, 2)
-    return _unique_rows_ordered(P, 1e-12)
+    return _drop_collinear(_unique_rows_ordered(P, 1e-12))
+
+
+def _drop_collinear(P: np.ndarray, tol: float = 1e-10) -> np.ndarray:
+    """Remove vertices lying on the segment between their neighbours (round-off leftovers)."""
+    changed = True
+    while changed and len(P) > 3:
+        changed = False
+        for i in range(len(P)):
+            a, b, c = P[i - 1], P[i], P[(i + 1) % len(P)]
+            ab, bc = b - a, c - b
+            scale = max(np.linalg.norm(ab) * np.linalg.norm(bc), 1e-300)
+            if abs(ab[0] * bc[1] - ab[1] * bc[0]) <= tol * scale and ab @ bc >= 0:
+                P = np.delete(P, i, axis=0)
+                changed = True
+                break
+    return P
 
 
 def _edges_to_halfplanes(poly2d: np.ndarray):

@@ -1,0 +1,45 @@
+"""Shared builders for the grasp tests."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from multiarm_pin.grasp import Grasp, contact_on_face
+from multiarm_pin.polyhedron import box
+
+
+def corner_grasp(size, a, b, c, d, e, f, seventh=None) -> Grasp:
+    """Example 2.1: p1 = (lx, a, b) on +x, p2 = (c, ly, d) on +y, p3 = (e, f, lz) on +z,
+    p4..6 = -p1..3, and optionally a seventh contact (x, y) on +z."""
+    P = box(size)
+    lx, ly, lz = np.asarray(size) / 2
+    p1, p2, p3 = np.array([lx, a, b]), np.array([c, ly, d]), np.array([e, f, lz])
+    specs = [("+x", p1), ("+y", p2), ("+z", p3), ("-x", -p1), ("-y", -p2), ("-z", -p3)]
+    if seventh is not None:
+        specs.append(("+z", np.array([seventh[0], seventh[1], lz])))
+    return Grasp(tuple(contact_on_face(P, fc, p) for fc, p in specs), P)
+
+
+def random_corner_parameters(rng: np.random.Generator):
+    """Random box size and Example 2.1 offsets a..f strictly inside the faces."""
+    size = rng.uniform(0.5, 3.0, 3)
+    lx, ly, lz = size / 2
+    a, f = rng.uniform(-0.95, 0.95, 2) * ly
+    b, d = rng.uniform(-0.95, 0.95, 2) * lz
+    c, e = rng.uniform(-0.95, 0.95, 2) * lx
+    return size, (a, b, c, d, e, f)
+
+
+def random_face_point(P, face, rng, inset=0.02):
+    """A random point strictly inside a face of polyhedron P."""
+    k = P.face_index(face)
+    V = P.vertices[list(P.faces[k])]
+    w = rng.dirichlet(np.ones(len(V)))
+    c = V.mean(axis=0)
+    return c + (1 - inset) * (w @ V - c)
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)
