@@ -389,7 +389,7 @@ def parse_scenario(data, file: str = "<scenario>") -> Scenario:
         if names.index(n) != i:
             raise arms_r.child(i, None).error(f"duplicate arm name {n!r}; names must be unique",
                                               f"arms[{i}].name")
-    controller = _parse_controller(root.get("controller")) if "controller" in d else \
+    controller = _parse_controller(root.get("controller"), obj) if "controller" in d else \
         ControllerSpec("none")
     sim = _parse_simulation(root.get("simulation")) if "simulation" in d else SimulationSpec()
     clean = dict(d)
@@ -510,13 +510,58 @@ def _parse_joint(r: _Reader) -> JointSpec:
     return JointSpec(kind, params, J_o, J_t)
 
 
-def _parse_controller(r: _Reader) -> ControllerSpec:
+def _controller_keys(kind: str) -> tuple[str, ...]:
+    """Keyword parameters accepted by the controller class of ``kind`` (besides system)."""
+    import inspect
+
+    from multiarm_pin.controllers import CONTROLLERS
+
+    sig = inspect.signature(CONTROLLERS[kind].__init__)
+    return tuple(p for p in sig.parameters if p not in ("self", "system"))
+
+
+def _parse_controller(r: _Reader, obj: ObjectSpec) -> ControllerSpec:
+    """Controller type and parameters; object_pd ``waypoints`` become its ``trajectory``.
+
+    ``waypoints: [{t: s, position: [..], quaternion: [..] | rpy: [..]}, ...]`` are world
+    poses of the object's COM frame; the initial pose is prepended at t = 0 when the first
+    waypoint is later.
+    """
     if not isinstance(r.value, Mapping):
         raise r.error(f"expected a mapping with 'type', got {_describe(r.value)}")
     if "type" not in r.value:
         raise r.error("missing required key 'type'", f"{r.path}.type")
     kind = r.get("type").string(CONTROLLER_TYPES)
-    params = {k: v for k, v in r.value.items() if k != "type"}
+    allowed = ("type", *_controller_keys(kind))
+    if kind == "object_pd":
+        allowed = (*allowed, "waypoints")
+    d = r.mapping(allowed)
+    params = {k: v for k, v in d.items() if k not in ("type", "waypoints")}
+    if "waypoints" in d:
+        if "trajectory" in d:
+            raise r.get("waypoints").error("give either waypoints or trajectory, not both")
+        wr = r.get("waypoints")
+        if not isinstance(wr.value, list) or not wr.value:
+            raise wr.error(f"expected a non-empty list of {{t, position, quaternion|rpy}}, got "
+                           f"{_describe(wr.value)}")
+        times, positions, quats = [], [], []
+        for k, w in enumerate(wr.value):
+            c = wr.child(k, w)
+            c.mapping(("t", "position", "quaternion", "rpy"), required=("t", "position"))
+            t = c.get("t").number(nonnegative=True)
+            if times and t <= times[-1]:
+                raise c.get("t").error(f"waypoint times must increase strictly; {t} after "
+                                       f"{times[-1]}")
+            M = _Reader(c.file, c.path, {k2: v for k2, v in w.items() if k2 != "t"}).placement()
+            times.append(t)
+            positions.append(M.translation.copy())
+            quats.append(pin.Quaternion(M.rotation).coeffs().copy())
+        if times[0] > 0:
+            times.insert(0, 0.0)
+            positions.insert(0, obj.position.copy())
+            quats.insert(0, obj.quaternion.copy())
+        params["trajectory"] = {"times": np.array(times), "positions": np.array(positions),
+                                "quaternions": np.array(quats)}
     return ControllerSpec(kind, params)
 
 
