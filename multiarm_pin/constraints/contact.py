@@ -125,6 +125,8 @@ class Contact:
             point_in_object=Ro.T @ (surface_point - xo),
             normal_in_tool=Rt.T @ (sign * nu),
             normal_in_object=Ro.T @ (sign * nu),
+            W_mi=-np.concatenate([Rt.T @ G_tool[:3], Rt.T @ G_tool[3:]]),
+            W_oi=-np.concatenate([Ro.T @ G_object[:3], Ro.T @ G_object[3:]]),
         )
 
 
@@ -145,6 +147,11 @@ class ContactState:
         tip_velocity: (3,) velocity of the tip centre [m/s].
         point_in_tool, point_in_object: (3,) ``point`` in the tool / object frame [m].
         normal_in_tool, normal_in_object: (3,) ``normal`` in tool / object axes.
+        W_mi: (6,) the contact's column of the thesis' ``W_mi``: the wrench it applies to the
+            object per unit compressive force, about the tool origin in tool axes
+            (``-G_tool`` rotated into tool axes).
+        W_oi: (6,) its column of the thesis' ``W_oi``: ``-G_object`` rotated into object axes
+            (about the COM), so that Eq 3.11 links the two.
     """
 
     phi: float
@@ -161,3 +168,5 @@ class ContactState:
     point_in_object: np.ndarray
     normal_in_tool: np.ndarray
     normal_in_object: np.ndarray
+    W_mi: np.ndarray
+    W_oi: np.ndarray

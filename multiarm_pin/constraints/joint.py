@@ -253,12 +253,12 @@ class Joint:
         _check_single(tool, "tool")
         _check_single(obj, "object")
         states = self.contact_states(tool, obj)
-        xt, Rt, vt = tool.position[0], tool.rotation[0], tool.twist[0]
+        xt, vt = tool.position[0], tool.twist[0]
         xo, Ro, vo = obj.position[0], obj.rotation[0], obj.twist[0]
         G_tool = np.array([s.G_tool for s in states])
         G_object = np.array([s.G_object for s in states])
-        W_mi = -_rotate_rows(Rt.T, G_tool).T
-        W_oi = -_rotate_rows(Ro.T, G_object).T
+        W_mi = np.array([s.W_mi for s in states]).T
+        W_oi = np.array([s.W_oi for s in states]).T
         # W_mi_o column = wrench on the object about the tool origin, object axes
         w = np.array([np.concatenate([s.normal, np.cross(s.tip_center - xt, s.normal)])
                       for s in states])

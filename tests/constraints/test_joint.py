@@ -152,3 +152,34 @@ def test_bad_joint_definitions_raise():
     j = Joint(collinear, pin.SE3.Identity(), alpha_rows=["vx", "vy", "wz", "wx"])
     assert j.alpha_names == ("vx", "vy", "wz", "wx")
     assert j.alpha_rows == tuple(TWIST_NAMES.index(r) for r in j.alpha_names)
+
+
+def test_contact_columns_agree_with_joint_matrices_and_frames():
+    joint, tool, obj = _setup("cylindrical", 15)
+    kt, ko = tool.kinematics(0.1), obj.kinematics(0.1)
+    terms = joint.evaluate(kt, ko)
+    Rt, Ro = kt.rotation[0], ko.rotation[0]
+    for k, s in enumerate(joint.contact_states(kt, ko)):
+        assert np.allclose(terms.W_mi[:, k], s.W_mi) and np.allclose(terms.W_oi[:, k], s.W_oi)
+        # the W_mi column is the zero-pitch wrench [n; p × n] in the tool frame
+        n_t, p_t = s.normal_in_tool, s.point_in_tool
+        assert np.allclose(s.W_mi, np.concatenate([n_t, np.cross(p_t, n_t)]))
+        n_o, p_o = s.normal_in_object, s.point_in_object
+        assert np.allclose(s.W_oi, -np.concatenate([n_o, np.cross(p_o, n_o)]))
+        assert np.allclose(Rt @ p_t + kt.position[0], s.point)
+        assert np.allclose(Ro @ n_o, s.normal)
+
+
+def test_motion_coordinates_that_stop_parametrising_raise_singularity():
+    from multiarm_pin.constraints import spherical
+    from multiarm_pin.exceptions import SingularityError
+
+    L = 0.05
+    joint = spherical(pin.SE3.Identity(), size=L)
+    assert joint.alpha_names == ("wx", "wy", "wz")
+    # moving the tool puts the ball's centre in the plane of the three tips: their normals
+    # become coplanar and the rotation rates no longer fix the translation rows of T
+    shifted = BodyKinematics.single(-L / 3 * np.ones(3), np.eye(3), np.zeros(6))
+    rest = BodyKinematics.single(np.zeros(3), np.eye(3), np.zeros(6))
+    with pytest.raises(SingularityError, match="W_mi_o.*spherical"):
+        joint.evaluate(shifted, rest)
