@@ -1,11 +1,14 @@
 """All arms' joints evaluated at once: the vectorised hot path of the constraint layer.
 
-The kept contacts of every joint are flattened into one list at construction, grouped by
-surface kind (planes; spheres and cylinders share one formula, a sphere being a cylinder
-with a zero axis). :meth:`ConstraintSet.evaluate` then computes every contact with a fixed
-number of array operations, whatever the number of arms, and scatters the rows into
-arrays padded to ``N_max`` constraints per arm. The formulas are those of
-:mod:`multiarm_pin.constraints.contact` in world axes.
+The kept contacts of every joint are flattened into one list at construction, with the
+carrier and surface body of each, its tip, and its surface as a (direction, point) pair in
+the surface body's frame. :meth:`ConstraintSet.evaluate` then computes every contact with a
+fixed number of array operations whatever the number of arms: the two surface formulas
+(planes; spheres and cylinders, a sphere being a cylinder with a zero axis) are evaluated
+for all contacts and selected by a mask, which costs fewer numpy calls than grouping by
+kind. The rows are scattered once into arrays padded to ``N_max`` constraints per arm (no
+scatter when every arm has ``N_max``). The formulas are those of
+:mod:`multiarm_pin.constraints.contact`, in world axes.
 """
 
 from __future__ import annotations

@@ -12,12 +12,12 @@ from .cases import KINDS, random_joint, trajectories
 from .trajectories import RigidTrajectory, stack
 
 
-def _random_system(rng, n):
+def _random_system(rng, n, kinds=KINDS):
     joints, tool_trajs = [], []
     obj_placement = pin.SE3.Random()
     obj = RigidTrajectory(rng, obj_placement.translation, obj_placement.rotation)
     for _ in range(n):
-        kind = KINDS[rng.integers(len(KINDS))]
+        kind = kinds[rng.integers(len(kinds))]
         joint, oMt, oMo = random_joint(kind, rng, ("tool", "object")[rng.integers(2)])
         # re-anchor the tool on the shared object placement
         oMt = obj_placement * oMo.actInv(oMt)
@@ -26,12 +26,17 @@ def _random_system(rng, n):
     return joints, tool_trajs, obj
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_vectorised_evaluate_matches_per_joint_evaluation(seed):
+@pytest.mark.parametrize(
+    ("seed", "kinds"),
+    [(0, KINDS), (1, KINDS), (2, KINDS), (3, ["revolute"]), (4, ["weld", "fingertips"])],
+)
+def test_vectorised_evaluate_matches_per_joint_evaluation(seed, kinds):
     rng = np.random.default_rng(seed)
     n = 12
-    joints, tool_trajs, obj = _random_system(rng, n)
+    joints, tool_trajs, obj = _random_system(rng, n, kinds)
     cs = ConstraintSet(joints)
+    # systems whose arms all have N_max constraints take the no-scatter path
+    assert cs._dense == (len(kinds) == 1 or kinds == ["weld", "fingertips"])
     assert cs.n_arms == n and cs.N_max == max(j.n_constraints for j in joints)
     t = 0.1
     tools = stack([tr.kinematics(t) for tr in tool_trajs])
