@@ -1,0 +1,287 @@
+"""Assembly: blocks against per-arm references, constraint acceleration by finite differences,
+solver agreement on real mixed systems, state validation, energy and momentum."""
+
+from functools import cache
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from multiarm_pin.arm import ROBOT_DEFAULTS, Arm
+from multiarm_pin.constraints import JOINT_DOF
+from multiarm_pin.exceptions import ConstraintError, DynamicsError, InputError
+from multiarm_pin.rigid_object import ObjectState, RigidObject
+from multiarm_pin.system import MultiArmSystem, SystemState
+
+Q_NOMINAL = {
+    "ur5": np.array([0.0, -1.2, 1.5, -1.9, -1.57, 0.0]),
+    "panda": np.array([0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]),
+}
+BOX_SIZE = (0.4, 0.3, 0.2)
+FINGERTIP_CONTACTS = [("+x", [0.2, 0.05, 0.03]), ("-x", [-0.2, -0.1, 0.0]), ("+z", [0.1, 0.1, 0.1])]
+JOINT_KINDS = sorted(JOINT_DOF) + ["fingertips"]
+
+
+@cache
+def robot_model(robot: str) -> tuple[pin.Model, str]:
+    """The example-robot-data model (Panda fingers locked) and its tool frame, loaded once."""
+    import example_robot_data as erd
+
+    model = erd.load(robot).model
+    defaults = ROBOT_DEFAULTS[robot]
+    locked = [model.getJointId(j) for j in defaults.get("locked_joints", ())]
+    if locked:
+        model = pin.buildReducedModel(model, locked, pin.neutral(model))
+    return model, defaults["tool_frame"]
+
+
+@cache
+def make_arm(robot: str, name: str, angle: float, radius: float = 0.9) -> Arm:
+    """An arm on a circle of ``radius`` around the origin, facing it."""
+    base = pin.SE3(pin.rpy.rpyToMatrix(0, 0, angle + np.pi),
+                   np.array([radius * np.cos(angle), radius * np.sin(angle), 0.0]))
+    model, tool = robot_model(robot)
+    return Arm.from_model(model, tool, name=name, base_placement=base, source=robot)
+
+
+def joint_spec(kind: str):
+    if kind == "fingertips":
+        return {"type": "fingertips", "contacts": FINGERTIP_CONTACTS, "radius": 0.01}
+    if kind == "corner_gripper":
+        return {"type": kind, "size": 0.08}
+    return {"type": kind, "size": 0.08, "tip_radius": 0.01}
+
+
+def build_system(robots, kinds, rng=None, gravity=(0.0, 0.0, -9.81), mass=5.0, spread=0.2,
+                 object_position=(0.0, 0.0, 0.3), object_quaternion=(0, 0, 0, 1)):
+    """Arms around the object, joints holding each tool where it is at t = 0 (at rest)."""
+    n = len(robots)
+    arms = [make_arm(r, f"{r}{i}", 2 * np.pi * i / n) for i, r in enumerate(robots)]
+    q0 = [Q_NOMINAL[r] + (spread * rng.normal(size=len(Q_NOMINAL[r])) if rng is not None else 0)
+          for r in robots]
+    obj = RigidObject.box(BOX_SIZE, mass)
+    specs = [joint_spec(k) if isinstance(k, str) else k for k in kinds]
+    return MultiArmSystem.from_initial_state(arms, obj, specs, q0, object_position,
+                                             object_quaternion, gravity)
+
+
+def random_quaternion(rng):
+    q = rng.normal(size=4)
+    return q / np.linalg.norm(q)
+
+
+def moving_state(system, state, rng, speed=1.0):
+    """``state`` with random velocities projected onto the constraints."""
+    o = state.obj
+    s = SystemState(state.q, speed * rng.normal(size=system.nv),
+                    ObjectState(o.position, o.quaternion, speed * rng.normal(size=6)))
+    return system.project_velocities(s)
+
+
+def random_mixed_system(rng, n_arms, gravity=(0.0, 0.0, -9.81)):
+    robots = [("ur5", "panda")[i % 2] for i in range(n_arms)]
+    kinds = [JOINT_KINDS[k] for k in rng.integers(len(JOINT_KINDS), size=n_arms)]
+    return build_system(robots, kinds, rng, gravity, object_quaternion=random_quaternion(rng))
+
+
+# ---------------------------------------------------------------------- blocks vs references
+@pytest.mark.parametrize("baumgarte", [None, (3.0, 4.0)])
+def test_blocks_equal_per_arm_pinocchio_and_per_joint_references(rng, baumgarte):
+    system, state = random_mixed_system(rng, 4, gravity=(0.3, -1.0, -9.0))
+    state = moving_state(system, state, rng)
+    # move off the constraint manifold a little so that phi and phi_dot are not zero
+    o = state.obj
+    state = SystemState(state.q + 1e-3 * rng.normal(size=system.nq),
+                        state.v + 0.1 * rng.normal(size=system.nv),
+                        ObjectState(o.position, o.quaternion, o.twist))
+    tau = rng.normal(size=system.nv)
+    ev = system.blocks(state, tau, baumgarte)
+    b = ev.blocks
+    R = o.rotation
+    np.testing.assert_allclose(b.M_o, system.obj.mass_matrix(R))
+    np.testing.assert_allclose(b.h_o[:3], system.obj.mass * np.array([0.3, -1.0, -9.0]))
+    Iw = R @ system.obj.inertia @ R.T
+    np.testing.assert_allclose(b.h_o[3:], -np.cross(o.twist[3:], Iw @ o.twist[3:]), atol=1e-12)
+    for i, arm in enumerate(system.arms):
+        qs, vs = system.arm_set.q_slices[i], system.arm_set.v_slices[i]
+        model = pin.Model(arm.model)
+        model.gravity = pin.Motion(np.array([0.3, -1.0, -9.0]), np.zeros(3))
+        ref_arm = Arm(arm.name, model, arm.tool_frame_id, arm.base_placement, arm.tool_frame,
+                      arm.tool_offset)
+        terms = ref_arm.terms(state.q[qs], state.v[vs])
+        tool = terms.tool_placement
+        from multiarm_pin.kinematics import BodyKinematics
+
+        jt = system.joints[i].evaluate(
+            BodyKinematics.single(tool.translation, tool.rotation, terms.tool_twist),
+            o.kinematics())
+        nv, N = arm.nv, system.joints[i].n_constraints
+        np.testing.assert_allclose(b.M[i, :nv, :nv], terms.M, atol=1e-10)
+        np.testing.assert_allclose(b.h[i, :nv], tau[vs] - terms.nle, atol=1e-9)
+        np.testing.assert_allclose(b.W[i, :nv, :N], jt.W_bar(terms.J), atol=1e-10)
+        np.testing.assert_allclose(b.W_o[i, :, :N], jt.W_bar_o, atol=1e-12)
+        c_ref = (jt.drift(terms.Jdot_qdot) if baumgarte is None
+                 else jt.drift_baumgarte(terms.Jdot_qdot, *baumgarte))
+        np.testing.assert_allclose(b.c[i, :N], c_ref, atol=1e-9)
+        np.testing.assert_allclose(ev.constraints.phi[i, :N], jt.phi, atol=1e-12)
+        assert np.all(b.W[i, :, N:] == 0) and np.all(b.c[i, N:] == 0)
+    b.check_padding()
+
+
+def _advance(system, state, sol, h):
+    """Second-order Taylor step of the whole state by h (negative allowed)."""
+    qdd = system.unpad(sol.qdd)
+    o = state.obj
+    q = pin.integrate(system.arm_set.model, state.q, h * state.v + 0.5 * h * h * qdd)
+    w, dw = o.twist[3:], sol.a_o[3:]
+    # rotation: R(h) = exp(h w + h²/2 dw) R to second order (world angular velocity)
+    R = pin.exp3(h * w + 0.5 * h * h * dw) @ o.rotation
+    quat = pin.Quaternion(R).coeffs()
+    return SystemState(q, state.v + h * qdd,
+                       ObjectState(o.position + h * o.twist[:3] + 0.5 * h * h * sol.a_o[:3],
+                                   np.array(quat), o.twist + h * sol.a_o))
+
+
+@pytest.mark.parametrize("n_arms", [1, 3])
+def test_forward_dynamics_keeps_constraint_acceleration_zero(rng, n_arms):
+    """phi_ddot = 0 at the solution, by central differences of phi_dot along the motion."""
+    system, state = random_mixed_system(rng, n_arms)
+    state = moving_state(system, state, rng)
+    sol, ev = system.forward_dynamics(state, rng.normal(size=system.nv))
+    h = 1e-5
+    plus = system.blocks(_advance(system, state, sol, h)).constraints.phi_dot
+    minus = system.blocks(_advance(system, state, sol, -h)).constraints.phi_dot
+    phi_ddot = (plus - minus) / (2 * h)
+    # the same quantity with a wrong drift term is far from zero: the check can fail
+    assert np.abs(ev.blocks.c).max() > 1e-2
+    assert np.abs(phi_ddot).max() < 1e-5
+
+
+@pytest.mark.parametrize("n_arms", [1, 2, 3, 4, 5, 6])
+def test_all_solvers_agree_on_real_mixed_systems(n_arms):
+    rng = np.random.default_rng(100 + n_arms)
+    system, state = random_mixed_system(rng, n_arms)
+    state = moving_state(system, state, rng)
+    tau = 5 * rng.normal(size=system.nv)
+    ev = system.blocks(state, tau)
+    sols = {s: system.forward_dynamics(state, tau, solver=s)[0]
+            for s in ("object_first", "dense_kkt", "singular", "auto")}
+    ref = sols["dense_kkt"]
+    for name, sol in sols.items():
+        for field in ("a_o", "qdd", "mu"):
+            a, r = getattr(sol, field), getattr(ref, field)
+            assert np.linalg.norm(a - r) <= 1e-9 * max(np.linalg.norm(r), 1.0), (name, field)
+        assert sol.residuals().relative < 1e-10
+    assert sols["auto"].solver == "object_first"
+    assert ev.blocks.n == n_arms
+
+
+# ---------------------------------------------------------------------- validation
+def test_initial_state_checks_and_velocity_projection(rng):
+    system, state = build_system(["ur5", "panda"], ["weld", "revolute"], rng)
+    system.check_initial_state(state)
+    bad = SystemState(state.q, rng.normal(size=system.nv), state.obj)
+    with pytest.raises(ConstraintError, match=r"inconsistent initial velocities: arm \d.*"
+                                              r"project_velocities"):
+        system.check_initial_state(bad)
+    fixed = system.project_velocities(bad)
+    system.check_initial_state(fixed, velocity_tol=1e-10)
+    assert np.abs(system.blocks(fixed).constraints.phi_dot).max() < 1e-12
+    # least-norm: the correction is orthogonal to every consistent velocity (range of Aᵀ)
+    A = system.constraint_jacobian(state)
+    delta = np.concatenate([fixed.v - bad.v, fixed.obj.twist - bad.obj.twist])
+    _, s, vh = np.linalg.svd(A)
+    null = vh[np.sum(s > 1e-10):]
+    assert np.abs(null @ delta).max() < 1e-10
+    assert np.linalg.norm(delta) > 0.1
+    # positions off the joint
+    moved = SystemState(state.q + 0.01, state.v, state.obj)
+    with pytest.raises(ConstraintError, match="initial gap"):
+        system.check_initial_state(moved)
+
+
+def test_nan_and_bad_arguments_are_clear_errors(rng):
+    system, state = build_system(["ur5", "ur5"], ["weld", "weld"], rng)
+    q = state.q.copy()
+    q[3] = np.nan
+    with pytest.raises(DynamicsError, match=r"arms' q contains NaN.*\[3\]"):
+        system.blocks(SystemState(q, state.v, state.obj))
+    o = state.obj
+    with pytest.raises(DynamicsError, match="object twist contains NaN"):
+        system.forward_dynamics(SystemState(state.q, state.v, ObjectState(
+            o.position, o.quaternion, np.array([0, 0, np.nan, 0, 0, 0]))))
+    with pytest.raises(InputError, match=r"tau: expected shape \(12,\)"):
+        system.blocks(state, np.zeros(3))
+    with pytest.raises(DynamicsError, match="tau contains NaN"):
+        system.blocks(state, np.full(12, np.nan))
+    with pytest.raises(InputError, match="baumgarte"):
+        system.blocks(state, baumgarte=(1.0,))
+    with pytest.raises(InputError, match="unknown solver 'fast'.*dense_kkt"):
+        system.forward_dynamics(state, solver="fast")
+    with pytest.raises(InputError, match="one joint per arm"):
+        MultiArmSystem(system.arms, system.obj, system.joints[:1])
+    with pytest.raises(InputError, match=r"arms' v: expected shape \(12,\)"):
+        system.state(state.q, np.zeros(5))
+    with pytest.raises(ConstraintError, match="cannot be built from the initial state"):
+        build_system(["ur5"], [{"type": "teleport"}], rng)
+
+
+def one_dof_arm(name: str, angle: float) -> Arm:
+    """A UR5 with all joints but the shoulder pan locked: one joint for six constraints."""
+    model, tool = robot_model("ur5")
+    lock = [model.getJointId(j) for j in model.names[2:]]
+    reduced = pin.buildReducedModel(model, lock, Q_NOMINAL["ur5"])
+    base = pin.SE3(pin.rpy.rpyToMatrix(0, 0, angle + np.pi),
+                   np.array([0.9 * np.cos(angle), 0.9 * np.sin(angle), 0.0]))
+    return Arm.from_model(reduced, tool, name=name, base_placement=base)
+
+
+def test_singular_system_without_solution_raises():
+    """Two one-joint arms welded to the object: 8 DOF, 12 constraints. At rest it is
+    consistent (the singular-arm solver finds the static answer); with velocities or a
+    Baumgarte correction that no motion can realise, there is no solution."""
+    arms = [one_dof_arm("a", 0.0), one_dof_arm("b", np.pi)]
+    obj = RigidObject.box(BOX_SIZE, 5.0)
+    q0 = [np.zeros(1), np.zeros(1)]
+    system, state = MultiArmSystem.from_initial_state(arms, obj, ["weld", "weld"], q0,
+                                                      (0, 0, 0.3))
+    sol, _ = system.forward_dynamics(state)
+    assert sol.solver == "singular" and set(sol.singular_arms) == {0, 1}
+    np.testing.assert_allclose(sol.a_o, 0, atol=1e-9)
+    np.testing.assert_allclose(system.unpad(sol.qdd), 0, atol=1e-9)
+    spinning = SystemState(state.q, np.array([1.0, 0.5]), state.obj)
+    with pytest.raises(DynamicsError, match="inconsistent"):
+        system.forward_dynamics(spinning)
+    twisted = SystemState(state.q + [0.3, -0.3], state.v, state.obj)
+    with pytest.raises(DynamicsError, match="inconsistent"):
+        system.forward_dynamics(twisted, baumgarte=(5.0, 5.0))
+    with pytest.raises(DynamicsError):
+        system.forward_dynamics(spinning, solver="dense_kkt")
+
+
+# ---------------------------------------------------------------------- energy and momentum
+def test_energy_and_momentum_against_body_sums(rng):
+    system, state = random_mixed_system(rng, 3)
+    state = moving_state(system, state, rng)
+    model = system.arm_set.model
+    data = model.createData()
+    pin.forwardKinematics(model, data, state.q, state.v)
+    ke, h_lin, h_ang, pe = 0.0, np.zeros(3), np.zeros(3), 0.0
+    g = system.gravity
+    for j in range(1, model.njoints):
+        Y, vj, oMi = model.inertias[j], data.v[j], data.oMi[j]
+        ke += 0.5 * vj.np @ (Y.matrix() @ vj.np)
+        f0 = oMi.act(pin.Force(Y.matrix() @ vj.np))  # momentum about the world origin
+        h_lin += f0.linear
+        h_ang += f0.angular
+        pe -= Y.mass * g @ (oMi.act(Y.lever))
+    o, m = state.obj, system.obj.mass
+    Iw = o.rotation @ system.obj.inertia @ o.rotation.T
+    ke += 0.5 * m * o.twist[:3] @ o.twist[:3] + 0.5 * o.twist[3:] @ Iw @ o.twist[3:]
+    pe -= m * g @ o.position
+    h_lin += m * o.twist[:3]
+    h_ang += Iw @ o.twist[3:] + np.cross(o.position, m * o.twist[:3])
+    assert system.kinetic_energy(state) == pytest.approx(ke, rel=1e-12)
+    assert system.potential_energy(state) == pytest.approx(pe, rel=1e-12)
+    np.testing.assert_allclose(system.momentum(state), np.concatenate([h_lin, h_ang]),
+                               rtol=1e-11, atol=1e-11)
