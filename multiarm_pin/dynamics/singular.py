@@ -89,10 +89,8 @@ def finish_singular(blocks: SystemBlocks, red: ArmReduction, mask: np.ndarray) -
     h_t = b.h_o.copy()
     Z = None
     if reg.any():
-        W_o_r = b.W_o[reg]
-        Z = np.linalg.solve(S[reg], np.concatenate((W_o_r.transpose(0, 2, 1),
-                                                    r[reg][:, :, None]), axis=2))
-        AB = W_o_r.transpose(1, 0, 2).reshape(6, -1) @ Z.reshape(-1, 7)
+        Z = red.Z[reg]  # S_i⁻¹ [W_o,iᵀ r_i] of the regular arms
+        AB = b.W_o[reg].transpose(1, 0, 2).reshape(6, -1) @ Z.reshape(-1, 7)
         M_t += AB[:, :6]
         h_t += AB[:, 6]
     # Singular arms: coupled system F μ = d on their real (unpadded) multipliers.
