@@ -804,6 +804,8 @@ def build_scenario(scenario: Scenario, load_visuals: bool = False) -> BuiltScena
     for spec in scenario.arms:
         arm = build_arm(scenario, spec, load_visuals)
         key = f"arms[{spec.index}]"
+        if spec.joint.type == "contacts":
+            _tips_in_tool(scenario, spec, arm)  # fingertip frames exist (did-you-mean)
         if spec.q0 is not None:
             if len(spec.q0) != arm.nq:
                 raise ScenarioError(scenario.file, f"{key}.q0",
