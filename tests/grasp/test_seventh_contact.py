@@ -105,7 +105,8 @@ def test_more_than_seven_contacts_region_by_eq_2_4_matches_lp(rng):
 
 
 def test_empty_region_is_reported_clearly(rng):
-    # a narrow box: the region x < e - 2 (A - E) of the top face lies beyond its edge
+    # a narrow box: the +y contact lies beyond the centre (c = l_x - A < 0 while a > 0), so
+    # the two inequalities z1 < 0 and z2 = (a / c) z1 < 0 of Eq 2.3 exclude each other
     size = [0.8, 2.0, 2.0]
     A, E = 0.45, 0.05
     lx, ly, lz = np.array(size) / 2
