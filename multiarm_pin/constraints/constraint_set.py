@@ -88,9 +88,8 @@ class ConstraintSet:
         on_tool = np.array([c.tip_on_tool for _, _, c in ordered])
         # bodies 0..n-1 are the tools, n the object; row 0 the carrier, row 1 the surface's
         self._bodies = np.stack([np.where(on_tool, arm, n), np.where(on_tool, n, arm)])
-        self._on_tool = on_tool[:, None]
-        self._push_sign = np.where(on_tool, -1.0, 1.0)[:, None]
-        self._tip = np.array([c.point for _, _, c in ordered])[:, :, None]
+        self._push_sign = np.where(on_tool, -1.0, 1.0)
+        self._tip = np.array([c.point for _, _, c in ordered]).T.copy()  # (3, K)
         self._radius = np.array([c.radius for _, _, c in ordered])
         self._flat = arm * self.N_max + slot
         self._dense = len(ordered) == n * self.N_max  # every slot used: no scatter needed
@@ -98,7 +97,7 @@ class ConstraintSet:
         # spheres (0, centre), cylinders (axis, point of the axis)
         kinds = [c.surface.kind for _, _, c in ordered]
         self._is_plane = np.array([k == "plane" for k in kinds])
-        self._is_plane_col = self._is_plane[:, None]
+        self._all_planes = bool(self._is_plane.all())
         local = np.zeros((len(ordered), 3, 2))
         radius = np.zeros(len(ordered))
         sign = np.ones(len(ordered))
@@ -110,11 +109,11 @@ class ConstraintSet:
                 local[m, :, 0] = surf.axis if surf.kind == "cylinder" else 0.0
                 local[m, :, 1] = surf.center
                 radius[m], sign[m] = surf.radius, surf.sign
-        self._surface_local = local
+        self._surface_local = local.transpose(1, 2, 0).copy()  # (3, 2, K)
         self._curv_radius = radius
         self._curv_sign = sign
         self._K = len(ordered)
-        self._sigma = np.array([1.0, -1.0])[:, None, None]
+        self._sigma = np.array([1.0, -1.0])[:, None]
         self._tool_first = np.stack([np.where(on_tool, 0, 1), np.where(on_tool, 1, 0)])
         self._arange = np.arange(len(ordered))[None, :]
 
@@ -138,53 +137,67 @@ class ConstraintSet:
                 f"ConstraintSet.evaluate: expected {n} tools and 1 object, got "
                 f"{len(tools.position)} tools and {len(obj.position)} object bodies"
             )
-        b = self._bodies
-        X = np.take(np.concatenate([tools.position, obj.position]), b, axis=0)  # (2, K, 3)
-        R = np.take(np.concatenate([tools.rotation, obj.rotation]), b, axis=0)  # (2, K, 3, 3)
-        V = np.take(np.concatenate([tools.twist, obj.twist]), b, axis=0)  # (2, K, 6)
-        W = V[:, :, 3:]
-        c = X[0] + (R[0] @ self._tip)[:, :, 0]  # tip centres
-        r = c - X  # (2, K, 3) lever arms from the carrier's and the surface body's origins
+        # component-major layout: every vector array is (3, ...) so that each numpy call
+        # works on contiguous rows of K contacts
+        b = self._bodies  # (2, K): carrier, surface body
+        K = self._K
+        bodies = np.concatenate(
+            [
+                np.concatenate([tools.position, obj.position]),
+                np.concatenate([tools.rotation, obj.rotation]).reshape(n + 1, 9),
+                np.concatenate([tools.twist, obj.twist]),
+            ],
+            axis=1,
+        )  # (n + 1, 18): position, rotation (row-major), twist of each body
+        gathered = np.ascontiguousarray(np.take(bodies, b, axis=0).transpose(2, 0, 1))
+        X = gathered[:3]  # (3, 2, K)
+        R = gathered[3:12].reshape(3, 3, 2, K)
+        V = gathered[12:]  # (6, 2, K)
+        W = V[3:]
+        c = X[:, 0] + (R[:, :, 0] * self._tip).sum(1)  # tip centres (3, K)
+        r = c[:, None] - X  # (3, 2, K) lever arms from the carrier's and the surface's origins
         w_r = _cross(W, r)
-        vel = V[:, :, :3] + w_r  # velocities of both bodies' material points at c
-        u = vel[0] - vel[1]
+        vel = V[:3] + w_r  # velocities of both bodies' material points at c
+        u = vel[:, 0] - vel[:, 1]
 
         # surfaces: planes g = ν·y; spheres/cylinders g = s (|y⊥| - R), ν = s y⊥/|y⊥|
-        S = R[1] @ self._surface_local  # (K, 3, 2): world direction and point
-        a = S[:, :, 0]
-        y = c - X[1] - S[:, :, 1]
-        ay = _dot(a, y)
-        yp = y - ay[:, None] * a
-        rho = np.maximum(np.sqrt(_dot(yp, yp)), 1e-300)
-        e = yp / rho[:, None]
-        sgn = self._curv_sign
-        nu = np.where(self._is_plane_col, a, sgn[:, None] * e)
-        g = np.where(self._is_plane, ay, sgn * (rho - self._curv_radius))
-        au, eu = _dot(a, u), _dot(e, u)
-        quad = np.where(self._is_plane, 0.0, sgn * (_dot(u, u) - au * au - eu * eu) / rho)
+        S = (R[:, :, 1, None] * self._surface_local).sum(1)  # (3, 2, K) direction, point
+        a = S[:, 0]
+        y = c - X[:, 1] - S[:, 1]
+        ay = (a * y).sum(0)
+        if self._all_planes:
+            nu, g, quad = a, ay, 0.0
+        else:
+            yp = y - ay * a
+            rho = np.maximum(np.sqrt((yp * yp).sum(0)), 1e-300)
+            e = yp / rho
+            sgn = self._curv_sign
+            nu = np.where(self._is_plane, a, sgn * e)
+            g = np.where(self._is_plane, ay, sgn * (rho - self._curv_radius))
+            au, eu = (a * u).sum(0), (e * u).sum(0)
+            quad = np.where(self._is_plane, 0.0, sgn * ((u * u).sum(0) - au * au - eu * eu) / rho)
 
         # κ = uᵀHu + ν·(ω_C×(ω_C×r_C) - ω_S×(ω_S×r_S + 2u))
         B = w_r.copy()
-        B[1] += 2.0 * u
+        B[:, 1] += 2.0 * u
         t = _cross(W, B)
-        kappa = quad + _dot(nu, t[0] - t[1])
-        G = np.empty((2, self._K, 6))
-        G[:, :, :3] = nu
-        G[:, :, 3:] = _cross(r, nu)
+        kappa = quad + (nu * (t[:, 0] - t[:, 1])).sum(0)
+        G = np.empty((6, 2, K))
+        G[:3] = nu[:, None]
+        G[3:] = _cross(r, nu[:, None])
         G *= self._sigma  # +1 carrier, -1 surface body
-        G = G[self._tool_first, self._arange]  # rows: tool, object
+        G = G[:, self._tool_first, self._arange]  # (6, 2, K): tool, object
         packed = np.concatenate(
             [
-                (g - self._radius)[:, None],
-                _dot(nu, u)[:, None],
-                kappa[:, None],
-                G[0],
-                G[1],
-                c - g[:, None] * nu,
+                (g - self._radius)[None],
+                (nu * u).sum(0)[None],
+                kappa[None],
+                G[:, 0],
+                G[:, 1],
+                c - g * nu,
                 self._push_sign * nu,
-            ],
-            axis=1,
-        )
+            ]
+        ).T
         if self._dense:
             out = packed.reshape(n, self.N_max, 21)
         else:
@@ -224,18 +237,10 @@ class ConstraintSet:
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product along the last axis (broadcasting; cheaper than ``np.cross``).
+    """Cross product along the first axis of (3, ...) arrays (broadcasting).
 
     Appending the first two components makes both cyclic shifts plain slices.
     """
-    a = np.concatenate([a, a[..., :2]], axis=-1)
-    b = np.concatenate([b, b[..., :2]], axis=-1)
-    return a[..., 1:4] * b[..., 2:5] - a[..., 2:5] * b[..., 1:4]
-
-
-if hasattr(np, "vecdot"):
-    _dot = np.vecdot
-else:  # numpy < 2.0
-
-    def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        return np.einsum("...i,...i->...", a, b)
+    a = np.concatenate([a, a[:2]])
+    b = np.concatenate([b, b[:2]])
+    return a[1:4] * b[2:5] - a[2:5] * b[1:4]
