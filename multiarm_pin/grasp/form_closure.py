@@ -154,9 +154,3 @@ def ferrari_canny_epsilon(W: np.ndarray) -> float:
     # qhull facets: normal · x + offset <= 0 inside, unit normals
     dist = -hull.equations[:, -1]
     return float(max(dist.min(), 0.0))
-
-
-def is_positive_combination_zero(W: np.ndarray, lam: np.ndarray, tol: float = 1e-8) -> bool:
-    """True when ``λ > 0`` and ``W λ ≈ 0`` (a certificate of Eq 2.1 for a rank-6 ``W``)."""
-    lam = np.asarray(lam, dtype=float)
-    return bool(np.all(lam > 0) and np.linalg.norm(W @ lam) <= tol * max(1.0, np.abs(lam).sum()))
