@@ -486,18 +486,28 @@ def make_joint_from_placements(kind: str, tool_placement, object_placement, **pa
     """A joint whose frame J is the tool frame at t = 0 (the tool is where it is).
 
     Args:
-        kind: a type of ``JOINT_DOF`` (weld, revolute, ...).
+        kind: a type of ``JOINT_DOF`` (weld, revolute, ...) or ``"fingertips"``.
         tool_placement: tool world placement ``oMtool`` at t = 0.
         object_placement: object (COM frame) world placement ``oMobject`` at t = 0.
-        **params: other parameters of that type (``size``, ``tip_radius``, ...).
+        **params: other parameters of that type (``size``, ``tip_radius``, ...; for
+            fingertips ``polyhedron``, ``contacts``, ``radius`` as in
+            :func:`fingertips_from_placements`).
 
     Raises:
         ConstraintError: unknown type or bad parameters.
     """
+    if kind == "fingertips":
+        try:
+            return fingertips_from_placements(
+                tool_placement=tool_placement, object_placement=object_placement, **params
+            )
+        except TypeError as exc:
+            raise ConstraintError(f"joint 'fingertips': bad parameters {sorted(params)}: {exc}") \
+                from exc
     if kind not in JOINT_DOF:
         raise ConstraintError(
             f"make_joint_from_placements: unknown joint type {kind!r}; known types: "
-            f"{', '.join(sorted(JOINT_DOF))}"
+            f"{', '.join(sorted(JOINT_DOF) + ['fingertips'])}"
         )
     M = relative_placement(tool_placement, object_placement)
     return make_joint(kind, joint_in_object=M, joint_in_tool=None, **params)

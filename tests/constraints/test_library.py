@@ -179,6 +179,10 @@ def test_fingertips_form_closure_grasp_drops_the_seventh():
                                           strict=True)])
     again = fingertips_on_faces(shape, contacts, 0.01, tips)
     assert np.allclose(again.tool_in_object, joint.tool_in_object, atol=1e-9)
+    yaml_like = [(face, list(p)) for face, p in contacts]
+    third = make_joint_from_placements("fingertips", oMt, oMo, polyhedron=shape,
+                                       contacts=yaml_like, radius=0.01)
+    assert np.allclose(third.evaluate(_at_rest(oMt), _at_rest(oMo)).G_object, terms.G_object)
     # errors: a point off its face, tips that no rigid placement matches, count mismatch
     with pytest.raises(ConstraintError, match=r"contact 1: point .* not on face '-x'"):
         fingertips_on_faces(shape, [("+x", [0.2, 0, 0]), ("-x", [-0.1, 0, 0])], 0.01,
@@ -200,7 +204,9 @@ def test_registry_and_placement_errors():
         make_joint("revolute", joint_in_object=pin.SE3.Identity(), size=0.0)
     with pytest.raises(ConstraintError, match="points_on"):
         make_joint("spherical", joint_in_object=pin.SE3.Identity(), points_on="nowhere")
-    with pytest.raises(ConstraintError, match="unknown joint type 'fingertips'"):
+    with pytest.raises(ConstraintError, match="unknown joint type 'custom'; known types: .*fing"):
+        make_joint_from_placements("custom", pin.SE3.Identity(), pin.SE3.Identity())
+    with pytest.raises(ConstraintError, match="joint 'fingertips': bad parameters"):
         make_joint_from_placements("fingertips", pin.SE3.Identity(), pin.SE3.Identity())
     with pytest.raises(ConstraintError, match="unit quaternion"):
         as_placement({"position": [0, 0, 0], "quaternion": [0, 0, 0, 2]})
