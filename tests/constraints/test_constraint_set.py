@@ -7,6 +7,7 @@ import pytest
 from multiarm_pin.constraints import ConstraintSet, ConstraintTerms, make_joint_from_placements
 from multiarm_pin.exceptions import ConstraintError, InputError
 from multiarm_pin.kinematics import BodyKinematics
+from multiarm_pin.polyhedron import box
 
 from .cases import KINDS, random_joint, trajectories
 from .trajectories import RigidTrajectory, stack
@@ -100,7 +101,11 @@ def _arm_state(model, data, fid, q, v, a):
     return M, twist, acc, J, bias
 
 
-@pytest.mark.parametrize("kind", ["revolute", "spherical", "corner_gripper", "universal"])
+UR5_KINDS = ["weld", "revolute", "prismatic", "cylindrical", "universal", "spherical",
+             "corner_gripper", "fingertips"]
+
+
+@pytest.mark.parametrize("kind", UR5_KINDS)
 def test_joint_space_acceleration_constraint_on_a_ur5(ur5, kind):
     """φ̈ = W_oiᵀ q̈_o + W_iᵀ q̈_i - c_i along a random arm and object trajectory."""
     model, fid = ur5
@@ -116,7 +121,13 @@ def test_joint_space_acceleration_constraint_on_a_ur5(ur5, kind):
     M0 = _arm_state(model, data, fid, *arm(0.0))[0]
     obj_M0 = M0 * pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(size=3) * 0.2)
     obj = RigidTrajectory(rng, obj_M0.translation, obj_M0.rotation, speed=0.3, spin=1.0)
-    joint = make_joint_from_placements(kind, M0, obj_M0, size=0.06)
+    if kind == "fingertips":
+        params = {"polyhedron": box([0.4, 0.3, 0.2]), "radius": 0.01,
+                  "contacts": [("+x", [0.2, 0.05, 0.03]), ("-x", [-0.2, -0.1, 0.0]),
+                               ("+z", [0.1, 0.1, 0.1])]}
+    else:
+        params = {"size": 0.06}
+    joint = make_joint_from_placements(kind, M0, obj_M0, **params)
     cs = ConstraintSet([joint])
 
     def terms_at(t):
