@@ -34,8 +34,8 @@ class ConstraintTerms:
         G_object: (n, N_max, 6) rows at the object COM, world axes (LWA object twist).
         kappa: (n, N_max) velocity-product terms [m/s^2]:
             ``φ̈ = G_tool·a_tool + G_object·a_object + κ`` (classical accelerations).
-        N: (n,) independent constraints per arm.
-        mask: (n, N_max) True on real (non-padded) constraints.
+        N: (n,) independent constraints per arm (read-only, shared between calls).
+        mask: (n, N_max) True on real (non-padded) constraints (read-only, shared).
         contact_points: (n, N_max, 3) world contact locations [m].
         normals: (n, N_max, 3) world unit directions in which each contact pushes the object.
     """
@@ -73,6 +73,7 @@ class ConstraintSet:
         n = len(self.joints)
         self.n_arms = n
         self.N = np.array([j.n_constraints for j in self.joints], dtype=int)
+        self.N.setflags(write=False)  # shared by every ConstraintTerms
         self.N_max = int(self.N.max())
         mask = np.arange(self.N_max)[None, :] < self.N[:, None]
         mask.setflags(write=False)
