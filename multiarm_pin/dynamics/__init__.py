@@ -2,6 +2,17 @@
 
 from multiarm_pin.dynamics.blocks import Residuals, Solution, SystemBlocks
 from multiarm_pin.dynamics.dense_kkt import assemble_kkt, solve_dense_kkt
+from multiarm_pin.dynamics.force_distribution import (
+    ForceDistribution,
+    distribute_forces,
+    min_norm_forces,
+)
+from multiarm_pin.dynamics.inverse_dynamics import (
+    InternalForceBasis,
+    InverseDynamicsResult,
+    internal_force_basis,
+    inverse_dynamics,
+)
 from multiarm_pin.dynamics.object_first import (
     DEFAULT_RCOND_TOL,
     ArmReduction,
@@ -15,10 +26,17 @@ __all__ = [
     "DEFAULT_RCOND_TOL",
     "SOLVERS",
     "ArmReduction",
+    "ForceDistribution",
+    "InternalForceBasis",
+    "InverseDynamicsResult",
     "Residuals",
     "Solution",
     "SystemBlocks",
     "assemble_kkt",
+    "distribute_forces",
+    "internal_force_basis",
+    "inverse_dynamics",
+    "min_norm_forces",
     "reduce_arms",
     "solve",
     "solve_dense_kkt",

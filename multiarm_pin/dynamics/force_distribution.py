@@ -1,0 +1,184 @@
+"""Force distribution: internal forces that keep every unilateral contact pushing (ch. 5).
+
+The arms must apply the object wrench ``w = W_o μ``; the internal forces ``μ_I`` (null space of
+``W_o``) are free. A frictionless point contact can only push, so we choose::
+
+    minimise ‖μ‖²  subject to  W_o μ = w,  μ_k >= m for every unilateral multiplier k
+
+(``m >= 0`` a margin [N]). With ``μ = W_o⁺ w + A z`` and ``A`` an orthonormal basis of the null
+space, ``‖μ‖² = ‖W_o⁺ w‖² + ‖z‖²``, so this is the least-distance problem
+``min ‖z‖ s.t. G z >= g`` (``G = A[U]``, ``g = m - (W_o⁺ w)[U]``), solved exactly by
+Lawson & Hanson's reduction to non-negative least squares (``scipy.optimize.nnls``):
+with ``E = [Gᵀ; gᵀ]``, ``f = [0; 1]`` and ``u = argmin_{u>=0} ‖E u - f‖``, the residual
+``ρ = E u - f`` is zero iff the constraints are infeasible, else ``z = -ρ[:k] / ρ[k]``.
+
+When no internal force meets the margin, :class:`DynamicsError` is raised; its message gives
+the largest margin that is achievable (from a linear program).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linprog, nnls
+
+from multiarm_pin.dynamics.blocks import SystemBlocks
+from multiarm_pin.dynamics.inverse_dynamics import InternalForceBasis, internal_force_basis
+from multiarm_pin.exceptions import DynamicsError, InputError
+from multiarm_pin.spatial import as_array
+
+
+@dataclass(frozen=True)
+class ForceDistribution:
+    """The chosen contact multipliers.
+
+    Attributes:
+        mu: (n, N_max) multipliers [N] (positive = pushing), zero on padding.
+        mu_flat: (Σ N_i,) the same, stacked arm-major.
+        mu_I: (k,) internal-force coordinates in ``basis`` (pass to ``inverse_dynamics``).
+        basis: the internal-force basis of ``mu_I``.
+        margin: the margin that was asked for [N].
+        min_unilateral: smallest unilateral multiplier [N] (``inf`` if none is unilateral).
+    """
+
+    mu: np.ndarray
+    mu_flat: np.ndarray
+    mu_I: np.ndarray
+    basis: InternalForceBasis
+    margin: float
+    min_unilateral: float
+
+
+def min_norm_forces(
+    W_o,
+    wrench,
+    unilateral,
+    margin: float = 0.0,
+    tol: float = 1e-9,
+) -> np.ndarray:
+    """Smallest multipliers producing ``wrench`` with every unilateral one >= ``margin``.
+
+    Args:
+        W_o: (6, K) stacked object wrench bases (wrench ``[f; m]`` at the COM, world axes,
+            per unit multiplier).
+        wrench: (6,) object wrench the contacts must produce [N, N m].
+        unilateral: (K,) bool, True for multipliers that must be >= ``margin``.
+        margin: the margin ``m >= 0`` [N].
+        tol: relative tolerance (reachability of the wrench, feasibility).
+
+    Returns:
+        ``μ`` (K,) minimising ``‖μ‖²`` under the constraints.
+
+    Raises:
+        DynamicsError: the wrench cannot be produced, or no internal force keeps every
+            unilateral multiplier >= margin (the message gives the best achievable margin).
+        InputError: wrong shapes, NaN, negative margin.
+    """
+    W = as_array(W_o, (6, None), "W_o (6 x K)")
+    K = W.shape[1]
+    w = as_array(wrench, (6,), "wrench")
+    U = np.asarray(unilateral)
+    if U.shape != (K,) or U.dtype != bool:
+        raise InputError(f"unilateral: expected a bool array of shape ({K},), got {U!r}")
+    if not (np.isfinite(margin) and margin >= 0.0):
+        raise InputError(f"margin: expected a finite number >= 0 [N], got {margin!r}")
+    basis = internal_force_basis(W, "svd")
+    mu_p = basis.W_o_pinv @ w
+    miss = np.linalg.norm(W @ mu_p - w)
+    if miss > tol * max(np.linalg.norm(w), 1e-12):
+        raise DynamicsError(
+            f"the contacts cannot produce the required object wrench (W_o has rank "
+            f"{basis.rank} < 6; unreachable part {miss:.3g})"
+        )
+    idx = np.flatnonzero(U)
+    if idx.size == 0:
+        return mu_p
+    A = basis.A_o
+    G = A[idx]
+    g = margin - mu_p[idx]
+    scale = max(np.abs(mu_p).max(), margin, 1e-12)
+    k = A.shape[1]
+    if k == 0:
+        if np.all(g <= tol * scale):
+            return mu_p
+        _raise_infeasible(mu_p[idx], G, margin)
+    # Least-distance programming via NNLS (Lawson & Hanson 1974, ch. 23).
+    E = np.vstack([G.T, g[None, :]])
+    f = np.zeros(k + 1)
+    f[k] = 1.0
+    u, _ = nnls(E, f, maxiter=50 * (k + 1 + idx.size))
+    rho = E @ u - f
+    if -rho[k] <= 1e-12:
+        _raise_infeasible(mu_p[idx], G, margin)
+    z = -rho[:k] / rho[k]
+    mu = mu_p + A @ z
+    if np.any(mu[idx] < margin - tol * scale):  # pragma: no cover - NNLS round-off guard
+        _raise_infeasible(mu_p[idx], G, margin)
+    return mu
+
+
+def _best_margin(mu_p_U: np.ndarray, G: np.ndarray, cap: float) -> float:
+    """Largest ``t <= cap`` such that ``mu_p_U + G z >= t`` for some ``z`` (an LP)."""
+    u, k = G.shape
+    c = np.zeros(k + 1)
+    c[-1] = -1.0
+    A_ub = np.hstack([-G, np.ones((u, 1))])
+    res = linprog(c, A_ub=A_ub, b_ub=mu_p_U, bounds=[(None, None)] * k + [(None, cap)],
+                  method="highs")
+    return float(res.x[-1]) if res.status == 0 else float("nan")
+
+
+def _raise_infeasible(mu_p_U: np.ndarray, G: np.ndarray, margin: float) -> None:
+    best = _best_margin(mu_p_U, G, margin)
+    raise DynamicsError(
+        f"no internal force keeps every unilateral contact force >= {margin:g} N: the largest "
+        f"achievable smallest force is {best:.6g} N (the grasp is not form closure for this "
+        "load, or the margin is too large)"
+    )
+
+
+def distribute_forces(
+    blocks: SystemBlocks,
+    wrench,
+    unilateral,
+    margin: float = 0.0,
+    basis: InternalForceBasis | str = "svd",
+) -> ForceDistribution:
+    """Choose the internal forces of a system's grasp (see :func:`min_norm_forces`).
+
+    Args:
+        blocks: the system blocks (only ``W_o`` and ``N`` are used).
+        wrench: (6,) object wrench the contacts must produce, ``M_o a_o - h_o`` [N, N m].
+        unilateral: (n, N_max) bool, True for multipliers of frictionless contacts that must
+            stay >= ``margin`` (padding ignored).
+        margin: the margin ``m >= 0`` [N].
+        basis: basis for the returned ``mu_I`` (an :class:`InternalForceBasis` of
+            ``blocks.stacked_W_o()``, or ``"svd"``/``"echelon"``).
+
+    Returns:
+        The multipliers (:class:`ForceDistribution`).
+
+    Raises:
+        DynamicsError: infeasible (see :func:`min_norm_forces`).
+        InputError: wrong shapes.
+    """
+    mask = np.asarray(unilateral)
+    if mask.shape != (blocks.n, blocks.N_max) or mask.dtype != bool:
+        raise InputError(
+            f"unilateral: expected a bool array of shape ({blocks.n}, {blocks.N_max}), "
+            f"got {mask!r}"
+        )
+    W_o = blocks.stacked_W_o()
+    mu_flat = min_norm_forces(W_o, wrench, blocks.flatten_mu(mask), margin)
+    if isinstance(basis, str):
+        basis = internal_force_basis(W_o, basis)
+    U = blocks.flatten_mu(mask)
+    return ForceDistribution(
+        mu=blocks.unflatten_mu(mu_flat),
+        mu_flat=mu_flat,
+        mu_I=basis.coordinates(mu_flat),
+        basis=basis,
+        margin=float(margin),
+        min_unilateral=float(mu_flat[U].min()) if U.any() else float("inf"),
+    )
