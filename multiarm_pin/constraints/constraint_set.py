@@ -57,6 +57,12 @@ class ConstraintSet:
     Args:
         joints: one :class:`Joint` per arm.
 
+    Attributes:
+        joints: the joints, in arm order.
+        n_arms: number of arms n.
+        N: (n,) independent constraints per arm; ``N_max`` their maximum.
+        mask: (n, N_max) True on real (non-padded) constraint slots.
+
     Raises:
         ConstraintError: an empty list or something that is not a Joint.
     """
