@@ -50,3 +50,27 @@ def test_scenario_runs_and_is_physical(path, tmp_path):
     # unilateral fingertips must push
     if built.system.unilateral.any():
         assert s["min_unilateral_contact_force"] > 0
+
+
+def test_fingertip_grasp_is_form_closure():
+    from multiarm_pin.grasp import form_closure, wrench_matrix
+    from multiarm_pin.scenario import build_scenario
+
+    path = next(p for p in SCENARIOS if p.stem == "fingertips_form_closure")
+    built = build_scenario(load_scenario(path))
+    sys_ = built.system
+    ct = sys_.blocks(built.initial_state).constraints
+    mask = ct.mask
+    assert mask.sum() == 7 and sys_.unilateral.sum() == 7
+    com = built.initial_state.obj.position
+    W = wrench_matrix(ct.contact_points[mask] - com, ct.normals[mask])
+    res = form_closure(W)
+    assert res.form_closure and res.rank == 6 and res.margin > 0.02
+    # without the seventh contact the corners alone are not form closure (needs 7)
+    assert not form_closure(W[:, :6], allow_fewer=True).form_closure
+    # each fingertip sphere touches its face: centre 15 mm off the face plane (FK check)
+    obj = built.obj.shape
+    for spec, arm, q in zip(built.scenario.arms, built.arms, built.q0, strict=True):
+        for c in spec.joint.contacts:
+            p = arm.frame_placement(q, c.tip).translation - com
+            assert obj.signed_distance_to_face(p, c.face) == pytest.approx(0.015, abs=1e-8)
