@@ -262,6 +262,15 @@ class MultiArmSystem:
         if not isinstance(state, SystemState):
             raise InputError(f"state: expected a SystemState, got {type(state).__name__}")
         o = state.obj
+        try:  # fast path (hot): right shapes and a finite sum (NaN and inf propagate)
+            if (state.q.shape == (self.nq,) and state.v.shape == (self.nv,)
+                    and o.position.shape == (3,) and o.quaternion.shape == (4,)
+                    and o.twist.shape == (6,)
+                    and np.isfinite(state.q.sum() + state.v.sum() + o.position.sum()
+                                    + o.quaternion.sum() + o.twist.sum())):
+                return
+        except AttributeError:
+            pass
         fields = (("arms' q", state.q, (self.nq,)), ("arms' v", state.v, (self.nv,)),
                   ("object position", o.position, (3,)), ("object quaternion", o.quaternion, (4,)),
                   ("object twist", o.twist, (6,)))
