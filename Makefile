@@ -18,7 +18,7 @@ venv: $(STAMP)
 
 ## The main job: run the default scenario, write results and a replay page.
 demo: $(STAMP)
-	$(VENV)/bin/multiarm-pin info
+	$(VENV)/bin/multiarm-pin demo --out results/demo
 
 ## The whole test suite (installs headless Chromium for the browser test when it can).
 test: $(STAMP) browser

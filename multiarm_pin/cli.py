@@ -74,20 +74,19 @@ def _build_parser() -> argparse.ArgumentParser:
     grasp_cli.configure_parser(p)
     p.set_defaults(func=grasp_cli.run)
 
-    try:
-        from multiarm_pin import runner
-    except ImportError:  # the scenario runner is not installed in this checkout
-        runner = None
-    if runner is not None:
-        p = sub.add_parser("run", help="simulate a scenario file")
-        runner.configure_run_parser(p)
-        p.set_defaults(func=runner.run_command)
-        p = sub.add_parser("replay", help="serve the replay of a finished run")
-        runner.configure_replay_parser(p)
-        p.set_defaults(func=runner.replay_command)
-        p = sub.add_parser("demo", help="run the default scenario")
-        p.add_argument("--out", default="results/demo", help="output folder")
-        p.set_defaults(func=_demo)
+    from multiarm_pin import runner
+
+    p = sub.add_parser("run", help="simulate a scenario file")
+    runner.configure_run_parser(p)
+    p.set_defaults(func=runner.run_command)
+    p = sub.add_parser("replay", help="serve the replay of a finished run")
+    runner.configure_replay_parser(p)
+    p.set_defaults(func=runner.replay_command)
+    p = sub.add_parser("demo", help=f"run the default scenario ({DEFAULT_SCENARIO.name})")
+    p.add_argument("--out", default="results/demo", help="output folder (default results/demo)")
+    p.add_argument("--duration", type=float, default=None, help="override the duration [s]")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_demo)
 
     p = sub.add_parser("info", help="print key quantities of two arms and an object")
     p.set_defaults(func=_info)
@@ -98,7 +97,11 @@ def _demo(args: argparse.Namespace) -> int:
     from multiarm_pin import runner
 
     ns = argparse.Namespace(
-        scenario=str(DEFAULT_SCENARIO), out=args.out, solver=None, duration=None, quiet=False
+        scenario=str(DEFAULT_SCENARIO),
+        out=args.out,
+        solver=None,
+        duration=args.duration,
+        quiet=args.quiet,
     )
     return runner.run_command(ns)
 
