@@ -20,7 +20,7 @@ import pinocchio as pin
 from multiarm_pin.arm import Arm
 from multiarm_pin.exceptions import InputError
 from multiarm_pin.kinematics import BodyKinematics
-from multiarm_pin.spatial import as_array, cross
+from multiarm_pin.spatial import as_array
 
 
 @dataclass(frozen=True)
@@ -107,6 +107,15 @@ class ArmSet:
             self._eye_pad[i, pad, pad] = 1.0
         self._mask2 = (mask[:, :, None] & mask[:, None, :]).astype(float)
         self._mask_f = mask.astype(float)
+        self._tool_ids = [int(f) for f in self.tool_frame_ids]
+        # fast path: every arm has nv_max joints and all of them move its tool, so the
+        # stacked blocks are plain reshapes of Pinocchio's (column-major) matrices
+        self._uniform = bool(mask.all() and support.all())
+        k = self.nv_max
+        self._block_rows = idx[:, :, None]
+        self._block_cols = idx[:, None, :]
+        self._diag_blocks = (np.arange(self.n)[:, None, None] * k + np.arange(k)[None, :, None],
+                             np.arange(self.n)[:, None, None] * k + np.arange(k)[None, None, :])
 
     # ------------------------------------------------------------------ state helpers
     def neutral(self) -> np.ndarray:
@@ -141,6 +150,11 @@ class ArmSet:
     def evaluate(self, q: np.ndarray, v: np.ndarray) -> ArmSetTerms:
         """All arms' dynamic terms at the combined state ``(q, v)`` in one Pinocchio pass.
 
+        Three Pinocchio calls on the combined model (Jacobians and their time variation, CRBA,
+        nonlinear effects) whatever the number of arms, then a fixed number of numpy
+        operations on stacked arrays. The only per-arm Python is reading the n tool frames'
+        placements (Pinocchio exposes frame placements one at a time).
+
         Args:
             q: (nq,) combined configuration.
             v: (nv,) combined velocity.
@@ -152,33 +166,39 @@ class ArmSet:
         pin.computeJointJacobiansTimeVariation(model, data, q, v)  # FK, J and dJ (world)
         pin.crba(model, data, q)
         pin.nonLinearEffects(model, data, q, v)
-        oMf = [pin.updateFramePlacement(model, data, int(f)) for f in self.tool_frame_ids]
-        p = np.array([m.translation for m in oMf])  # (n, 3)
-        R = np.array([m.rotation for m in oMf])  # (n, 3, 3)
-        idx, sup = self._idx, self._support
-        Jw = np.moveaxis(data.J[:, idx], 1, 0) * sup[:, None, :]  # (n, 6, nv_max) world, at origin
-        dJw = np.moveaxis(data.dJ[:, idx], 1, 0) * sup[:, None, :]
-        vp = v[idx] * self._mask_f  # (n, nv_max)
+        upd = pin.updateFramePlacement
+        H = np.array([upd(model, data, f).np for f in self._tool_ids])  # (n, 4, 4)
+        p = H[:, :3, 3]
+        n, k = self.n, self.nv_max
+        if self._uniform:
+            # data.J, data.dJ are (6, nv) column-major: their transposes reshape for free
+            Jw = data.J.T.reshape(n, k, 6).transpose(0, 2, 1)  # (n, 6, k) world, at origin
+            dJw = data.dJ.T.reshape(n, k, 6).transpose(0, 2, 1)
+            vp = v.reshape(n, k).copy()
+            M = data.M[self._diag_blocks]
+            nle = data.nle.reshape(n, k).copy()
+        else:
+            idx, sup = self._idx, self._support[:, None, :]
+            Jw = data.J[:, idx].transpose(1, 0, 2) * sup  # (n, 6, nv_max) world, at origin
+            dJw = data.dJ[:, idx].transpose(1, 0, 2) * sup
+            vp = v[idx] * self._mask_f
+            M = data.M[self._block_rows, self._block_cols] * self._mask2 + self._eye_pad
+            nle = data.nle[idx] * self._mask_f
+        # LWA Jacobian of the tool point: linear rows + (angular rows) × p, i.e. - p× ω-rows
         J = Jw.copy()
-        # velocity of the tool point: v_O + ω × p  ->  linear rows minus p × angular rows
-        w = Jw[:, 3:, :]
-        px, py, pz = p[:, 0, None], p[:, 1, None], p[:, 2, None]
-        J[:, 0, :] -= py * w[:, 2] - pz * w[:, 1]
-        J[:, 1, :] -= pz * w[:, 0] - px * w[:, 2]
-        J[:, 2, :] -= px * w[:, 1] - py * w[:, 0]
-        twist = np.einsum("nij,nj->ni", J, vp)
-        a0 = np.einsum("nij,nj->ni", dJw, vp)  # world spatial acceleration at q̈ = 0
+        J[:, :3] -= np.einsum("abc,nb,ncj->naj", _EPS, p, Jw[:, 3:])
+        vcol = vp[:, :, None]
+        twist = np.matmul(J, vcol)[:, :, 0]  # (n, 6) LWA tool twists
+        acc = np.matmul(dJw, vcol)[:, :, 0]  # spatial acceleration at the world origin, q̈ = 0
         # classical acceleration of the tool point: a_O + α × p + ω × v_p
-        lin = a0[:, :3] + cross(a0[:, 3:], p) + cross(twist[:, 3:], twist[:, :3])
-        Jdot_qdot = np.concatenate([lin, a0[:, 3:]], axis=1)
-        M = data.M[idx[:, :, None], idx[:, None, :]] * self._mask2 + self._eye_pad
-        nle = data.nle[idx] * self._mask_f
+        acc[:, :3] += np.einsum("abc,nb,nc->na", _EPS, acc[:, 3:], p) + np.einsum(
+            "abc,nb,nc->na", _EPS, twist[:, 3:], twist[:, :3])
         return ArmSetTerms(
             M=M,
             nle=nle,
             J=J,
-            Jdot_qdot=Jdot_qdot,
-            tools=BodyKinematics(p, R, twist),
+            Jdot_qdot=acc,
+            tools=BodyKinematics(p, H[:, :3, :3], twist),
             v=vp,
         )
 
@@ -199,6 +219,12 @@ class ArmSet:
             R.append(m.rotation.copy())
             tw.append(pin.getFrameVelocity(self.model, self.data, int(f), LWA).vector.copy())
         return BodyKinematics(np.array(p), np.array(R), np.array(tw))
+
+
+_EPS = np.zeros((3, 3, 3))
+_EPS[0, 1, 2] = _EPS[1, 2, 0] = _EPS[2, 0, 1] = 1.0
+_EPS[0, 2, 1] = _EPS[2, 1, 0] = _EPS[1, 0, 2] = -1.0
+"""Levi-Civita symbol: ``(a × b)_i = ε_ijk a_j b_k`` (one einsum instead of ``np.cross``)."""
 
 
 def _prefixed(model: pin.Model, prefix: str) -> pin.Model:
