@@ -59,6 +59,7 @@ class SystemBlocks:
     dof_mask: np.ndarray = field(init=False, repr=False, compare=False)
     constraint_mask: np.ndarray = field(init=False, repr=False, compare=False)
     has_constraint_padding: bool = field(init=False, repr=False, compare=False)
+    padding_diagonal: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self._check_shapes()
@@ -69,6 +70,7 @@ class SystemBlocks:
         object.__setattr__(self, "dof_mask", np.arange(self.nv_max)[None, :] < nv[:, None])
         object.__setattr__(self, "constraint_mask", np.arange(self.N_max)[None, :] < N[:, None])
         object.__setattr__(self, "has_constraint_padding", bool(np.any(N < self.N_max)))
+        object.__setattr__(self, "padding_diagonal", (~self.constraint_mask).astype(float))
 
     # ------------------------------------------------------------------ sizes
     @property
