@@ -13,25 +13,26 @@ without recomputing them. Build one by name with :func:`make_controller`:
 - ``object_pd``: object-level computed torque. A desired object trajectory
   (:class:`~multiarm_pin.trajectories.MinimumJerkTrajectory`; default: hold the pose of the
   first call) and PD on the object pose give a desired acceleration
-  ``a_d = a_ref + K_d (v_ref - v_o) + K_p [p_ref - p; log(R_ref Rᵀ)]``. The contact
-  multipliers are chosen by :func:`distribute_forces` (every unilateral contact pushes with at
-  least ``margin``, forces as small as possible), joint accelerations satisfy the constraints
-  with a PD in their null space (relative motion in the joints, redundancy), and the torques
-  follow from the arms' equations (:func:`inverse_dynamics`). With these torques the forward
-  dynamics returns exactly ``a_d`` and those multipliers.
+  ``a_d = a_ref + K_d (v_ref - v_o) + K_p [p_ref - p; log(R_ref Rᵀ)]``. The internal forces
+  come from :func:`multiarm_pin.dynamics.force_distribution.distribute_forces` (every
+  unilateral contact pushes with at least ``margin``, forces as small as possible), the joint
+  accelerations closest to a joint-space PD that satisfy the constraint rows (so the PD acts
+  on the joints' relative motion and on redundancy) and the torques from
+  :func:`multiarm_pin.dynamics.inverse_dynamics.inverse_dynamics` (Eq 3.10). With these
+  torques the forward dynamics returns exactly ``a_d`` and those multipliers.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 import pinocchio as pin
 
-from multiarm_pin.dynamics import SystemBlocks
-from multiarm_pin.exceptions import DynamicsError, InputError
+from multiarm_pin.dynamics.force_distribution import distribute_forces
+from multiarm_pin.dynamics.inverse_dynamics import InverseDynamicsResult, inverse_dynamics
+from multiarm_pin.exceptions import InputError
 from multiarm_pin.system import Evaluation, MultiArmSystem, SystemState
 from multiarm_pin.trajectories import MinimumJerkTrajectory, pose_error
 
@@ -116,140 +117,6 @@ class JointPD(Controller):
         return self.system.gravity_torques(state.q) + self.kp * err - self.kd * state.v
 
 
-# ---------------------------------------------------------------------- force distribution
-@dataclass(frozen=True)
-class ForceDistribution:
-    """Contact multipliers that produce a required wrench on the object.
-
-    Attributes:
-        mu: (Σ N_i,) multipliers [N], arm-major (``SystemBlocks.flatten_mu`` order).
-        min_unilateral: smallest multiplier among unilateral contacts [N] (inf if none).
-        residual: ``‖W_o μ - w‖`` [N, N m].
-    """
-
-    mu: np.ndarray
-    min_unilateral: float
-    residual: float
-
-
-def distribute_forces(W_o: np.ndarray, wrench: np.ndarray, unilateral: np.ndarray,
-                      margin: float = 1.0) -> ForceDistribution:
-    """Smallest multipliers producing ``wrench``, every unilateral one at least ``margin``.
-
-    Solves ``min ‖μ‖²`` subject to ``W_o μ = wrench`` and ``μ_k >= margin`` for unilateral k
-    (a small QP: SLSQP after an LP feasibility test). Without unilateral contacts it is the
-    least-norm solution ``W_o⁺ wrench``.
-
-    Args:
-        W_o: (6, K) contact wrenches on the object per unit multiplier (LWA at the COM).
-        wrench: (6,) total contact wrench required on the object [N, N m].
-        unilateral: (K,) bool, which multipliers must be >= ``margin``.
-        margin: smallest push [N] of a unilateral contact (>= 0).
-
-    Returns:
-        :class:`ForceDistribution`.
-
-    Raises:
-        DynamicsError: no multipliers satisfy the constraints (the contacts cannot produce the
-            wrench with every unilateral force >= margin: not a form-closure grasp for it).
-    """
-    W_o = np.asarray(W_o, dtype=float)
-    w = np.asarray(wrench, dtype=float)
-    uni = np.asarray(unilateral, dtype=bool)
-    K = W_o.shape[1]
-    if W_o.shape != (6, K) or w.shape != (6,) or uni.shape != (K,):
-        raise InputError(
-            f"distribute_forces: expected W_o (6, K), wrench (6,), unilateral (K,); got "
-            f"{W_o.shape}, {w.shape}, {uni.shape}"
-        )
-    if not (np.isfinite(margin) and margin >= 0):
-        raise InputError(f"margin: expected a force >= 0 [N], got {margin!r}")
-    scale = max(float(np.abs(w).max()), 1.0)
-    tol = 1e-9 * scale
-    mu = np.linalg.lstsq(W_o, w, rcond=None)[0]
-    if not uni.any() or mu[uni].min() >= margin:
-        return _distribution(mu, W_o, w, uni)
-    from scipy.optimize import linprog, minimize
-
-    bounds = [(margin, None) if u else (None, None) for u in uni]
-    lp = linprog(np.zeros(K), A_eq=W_o, b_eq=w, bounds=bounds, method="highs")
-    if lp.status != 0:
-        raise DynamicsError(
-            f"force distribution: no contact forces produce the wrench {np.round(w, 6).tolist()} "
-            f"with every unilateral contact pushing >= {margin:g} N ({int(uni.sum())} unilateral "
-            f"of {K} contacts; LP: {lp.message})"
-        )
-    res = minimize(
-        lambda x: float(x @ x), lp.x, jac=lambda x: 2.0 * x, method="SLSQP", bounds=bounds,
-        constraints=[{"type": "eq", "fun": lambda x: W_o @ x - w, "jac": lambda x: W_o}],
-        options={"ftol": 1e-14, "maxiter": 200},
-    )
-    x = res.x if res.success else lp.x
-    x = x + np.linalg.lstsq(W_o, w - W_o @ x, rcond=None)[0]  # restore equality exactly
-    if uni.any() and x[uni].min() < margin - 1e-6 * scale:
-        x = lp.x
-    if np.linalg.norm(W_o @ x - w) > max(tol, 1e-8):
-        x = lp.x
-    return _distribution(x, W_o, w, uni)
-
-
-def _distribution(mu, W_o, w, uni) -> ForceDistribution:
-    return ForceDistribution(mu, float(mu[uni].min()) if uni.any() else float("inf"),
-                             float(np.linalg.norm(W_o @ mu - w)))
-
-
-# ---------------------------------------------------------------------- inverse dynamics
-@dataclass(frozen=True)
-class InverseDynamics:
-    """Torques for a desired motion and the contact multipliers they go with.
-
-    Attributes:
-        tau: (nv,) joint torques [N m].
-        qdd: (n, nv_max) joint accelerations (padded).
-        mu: (n, N_max) multipliers [N] (padded).
-        a_o: (6,) object acceleration ``[ẍ; ω̇]`` (world, COM).
-    """
-
-    tau: np.ndarray
-    qdd: np.ndarray
-    mu: np.ndarray
-    a_o: np.ndarray
-
-
-def inverse_dynamics(system: MultiArmSystem, blocks: SystemBlocks, a_o: np.ndarray,
-                     mu: np.ndarray, qdd_secondary: np.ndarray | None = None
-                     ) -> InverseDynamics:
-    """Joint torques that give the object acceleration ``a_o`` with multipliers ``mu``.
-
-    Joint accelerations: ``q̈_i = (W_iᵀ)⁺ (c_i - W_o,iᵀ a_o) + (I - (W_iᵀ)⁺ W_iᵀ) q̈_sec,i``
-    (the constraint rows hold; ``q̈_sec`` acts in their null space: relative motion in the
-    joint and redundancy). Torques: ``τ_i = M_i q̈_i - h_i - W_i μ_i`` (thesis Eq 3.10 in joint
-    space). ``mu`` must satisfy ``M_o a_o = h_o + Σ W_o,i μ_i`` (see
-    :func:`distribute_forces`) for the object equation to hold.
-
-    Args:
-        system: the system.
-        blocks: blocks at zero torque (``h = -nle``).
-        a_o: (6,) desired object acceleration [m/s², rad/s²].
-        mu: (n, N_max) multipliers [N], zero on padding.
-        qdd_secondary: (n, nv_max) desired joint accelerations in the null space (zero if None).
-
-    Returns:
-        :class:`InverseDynamics`.
-    """
-    b = blocks
-    Wt = b.W.transpose(0, 2, 1)  # (n, N_max, nv_max)
-    rhs = b.c - np.einsum("nik,i->nk", b.W_o, a_o)
-    P = np.linalg.pinv(Wt, rcond=1e-10)  # (n, nv_max, N_max), batched
-    qdd = np.einsum("nvk,nk->nv", P, rhs)
-    if qdd_secondary is not None:
-        sec = qdd_secondary - np.einsum("nvk,nk->nv", P, np.einsum("nkv,nv->nk", Wt, qdd_secondary))
-        qdd = qdd + sec
-    qdd = qdd * system.arm_set.dof_mask
-    tau_p = np.einsum("nuv,nv->nu", b.M, qdd) - b.h - np.einsum("nvk,nk->nv", b.W, mu)
-    return InverseDynamics(system.unpad(tau_p), qdd, mu, np.asarray(a_o, dtype=float))
-
-
 class ObjectPD(Controller):
     """Object-level computed torque on the inverse dynamics with force distribution.
 
@@ -266,7 +133,8 @@ class ObjectPD(Controller):
         null_kd: its damping [1/s].
 
     Attributes:
-        last: the :class:`InverseDynamics` of the last call (its ``mu`` are the planned forces).
+        last: the :class:`~multiarm_pin.dynamics.inverse_dynamics.InverseDynamicsResult` of
+            the last call (its ``mu`` are the planned forces).
     """
 
     name = "object_pd"
@@ -291,7 +159,7 @@ class ObjectPD(Controller):
             raise InputError(f"object_pd margin: expected a force >= 0 [N], got {margin!r}")
         self.margin = float(margin)
         self.q_ref: np.ndarray | None = None
-        self.last: InverseDynamics | None = None
+        self.last: InverseDynamicsResult | None = None
 
     def desired_acceleration(self, t: float, state: SystemState) -> np.ndarray:
         """(6,) ``a_d = a_ref + K_d (v_ref - v_o) + K_p e`` [m/s², rad/s²], world at the COM."""
@@ -309,14 +177,11 @@ class ObjectPD(Controller):
         if self.q_ref is None:
             self.q_ref = np.array(state.q, dtype=float)
         a_d = self.desired_acceleration(t, state)
-        wrench = b.M_o @ a_d - b.h_o
-        fd = distribute_forces(b.stacked_W_o(), wrench, s.unilateral[b.constraint_mask],
-                               self.margin)
-        mu = b.unflatten_mu(fd.mu)
+        fd = distribute_forces(b, b.M_o @ a_d - b.h_o, s.unilateral, self.margin)
         err = pin.difference(s.arm_set.model, state.q, self.q_ref)
-        sec = s.pad(self.null_kp * err - self.null_kd * state.v)
-        self.last = inverse_dynamics(s, b, a_d, mu, sec)
-        return self.last.tau
+        qdd_desired = s.pad(self.null_kp * err - self.null_kd * state.v)
+        self.last = inverse_dynamics(b, a_d, qdd_desired, fd.mu_I, fd.basis)
+        return s.unpad(self.last.tau)
 
 
 CONTROLLERS: dict[str, type[Controller]] = {
@@ -353,13 +218,9 @@ __all__ = [
     "CONTROLLERS",
     "Controller",
     "ControllerFunction",
-    "ForceDistribution",
     "GravityCompensation",
-    "InverseDynamics",
     "JointPD",
     "ObjectPD",
     "ZeroTorque",
-    "distribute_forces",
-    "inverse_dynamics",
     "make_controller",
 ]

@@ -1,17 +1,12 @@
-"""Controllers: registry, formulas, force distribution optimality, inverse dynamics round trip
-through the forward dynamics, object trajectory tracking."""
+"""Controllers: registry, formulas, object-level control realised exactly by the forward
+dynamics, impossible grasps, object trajectory tracking."""
 
 import numpy as np
 import pinocchio as pin
 import pytest
 from test_system import build_system, moving_state
 
-from multiarm_pin.controllers import (
-    CONTROLLERS,
-    distribute_forces,
-    inverse_dynamics,
-    make_controller,
-)
+from multiarm_pin.controllers import CONTROLLERS, make_controller
 from multiarm_pin.exceptions import DynamicsError, InputError
 from multiarm_pin.simulation import simulate
 from multiarm_pin.trajectories import MinimumJerkTrajectory
@@ -57,50 +52,37 @@ def test_simple_controllers(two_arms):
                                system.gravity_torques(q1) - 1.0 - 2.0 * state.v, atol=1e-12)
 
 
-def test_force_distribution_is_the_constrained_least_norm(rng):
-    W = rng.normal(size=(6, 9))
-    uni = np.array([True] * 6 + [False] * 3)
-    w = W @ np.concatenate([rng.uniform(1, 5, 6), rng.normal(size=3)])  # feasible
-    margin = 0.5
-    assert (np.linalg.pinv(W) @ w)[uni].min() < margin  # the bounds are active
-    fd = distribute_forces(W, w, uni, margin)
-    mu = fd.mu
-    assert fd.residual < 1e-9 and mu[uni].min() >= margin - 1e-9
-    # KKT: 2 mu = Wᵀ y + λ with λ >= 0 supported on the active bounds
-    active = uni & (mu < margin + 1e-7)
-    A = np.hstack([W.T, np.eye(9)[:, active]])
-    sol, *_ = np.linalg.lstsq(A, 2 * mu, rcond=None)
-    assert np.linalg.norm(A @ sol - 2 * mu) < 1e-6 * np.linalg.norm(mu)
-    assert np.all(sol[6:] >= -1e-6)
-    # without unilateral contacts: the least-norm solution
-    free = distribute_forces(W, w, np.zeros(9, bool))
-    np.testing.assert_allclose(free.mu, np.linalg.pinv(W) @ w, atol=1e-10)
-
-
-def test_force_distribution_reports_impossible_grasps():
-    # three contacts all pushing up cannot pull the object down
-    W = np.array([[0, 0, 1, y, -x, 0] for x, y in [(0.1, 0), (-0.1, 0.1), (0, -0.1)]]).T
-    with pytest.raises(DynamicsError, match="no contact forces produce the wrench"):
-        distribute_forces(np.hstack([W, W]), np.array([0, 0, -10.0, 0, 0, 0]), np.ones(6, bool))
-
-
 @pytest.mark.parametrize("kinds", [["weld", "spherical", "fingertips"],
                                    ["revolute", "universal"]])
-def test_inverse_dynamics_round_trips_through_forward_dynamics(kinds):
+def test_object_pd_torques_realise_its_plan_in_the_forward_dynamics(kinds):
+    """The controller's torques, fed to the forward dynamics, give its desired object
+    acceleration and its planned multipliers (fingertips pushing >= margin)."""
     rng = np.random.default_rng(len(kinds))
     robots = ["ur5", "panda", "ur5"][: len(kinds)]
     system, state = build_system(robots, kinds, rng)
     state = moving_state(system, state, rng, 0.5)
-    b = system.blocks(state).blocks
-    a_d = rng.normal(size=6)
-    uni = system.unilateral[b.constraint_mask]
-    fd = distribute_forces(b.stacked_W_o(), b.M_o @ a_d - b.h_o, uni, 1.0)
-    sec = system.pad(rng.normal(size=system.nv))
-    inv = inverse_dynamics(system, b, a_d, b.unflatten_mu(fd.mu), sec)
-    sol, _ = system.forward_dynamics(state, inv.tau)
+    o = state.obj
+    target = MinimumJerkTrajectory.hold(o.position + [0.01, -0.02, 0.03], o.quaternion)
+    ctrl = make_controller("object_pd", system, trajectory=target, margin=1.0)
+    tau = ctrl(0.0, state, system.blocks(state))
+    a_d = ctrl.desired_acceleration(0.0, state)
+    assert np.abs(a_d).max() > 0.5
+    sol, _ = system.forward_dynamics(state, tau)
     np.testing.assert_allclose(sol.a_o, a_d, atol=1e-8)
-    np.testing.assert_allclose(sol.mu, inv.mu, atol=1e-6)
-    np.testing.assert_allclose(sol.qdd, inv.qdd, atol=1e-7)
+    np.testing.assert_allclose(sol.mu, ctrl.last.mu, atol=1e-6)
+    np.testing.assert_allclose(sol.qdd, ctrl.last.qdd, atol=1e-7)
+    if system.unilateral.any():
+        assert sol.mu[system.unilateral].min() >= 1.0 - 1e-6
+
+
+def test_object_pd_reports_an_impossible_grasp():
+    """Two fingertips on the top face cannot hold the box up."""
+    specs = [{"type": "fingertips", "contacts": [("+z", [0.1, 0.0, 0.1]),
+                                                 ("+z", [-0.1, 0.05, 0.1])], "radius": 0.01}]
+    system, state = build_system(["ur5"], specs, None)
+    ctrl = make_controller("object_pd", system)
+    with pytest.raises(DynamicsError):
+        ctrl(0.0, state, system.blocks(state))
 
 
 def test_object_pd_tracks_a_minimum_jerk_trajectory(two_arms):
