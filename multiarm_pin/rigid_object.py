@@ -19,7 +19,7 @@ import numpy as np
 from multiarm_pin.exceptions import InputError
 from multiarm_pin.kinematics import BodyKinematics
 from multiarm_pin.polyhedron import Polyhedron, box, from_vertices
-from multiarm_pin.spatial import as_array, as_unit_quaternion, cross, quaternion_to_rotation
+from multiarm_pin.spatial import as_array, as_unit_quaternion, quaternion_to_rotation
 
 
 @dataclass(frozen=True)
@@ -140,10 +140,13 @@ class RigidObject:
             gravity: (3,) [m/s^2] in the world.
             external: optional (6,) wrench ``[f; n]`` applied at the COM, world axes.
         """
-        w = twist[3:]
+        wx, wy, wz = twist[3], twist[4], twist[5]
+        Lx, Ly, Lz = rotation @ (self.inertia @ (rotation.T @ twist[3:]))  # I_w ω
         h = np.empty(6)
         h[:3] = self.mass * gravity
-        h[3:] = -cross(w, self.inertia_world(rotation) @ w)
+        h[3] = wz * Ly - wy * Lz  # -(ω × I_w ω), written out: np.cross costs ~10 µs per call
+        h[4] = wx * Lz - wz * Lx
+        h[5] = wy * Lx - wx * Ly
         if external is not None:
             h += external
         return h
