@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.linalg import lapack
 
 from multiarm_pin.exceptions import InputError
 
@@ -43,8 +44,9 @@ class SystemBlocks:
         N: (n,) int, number of constraint rows of each arm (``0 <= N_i <= N_max``).
 
     Construct with :meth:`from_lists` (pads and validates fully) or directly from padded
-    arrays (shapes and padding sizes are checked; finiteness is checked by
-    :meth:`check_finite`, which the solvers call whenever a result is not finite).
+    arrays (shapes, padding sizes and the positive definiteness of ``M_o`` are checked;
+    finiteness is checked by :meth:`check_finite`, which the solvers call whenever a result
+    is not finite; :meth:`check_padding` checks the padded entries).
     """
 
     M: np.ndarray
@@ -71,6 +73,13 @@ class SystemBlocks:
         object.__setattr__(self, "constraint_mask", np.arange(self.N_max)[None, :] < N[:, None])
         object.__setattr__(self, "has_constraint_padding", bool(np.any(N < self.N_max)))
         object.__setattr__(self, "padding_diagonal", (~self.constraint_mask).astype(float))
+        if lapack.dpotrf(self.M_o)[1] != 0:
+            if not np.isfinite(self.M_o).all():
+                raise InputError("SystemBlocks.M_o contains NaN or infinity")
+            raise InputError(
+                "SystemBlocks.M_o: the object spatial inertia must be symmetric positive "
+                f"definite, got eigenvalues {np.linalg.eigvalsh(self.M_o).round(12).tolist()}"
+            )
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -324,7 +333,7 @@ class Residuals:
         return worst / self.scale if self.scale > 0 else worst
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Solution:
     """Result of a forward-dynamics solve.
 

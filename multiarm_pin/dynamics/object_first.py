@@ -216,7 +216,7 @@ def solve_object_first(
 def solve_object_system(b: SystemBlocks, A: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     """Solve the reduced 6 x 6 object system ``A a_o = rhs`` (A symmetric positive definite).
 
-    Also checks that ``M_o`` itself is positive definite and that the result is finite.
+    Also checks that the result is finite (``M_o`` itself is checked by ``SystemBlocks``).
 
     Args:
         b: the blocks (for ``M_o`` and error diagnosis).
@@ -227,15 +227,9 @@ def solve_object_system(b: SystemBlocks, A: np.ndarray, rhs: np.ndarray) -> np.n
         ``A⁻¹ rhs``, same shape as ``rhs``.
 
     Raises:
-        InputError: ``M_o`` not positive definite, NaN or infinity in the blocks.
+        InputError: NaN or infinity in the blocks.
         DynamicsError: ``A`` not positive definite.
     """
-    if lapack.dpotrf(b.M_o)[1] != 0:
-        b.check_finite()
-        raise InputError(
-            "SystemBlocks.M_o: the object spatial inertia must be symmetric positive definite, "
-            f"got eigenvalues {np.linalg.eigvalsh(b.M_o).round(12).tolist()}"
-        )
     _, x, info = lapack.dposv(A, rhs)
     if info != 0 or not math.isfinite(x.sum()):
         b.check_finite()
@@ -247,5 +241,7 @@ def solve_object_system(b: SystemBlocks, A: np.ndarray, rhs: np.ndarray) -> np.n
 
 
 def _check_tol(rcond_tol: float) -> None:
+    if rcond_tol is DEFAULT_RCOND_TOL:
+        return
     if not (isinstance(rcond_tol, float | int) and 0.0 <= rcond_tol < 1.0):
         raise InputError(f"rcond_tol: expected a number in [0, 1), got {rcond_tol!r}")

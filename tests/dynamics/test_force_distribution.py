@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.optimize import linprog, minimize
-from synthetic import random_spd
 
 from multiarm_pin.dynamics import (
     SystemBlocks,
@@ -15,6 +14,8 @@ from multiarm_pin.dynamics import (
     solve,
 )
 from multiarm_pin.exceptions import DynamicsError, InputError
+
+from .synthetic import random_spd
 
 G = 9.81
 MASS = 5.0

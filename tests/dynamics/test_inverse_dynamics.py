@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from synthetic import random_system
 
 from multiarm_pin.dynamics import (
     SystemBlocks,
@@ -13,6 +12,8 @@ from multiarm_pin.dynamics import (
     solve,
 )
 from multiarm_pin.exceptions import DynamicsError, InputError
+
+from .synthetic import random_system
 
 
 def random_graspable(rng, n=None):

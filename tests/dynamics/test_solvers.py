@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from synthetic import random_object_inertia, random_spd, random_system
 
 import multiarm_pin.dynamics as dyn
 from multiarm_pin.dynamics import SOLVERS, SystemBlocks, assemble_kkt, solve
 from multiarm_pin.dynamics.dense_kkt import unpack_kkt
 from multiarm_pin.exceptions import DynamicsError, InputError, SingularityError
+
+from .synthetic import random_object_inertia, random_spd, random_system
 
 
 def lstsq_kkt(blocks: SystemBlocks):
