@@ -29,19 +29,26 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
-import csv
-import gc
-import math
-import platform
-import sys
-import time
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from pathlib import Path
+import os
 
-import numpy as np
-import pinocchio as pin
+# single-threaded BLAS/LAPACK, like Pinocchio: on a small shared VM, threaded BLAS on small
+# matrices mostly measures thread contention (must be set before numpy is imported)
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import csv  # noqa: E402
+import gc  # noqa: E402
+import math  # noqa: E402
+import platform  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from collections.abc import Callable, Sequence  # noqa: E402
+from dataclasses import dataclass, field  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pinocchio as pin  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # run from a checkout without installing
@@ -235,34 +242,43 @@ def kkt_difference(bench: Bench) -> float:
 # ---------------------------------------------------------------------------- timing
 @dataclass
 class Timer:
-    """Median single-call times with a per-measurement budget."""
+    """Median single-call times of several functions, measured interleaved.
+
+    The functions are called round-robin (one call of each per round), so that a change of
+    the machine's load affects all of them alike and their ratios stay meaningful.
+    """
 
     repeat: int
     warmup: int = 20
     budget_s: float = 2.0
 
-    def median(self, fn: Callable[[int], object], n_states: int) -> tuple[float, int]:
-        """Median seconds of ``fn(k)`` (k cycles over the states) and the number of calls."""
+    def medians(self, fns: Sequence[Callable[[int], object]], n_states: int
+                ) -> tuple[list[float], int]:
+        """Median seconds of each ``fn(k)`` (k cycles over the states) and the rounds run."""
         for i in range(self.warmup):
-            fn(i % n_states)
+            for fn in fns:
+                fn(i % n_states)
         t0 = time.perf_counter()
-        fn(0)
+        for fn in fns:
+            fn(0)
         once = max(time.perf_counter() - t0, 1e-7)
         reps = int(max(5, min(self.repeat, self.budget_s / once)))
-        times = np.empty(reps)
+        times = np.empty((reps, len(fns)))
         clock = time.perf_counter
         gc_was = gc.isenabled()
         gc.disable()
         try:
             for i in range(reps):
                 k = i % n_states
-                t = clock()
-                fn(k)
-                times[i] = clock() - t
+                row = times[i]
+                for j, fn in enumerate(fns):
+                    t = clock()
+                    fn(k)
+                    row[j] = clock() - t
         finally:
             if gc_was:
                 gc.enable()
-        return float(np.median(times)), reps
+        return [float(x) for x in np.median(times, axis=0)], reps
 
 
 @dataclass
@@ -290,14 +306,19 @@ def measure_case(bench: Bench, case: str, timer: Timer, peer: PinocchioPeer | No
     """Time coefficient blocks, both solvers, the full step and (weld) Pinocchio."""
     system, states, taus, blocks = bench.system, bench.states, bench.taus, bench.blocks
     K = len(states)
-    t_coeff, reps = timer.median(lambda k: system.blocks(states[k], taus[k]), K)
-    t1, _ = timer.median(lambda k: solve(blocks[k], "object_first"), K)
-    t2, _ = timer.median(lambda k: solve(blocks[k], "dense_kkt"), K)
-    t_full, _ = timer.median(
-        lambda k: system.forward_dynamics(states[k], taus[k], "object_first"), K)
+    fns = [
+        lambda k: system.blocks(states[k], taus[k]),
+        lambda k: solve(blocks[k], "object_first"),
+        lambda k: solve(blocks[k], "dense_kkt"),
+        lambda k: system.forward_dynamics(states[k], taus[k], "object_first"),
+    ]
+    if peer is not None:
+        fns.append(peer.step)
+    times, reps = timer.medians(fns, K)
+    t_coeff, t1, t2, t_full = times[:4]
     t_pin, diff_pin = math.nan, math.nan
     if peer is not None:
-        t_pin, _ = timer.median(peer.step, K)
+        t_pin = times[4]
         diff_pin = peer_difference(bench, peer)
     return Row(case, system.n_arms, system.nv, int(blocks[0].n_constraints), t_coeff, t1, t2,
                t_full, t_pin, reps, kkt_difference(bench), diff_pin)
@@ -333,14 +354,15 @@ def profile_stages(bench: Bench, timer: Timer) -> dict[str, float]:
 
     terms = [aset.evaluate(s.q, s.v) for s in states]
     objk = [s.obj.kinematics() for s in states]
-    t_check, _ = timer.median(lambda k: system.check_state(states[k]), K)
-    t_pin, _ = timer.median(pin_calls, K)
-    t_arm, _ = timer.median(lambda k: aset.evaluate(states[k].q, states[k].v), K)
-    t_con, _ = timer.median(lambda k: cset.evaluate(terms[k].tools, objk[k]), K)
-    t_blocks, _ = timer.median(lambda k: system.blocks(states[k], taus[k]), K)
-    t_solve, _ = timer.median(lambda k: solve(blocks[k], "object_first"), K)
-    t_full, _ = timer.median(
-        lambda k: system.forward_dynamics(states[k], taus[k], "object_first"), K)
+    (t_check, t_pin, t_arm, t_con, t_blocks, t_solve, t_full), _ = timer.medians([
+        lambda k: system.check_state(states[k]),
+        pin_calls,
+        lambda k: aset.evaluate(states[k].q, states[k].v),
+        lambda k: cset.evaluate(terms[k].tools, objk[k]),
+        lambda k: system.blocks(states[k], taus[k]),
+        lambda k: solve(blocks[k], "object_first"),
+        lambda k: system.forward_dynamics(states[k], taus[k], "object_first"),
+    ], K)
     return {
         "check_state": t_check,
         "pinocchio": t_pin,
@@ -393,8 +415,6 @@ def environment() -> dict[str, str]:
                 break
     except OSError:
         pass
-    import os
-
     import scipy
 
     import multiarm_pin
@@ -403,9 +423,23 @@ def environment() -> dict[str, str]:
         load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
     except OSError:
         load = "?"
+    import subprocess
+
+    try:
+        commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
+                                capture_output=True, text=True, timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "--",
+                                "multiarm_pin"], capture_output=True, text=True,
+                               timeout=10).stdout.strip()
+        commit = (commit or "?") + (" (with uncommitted changes in multiarm_pin/)"
+                                    if dirty else "")
+    except (OSError, subprocess.SubprocessError):
+        commit = "?"
     return {
+        "git commit": commit,
         "CPU": f"{cpu} ({os.cpu_count()} logical cores)",
         "load average at start (1, 5, 15 min)": load,
+        "BLAS threads (OPENBLAS_NUM_THREADS)": os.environ.get("OPENBLAS_NUM_THREADS", "?"),
         "Python": platform.python_version(),
         "numpy": np.__version__,
         "scipy": scipy.__version__,
@@ -433,9 +467,11 @@ def write_report(path: Path, rows: Sequence[Row], profiles: dict[tuple[str, int]
         f"- {args.states} random consistent states per system (positions on the constraint "
         "manifold, random joint and object velocities projected onto the constraints' null "
         "space, torques = gravity compensation + N(0, 5 N m)); states are cycled.\n"
-        "- Every time is the **median** of single-call timings (`time.perf_counter`), "
-        f"up to {args.repeat} calls per measurement (fewer for slow calls: ~"
-        f"{args.budget:g} s budget, at least 5), after {Timer(1).warmup} warm-up calls that "
+        "- Every time is the **median** of single-call timings (`time.perf_counter`); the "
+        "functions compared in one table row are called **interleaved** (round-robin, one call "
+        "of each per round) so that load changes on the machine hit them alike; "
+        f"up to {args.repeat} rounds per row (fewer for slow calls: ~"
+        f"{args.budget:g} s budget, at least 5), after {args.warmup} warm-up rounds that "
         "are excluded; the garbage collector is off while timing.\n"
         "- `t` = `MultiArmSystem.blocks(state, tau)` (Pinocchio terms of all arms in one "
         "combined model + vectorised constraint layer + block assembly, with input checks); "
@@ -612,9 +648,9 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                    help="numbers of arms for the stage profile (weld); default "
                         f"{','.join(map(str, DEFAULT_PROFILE_ARMS))}")
     p.add_argument("--repeat", type=int, default=None,
-                   help="timed calls per measurement (default 2000, quick 50)")
+                   help="timed rounds per table row (default 2000, quick 50)")
     p.add_argument("--budget", type=float, default=None,
-                   help="seconds per measurement at most (default 2, quick 0.2)")
+                   help="seconds per table row, roughly (default 4, quick 0.3)")
     p.add_argument("--states", type=int, default=None,
                    help="random states per system (default 8, quick 2)")
     p.add_argument("--robot", choices=sorted(ROBOT_TOOL), default="ur5")
@@ -628,7 +664,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     args.peer_arms = args.peer_arms or (QUICK_PEER_ARMS if q else DEFAULT_PEER_ARMS)
     args.profile_arms = args.profile_arms or (QUICK_PROFILE_ARMS if q else DEFAULT_PROFILE_ARMS)
     args.repeat = args.repeat or (50 if q else 2000)
-    args.budget = args.budget or (0.2 if q else 2.0)
+    args.budget = args.budget or (0.3 if q else 4.0)
     args.states = args.states or (2 if q else 8)
     if args.repeat < 1 or args.states < 1 or args.budget <= 0:
         p.error("--repeat, --states and --budget must be positive")
@@ -640,7 +676,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     start = time.perf_counter()
     env = environment()
     args.out.mkdir(parents=True, exist_ok=True)
-    timer = Timer(args.repeat, warmup=5 if args.quick else 20, budget_s=args.budget)
+    args.warmup = 5 if args.quick else 20
+    timer = Timer(args.repeat, warmup=args.warmup, budget_s=args.budget)
     rows: list[Row] = []
     profiles: dict[tuple[str, int], dict] = {}
     for n in args.arms:
