@@ -10,9 +10,10 @@ every ``μ_i`` from the object equation::
 All per-arm work is done on stacked arrays with batched LAPACK calls: one solve with
 ``M`` (right-hand sides ``[W h]`` together), one solve with ``S`` (right-hand sides
 ``[W_oᵀ r I]`` together: the identity gives ``diag(S⁻¹)`` for the conditioning test), then a
-6 x 6 Cholesky solve. No Python loop over arms. (A condition estimate from the Cholesky
-diagonal of ``S`` was tried first: at a UR5 elbow singularity it over-estimated the
-reciprocal condition number by 1e4 and let 4e-8 errors through.)
+6 x 6 Cholesky solve with a LAPACK condition estimate. No Python loop over arms. (A
+condition estimate from the Cholesky diagonal of ``S`` was tried first: at a UR5 elbow
+singularity it over-estimated the reciprocal condition number by 1e4 and let 4e-8 errors
+through.)
 """
 
 from __future__ import annotations
@@ -53,16 +54,25 @@ except (ImportError, AttributeError, TypeError):  # pragma: no cover - other num
 
 _QUIET = {"invalid": "ignore", "divide": "ignore"}
 
-DEFAULT_RCOND_TOL = 1e-5
+DEFAULT_RCOND_TOL = 1e-7
 """An arm whose ``S_i`` has an estimated reciprocal condition number below this is singular.
 
 Chosen so that "auto" keeps 1e-9 relative accuracy. Measured with a UR5 welded to an object
 approaching its elbow singularity: the object-first error relative to the dense KKT was about
-``2.4e-15 / rcond`` for the (equilibrated) estimate ``rcond`` of :class:`ArmReduction`
-(3e-11 at 3.7e-4, 6e-10 at 3.8e-6, 2e-8 at 3.8e-8), while the singular-arm variant stays at
-round-off. Over 300 random UR5 poses with a weld the estimate had median 7e-2 and 1st
-percentile 1.4e-5, so the switch is rare away from singularities.
+``2e-18 / rcond`` (true reciprocal condition number of ``S``; 7e-10 at 3e-9, 4e-8 at 3e-11),
+while the singular-arm variant stays at round-off. The estimate of :class:`ArmReduction` is
+at most ``N²`` times the true value, so an accepted arm has a true rcond above ``3e-9``.
+Over 300 random UR5 poses with a weld the median estimate was 2.5e-3.
+
+(A scale-invariant estimate from the equilibrated ``S`` was tried and dropped: it accepts an
+arm whose constraint column ``W_j`` is tiny but not zero, where object-first lost 6 digits.)
 """
+
+OBJECT_RCOND_TOL = 1e-7
+"""Smallest accepted reciprocal condition number (LAPACK ``dpocon`` estimate) of the reduced
+object matrix ``M_o + Σ W_o,i S_i⁻¹ W_o,iᵀ``. Arms far heavier than the object along their
+constraints make it badly conditioned: measured object-first error ``~5e-17 / rcond``
+(4e-8 at 1.3e-9) while the singular variant (all arms) stays at round-off."""
 
 
 @dataclass(slots=True)
@@ -72,15 +82,14 @@ class ArmReduction:
     Attributes:
         X: (n, nv_max, N_max + 1) ``M_i⁻¹ [W_i  h_i]``.
         S: (n, N_max, N_max) ``W_iᵀ M_i⁻¹ W_i``, with a positive value on the padded diagonal
-            (the arm's largest diagonal entry, or 1) so that padded multipliers solve to 0.
+            (the arm's largest diagonal entry, or 1) so that padded multipliers solve to 0 and
+            the condition estimate is not changed by padding.
         r: (n, N_max) ``c_i - W_iᵀ M_i⁻¹ h_i`` (zero on padding).
         Z: (n, N_max, 7) ``S_i⁻¹ [W_o,iᵀ  r_i]`` (meaningless for singular arms).
-        rcond: (n,) scale-invariant estimate of the reciprocal condition number of each
-            ``S_i``: ``1 / max_j S_jj |(S⁻¹)_jj|``. With ``D = diag(S)^-1/2`` the products
-            ``S_jj (S⁻¹)_jj`` are the diagonal of ``(D S D)⁻¹``, so the estimate lies between
-            ``rcond(D S D)`` and ``N_i² rcond(D S D)``. The equilibrated ``D S D`` is what
-            limits the accuracy of the solve (it is invariant to the units of the constraint
-            rows, e.g. forces vs moments of a weld). 0 where the solve failed.
+        rcond: (n,) estimate of the reciprocal condition number of each ``S_i``:
+            ``1 / (max_j S_jj · max_j |(S⁻¹)_jj|)``. As ``λ_max / N <= max_j S_jj <= λ_max``
+            and likewise for ``S⁻¹``, it is never smaller than the true ``λ_min / λ_max`` and
+            at most ``N_max²`` times larger; 0 where the solve failed.
     """
 
     X: np.ndarray
@@ -105,7 +114,7 @@ def reduce_arms(blocks: SystemBlocks) -> ArmReduction:
     """
     with np.errstate(**_QUIET):
         X, S, r, Z, cond = _reduce(blocks)
-        rcond = _check_reduction(blocks, X, 1.0 / np.abs(cond).max(axis=1))
+        rcond = _check_reduction(blocks, X, 1.0 / cond)
     return ArmReduction(X, S, r, Z[:, :, :7], rcond)
 
 
@@ -129,9 +138,10 @@ def _constants(n: int, m: int) -> tuple[np.ndarray, np.ndarray]:
 def _reduce(b: SystemBlocks) -> tuple[np.ndarray, ...]:
     """Hot path of :func:`reduce_arms` (call inside ``np.errstate(invalid="ignore")``).
 
-    Returns ``X, S, r, Z, cond``: ``Z = S⁻¹ [W_oᵀ r I]`` (n, m, 7 + m) and ``cond`` (n, m)
-    the products ``S_jj (S⁻¹)_jj`` (NaN where the solve failed). Diagonals are read as strided
-    views of the flattened stacks (cheaper than np.diagonal).
+    Returns ``X, S, r, Z, cond``: ``Z = S⁻¹ [W_oᵀ r I]`` (n, m, 7 + m) and ``cond`` (n,) the
+    estimate ``max_j S_jj · max_j |(S⁻¹)_jj|`` of the condition number of each ``S_i`` (NaN
+    where the solve failed). Diagonals are read as strided views of the flattened stacks
+    (cheaper than np.diagonal).
     """
     n, m = b.M.shape[0], b.N_max
     X = _batched_solve(b.M, np.concatenate((b.W, b.h[:, :, None]), axis=2))
@@ -139,12 +149,14 @@ def _reduce(b: SystemBlocks) -> tuple[np.ndarray, ...]:
     S = WtX[:, :, :m]
     r = b.c - WtX[:, :, m]
     diag = WtX.reshape(n, -1)[:, :: m + 2]  # S_jj, a view into S
-    if b.has_constraint_padding:
-        diag += b.padding_diagonal  # 1 on padded constraints, whose rows of S are zero
+    smax = diag.max(axis=1)
+    if b.has_constraint_padding:  # padded rows of S are zero: put the arm's max S_jj there
+        smax = np.where(smax > 0.0, smax, 1.0)
+        diag += b.padding_diagonal * smax[:, None]
     Z = _batched_solve(
         S, np.concatenate((b.W_o.transpose(0, 2, 1), r[:, :, None], _constants(n, m)[0]), axis=2)
     )
-    return X, S, r, Z, diag * Z.reshape(n, -1)[:, 7 :: m + 8]  # S_jj (S⁻¹)_jj
+    return X, S, r, Z, smax * np.abs(Z.reshape(n, -1)[:, 7 :: m + 8]).max(axis=1)
 
 
 def _check_reduction(b: SystemBlocks, X: np.ndarray, rcond: np.ndarray) -> np.ndarray:
@@ -173,24 +185,25 @@ def solve_object_first(
             are singular.
         fallback: if True, singular arms are handed to the singular-arm variant
             (:func:`multiarm_pin.dynamics.singular.finish_singular`), and the solution says
-            so in ``solver``/``singular_arms``; if False they raise.
+            so in ``solver``/``singular_arms``; all arms are handed over when the reduced
+            object matrix is badly conditioned (``OBJECT_RCOND_TOL``). If False both raise.
 
     Returns:
         The solution: ``a_o`` (6,) [m/s², rad/s²] LWA at the COM, ``qdd`` (n, nv_max),
         ``mu`` (n, N_max).
 
     Raises:
-        SingularityError: some ``S_i`` is singular or badly conditioned and ``fallback`` is
-            False.
-        DynamicsError: singular ``M_i`` or singular object matrix.
+        SingularityError: some ``S_i``, or the reduced object matrix, is singular or badly
+            conditioned and ``fallback`` is False.
+        DynamicsError: singular ``M_i``.
         InputError: NaN or infinity in the blocks, ``M_o`` not positive definite.
     """
     _check_tol(rcond_tol)
     b = blocks
     with np.errstate(**_QUIET):
         X, S, r, Z, cond = _reduce(b)
-        if not float(np.abs(cond).max()) * rcond_tol <= 1.0:  # also catches NaN
-            rcond = _check_reduction(b, X, 1.0 / np.abs(cond).max(axis=1))
+        if not float(cond.max()) * rcond_tol <= 1.0:  # also catches NaN
+            rcond = _check_reduction(b, X, 1.0 / cond)
             singular = rcond < rcond_tol
             if fallback:
                 from multiarm_pin.dynamics.singular import finish_singular
@@ -206,7 +219,23 @@ def solve_object_first(
             )
     Z7 = Z[:, :, :7]
     AB = b.W_o.transpose(1, 0, 2).reshape(6, -1) @ Z7.reshape(-1, 7)
-    a_o = solve_object_system(b, b.M_o + AB[:, :6], b.h_o + AB[:, 6])
+    A = b.M_o + AB[:, :6]
+    chol, a_o, info = lapack.dposv(A, b.h_o + AB[:, 6])
+    rcond_A = lapack.dpocon(chol, A.trace())[0] if info == 0 else 0.0
+    if not (rcond_A >= OBJECT_RCOND_TOL and math.isfinite(a_o.sum())):
+        b.check_finite()
+        if fallback:  # e.g. arms far heavier than the object along their constraints
+            from multiarm_pin.dynamics.singular import finish_singular
+
+            rcond = _check_reduction(b, X, 1.0 / cond)
+            return finish_singular(
+                b, ArmReduction(X, S, r, Z7, rcond), np.ones(b.n, dtype=bool)
+            )
+        raise SingularityError(
+            "reduced object matrix M_o + Σ W_o,i S_i⁻¹ W_o,iᵀ",
+            np.inf if rcond_A <= 0 else 1.0 / rcond_A,
+            "object-first would lose accuracy; use solver='auto' or solver='singular'",
+        )
     mu = Z[:, :, 6] - Z[:, :, :6] @ a_o  # S⁻¹ (r - W_oᵀ a_o)
     ones = _constants(b.n, b.N_max)[1]
     qdd = np.matmul(X, np.concatenate((mu, ones), axis=1)[:, :, None])[:, :, 0]
@@ -214,12 +243,10 @@ def solve_object_first(
 
 
 def solve_object_system(b: SystemBlocks, A: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """Solve the reduced 6 x 6 object system ``A a_o = rhs`` (A symmetric positive definite).
-
-    Also checks that the result is finite (``M_o`` itself is checked by ``SystemBlocks``).
+    """Solve a reduced 6 x 6 object system ``A a_o = rhs`` (A symmetric positive definite).
 
     Args:
-        b: the blocks (for ``M_o`` and error diagnosis).
+        b: the blocks (for error diagnosis).
         A: (6, 6) reduced object matrix.
         rhs: (6,) or (6, p) right-hand side(s).
 

@@ -186,15 +186,50 @@ def test_badly_conditioned_arm_is_detected():
     assert rel_diff(sol.a_o, ref.a_o) < 1e-9 and rel_diff(sol.qdd, ref.qdd) < 1e-9
     with pytest.raises(SingularityError):
         solve(ill, "object_first")
-    # forcing object-first through it loses the answer: that is why the switch exists
-    forced = solve(ill, "object_first", rcond_tol=0.0)
-    assert rel_diff(forced.a_o, ref.a_o) > 1e-6
+    # forcing past the arm test, object-first still refuses: the reduced object matrix is
+    # then badly conditioned too
+    with pytest.raises(SingularityError, match="reduced object matrix"):
+        solve(ill, "object_first", rcond_tol=0.0)
+
+
+@pytest.mark.parametrize("scale", [1e-6, 1e-9, 1e-12])
+def test_tiny_constraint_column_is_detected(scale):
+    """W_1[:, 0] tiny but not zero: the arm barely moves along constraint 0."""
+    rng = np.random.default_rng(3)
+    b, _, _ = random_system(rng, [6, 6, 7], [5, 4, 6])
+    W = b.W.copy()
+    W[1, :, 0] *= scale
+    tiny = SystemBlocks(b.M, b.h, W, b.W_o, b.c, b.M_o, b.h_o, b.nv, b.N)
+    ref = solve(tiny, "dense_kkt")
+    sol = solve(tiny, "auto")
+    assert sol.solver == "singular" and 1 in sol.singular_arms
+    assert rel_diff(sol.qdd, ref.qdd) < 1e-9 and rel_diff(sol.a_o, ref.a_o) < 1e-9
+    with pytest.raises(SingularityError):
+        solve(tiny, "object_first")
+
+
+@pytest.mark.parametrize("heavy", [1e9, 1e12])
+def test_arm_far_heavier_than_object_falls_back(heavy):
+    """S_i well conditioned but tiny: M_o + W_o S⁻¹ W_oᵀ is badly conditioned (5 of 6
+    directions stiff), object-first would lose digits; auto hands every arm over."""
+    rng = np.random.default_rng(3)
+    b, _, _ = random_system(rng, [6], [5])
+    big = SystemBlocks(b.M * heavy, b.h * heavy, b.W, b.W_o, b.c, b.M_o, b.h_o, b.nv, b.N)
+    assert dyn.reduce_arms(big).rcond[0] > 1e-2
+    ref = solve(big, "dense_kkt")
+    sol = solve(big, "auto")
+    assert sol.solver == "singular" and sol.singular_arms == (0,)
+    assert rel_diff(sol.a_o, ref.a_o) < 1e-9 and rel_diff(sol.qdd, ref.qdd) < 1e-9
+    with pytest.raises(SingularityError, match="reduced object matrix"):
+        solve(big, "object_first")
+    moderate = SystemBlocks(b.M * 1e3, b.h, b.W, b.W_o, b.c, b.M_o, b.h_o, b.nv, b.N)
+    assert solve(moderate, "auto").solver == "object_first"
 
 
 def test_moderately_conditioned_arm_stays_object_first():
     ill = ill_conditioned(1e-2)
     red = dyn.reduce_arms(ill)
-    assert 1e-5 < red.rcond[1] < 1e-2
+    assert 1e-7 < red.rcond[1] < 1e-2
     sol = solve(ill, "auto")
     assert sol.solver == "object_first"
     assert rel_diff(sol.a_o, solve(ill, "dense_kkt").a_o) < 1e-9
