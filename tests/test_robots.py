@@ -19,6 +19,9 @@ import yourdfpy
 
 ROBOTS = Path(__file__).resolve().parents[1] / "robots"
 MP6 = ROBOTS / "mp6" / "mp6.urdf"
+MP6_4F = ROBOTS / "mp6" / "mp6_4f.urdf"
+VARIANTS = {"mp6": MP6, "mp6_4f": MP6_4F}
+LINKS_WITH_MASS = {"mp6": 11, "mp6_4f": 12}  # 8 arm/gripper links + one per fingertip
 DENSITY = 2700.0
 G = 9.81
 
@@ -40,6 +43,19 @@ FRAMES_AT_ZERO = {
 }
 
 
+# Stated in robots/README.md for mp6_4f: frame origins in the base frame at q = 0 [m].
+FRAMES_AT_ZERO_4F = {
+    "gripper_link": (0.865, 0.0, 0.26),
+    "tool0": (0.9803109, 0.0, 0.26),
+    "fingertip_1": (0.9673205, 0.0618718, 0.2110102),
+    "fingertip_2": (0.9673205, -0.030052, 0.2110102),
+    "fingertip_3": (0.95, 0.0371231, 0.2783712),
+    "fingertip_4": (1.0366025, -0.0689429, 0.3396084),
+}
+# mp6_4f's corner layout (thesis Sec 2.2.3.1, robots/README.md) [m]
+A, E, D, TIP_RADIUS = 0.05, 0.02, 0.15, 0.015
+
+
 @pytest.fixture(scope="module")
 def model() -> pin.Model:
     return pin.buildModelFromUrdf(str(MP6))
@@ -50,7 +66,23 @@ def urdf() -> yourdfpy.URDF:
     return yourdfpy.URDF.load(str(MP6), build_scene_graph=True, load_meshes=False)
 
 
-def test_committed_urdf_matches_generator():
+@pytest.fixture(scope="module")
+def model_4f() -> pin.Model:
+    return pin.buildModelFromUrdf(str(MP6_4F))
+
+
+@pytest.fixture(scope="module")
+def urdf_4f() -> yourdfpy.URDF:
+    return yourdfpy.URDF.load(str(MP6_4F), build_scene_graph=True, load_meshes=False)
+
+
+def _urdf_of(variant: str) -> yourdfpy.URDF:
+    return yourdfpy.URDF.load(str(VARIANTS[variant]), build_scene_graph=True,
+                              load_meshes=False)
+
+
+@pytest.mark.parametrize("variant", list(VARIANTS))
+def test_committed_urdf_matches_generator(variant):
     path = ROBOTS / "mp6" / "generate_mp6.py"
     spec = importlib.util.spec_from_file_location("generate_mp6", path)
     gen = importlib.util.module_from_spec(spec)
@@ -59,7 +91,9 @@ def test_committed_urdf_matches_generator():
         spec.loader.exec_module(gen)
     finally:
         del sys.modules["generate_mp6"]
-    assert MP6.read_text() == gen.urdf_text(), "run robots/mp6/generate_mp6.py and commit"
+    assert set(gen.VARIANTS) == set(VARIANTS)
+    assert VARIANTS[variant].read_text() == gen.urdf_text(variant), (
+        "run robots/mp6/generate_mp6.py and commit")
 
 
 def test_loads_in_pinocchio_with_six_revolute_joints(model):
@@ -101,9 +135,11 @@ def _links_with_mass(urdf):
     return [link for link in urdf.robot.links if link.inertial is not None]
 
 
-def test_inertias_positive_definite_and_triangle_inequality(urdf):
+@pytest.mark.parametrize("variant", list(VARIANTS))
+def test_inertias_positive_definite_and_triangle_inequality(variant):
+    urdf = _urdf_of(variant)
     links = _links_with_mass(urdf)
-    assert len(links) == 11
+    assert len(links) == LINKS_WITH_MASS[variant]
     for link in links:
         inertia = link.inertial.inertia
         np.testing.assert_allclose(inertia, inertia.T, atol=1e-15)
@@ -113,12 +149,14 @@ def test_inertias_positive_definite_and_triangle_inequality(urdf):
         assert a + b >= c and a + c >= b and b + c >= a, link.name
 
 
-def test_mass_properties_agree_with_triangulated_collision_geometry(urdf):
+@pytest.mark.parametrize("variant", list(VARIANTS))
+def test_mass_properties_agree_with_triangulated_collision_geometry(variant):
     """Every link's mass, COM and inertia equal trimesh integrals over its collision shapes.
 
     Overlapping primitives are each counted in full, as in the generator: concatenating
     closed meshes sums their volume integrals. Triangulation costs at most ~0.3 % here.
     """
+    urdf = _urdf_of(variant)
     for link in _links_with_mass(urdf):
         meshes = []
         for col in link.collisions:
@@ -207,3 +245,139 @@ def test_gravity_torque_stretched_out_matches_statics(model, urdf):
     assert np.all(np.abs(tau_g) < model.effortLimit)
     # Joints whose axis is vertical or along the arm feel no gravity torque here.
     np.testing.assert_allclose(tau_g[[0, 3, 5]], 0.0, atol=1e-9)
+
+
+# ------------------------------------------------------------------ mp6_4f (four fingers)
+def test_4f_is_the_same_arm_with_four_fingertips(model, model_4f, urdf_4f):
+    assert model_4f.nq == 6 and model_4f.nv == 6
+    assert list(model_4f.names)[1:] == JOINT_NAMES
+    assert urdf_4f.actuated_joint_names == JOINT_NAMES and urdf_4f.robot.name == "mp6_4f"
+    for attr in ("lowerPositionLimit", "upperPositionLimit", "effortLimit", "velocityLimit"):
+        np.testing.assert_array_equal(getattr(model_4f, attr), getattr(model, attr))
+    # same kinematics and arm links; Pinocchio merges the fixed gripper into joint 6's body,
+    # so only that body's inertia differs
+    for j in range(1, 7):
+        assert model_4f.jointPlacements[j].isApprox(model.jointPlacements[j])
+        same = np.allclose(model_4f.inertias[j].toDynamicParameters(),
+                           model.inertias[j].toDynamicParameters(), atol=1e-12)
+        assert same == (j < 6), j
+    assert 20.0 < pin.computeTotalMass(model_4f) < 30.0
+    for k in (1, 2, 3, 4):
+        link = urdf_4f.link_map[f"fingertip_{k}"]
+        (col,) = link.collisions
+        assert col.geometry.sphere.radius == pytest.approx(TIP_RADIUS)
+        np.testing.assert_allclose(col.origin, np.eye(4), atol=1e-12)
+    assert not model_4f.existFrame("fingertip_5")
+
+
+def test_4f_frames_at_zero_configuration(model_4f, urdf_4f):
+    data = model_4f.createData()
+    pin.framesForwardKinematics(model_4f, data, np.zeros(6))
+    for name, expected in FRAMES_AT_ZERO_4F.items():
+        oMf = data.oMf[model_4f.getFrameId(name)]
+        np.testing.assert_allclose(oMf.translation, expected, atol=1e-6, err_msg=name)
+        T = urdf_4f.get_transform(name, "base_link")
+        np.testing.assert_allclose(T[:3, 3], expected, atol=1e-6, err_msg=name)
+    tool = data.oMf[model_4f.getFrameId("tool0")]
+    np.testing.assert_allclose(tool.rotation[:, 2], [1, 0, 0], atol=1e-9)  # approach
+    tips = np.array([data.oMf[model_4f.getFrameId(f"fingertip_{k}")].translation
+                     for k in (1, 2, 3, 4)])
+    np.testing.assert_allclose(tips.mean(axis=0), tool.translation, atol=1e-12)
+
+
+def _design_tip_centres() -> np.ndarray:
+    """(4, 3) tip centres in the box-corner frame (box in the negative octant), Example 2.1.
+
+    Contacts p1 (+x), p2 (+y), p3 (+z) around the corner and the seventh p7 (+z) D further
+    along -x; each sphere centre is one radius out along the face's outward normal.
+    """
+    points = np.array([[0, -A, -A], [-A, 0, -A], [-E, -A, 0], [-E - D, -A, 0]], float)
+    return points + TIP_RADIUS * np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, 1]])
+
+
+def _fit_rigid(src: np.ndarray, dst: np.ndarray):
+    """Kabsch: rotation R and translation p minimising |R src_k + p - dst_k|."""
+    cs, cd = src.mean(axis=0), dst.mean(axis=0)
+    U, _, Vt = np.linalg.svd((src - cs).T @ (dst - cd))
+    S = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    R = Vt.T @ S @ U.T
+    return R, cd - R @ cs
+
+
+def _design_pose_of_tool(model_4f):
+    """Tool0 placement in the corner frame that puts the tips on the design points."""
+    data = model_4f.createData()
+    q = np.random.default_rng(3).uniform(-1, 1, 6)  # any q: the tips are rigid in tool0
+    pin.framesForwardKinematics(model_4f, data, q)
+    tool = data.oMf[model_4f.getFrameId("tool0")]
+    tips_tool = np.array([tool.actInv(data.oMf[model_4f.getFrameId(f"fingertip_{k}")]
+                                      .translation) for k in (1, 2, 3, 4)])
+    R, p = _fit_rigid(tips_tool, _design_tip_centres())
+    return R, p, tips_tool
+
+
+def test_4f_tips_are_congruent_to_the_thesis_corner_layout(model_4f):
+    """A rigid motion maps the four tip centres onto Example 2.1's layout exactly."""
+    R, p, tips_tool = _design_pose_of_tool(model_4f)
+    np.testing.assert_allclose(tips_tool @ R.T + p, _design_tip_centres(), atol=1e-9)
+    assert np.linalg.det(R) == pytest.approx(1.0)  # not a mirror image
+    # the gripper approaches along the corner's diagonal, into the box
+    np.testing.assert_allclose(R[:, 2], -np.ones(3) / np.sqrt(3), atol=1e-9)
+    # D exceeds the thesis minimum D_x = 2 (A - E) with A > E
+    assert A > E and D > 2 * (A - E)
+
+
+def test_4f_gripper_does_not_penetrate_the_box_at_the_design_pose(model_4f, urdf_4f):
+    """Palm, fingers and tips stay outside the corner's octant (a box of any larger size).
+
+    For each collision primitive (triangulated), a linear programme looks for a convex
+    combination of its vertices inside ``{x, y, z <= -depth}``; only the fingertip spheres
+    may reach the faces (they touch them), none may go deeper than the mesh error.
+    """
+    from scipy.optimize import linprog
+
+    R_ct, p_ct, _ = _design_pose_of_tool(model_4f)
+    tool_in_corner = np.eye(4)
+    tool_in_corner[:3, :3], tool_in_corner[:3, 3] = R_ct, p_ct
+    tool_in_base = urdf_4f.get_transform("tool0", "base_link")
+    base_in_corner = tool_in_corner @ np.linalg.inv(tool_in_base)
+
+    def penetrates(vertices: np.ndarray, depth: float) -> bool:
+        n = len(vertices)
+        res = linprog(np.zeros(n), A_ub=vertices.T, b_ub=np.full(3, -depth),
+                      A_eq=np.ones((1, n)), b_eq=[1.0], bounds=(0, None), method="highs")
+        return res.status == 0
+
+    checked = 0
+    for name in ["gripper_link", "fingertip_1", "fingertip_2", "fingertip_3", "fingertip_4"]:
+        link_in_corner = base_in_corner @ urdf_4f.get_transform(name, "base_link")
+        for col in urdf_4f.link_map[name].collisions:
+            mesh = _primitive_mesh(col.geometry)
+            mesh.apply_transform(link_in_corner @ col.origin)
+            depth = 1e-4 if name.startswith("fingertip") else 1e-9
+            assert not penetrates(mesh.vertices, depth), name
+            checked += 1
+    assert checked == 1 + 4 + 4  # palm, 4 fingers, 4 spheres
+    # and the spheres do reach their faces: the lowest point along each face normal
+    centres = _design_tip_centres()
+    normals = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, 1]])
+    np.testing.assert_allclose(np.einsum("ij,ij->i", centres, normals) - TIP_RADIUS, 0,
+                               atol=1e-12)
+
+
+def test_4f_gravity_torque_stretched_out_matches_statics(model_4f, urdf_4f):
+    """Shoulder and elbow gravity torques at q = 0 from the URDF masses (yourdfpy poses)."""
+    data = model_4f.createData()
+    tau_g = pin.computeGeneralizedGravity(model_4f, data, np.zeros(6))
+    y = np.array([0.0, 1.0, 0.0])
+    links = _links_with_mass(urdf_4f)
+    for joint, index, first in (("shoulder_lift_joint", 1, 2), ("elbow_joint", 2, 3)):
+        origin = urdf_4f.get_transform(urdf_4f.joint_map[joint].child, "base_link")[:3, 3]
+        moment = sum(
+            np.cross((urdf_4f.get_transform(lk.name, "base_link") @ lk.inertial.origin)[:3, 3]
+                     - origin, [0.0, 0.0, -lk.inertial.mass * G]) @ y
+            for lk in links[first:]
+        )
+        assert tau_g[index] == pytest.approx(-moment, rel=1e-6), joint
+    assert tau_g[0] == pytest.approx(0.0, abs=1e-9)  # vertical axis
+    assert np.all(np.abs(tau_g) < model_4f.effortLimit)
