@@ -344,8 +344,9 @@ class Solution:
         mu: (n, N_max) contact multipliers (positive = pushing), zero on padding.
         solver: name of the solver actually used (``"object_first"``, ``"dense_kkt"`` or
             ``"singular"``).
-        singular_arms: indices of arms whose ``S_i = W_iᵀ M_i⁻¹ W_i`` was singular or badly
-            conditioned (empty when none was found or the solver does not look).
+        singular_arms: indices of the arms handled by the singular-arm variant: those whose
+            ``S_i = W_iᵀ M_i⁻¹ W_i`` was singular or badly conditioned, or all arms when the
+            reduced object matrix was (empty when none, or for ``"dense_kkt"``).
         blocks: the blocks that were solved (not copied).
     """
 

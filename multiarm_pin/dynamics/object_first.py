@@ -62,7 +62,8 @@ approaching its elbow singularity: the object-first error relative to the dense 
 ``2e-18 / rcond`` (true reciprocal condition number of ``S``; 7e-10 at 3e-9, 4e-8 at 3e-11),
 while the singular-arm variant stays at round-off. The estimate of :class:`ArmReduction` is
 at most ``N²`` times the true value, so an accepted arm has a true rcond above ``3e-9``.
-Over 300 random UR5 poses with a weld the median estimate was 2.5e-3.
+Over 300 random UR5 poses with a weld the median estimate was 7e-4; "auto" switched at 9 of
+them, and all 300 agreed with the dense KKT to 1e-9.
 
 (A scale-invariant estimate from the equilibrated ``S`` was tried and dropped: it accepts an
 arm whose constraint column ``W_j`` is tiny but not zero, where object-first lost 6 digits.)
