@@ -113,6 +113,13 @@ def test_short_run_holds_the_grasp(tmp_path):
     # it follows the first waypoint's minimum-jerk lift (upwards, no jump)
     z = tr["object_position"][:, 2]
     assert np.all(np.diff(z) > -1e-9) and 0 < z[-1] - z[0] < 0.05
+    # the grasp is still form closure where the (frictionless) tips are at the end: they
+    # may slide along their faces, which the closure margin bounds
+    R = built.scenario.object.placement.rotation  # yaw is still ~0 in the first 0.25 s
+    p_end = (tr["contact_points"][-1] - tr["object_position"][-1]) @ R
+    n_end = tr["contact_forces"][-1] @ R
+    n_end /= np.linalg.norm(n_end, axis=1, keepdims=True)
+    assert form_closure(wrench_matrix(p_end, n_end)).margin > 0.03
     # torques within the arms' effort limits
     for arm in built.arms:
         assert np.all(np.abs(tr[f"tau_{arm.name}"]) <= arm.model.effortLimit)
