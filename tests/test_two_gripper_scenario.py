@@ -17,6 +17,7 @@ import pytest
 from multiarm_pin.grasp import form_closure, two_corner_box_grasp, wrench_matrix
 from multiarm_pin.runner import run_scenario
 from multiarm_pin.scenario import build_scenario, load_scenario
+from multiarm_pin.spatial import quaternion_to_rotation
 
 PATH = Path(__file__).resolve().parents[1] / "scenarios" / "two_gripper_form_closure.yaml"
 TIP_RADIUS = 0.015
@@ -115,7 +116,7 @@ def test_short_run_holds_the_grasp(tmp_path):
     assert np.all(np.diff(z) > -1e-9) and 0 < z[-1] - z[0] < 0.05
     # the grasp is still form closure where the (frictionless) tips are at the end: they
     # may slide along their faces, which the closure margin bounds
-    R = built.scenario.object.placement.rotation  # yaw is still ~0 in the first 0.25 s
+    R = quaternion_to_rotation(tr["object_quaternion"][-1])
     p_end = (tr["contact_points"][-1] - tr["object_position"][-1]) @ R
     n_end = tr["contact_forces"][-1] @ R
     n_end /= np.linalg.norm(n_end, axis=1, keepdims=True)
