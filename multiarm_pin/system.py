@@ -23,12 +23,14 @@ twist ``[ẋ; ω]`` in world axes).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
+from multiarm_pin import kernels
 from multiarm_pin.arm import Arm
 from multiarm_pin.arm_set import ArmSet, ArmSetTerms
 from multiarm_pin.constraints import (
@@ -204,6 +206,37 @@ class MultiArmSystem:
         kinds = np.array([j.kind in UNILATERAL_JOINT_KINDS for j in self.joints])
         self.unilateral = self.constraint_set.mask & kinds[:, None]
         self.unilateral.setflags(write=False)
+        self._init_kernel_tables()
+
+    def _init_kernel_tables(self) -> None:
+        """Constant inputs of the compiled hot path (:mod:`multiarm_pin.kernels`)."""
+        aset, cs = self.arm_set, self.constraint_set
+        n, k, m = self.n_arms, aset.nv_max, self.N_max
+        self._k_idx = np.ascontiguousarray(aset._idx, dtype=np.int64)
+        self._k_nv = np.ascontiguousarray(aset.nv_arm, dtype=np.int64)
+        self._k_support = np.ascontiguousarray(aset._support, dtype=np.int64)
+        self._k_ints, self._k_floats = kernels.contact_tables(cs)
+        self._k_obj_params = np.concatenate(
+            ([self.obj.mass], self.obj.inertia.ravel(), self.gravity)).astype(float)
+        self._k_off, self._k_size = kernels.buffer_layout(n, k, m)
+        shapes = kernels.segment_shapes(n, k, m)
+        self._k_segments = [(int(self._k_off[j]), int(self._k_off[j + 1]), shapes[name])
+                            for j, name in enumerate(kernels.SEGMENTS)]
+        self._k_k, self._k_m = k, m
+        self._k_zero_tau = np.zeros(self.nv)
+        self._k_zero_tau.setflags(write=False)
+        self._k_no_baumgarte = np.zeros(3)
+        # the derived (constant) fields of SystemBlocks, computed once by a validated build
+        probe = SystemBlocks(np.broadcast_to(np.eye(k), (n, k, k)).copy(), np.zeros((n, k)),
+                             np.zeros((n, k, m)), np.zeros((n, 6, m)), np.zeros((n, m)),
+                             np.eye(6), np.zeros(6), self._nv_arm, self._N)
+        derived = {}
+        for name in ("nv", "N", "dof_mask", "constraint_mask", "padding_diagonal"):
+            arr = getattr(probe, name)
+            arr.setflags(write=False)
+            derived[name] = arr
+        derived["has_constraint_padding"] = probe.has_constraint_padding
+        self._k_blocks_constant = derived
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -360,17 +393,81 @@ class MultiArmSystem:
         return self.arm_set.unpad_v(x)
 
     def blocks(self, state: SystemState, tau: np.ndarray | None = None,
-               baumgarte: tuple[float, float] | None = None) -> Evaluation:
+               baumgarte: tuple[float, float] | None = None, *,
+               reference: bool = False) -> Evaluation:
         """The coefficient blocks of the equations of motion at a state.
+
+        Computed by the compiled kernels of :mod:`multiarm_pin.kernels` after the three
+        Pinocchio calls of :meth:`ArmSet.pinocchio_pass`: every returned array is new (views
+        of one buffer allocated per call), so an :class:`Evaluation` stays valid after later
+        calls.
 
         Args:
             state: the system state (validated: NaN raises :class:`DynamicsError`).
             tau: (nv,) joint torques [N m or N], zero when None.
             baumgarte: ``(α, β)`` [1/s]: ``c_i ← c_i - 2α φ̇_i - β² φ_i`` (thesis Sec 4.3).
+            reference: if True, compute with the numpy reference implementation
+                (:meth:`ArmSet.evaluate`, :meth:`ConstraintSet.evaluate`, ``einsum``
+                assembly) instead; same results to round-off (for tests and benchmarks).
 
         Returns:
             :class:`Evaluation` (blocks, arm terms, constraint terms).
         """
+        if reference:
+            return self._blocks_reference(state, tau, baumgarte)
+        try:  # cheap checks: shapes, then one finite sum over the concatenated state
+            o = state.obj
+            q, v = state.q, state.v
+            x = np.concatenate((o.position, o.quaternion, o.twist, q, v))
+            ok = (q.shape == (self.nq,) and v.shape == (self.nv,) and x.shape[0] == 13
+                  + self.nq + self.nv and o.position.shape == (3,) and o.twist.shape == (6,)
+                  and math.isfinite(x.sum()) and x.dtype == np.float64)
+        except (AttributeError, TypeError, ValueError):
+            ok = False
+        if not ok:
+            self.check_state(state)  # raises with the field named (or accepts: then go on)
+            o = state.obj
+            q = np.ascontiguousarray(state.q, dtype=float)
+            v = np.ascontiguousarray(state.v, dtype=float)
+            x = np.concatenate((np.asarray(o.position, float), np.asarray(o.quaternion, float),
+                                np.asarray(o.twist, float), q, v))
+        if tau is None:
+            t = self._k_zero_tau
+        else:
+            t = np.asarray(tau, dtype=float)
+            if t.shape != (self.nv,):
+                raise InputError(f"tau: expected shape ({self.nv},), got {t.shape}")
+            if not math.isfinite(t.sum()) and not np.all(np.isfinite(t)):
+                raise DynamicsError(f"tau contains NaN or infinity: {t.tolist()}")
+        if baumgarte is None:
+            bg = self._k_no_baumgarte
+        else:
+            a, b = _baumgarte(baumgarte)
+            bg = np.array([a, b, 1.0])
+        aset = self.arm_set
+        H = aset.pinocchio_pass(q, v)
+        data = aset.data
+        buf = np.empty(self._k_size)
+        kernels.evaluate_system(data.J, data.dJ, data.M, data.nle, v, H, t, self._k_idx,
+                                self._k_nv, self._k_support, self._k_ints, self._k_floats,
+                                x[:13], self._k_obj_params, bg, self._k_off, self._k_k,
+                                self._k_m, buf)
+        (M, nle, J, Jdq, p, R, tw, vp, rows, h, W, W_o, c, M_o, h_o) = [
+            buf[a:b].reshape(shape) for a, b, shape in self._k_segments]
+        cs = self.constraint_set
+        ct = _trusted(ConstraintTerms, phi=rows[:, :, 0], phi_dot=rows[:, :, 1],
+                      kappa=rows[:, :, 2], G_tool=rows[:, :, 3:9], G_object=rows[:, :, 9:15],
+                      N=cs.N, mask=cs.mask, contact_points=rows[:, :, 15:18],
+                      normals=rows[:, :, 18:21])
+        arms = _trusted(ArmSetTerms, M=M, nle=nle, J=J, Jdot_qdot=Jdq,
+                        tools=_trusted(BodyKinematics, position=p, rotation=R, twist=tw), v=vp)
+        blocks = _trusted(SystemBlocks, M=M, h=h, W=W, W_o=W_o, c=c, M_o=M_o, h_o=h_o,
+                          **self._k_blocks_constant)
+        return _trusted(Evaluation, blocks=blocks, arms=arms, constraints=ct)
+
+    def _blocks_reference(self, state: SystemState, tau: np.ndarray | None = None,
+                          baumgarte: tuple[float, float] | None = None) -> Evaluation:
+        """:meth:`blocks` by the numpy reference implementation (the compiled path's oracle)."""
         self.check_state(state)
         arms = self.arm_set.evaluate(state.q, state.v)
         o = state.obj
@@ -452,6 +549,18 @@ class MultiArmSystem:
         ang = (hg.angular + cross(com, hg.linear) + ho[3:]
                + cross(state.obj.position, ho[:3]))
         return np.concatenate([lin, ang])
+
+
+def _trusted(cls, **fields):
+    """An instance of the (non-slots) dataclass ``cls`` with ``fields`` set as they are.
+
+    The trusted internal constructor of the hot path: no ``__init__``/``__post_init__``, so
+    no validation (the compiled path builds shapes that are right by construction). Public
+    construction (``SystemBlocks(...)``) still validates.
+    """
+    obj = object.__new__(cls)
+    obj.__dict__.update(fields)
+    return obj
 
 
 def _single_body(position, rotation, twist) -> BodyKinematics:

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lapack
 
+from multiarm_pin import kernels as _kernels
 from multiarm_pin.dynamics.blocks import Solution, SystemBlocks
 from multiarm_pin.exceptions import DynamicsError, InputError, SingularityError
 
@@ -178,7 +179,53 @@ def _check_reduction(b: SystemBlocks, X: np.ndarray, rcond: np.ndarray) -> np.nd
 def solve_object_first(
     blocks: SystemBlocks, rcond_tol: float = DEFAULT_RCOND_TOL, *, fallback: bool = False
 ) -> Solution:
-    """Forward dynamics by eliminating the multipliers into the object (Eq 4.10-4.12).
+    """Forward dynamics by eliminating the multipliers into the object (Eq 4.10-4.12), compiled.
+
+    The compiled kernel :func:`multiarm_pin.kernels.object_first` (per-arm Cholesky of
+    ``M_i`` and ``S_i``, the same conditioning criterion and thresholds). Whenever it reports
+    a problem (a singular or badly conditioned ``S_i`` or reduced object matrix, a singular
+    ``M_i``, NaN) the call is handed to :func:`solve_object_first_numpy`, which decides,
+    falls back to the singular variant or raises exactly as documented there; so results and
+    errors are those of the numpy version (to round-off).
+
+    Args:
+        blocks: the system blocks (see :class:`SystemBlocks`).
+        rcond_tol: arms whose estimated reciprocal condition number of ``S_i`` is below this
+            are singular.
+        fallback: as for :func:`solve_object_first_numpy`.
+
+    Returns:
+        The solution: ``a_o`` (6,) [m/s², rad/s²] LWA at the COM, ``qdd`` (n, nv_max),
+        ``mu`` (n, N_max).
+
+    Raises:
+        SingularityError, DynamicsError, InputError: as :func:`solve_object_first_numpy`.
+    """
+    _check_tol(rcond_tol)
+    b = blocks
+    n, k, m = b.W.shape
+    a_o = np.empty(6)
+    qdd = np.empty((n, k))
+    mu = np.empty((n, m))
+    status = _kernels.object_first(
+        _c(b.M), _c(b.h), _c(b.W), _c(b.W_o), _c(b.c), _c(b.M_o), _c(b.h_o), b.N,
+        float(rcond_tol), OBJECT_RCOND_TOL, a_o, qdd, mu)
+    if status != _kernels.SOLVE_OK:
+        return solve_object_first_numpy(b, rcond_tol, fallback=fallback)
+    return Solution(a_o, qdd, mu, "object_first", (), b)
+
+
+def _c(a: np.ndarray) -> np.ndarray:
+    """C-contiguous float64 (one compiled specialisation of the kernel for every input)."""
+    return a if a.flags.c_contiguous else np.ascontiguousarray(a)
+
+
+def solve_object_first_numpy(
+    blocks: SystemBlocks, rcond_tol: float = DEFAULT_RCOND_TOL, *, fallback: bool = False
+) -> Solution:
+    """Forward dynamics by eliminating the multipliers into the object (Eq 4.10-4.12), numpy.
+
+    The vectorised numpy reference of :func:`solve_object_first` (batched LAPACK solves).
 
     Args:
         blocks: the system blocks (see :class:`SystemBlocks`).

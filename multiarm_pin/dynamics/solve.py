@@ -6,11 +6,15 @@ from collections.abc import Iterable
 
 from multiarm_pin.dynamics.blocks import Solution, SystemBlocks
 from multiarm_pin.dynamics.dense_kkt import solve_dense_kkt
-from multiarm_pin.dynamics.object_first import DEFAULT_RCOND_TOL, solve_object_first
+from multiarm_pin.dynamics.object_first import (
+    DEFAULT_RCOND_TOL,
+    solve_object_first,
+    solve_object_first_numpy,
+)
 from multiarm_pin.dynamics.singular import solve_singular
 from multiarm_pin.exceptions import InputError
 
-SOLVERS = ("auto", "object_first", "dense_kkt", "singular")
+SOLVERS = ("auto", "object_first", "dense_kkt", "singular", "object_first_numpy")
 """Names accepted by :func:`solve`."""
 
 
@@ -28,7 +32,9 @@ def solve(
         solver: ``"auto"`` (object-first, switching to the singular-arm variant when some
             ``S_i`` is singular or badly conditioned), ``"object_first"`` (raises
             :class:`~multiarm_pin.exceptions.SingularityError` instead), ``"dense_kkt"``
-            (reference, raises on a singular KKT matrix) or ``"singular"``.
+            (reference, raises on a singular KKT matrix), ``"singular"``, or
+            ``"object_first_numpy"`` (the vectorised numpy reference of the compiled
+            ``"object_first"``; raises like it).
         rcond_tol: reciprocal-condition threshold below which ``S_i`` counts as singular.
         singular_arms: only for ``"singular"``: arms to treat as singular in any case.
 
@@ -51,6 +57,8 @@ def solve(
         return solve_object_first(blocks, rcond_tol, fallback=True)
     if solver == "object_first":
         return solve_object_first(blocks, rcond_tol, fallback=False)
+    if solver == "object_first_numpy":
+        return solve_object_first_numpy(blocks, rcond_tol, fallback=False)
     if solver == "dense_kkt":
         return solve_dense_kkt(blocks)
     if solver == "singular":
