@@ -19,7 +19,7 @@ object, the controller and the simulation settings (format in the README and iss
         q_seed: [...]                        # IK seed when q0 is omitted
         joint: {type: weld}                  # or with placement_in_object: {...}
     controller: {type: none}
-    simulation: {duration: 2.0, integrator: rk4, dt: 0.001, solver: object_first,
+    simulation: {duration: 2.0, integrator: rk4, dt: 0.001, solver: auto,
                  baumgarte: {alpha: 5.0, beta: 5.0}}
 
 Joint types: ``weld``, ``revolute``, ``prismatic``, ``cylindrical``, ``universal``,
@@ -46,6 +46,7 @@ import numpy as np
 import pinocchio as pin
 import yaml
 
+from multiarm_pin.dynamics import SOLVERS
 from multiarm_pin.exceptions import (
     FrameNotFoundError,
     MultiArmError,
@@ -62,7 +63,7 @@ CONTROLLER_TYPES = ("none", "gravity_compensation", "joint_pd", "object_pd")
 """Controller types a scenario may name."""
 INTEGRATORS = ("rk45", "rk4", "semi_implicit")
 """Integrators a scenario may name."""
-SOLVER_NAMES = ("object_first", "dense_kkt", "auto", "singular")
+SOLVER_NAMES = tuple(SOLVERS)  # auto | object_first | dense_kkt | singular | object_first_numpy
 """Forward-dynamics solvers a scenario may name."""
 INITIAL_GAP_TOLERANCE = 1e-6
 """Largest gap [m] of any contact in the initial state."""
@@ -189,7 +190,7 @@ class SimulationSpec:
     duration: float = 2.0
     integrator: str = "rk4"
     dt: float = 1e-3
-    solver: str = "object_first"
+    solver: str = "auto"  # object-first, switching to the singular-arm variant when needed
     baumgarte: tuple[float, float] = (5.0, 5.0)
 
 
