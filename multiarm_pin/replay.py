@@ -55,6 +55,12 @@ CAMERA_FOV_DEG = 75.0
 CAMERA_DIRECTION = np.array([1.0, -1.6, 0.9])
 """Direction from the scene centre to the camera (world axes), normalised when used."""
 _MIN_SCALE = 1e-6  # a zero-length arrow would make a singular transform
+# Meshcat's viewer turns its z-up world into three.js's y-up one with this rotation of the
+# scene root (Rx(-pi/2), `create_default_scene` in meshcat's viewer/src/index.js).
+_SCENE_ROOT_ROTATION = np.array([[1.0, 0.0, 0.0, 0.0],
+                                 [0.0, 0.0, 1.0, 0.0],
+                                 [0.0, -1.0, 0.0, 0.0],
+                                 [0.0, 0.0, 0.0, 1.0]])
 
 
 @dataclass
@@ -337,7 +343,12 @@ def _scaled(T: np.ndarray, scale: np.ndarray) -> np.ndarray:
 
 
 def _scene_points(drawers, obj, contacts, index0) -> np.ndarray:
-    pts = [np.zeros((1, 3))]
+    """(P, 3) world points [m] that the camera frames, at sample ``index0``.
+
+    Arm nodes and bases, object vertices and contact points; the world origin only for an
+    empty scene (framing it too would push content far from the origin off-centre).
+    """
+    pts = []
     for d in drawers:
         pts.append(np.array([T[:3, 3] for T in d.poses(d.arm.q[index0])]).reshape(-1, 3))
         pts.append(d.base[None, :3, 3])
@@ -346,18 +357,44 @@ def _scene_points(drawers, obj, contacts, index0) -> np.ndarray:
         pts.append(obj.position[index0] + obj.polyhedron.vertices @ R.T)
     if contacts is not None:
         pts.append(contacts.points[index0])
-    return np.vstack(pts)
+    pts = [p for p in pts if len(p)]
+    return np.vstack(pts) if pts else np.zeros((1, 3))
 
 
 def set_camera(vis: meshcat.Visualizer, target, eye) -> None:
     """Point Meshcat's default camera from ``eye`` (3,) at ``target`` (3,), world [m].
 
-    Meshcat 0.3.2 orbits around the origin of ``/Cameras/default``; the camera itself sits
-    under a node rotated from three.js's y-up axes to z-up, so its local position is
-    ``(dx, dz, -dy)`` for a world offset ``d = eye - target``.
+    How meshcat 0.3.2's viewer moves its camera (``viewer/src/index.js`` and three.js's
+    ``OrbitControls``, read in the installed package): the scene root, a three.js
+    ``Scene`` at Meshcat path ``/``, is rotated by ``Rx(-pi/2)`` so that Meshcat's z-up
+    world shows in three.js's y-up world; the camera is the object at
+    ``/Cameras/default/rotated``, a node rotated back by ``Rx(pi/2)``. On every render
+    the orbit controls set the camera's *local* position to ``controls.target + offset``
+    and call ``camera.lookAt(controls.target)``, which takes a point in three.js *world*
+    coordinates. ``controls.target`` stays at ``(0, 0, 0)``: the viewer has no command
+    that changes it (no ``set_target``; the server forwards only ``set_transform``,
+    ``set_object``, ``set_property``, ``set_animation`` and ``delete``). Moving
+    ``/Cameras/default`` alone therefore moves the eye, but the camera keeps looking at
+    the world origin.
+
+    So the scene root's transform becomes ``Rx(-pi/2) T(-target)``: three.js's world
+    origin is then our ``target``, and everything in the scene (grid, axes, lights, the
+    ``/meshcat`` tree, the camera) keeps its pose relative to the rest.
+    ``/Cameras/default`` is placed at ``target``, so the camera's parent frame is
+    three.js's world frame, exactly as in Meshcat's default set-up: orbiting, zooming and
+    panning act about ``target``. The camera's local position is ``(dx, dz, -dy)`` for
+    the world offset ``d = eye - target``. The server stores the root's transform like any
+    node's, so both the live viewer and ``static_html`` pages replay it.
+
+    Raises:
+        InputError: ``target`` or ``eye`` not a finite 3-vector, or ``eye == target``.
     """
     target = as_array(target, (3,), "camera target [m]")
     d = as_array(eye, (3,), "camera eye [m]") - target
+    if not np.linalg.norm(d) > 0:
+        raise InputError("camera eye: expected a point different from the target, "
+                         f"got eye = target = {target.tolist()}")
+    vis["/"].set_transform(_SCENE_ROOT_ROTATION @ _pose(np.eye(3), -target))
     vis["/Cameras/default"].set_transform(_pose(np.eye(3), target))
     vis["/Cameras/default/rotated/<object>"].set_property("position", [d[0], d[2], -d[1]])
 
