@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import re
 import shutil
 import subprocess
@@ -9,6 +11,7 @@ import urllib.request
 from pathlib import Path
 
 import example_robot_data as erd
+import meshcat
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -25,6 +28,7 @@ from multiarm_pin.replay import (
     frame_indices,
     polyhedron_triangles,
     serve_replay,
+    set_camera,
     write_replay_html,
 )
 from multiarm_pin.spatial import quaternion_to_rotation, rotation_to_quaternion
@@ -187,6 +191,83 @@ def test_arm_without_visual_model_draws_joint_spheres(ur5):
     np.testing.assert_allclose(pos[0], data.oMi[ur5.model.getJointId("elbow_joint")].translation)
 
 
+# ------------------------------------------------------------------ camera
+MESHCAT_VIEWER = Path(meshcat.__file__).parent / "viewer"
+FAR_BOX_CENTRE = np.array([2.0, 1.0, 1.2])  # content far from the world origin
+FOV_DEG = 75.0  # the PerspectiveCamera of meshcat's create_camera
+
+
+def _matrix(command) -> np.ndarray:
+    """(4, 4) matrix of a recorded set_transform command (Meshcat sends it column-major)."""
+    return np.array(command["matrix"], dtype=float).reshape(4, 4).T
+
+
+def _rx(angle: float) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = pin.rpy.rpyToMatrix(angle, 0.0, 0.0)
+    return T
+
+
+def test_set_camera_puts_the_target_at_the_viewers_world_origin():
+    # What the viewer does with these commands, read from meshcat's own source: the scene
+    # root is rotated by Rx(-pi/2), the camera sits under /Cameras/default/rotated (rotated
+    # by Rx(pi/2)), and OrbitControls calls camera.lookAt(target = three.js world origin).
+    source = (MESHCAT_VIEWER / "src" / "index.js").read_text()
+    assert "scene.rotateX(-Math.PI / 2);" in source
+    assert "mat.makeRotationX(Math.PI / 2);" in source
+    minified = (MESHCAT_VIEWER / "dist" / "main.min.js").read_text()
+    assert "n.object.lookAt(n.target)" in minified and "set_target" not in minified
+
+    rng = np.random.default_rng(3)
+    target = rng.uniform(-3, 3, 3)
+    eye = target + rng.uniform(-2, 2, 3)
+    window = RecordingWindow()
+    set_camera(Visualizer(window=window), target, eye)
+    by_path = {(c["type"], c["path"]): c for c in window.commands}
+    root = _matrix(by_path["set_transform", "/"])
+    cameras = _matrix(by_path["set_transform", "/Cameras/default"])
+    local = np.append(by_path["set_property", "/Cameras/default/rotated/<object>"]["value"], 1)
+
+    # The root keeps the viewer's own z-up rotation; the target becomes the world origin.
+    np.testing.assert_allclose(root[:3, :3], _rx(-np.pi / 2)[:3, :3], atol=1e-15)
+    np.testing.assert_allclose(root @ np.append(target, 1), [0, 0, 0, 1], atol=1e-12)
+    # The camera is at the eye: the same three.js world point as the eye in the scene.
+    chain = root @ cameras @ _rx(np.pi / 2)
+    np.testing.assert_allclose(chain @ local, root @ np.append(eye, 1), atol=1e-12)
+    # Its parent frame is three.js's world frame, as in meshcat's default set-up
+    # (identity root-to-camera chain there too), so orbiting and zooming act about target.
+    np.testing.assert_allclose(chain, np.eye(4), atol=1e-12)
+    default = _rx(-np.pi / 2) @ np.eye(4) @ _rx(np.pi / 2)
+    np.testing.assert_allclose(default, np.eye(4), atol=1e-15)
+
+
+def test_set_camera_rejects_bad_points():
+    vis = Visualizer(window=RecordingWindow())
+    with pytest.raises(InputError, match="different from the target"):
+        set_camera(vis, [1.0, 2.0, 3.0], [1.0, 2.0, 3.0])
+    with pytest.raises(InputError, match=r"camera target \[m\]"):
+        set_camera(vis, [1.0, 2.0], [0.0, 0.0, 0.0])
+    with pytest.raises(InputError, match=r"camera eye \[m\]"):
+        set_camera(vis, [1.0, 2.0, 3.0], [[0.0, 0.0, 0.0]])
+
+
+def test_framing_centres_on_content_not_on_the_world_origin():
+    # A box far from the origin: the camera's target is the box's centre.
+    obj = _far_box()
+    window = RecordingWindow()
+    build_animation(Visualizer(window=window), [], obj, None, [0.0, 0.1])
+    root = [_matrix(c) for c in window.commands
+            if c["type"] == "set_transform" and c["path"] == "/"]
+    assert len(root) == 1
+    np.testing.assert_allclose(root[0] @ np.append(FAR_BOX_CENTRE, 1), [0, 0, 0, 1],
+                               atol=1e-12)
+
+
+def _far_box() -> ReplayObject:
+    return ReplayObject(box([0.3, 0.3, 0.3]), np.tile(FAR_BOX_CENTRE, (2, 1)),
+                        np.tile([0.0, 0.0, 0.0, 1.0], (2, 1)))
+
+
 # ------------------------------------------------------------------ bad input
 def test_bad_input_raises_clear_errors(ur5, tmp_path):
     arms, obj, contacts, t = _two_ur5_scene(ur5)
@@ -257,15 +338,17 @@ def test_write_replay_html_panda_and_mp6(tmp_path):
 
 
 # ------------------------------------------------------------------ browser
-def _screenshot(html: Path, png: Path, profile: Path) -> np.ndarray:
+def _screenshot(page: Path | str, png: Path, profile: Path) -> np.ndarray:
+    """(768, 1024, 3) RGB screenshot of an HTML file or of a URL (str)."""
     from PIL import Image
 
+    url = page if isinstance(page, str) else f"file://{page}"
     cmd = [
         CHROMIUM, "--headless", "--no-sandbox", "--use-angle=swiftshader",
         "--enable-unsafe-swiftshader", "--disable-background-networking",
         "--disable-component-update", "--disable-sync", "--no-first-run",
         f"--user-data-dir={profile}", "--window-size=1024,768",
-        "--virtual-time-budget=15000", f"--screenshot={png}", f"file://{html}",
+        "--virtual-time-budget=15000", f"--screenshot={png}", url,
     ]
     subprocess.run(cmd, check=True, capture_output=True, timeout=180)
     return np.asarray(Image.open(png).convert("RGB"), dtype=int)
@@ -298,6 +381,71 @@ def test_page_renders_arms_and_object_in_headless_chromium(ur5, tmp_path):
     assert _arm_pixels(img) - _arm_pixels(ref) > 5000
 
 
+def _red_centroid(img: np.ndarray) -> tuple[int, np.ndarray]:
+    """(count, (2,) centroid [x, y] in pixels) of the red object's pixels."""
+    r, g, b = img[..., 0], img[..., 1], img[..., 2]
+    ys, xs = np.nonzero((r > g + 40) & (r > b + 15))
+    return len(xs), np.array([xs.mean(), ys.mean()]) if len(xs) else np.full(2, np.nan)
+
+
+def _project(point, eye, target, width=1024, height=768) -> np.ndarray:
+    """(2,) pixel [x, y] of a world point for a pinhole camera at eye looking at target,
+    world z up on screen, three.js's PerspectiveCamera (vertical fov FOV_DEG)."""
+    forward = (target - eye) / np.linalg.norm(target - eye)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    p = np.asarray(point) - eye
+    depth = p @ forward
+    t = np.tan(np.radians(FOV_DEG) / 2)
+    x = (p @ right) / depth / (t * width / height)
+    y = (p @ up) / depth / t
+    return np.array([width / 2 * (1 + x), height / 2 * (1 - y)])
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed "
+                    "(apt-get install -y chromium); the browser test needs it")
+def test_page_centres_content_far_from_the_origin(tmp_path):
+    page = write_replay_html(tmp_path / "far.html", [], _far_box(), [0.0, 0.1])
+    img = _screenshot(page, tmp_path / "far.png", tmp_path / "profile_far")
+    count, centroid = _red_centroid(img)
+    assert count > 5000, f"the box covers only {count} pixels"
+    centre = np.array([img.shape[1], img.shape[0]]) / 2
+    # Meshcat 0.3.2 used to keep looking at the world origin: the box was at the right
+    # edge, about 45 % of the width away from the centre.
+    offset = np.linalg.norm(centroid - centre) / img.shape[1]
+    assert offset < 0.05, f"box centroid {centroid} is {offset:.1%} of the width off-centre"
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed "
+                    "(apt-get install -y chromium); the browser test needs it")
+@pytest.mark.parametrize(("shift", "view"), [([0.5, -0.2, -0.45], [1.2, -1.8, 0.7]),
+                                              ([-0.3, 0.4, 0.3], [-1.5, -1.0, 1.2])])
+def test_camera_view_matches_a_pinhole_projection(tmp_path, shift, view):
+    # The target is not the box: the box must appear where a pinhole camera at the eye,
+    # looking at the target with z up, sees it (checks eye, target and up together).
+    target = FAR_BOX_CENTRE + np.array(shift)
+    eye = target + np.array(view)
+    with contextlib.redirect_stdout(io.StringIO()):
+        vis = Visualizer()
+    try:
+        build_animation(vis, [], _far_box(), None, [0.0, 0.1])
+        set_camera(vis, target, eye)
+        html = vis.static_html()
+    finally:
+        close_visualizer(vis)
+    page = tmp_path / "pinhole.html"
+    page.write_text(html, encoding="utf-8")
+    img = _screenshot(page, tmp_path / "pinhole.png", tmp_path / "profile_pinhole")
+    count, centroid = _red_centroid(img)
+    assert count > 2000, f"the box covers only {count} pixels"
+    expected = _project(FAR_BOX_CENTRE, eye, target)
+    centre = np.array([img.shape[1], img.shape[0]]) / 2
+    assert np.linalg.norm(expected - centre) > 100  # the test is not the centring test
+    error = np.linalg.norm(centroid - expected)
+    assert error < 15, f"box centroid {centroid}, pinhole projection {expected}"
+
+
 # ------------------------------------------------------------------ live server
 def test_serve_replay_answers_http_and_closes(ur5):
     arms, obj, contacts, t = _two_ur5_scene(ur5)
@@ -310,6 +458,21 @@ def test_serve_replay_answers_http_and_closes(ur5):
     finally:
         close_visualizer(vis)
     assert vis.window.server_proc.poll() is not None
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed "
+                    "(apt-get install -y chromium); the browser test needs it")
+def test_live_viewer_centres_content_far_from_the_origin(tmp_path):
+    url, vis = serve_replay([], _far_box(), [0.0, 0.1])
+    try:
+        img = _screenshot(url, tmp_path / "live.png", tmp_path / "profile_live")
+    finally:
+        close_visualizer(vis)
+    count, centroid = _red_centroid(img)
+    assert count > 5000, f"the box covers only {count} pixels"
+    centre = np.array([img.shape[1], img.shape[0]]) / 2
+    offset = np.linalg.norm(centroid - centre) / img.shape[1]
+    assert offset < 0.05, f"box centroid {centroid} is {offset:.1%} of the width off-centre"
 
 
 def test_rotation_to_quaternion_roundtrip_used_by_tests():
