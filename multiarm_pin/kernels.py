@@ -18,7 +18,8 @@ quantity, each C-contiguous; offsets from :func:`buffer_layout`): the arms' ``M 
 (n, 3, 3)``, ``twist (n, 6)``, padded ``v (n, k)``; the constraint rows packed as ``(n, m, 21)``
 (``φ, φ̇, κ, G_tool (6), G_object (6), contact point (3), normal (3)``, the layout of
 :meth:`ConstraintSet.evaluate`); the blocks ``h (n, k)``, ``W (n, k, m)``, ``W_o (n, 6, m)``,
-``c (n, m)``, ``M_o (6, 6)``, ``h_o (6,)``. ``k = nv_max``, ``m = N_max``.
+``c (n, m)``, ``M_o (6, 6)``, ``h_o (6,)``; the solution of :func:`step_system` ``a_o (6,)``,
+``qdd (n, k)``, ``mu (n, m)``. ``k = nv_max``, ``m = N_max``.
 
 Compilation is cached on disk (``cache=True``, in ``__pycache__``): the first call in a fresh
 checkout compiles every kernel (a few seconds), later processes load them.
@@ -33,7 +34,7 @@ from numba import njit
 
 # ------------------------------------------------------------------ buffer layout
 SEGMENTS = ("M", "nle", "J", "Jdot_qdot", "position", "rotation", "twist", "v",
-            "rows", "h", "W", "W_o", "c", "M_o", "h_o")
+            "rows", "h", "W", "W_o", "c", "M_o", "h_o", "a_o", "qdd", "mu")
 """Names of the segments of the flat output buffer of :func:`evaluate_system`, in order."""
 
 ROW_WIDTH = 21
@@ -54,7 +55,7 @@ def segment_shapes(n: int, k: int, m: int) -> dict[str, tuple[int, ...]]:
         "M": (n, k, k), "nle": (n, k), "J": (n, 6, k), "Jdot_qdot": (n, 6),
         "position": (n, 3), "rotation": (n, 3, 3), "twist": (n, 6), "v": (n, k),
         "rows": (n, m, ROW_WIDTH), "h": (n, k), "W": (n, k, m), "W_o": (n, 6, m), "c": (n, m),
-        "M_o": (6, 6), "h_o": (6,),
+        "M_o": (6, 6), "h_o": (6,), "a_o": (6,), "qdd": (n, k), "mu": (n, m),
     }
 
 
@@ -105,7 +106,7 @@ def contact_tables(constraint_set) -> tuple[np.ndarray, np.ndarray]:
 
 
 # ------------------------------------------------------------------ small dense linear algebra
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def cholesky(A, L, size):  # pragma: no cover - compiled
     """Lower Cholesky factor of the leading ``size`` x ``size`` block of ``A`` into ``L``.
 
@@ -127,7 +128,7 @@ def cholesky(A, L, size):  # pragma: no cover - compiled
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def cholesky_solve(L, B, size, ncols):  # pragma: no cover - compiled
     """``B[:size, :ncols] ← A⁻¹ B`` in place, ``A = L Lᵀ`` (L from :func:`cholesky`)."""
     for col in range(ncols):
@@ -143,10 +144,12 @@ def cholesky_solve(L, B, size, ncols):  # pragma: no cover - compiled
             B[i, col] = t / L[i, i]
 
 
-@njit(cache=True)
-def inverse_diagonal(L, size, out):  # pragma: no cover - compiled
-    """``out[j] = (A⁻¹)_jj`` for ``A = L Lᵀ``: squared column norms of ``L⁻¹``."""
-    col = np.empty(size)
+@njit(cache=True, error_model="numpy")
+def inverse_diagonal(L, size, out, col):  # pragma: no cover - compiled
+    """``out[j] = (A⁻¹)_jj`` for ``A = L Lᵀ``: squared column norms of ``L⁻¹``.
+
+    ``col`` is scratch of length ``size``.
+    """
     for j in range(size):
         for i in range(size):
             col[i] = 0.0
@@ -162,7 +165,7 @@ def inverse_diagonal(L, size, out):  # pragma: no cover - compiled
 
 
 # ------------------------------------------------------------------ 1. arm terms
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def arm_terms(J_world, dJ_world, M_full, nle_full, v, H, idx, nv_arm, support,
               M, nle, J, Jdq, p, R, twist, vp):  # pragma: no cover - compiled
     """Stacked, padded arm terms from the combined Pinocchio model's arrays (``ArmSet.evaluate``).
@@ -189,6 +192,8 @@ def arm_terms(J_world, dJ_world, M_full, nle_full, v, H, idx, nv_arm, support,
         vp: output (n, k) padded joint velocities.
     """
     n, k = idx.shape
+    acc = np.empty(6)
+    tw = np.empty(6)
     for i in range(n):
         nvi = nv_arm[i]
         px, py, pz = H[i, 0, 3], H[i, 1, 3], H[i, 2, 3]
@@ -196,8 +201,9 @@ def arm_terms(J_world, dJ_world, M_full, nle_full, v, H, idx, nv_arm, support,
         for a in range(3):
             for b in range(3):
                 R[i, a, b] = H[i, a, b]
-        acc = np.zeros(6)
-        tw = np.zeros(6)
+        for r in range(6):
+            acc[r] = 0.0
+            tw[r] = 0.0
         for a in range(k):
             if a < nvi:
                 ia = idx[i, a]
@@ -240,7 +246,7 @@ def arm_terms(J_world, dJ_world, M_full, nle_full, v, H, idx, nv_arm, support,
 
 
 # ------------------------------------------------------------------ 2. constraint rows
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def constraint_rows(tool_p, tool_R, tool_twist, obj_p, obj_R, obj_twist, ints, floats,
                     rows):  # pragma: no cover - compiled
     """Every contact's row (``ConstraintSet.evaluate``), packed into ``rows`` (n, m, 21).
@@ -266,6 +272,12 @@ def constraint_rows(tool_p, tool_R, tool_twist, obj_p, obj_R, obj_twist, ints, f
     V = np.empty((2, 6))
     r = np.empty((2, 3))
     wr = np.empty((2, 3))
+    c = np.empty(3)
+    u = np.empty(3)
+    d = np.empty(3)
+    y = np.empty(3)
+    nu = np.empty(3)
+    yp = np.empty(3)
     for q in range(ints.shape[0]):
         for side in range(2):
             body = ints[q, side]
@@ -284,11 +296,9 @@ def constraint_rows(tool_p, tool_R, tool_twist, obj_p, obj_R, obj_twist, ints, f
                 for a in range(6):
                     V[side, a] = obj_twist[a]
         # tip centre c (world), lever arms from both bodies' origins, material velocities
-        c = np.empty(3)
         for a in range(3):
             c[a] = X[0, a] + (Rb[0, a, 0] * floats[q, 0] + Rb[0, a, 1] * floats[q, 1]
                               + Rb[0, a, 2] * floats[q, 2])
-        u = np.empty(3)
         for side in range(2):
             for a in range(3):
                 r[side, a] = c[a] - X[side, a]
@@ -299,8 +309,6 @@ def constraint_rows(tool_p, tool_R, tool_twist, obj_p, obj_R, obj_twist, ints, f
         for a in range(3):
             u[a] = (V[0, a] + wr[0, a]) - (V[1, a] + wr[1, a])
         # surface in world axes: direction d, point s (surface body = side 1)
-        d = np.empty(3)
-        y = np.empty(3)
         for a in range(3):
             d[a] = (Rb[1, a, 0] * floats[q, 4] + Rb[1, a, 1] * floats[q, 5]
                     + Rb[1, a, 2] * floats[q, 6])
@@ -308,14 +316,12 @@ def constraint_rows(tool_p, tool_R, tool_twist, obj_p, obj_R, obj_twist, ints, f
                   + Rb[1, a, 2] * floats[q, 9])
             y[a] = c[a] - X[1, a] - sp
         dy = d[0] * y[0] + d[1] * y[1] + d[2] * y[2]
-        nu = np.empty(3)
         if floats[q, _F_IS_PLANE] != 0.0:
             for a in range(3):
                 nu[a] = d[a]
             g = dy
             quad = 0.0
         else:
-            yp = np.empty(3)
             for a in range(3):
                 yp[a] = y[a] - dy * d[a]
             rho = max(math.sqrt(yp[0] * yp[0] + yp[1] * yp[1] + yp[2] * yp[2]), 1e-300)
@@ -369,7 +375,7 @@ def constraint_rows(tool_p, tool_R, tool_twist, obj_p, obj_R, obj_twist, ints, f
 
 
 # ------------------------------------------------------------------ 3. assembly
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def assemble(J, Jdq, nle, tau_padded, rows, baumgarte, obj_R, mass, inertia_body, gravity,
              obj_twist, h, W, W_o, c, M_o, h_o):  # pragma: no cover - compiled
     """The padded blocks (``MultiArmSystem.blocks``) from arm terms and constraint rows.
@@ -445,7 +451,7 @@ def assemble(J, Jdq, nle, tau_padded, rows, baumgarte, obj_R, mass, inertia_body
 
 
 # ------------------------------------------------------------------ fused evaluation
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def quaternion_rotation(quat, R):  # pragma: no cover - compiled
     """Rotation matrix (3, 3) of a unit quaternion ``[x, y, z, w]`` into ``R``."""
     x, y, z, w = quat[0], quat[1], quat[2], quat[3]
@@ -460,10 +466,51 @@ def quaternion_rotation(quat, R):  # pragma: no cover - compiled
     R[2, 2] = 1 - 2 * (x * x + y * y)
 
 
-@njit(cache=True)
-def evaluate_system(J_world, dJ_world, M_full, nle_full, v, H, tau, idx, nv_arm, support,
-                    ints, floats, obj_state, obj_params, baumgarte, off, k, m,
-                    buf):  # pragma: no cover - compiled
+@njit(cache=True, error_model="numpy")
+def _segments(buf, n, k, m):  # pragma: no cover - compiled
+    """Views of the flat buffer's segments (order of :data:`SEGMENTS`)."""
+    o = 0
+    M = buf[o:o + n * k * k].reshape((n, k, k))
+    o += n * k * k
+    nle = buf[o:o + n * k].reshape((n, k))
+    o += n * k
+    J = buf[o:o + n * 6 * k].reshape((n, 6, k))
+    o += n * 6 * k
+    Jdq = buf[o:o + n * 6].reshape((n, 6))
+    o += n * 6
+    p = buf[o:o + n * 3].reshape((n, 3))
+    o += n * 3
+    R = buf[o:o + n * 9].reshape((n, 3, 3))
+    o += n * 9
+    tw = buf[o:o + n * 6].reshape((n, 6))
+    o += n * 6
+    vp = buf[o:o + n * k].reshape((n, k))
+    o += n * k
+    rows = buf[o:o + n * m * ROW_WIDTH].reshape((n, m, ROW_WIDTH))
+    o += n * m * ROW_WIDTH
+    h = buf[o:o + n * k].reshape((n, k))
+    o += n * k
+    W = buf[o:o + n * k * m].reshape((n, k, m))
+    o += n * k * m
+    W_o = buf[o:o + n * 6 * m].reshape((n, 6, m))
+    o += n * 6 * m
+    c = buf[o:o + n * m].reshape((n, m))
+    o += n * m
+    M_o = buf[o:o + 36].reshape((6, 6))
+    o += 36
+    h_o = buf[o:o + 6]
+    o += 6
+    a_o = buf[o:o + 6]
+    o += 6
+    qdd = buf[o:o + n * k].reshape((n, k))
+    o += n * k
+    mu = buf[o:o + n * m].reshape((n, m))
+    return M, nle, J, Jdq, p, R, tw, vp, rows, h, W, W_o, c, M_o, h_o, a_o, qdd, mu
+
+
+@njit(cache=True, error_model="numpy")
+def evaluate_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, ints, floats,
+                    params, dims, buf):  # pragma: no cover - compiled
     """Arm terms, constraint rows and blocks of one state into the flat buffer ``buf``.
 
     Args:
@@ -471,54 +518,81 @@ def evaluate_system(J_world, dJ_world, M_full, nle_full, v, H, tau, idx, nv_arm,
         dJ_world: (6, nv) ``data.dJ``.
         M_full: (nv, nv) ``data.M``.
         nle_full: (nv,) ``data.nle``.
-        v: (nv,) combined joint velocities.
         H: (n, 4, 4) tool placements.
-        tau: (nv,) combined joint torques [N m] (zeros for none).
-        idx: (n, k) int joint indices (see :func:`arm_terms`).
-        nv_arm: (n,) int joints per arm.
-        support: (n, k) int tool-support mask.
+        x: (13 + nq + 2 nv,) object position (3) [m], quaternion ``[x, y, z, w]`` (4), twist
+            ``[ẋ; ω]`` (6), then the arms' ``q`` (not read), ``v`` and joint torques ``τ``
+            [N m] (zeros for none): one array so that one finiteness test covers all.
+        arm_ints: (n, 1 + 2k) int: joints per arm, then joint indices (see ``idx`` of
+            :func:`arm_terms`), then the tool-support mask.
         ints: (K, 4) int contact table (:func:`contact_tables`).
         floats: (K, 14) float contact table.
-        obj_state: (13,) object position (3) [m], quaternion ``[x, y, z, w]`` (4), twist
-            ``[ẋ; ω]`` (6).
-        obj_params: (13,) mass [kg], inertia about the COM in object axes (9, row-major)
-            [kg m²], gravity (3) [m/s²].
-        baumgarte: (3,) ``(α, β, on)``.
-        off: segment offsets of :func:`buffer_layout`.
-        k: nv_max.
-        m: N_max.
-        buf: output, the flat buffer (see the module docstring).
+        params: (18,) object mass [kg], inertia about the COM in object axes (9, row-major)
+            [kg m²], gravity (3) [m/s²], Baumgarte ``(α, β, on)``, then the solver thresholds
+            ``rcond_tol``, ``object_rcond_tol`` (read by :func:`step_system` only).
+        dims: (3,) int ``(k, m, nv) = (nv_max, N_max, total joints)``.
+        buf: output, the flat buffer (segments :data:`SEGMENTS`, see the module docstring).
+
+    Returns:
+        False (and nothing computed) if some entry of ``x`` is NaN or infinite.
     """
-    n = idx.shape[0]
-    M = buf[off[0]:off[1]].reshape((n, k, k))
-    nle = buf[off[1]:off[2]].reshape((n, k))
-    J = buf[off[2]:off[3]].reshape((n, 6, k))
-    Jdq = buf[off[3]:off[4]].reshape((n, 6))
-    p = buf[off[4]:off[5]].reshape((n, 3))
-    R = buf[off[5]:off[6]].reshape((n, 3, 3))
-    tw = buf[off[6]:off[7]].reshape((n, 6))
-    vp = buf[off[7]:off[8]].reshape((n, k))
-    rows = buf[off[8]:off[9]].reshape((n, m, ROW_WIDTH))
-    h = buf[off[9]:off[10]].reshape((n, k))
-    W = buf[off[10]:off[11]].reshape((n, k, m))
-    W_o = buf[off[11]:off[12]].reshape((n, 6, m))
-    c = buf[off[12]:off[13]].reshape((n, m))
-    M_o = buf[off[13]:off[14]].reshape((6, 6))
-    h_o = buf[off[14]:off[15]]
+    for a in range(x.shape[0]):
+        if not math.isfinite(x[a]):
+            return False
+    n = H.shape[0]
+    k, m, nv = dims[0], dims[1], dims[2]
+    (M, nle, J, Jdq, p, R, tw, vp, rows, h, W, W_o, c, M_o, h_o, a_o, qdd,
+     mu) = _segments(buf, n, k, m)
+    nv_arm = arm_ints[:, 0]
+    idx = arm_ints[:, 1:1 + k]
+    support = arm_ints[:, 1 + k:1 + 2 * k]
+    v = x[x.shape[0] - 2 * nv:x.shape[0] - nv]
+    tau = x[x.shape[0] - nv:]
     arm_terms(J_world, dJ_world, M_full, nle_full, v, H, idx, nv_arm, support,
               M, nle, J, Jdq, p, R, tw, vp)
     obj_R = np.empty((3, 3))
-    quaternion_rotation(obj_state[3:7], obj_R)
-    obj_p = obj_state[0:3]
-    obj_tw = obj_state[7:13]
-    constraint_rows(p, R, tw, obj_p, obj_R, obj_tw, ints, floats, rows)
+    quaternion_rotation(x[3:7], obj_R)
+    obj_tw = x[7:13]
+    constraint_rows(p, R, tw, x[0:3], obj_R, obj_tw, ints, floats, rows)
     tau_p = np.zeros((n, k))
     for i in range(n):
         for a in range(nv_arm[i]):
             tau_p[i, a] = tau[idx[i, a]]
-    assemble(J, Jdq, nle, tau_p, rows, baumgarte, obj_R, obj_params[0],
-             obj_params[1:10].reshape((3, 3)), obj_params[10:13], obj_tw,
-             h, W, W_o, c, M_o, h_o)
+    assemble(J, Jdq, nle, tau_p, rows, params[13:16], obj_R, params[0],
+             params[1:10].reshape((3, 3)), params[10:13], obj_tw, h, W, W_o, c, M_o, h_o)
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def step_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, ints, floats,
+                params, dims, N, buf):  # pragma: no cover - compiled
+    """:func:`evaluate_system` then :func:`object_first` on the buffer (one full step).
+
+    Args:
+        J_world: see :func:`evaluate_system` (likewise every argument but ``N``).
+        dJ_world: (6, nv).
+        M_full: (nv, nv).
+        nle_full: (nv,).
+        H: (n, 4, 4).
+        x: (13 + nq + 2 nv,).
+        arm_ints: (n, 1 + 2k).
+        ints: (K, 4).
+        floats: (K, 14).
+        params: (18,), the last two entries the solver thresholds.
+        dims: (3,).
+        N: (n,) int constraint rows per arm.
+        buf: output buffer; the segments ``a_o``, ``qdd``, ``mu`` receive the solution.
+
+    Returns:
+        The status of :func:`object_first`, or ``SOLVE_NOT_FINITE`` if ``x`` holds NaN or
+        infinity (nothing computed then).
+    """
+    if not evaluate_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, ints, floats,
+                           params, dims, buf):
+        return SOLVE_NOT_FINITE
+    n = H.shape[0]
+    (M, nle, J, Jdq, p, R, tw, vp, rows, h, W, W_o, c, M_o, h_o, a_o, qdd,
+     mu) = _segments(buf, n, dims[0], dims[1])
+    return object_first(M, h, W, W_o, c, M_o, h_o, N, params[16], params[17], a_o, qdd, mu)
 
 
 # ------------------------------------------------------------------ 4. object-first solve
@@ -528,9 +602,11 @@ SOLVE_ARM_SINGULAR = 1
 """Status: some ``M_i`` or ``S_i`` failed to factor, or ``S_i`` is badly conditioned."""
 SOLVE_OBJECT_SINGULAR = 2
 """Status: the reduced object matrix is badly conditioned or the result is not finite."""
+SOLVE_NOT_FINITE = 3
+"""Status of :func:`step_system`: the state or the torques hold NaN or infinity."""
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def object_first(M, h, W, W_o, c, M_o, h_o, N, rcond_tol, object_rcond_tol,
                  a_o, qdd, mu):  # pragma: no cover - compiled
     """Object-first forward dynamics (``solve_object_first_numpy``) with per-arm Cholesky.
@@ -569,6 +645,7 @@ def object_first(M, h, W, W_o, c, M_o, h_o, N, rcond_tol, object_rcond_tol,
     S = np.empty((m, m))
     LS = np.zeros((m, m))
     dinv = np.empty(m)
+    col = np.empty(m)
     A = np.empty((6, 6))
     rhs = np.empty(6)
     for a in range(6):
@@ -608,7 +685,7 @@ def object_first(M, h, W, W_o, c, M_o, h_o, N, rcond_tol, object_rcond_tol,
                 S[s, s] += smax
         if not cholesky(S, LS, m):
             return SOLVE_ARM_SINGULAR
-        inverse_diagonal(LS, m, dinv)
+        inverse_diagonal(LS, m, dinv, col)
         worst = 0.0
         for s in range(m):
             if dinv[s] > worst:

@@ -23,9 +23,9 @@ twist ``[ẋ; ω]`` in world axes).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import pinocchio as pin
@@ -42,6 +42,11 @@ from multiarm_pin.constraints import (
     make_joint_from_placements,
 )
 from multiarm_pin.dynamics import Solution, SystemBlocks, solve
+from multiarm_pin.dynamics.object_first import (
+    DEFAULT_RCOND_TOL,
+    OBJECT_RCOND_TOL,
+    solve_object_first_numpy,
+)
 from multiarm_pin.exceptions import ConstraintError, DynamicsError, InputError
 from multiarm_pin.kinematics import BodyKinematics
 from multiarm_pin.rigid_object import ObjectState, RigidObject
@@ -52,6 +57,9 @@ UNILATERAL_JOINT_KINDS = frozenset({"fingertips"})
 
 The joint library has no per-contact flag; fingertip grasps (``Joint.kind == "fingertips"``)
 are the unilateral ones, every other joint (weld, revolute, ...) is bilateral."""
+
+_COMPILED_SOLVERS = frozenset({"auto", "object_first"})
+"""Solvers that :meth:`MultiArmSystem.forward_dynamics` runs fused with the blocks."""
 
 VELOCITY_TOLERANCE = 1e-6
 """Default largest accepted initial ``|φ̇|`` [m/s] (:meth:`MultiArmSystem.check_initial_state`)."""
@@ -212,20 +220,27 @@ class MultiArmSystem:
         """Constant inputs of the compiled hot path (:mod:`multiarm_pin.kernels`)."""
         aset, cs = self.arm_set, self.constraint_set
         n, k, m = self.n_arms, aset.nv_max, self.N_max
-        self._k_idx = np.ascontiguousarray(aset._idx, dtype=np.int64)
-        self._k_nv = np.ascontiguousarray(aset.nv_arm, dtype=np.int64)
-        self._k_support = np.ascontiguousarray(aset._support, dtype=np.int64)
+        self._k_arm_ints = np.concatenate(
+            (aset.nv_arm[:, None], aset._idx, aset._support.astype(int)), axis=1
+        ).astype(np.int64)
         self._k_ints, self._k_floats = kernels.contact_tables(cs)
-        self._k_obj_params = np.concatenate(
-            ([self.obj.mass], self.obj.inertia.ravel(), self.gravity)).astype(float)
-        self._k_off, self._k_size = kernels.buffer_layout(n, k, m)
+        self._k_params = np.concatenate(
+            ([self.obj.mass], self.obj.inertia.ravel(), self.gravity, [0.0, 0.0, 0.0],
+             [DEFAULT_RCOND_TOL, OBJECT_RCOND_TOL])).astype(float)
+        self._k_params.setflags(write=False)
+        self._k_dims = np.array([k, m, self.nv], dtype=np.int64)
+        self._k_N = np.ascontiguousarray(self._N, dtype=np.int64)
+        off, self._k_size = kernels.buffer_layout(n, k, m)
         shapes = kernels.segment_shapes(n, k, m)
-        self._k_segments = [(int(self._k_off[j]), int(self._k_off[j + 1]), shapes[name])
-                            for j, name in enumerate(kernels.SEGMENTS)]
-        self._k_k, self._k_m = k, m
+        where = {name: (int(off[j]), int(off[j + 1]), shapes[name])
+                 for j, name in enumerate(kernels.SEGMENTS)}
+        self._k_segments = where
+        self._k_solution = [where[name] for name in ("a_o", "qdd", "mu")]
+        self._k_rows_range = where["rows"]
+        self._k_nx = 13 + self.nq + 2 * self.nv
+        self._N_shared, self._mask_shared = cs.N, cs.mask
         self._k_zero_tau = np.zeros(self.nv)
         self._k_zero_tau.setflags(write=False)
-        self._k_no_baumgarte = np.zeros(3)
         # the derived (constant) fields of SystemBlocks, computed once by a validated build
         probe = SystemBlocks(np.broadcast_to(np.eye(k), (n, k, k)).copy(), np.zeros((n, k)),
                              np.zeros((n, k, m)), np.zeros((n, 6, m)), np.zeros((n, m)),
@@ -415,55 +430,73 @@ class MultiArmSystem:
         """
         if reference:
             return self._blocks_reference(state, tau, baumgarte)
-        try:  # cheap checks: shapes, then one finite sum over the concatenated state
-            o = state.obj
-            q, v = state.q, state.v
-            x = np.concatenate((o.position, o.quaternion, o.twist, q, v))
-            ok = (q.shape == (self.nq,) and v.shape == (self.nv,) and x.shape[0] == 13
-                  + self.nq + self.nv and o.position.shape == (3,) and o.twist.shape == (6,)
-                  and math.isfinite(x.sum()) and x.dtype == np.float64)
-        except (AttributeError, TypeError, ValueError):
-            ok = False
-        if not ok:
-            self.check_state(state)  # raises with the field named (or accepts: then go on)
-            o = state.obj
-            q = np.ascontiguousarray(state.q, dtype=float)
-            v = np.ascontiguousarray(state.v, dtype=float)
-            x = np.concatenate((np.asarray(o.position, float), np.asarray(o.quaternion, float),
-                                np.asarray(o.twist, float), q, v))
+        return self._compiled(state, tau, baumgarte, False)[0]
+
+    def _compiled(self, state: SystemState, tau, baumgarte, step: bool
+                  ) -> tuple[Evaluation, Solution | None]:
+        """The compiled hot path: blocks and, if ``step``, the object-first solution.
+
+        The solution is None if ``step`` is False or the kernel reported a doubtful case
+        (singular or badly conditioned ``S_i`` / object matrix), which the caller hands to
+        the numpy solvers.
+        """
         if tau is None:
             t = self._k_zero_tau
         else:
             t = np.asarray(tau, dtype=float)
             if t.shape != (self.nv,):
                 raise InputError(f"tau: expected shape ({self.nv},), got {t.shape}")
-            if not math.isfinite(t.sum()) and not np.all(np.isfinite(t)):
-                raise DynamicsError(f"tau contains NaN or infinity: {t.tolist()}")
-        if baumgarte is None:
-            bg = self._k_no_baumgarte
-        else:
+        try:  # cheap checks here: types and shapes (finiteness is checked by the kernel)
+            o = state.obj
+            q, v = state.q, state.v
+            x = np.concatenate((o.position, o.quaternion, o.twist, q, v, t))
+            ok = (q.shape == (self.nq,) and v.shape == (self.nv,) and x.shape[0] == self._k_nx
+                  and o.position.shape == (3,) and o.twist.shape == (6,)
+                  and x.dtype == np.float64)
+        except (AttributeError, TypeError, ValueError):
+            ok = False
+        if not ok:
+            self._check_state_and_tau(state, t)  # raises naming the field, or accepts
+            o = state.obj
+            q = np.ascontiguousarray(state.q, dtype=float)
+            v = np.ascontiguousarray(state.v, dtype=float)
+            x = np.concatenate((np.asarray(o.position, float), np.asarray(o.quaternion, float),
+                                np.asarray(o.twist, float), q, v, t))
+        params = self._k_params
+        if baumgarte is not None:
             a, b = _baumgarte(baumgarte)
-            bg = np.array([a, b, 1.0])
+            params = params.copy()
+            params[13:16] = a, b, 1.0
         aset = self.arm_set
         H = aset.pinocchio_pass(q, v)
-        data = aset.data
+        J, dJ, M, nle = aset.data_arrays()
         buf = np.empty(self._k_size)
-        kernels.evaluate_system(data.J, data.dJ, data.M, data.nle, v, H, t, self._k_idx,
-                                self._k_nv, self._k_support, self._k_ints, self._k_floats,
-                                x[:13], self._k_obj_params, bg, self._k_off, self._k_k,
-                                self._k_m, buf)
-        (M, nle, J, Jdq, p, R, tw, vp, rows, h, W, W_o, c, M_o, h_o) = [
-            buf[a:b].reshape(shape) for a, b, shape in self._k_segments]
-        cs = self.constraint_set
-        ct = _trusted(ConstraintTerms, phi=rows[:, :, 0], phi_dot=rows[:, :, 1],
-                      kappa=rows[:, :, 2], G_tool=rows[:, :, 3:9], G_object=rows[:, :, 9:15],
-                      N=cs.N, mask=cs.mask, contact_points=rows[:, :, 15:18],
-                      normals=rows[:, :, 18:21])
-        arms = _trusted(ArmSetTerms, M=M, nle=nle, J=J, Jdot_qdot=Jdq,
-                        tools=_trusted(BodyKinematics, position=p, rotation=R, twist=tw), v=vp)
-        blocks = _trusted(SystemBlocks, M=M, h=h, W=W, W_o=W_o, c=c, M_o=M_o, h_o=h_o,
-                          **self._k_blocks_constant)
-        return _trusted(Evaluation, blocks=blocks, arms=arms, constraints=ct)
+        args = (J, dJ, M, nle, H, x, self._k_arm_ints, self._k_ints, self._k_floats, params,
+                self._k_dims)
+        if step:
+            status = kernels.step_system(*args, self._k_N, buf)
+            finite = status != kernels.SOLVE_NOT_FINITE
+        else:
+            finite = kernels.evaluate_system(*args, buf)
+        if not finite:
+            self._check_state_and_tau(state, t)  # raises naming the field
+        seg = self._k_segments
+        blocks = _trusted(_BlocksView, _buf=buf, _seg=seg, **self._k_blocks_constant)
+        lo, hi, rows = self._k_rows_range
+        ev = _trusted(Evaluation, blocks=blocks,
+                      arms=_trusted(_ArmTermsView, _buf=buf, _seg=seg),
+                      constraints=_trusted(_ConstraintTermsView, _rows=buf[lo:hi].reshape(rows),
+                                           N=self._N_shared, mask=self._mask_shared))
+        if step and status == kernels.SOLVE_OK:
+            a_o, qdd, mu = [buf[lo:hi].reshape(shape) for lo, hi, shape in self._k_solution]
+            return ev, Solution(a_o, qdd, mu, "object_first", (), blocks)
+        return ev, None
+
+    def _check_state_and_tau(self, state: SystemState, tau: np.ndarray) -> None:
+        """Slow path of the checks: raise naming the field that is wrong or not finite."""
+        self.check_state(state)
+        if not np.all(np.isfinite(tau)):
+            raise DynamicsError(f"tau contains NaN or infinity: {tau.tolist()}")
 
     def _blocks_reference(self, state: SystemState, tau: np.ndarray | None = None,
                           baumgarte: tuple[float, float] | None = None) -> Evaluation:
@@ -515,6 +548,11 @@ class MultiArmSystem:
             DynamicsError: NaN in the state, or no solution (inconsistent constraints).
             InputError: unknown solver (lists the known ones).
         """
+        if solver in _COMPILED_SOLVERS:  # blocks and solve in one compiled call
+            ev, sol = self._compiled(state, tau, baumgarte, True)
+            if sol is None:  # doubtful case: the numpy solver decides, falls back or raises
+                sol = solve_object_first_numpy(ev.blocks, fallback=solver == "auto")
+            return sol, ev
         ev = self.blocks(state, tau, baumgarte)
         return solve(ev.blocks, solver), ev
 
@@ -549,6 +587,62 @@ class MultiArmSystem:
         ang = (hg.angular + cross(com, hg.linear) + ho[3:]
                + cross(state.obj.position, ho[:3]))
         return np.concatenate([lin, ang])
+
+
+class _BufferView:
+    """Mixin: ``_view(name)`` is the segment ``name`` of the buffer ``_buf`` (layout ``_seg``)."""
+
+    def _view(self, name: str) -> np.ndarray:
+        lo, hi, shape = self._seg[name]
+        return self._buf[lo:hi].reshape(shape)
+
+
+class _BlocksView(_BufferView, SystemBlocks):
+    """:class:`SystemBlocks` of the compiled path, its arrays made on first access.
+
+    Views of the step's buffer; the derived constant fields (masks) are shared per system.
+    Built by :func:`_trusted` only (the public constructor validates; this one is trusted).
+    """
+
+    M = cached_property(lambda self: self._view("M"))
+    h = cached_property(lambda self: self._view("h"))
+    W = cached_property(lambda self: self._view("W"))
+    W_o = cached_property(lambda self: self._view("W_o"))
+    c = cached_property(lambda self: self._view("c"))
+    M_o = cached_property(lambda self: self._view("M_o"))
+    h_o = cached_property(lambda self: self._view("h_o"))
+
+
+class _ArmTermsView(_BufferView, ArmSetTerms):
+    """:class:`ArmSetTerms` of the compiled path, its arrays made on first access.
+
+    Fields are views of the step's buffer (``M`` shares memory with the blocks' ``M``);
+    built by :func:`_trusted` only. Saves the view creation when only the blocks are used.
+    """
+
+    M = cached_property(lambda self: self._view("M"))
+    nle = cached_property(lambda self: self._view("nle"))
+    J = cached_property(lambda self: self._view("J"))
+    Jdot_qdot = cached_property(lambda self: self._view("Jdot_qdot"))
+    v = cached_property(lambda self: self._view("v"))
+    tools = cached_property(lambda self: BodyKinematics(
+        self._view("position"), self._view("rotation"), self._view("twist")))
+
+
+class _ConstraintTermsView(ConstraintTerms):
+    """:class:`ConstraintTerms` of the compiled path, its arrays made on first access.
+
+    Fields are views of the packed ``(n, N_max, 21)`` rows of the step's buffer; built by
+    :func:`_trusted` only.
+    """
+
+    phi = cached_property(lambda self: self._rows[:, :, 0])
+    phi_dot = cached_property(lambda self: self._rows[:, :, 1])
+    kappa = cached_property(lambda self: self._rows[:, :, 2])
+    G_tool = cached_property(lambda self: self._rows[:, :, 3:9])
+    G_object = cached_property(lambda self: self._rows[:, :, 9:15])
+    contact_points = cached_property(lambda self: self._rows[:, :, 15:18])
+    normals = cached_property(lambda self: self._rows[:, :, 18:21])
 
 
 def _trusted(cls, **fields):
