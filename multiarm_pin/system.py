@@ -227,7 +227,6 @@ class MultiArmSystem:
         self._k_params = np.concatenate(
             ([self.obj.mass], self.obj.inertia.ravel(), self.gravity, [0.0, 0.0, 0.0],
              [DEFAULT_RCOND_TOL, OBJECT_RCOND_TOL])).astype(float)
-        self._k_params.setflags(write=False)
         self._k_dims = np.array([k, m, self.nv], dtype=np.int64)
         self._k_N = np.ascontiguousarray(self._N, dtype=np.int64)
         off, self._k_size = kernels.buffer_layout(n, k, m)
@@ -248,7 +247,8 @@ class MultiArmSystem:
         derived = {}
         for name in ("nv", "N", "dof_mask", "constraint_mask", "padding_diagonal"):
             arr = getattr(probe, name)
-            arr.setflags(write=False)
+            if arr.dtype == bool or name == "padding_diagonal":  # nv, N stay writable like
+                arr.setflags(write=False)  # any SystemBlocks' (one compiled kernel variant)
             derived[name] = arr
         derived["has_constraint_padding"] = probe.has_constraint_padding
         self._k_blocks_constant = derived

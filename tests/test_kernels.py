@@ -1,0 +1,337 @@
+"""Compiled hot path (multiarm_pin.kernels) against the numpy reference implementation.
+
+The numpy path (``MultiArmSystem.blocks(..., reference=True)``: ``ArmSet.evaluate``,
+``ConstraintSet.evaluate``, einsum assembly; solver ``object_first_numpy``) is itself tested
+against per-arm Pinocchio, per-joint formulas and finite differences elsewhere; here the
+compiled path must reproduce it to 1e-12 (relative) on random systems with every joint type,
+both robots (UR5 6-dof, Panda 7-dof: padding), tips on the tool and on the object, planes,
+spheres and cylinders (outside and inside), with and without Baumgarte, and must keep the
+singular-arm fallback and the error behaviour.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from dynamics.synthetic import random_system
+from test_system import JOINT_KINDS, build_system, joint_spec, moving_state
+
+from multiarm_pin import kernels
+from multiarm_pin.constraints import custom
+from multiarm_pin.dynamics import SystemBlocks, solve
+from multiarm_pin.exceptions import DynamicsError, InputError, SingularityError
+from multiarm_pin.rigid_object import ObjectState
+from multiarm_pin.system import SystemState
+
+TOL = 1e-12
+
+SOCKETS = [  # curved surfaces, inside and outside, tips on both bodies
+    {"point": [0.1, 0, 0], "surface": {"type": "sphere", "center": [0, 0, 0], "radius": 0.1,
+                                       "inside": True},
+     "tip_radius": 0.01, "points_on": "object"},
+    {"point": [0, 0.1, 0], "surface": {"type": "sphere", "center": [0, 0, 0], "radius": 0.1,
+                                       "inside": True}},
+    {"point": [0.05, 0.2, 0.3], "surface": {"type": "cylinder", "center": [0, 0.2, 0],
+                                            "axis": [0, 0, 1], "radius": 0.05,
+                                            "inside": True},
+     "tip_radius": 0.005},
+    {"point": [0.0, -0.2, 0.1], "surface": {"type": "sphere", "center": [0, -0.3, 0.1],
+                                            "radius": 0.1}, "points_on": "object"},
+    {"point": [0.05, -0.05, 0.05], "surface": {"type": "plane", "point": [0, 0, 0.05],
+                                               "normal": [1, 1, 0]},
+     "points_on": "object", "tip_radius": 0.02},
+]
+
+
+def sockets(oMt: pin.SE3, oMo: pin.SE3):
+    """A custom joint of SOCKETS whose frame is the tool frame at t = 0."""
+    return custom(SOCKETS, oMo.actInv(oMt), name="sockets")
+
+
+def random_spec(rng, kind: str):
+    if kind == "sockets":
+        return sockets
+    spec = joint_spec(kind)
+    if kind not in ("fingertips", "corner_gripper") and rng.random() < 0.5:
+        spec = {**spec, "points_on": "object"}
+    return spec
+
+
+def random_system_and_state(seed: int, n_arms: int):
+    """Mixed robots and joints, a random consistent moving state, moved slightly off the
+    constraint manifold so that φ and φ̇ are not zero (Baumgarte terms matter)."""
+    rng = np.random.default_rng(seed)
+    robots = [("ur5", "panda")[int(rng.integers(2))] for _ in range(n_arms)]
+    kinds = [(JOINT_KINDS + ["sockets"])[int(rng.integers(len(JOINT_KINDS) + 1))]
+             for _ in range(n_arms)]
+    q = rng.normal(size=4)
+    system, state = build_system(robots, [random_spec(rng, k) for k in kinds], rng,
+                                 gravity=(0.3, -1.0, -9.0), object_quaternion=q / np.linalg.norm(q))
+    state = moving_state(system, state, rng)
+    o = state.obj
+    off = SystemState(state.q + 1e-3 * rng.normal(size=system.nq),
+                      state.v + 0.1 * rng.normal(size=system.nv),
+                      ObjectState(o.position + 1e-3 * rng.normal(size=3), o.quaternion, o.twist))
+    return system, state, off, rng.normal(size=system.nv)
+
+
+def assert_close(a, b, name):
+    a, b = np.asarray(a), np.asarray(b)
+    assert a.shape == b.shape, f"{name}: shape {a.shape} != {b.shape}"
+    if a.dtype.kind in "bi":
+        np.testing.assert_array_equal(a, b, err_msg=name)
+        return
+    err = np.abs(a - b).max(initial=0.0)
+    assert err <= TOL * max(1.0, np.abs(b).max(initial=0.0)), f"{name}: {err:.3g}"
+
+
+BLOCK_FIELDS = ("M", "h", "W", "W_o", "c", "M_o", "h_o", "nv", "N", "dof_mask",
+                "constraint_mask", "padding_diagonal")
+ROW_FIELDS = ("phi", "phi_dot", "kappa", "G_tool", "G_object", "contact_points", "normals",
+              "N", "mask")
+ARM_FIELDS = ("M", "nle", "J", "Jdot_qdot", "v")
+
+
+def assert_evaluations_equal(ev, ref):
+    for f in BLOCK_FIELDS:
+        assert_close(getattr(ev.blocks, f), getattr(ref.blocks, f), f"blocks.{f}")
+    assert ev.blocks.has_constraint_padding == ref.blocks.has_constraint_padding
+    for f in ROW_FIELDS:
+        assert_close(getattr(ev.constraints, f), getattr(ref.constraints, f), f"constraints.{f}")
+    for f in ARM_FIELDS:
+        assert_close(getattr(ev.arms, f), getattr(ref.arms, f), f"arms.{f}")
+    for f in ("position", "rotation", "twist"):
+        assert_close(getattr(ev.arms.tools, f), getattr(ref.arms.tools, f), f"tools.{f}")
+
+
+# ------------------------------------------------------------------ blocks
+@pytest.mark.parametrize("seed,n_arms", [(s, 1 + s % 8) for s in range(10)])
+def test_compiled_blocks_equal_numpy_reference(seed, n_arms):
+    system, state, off, tau = random_system_and_state(seed, n_arms)
+    for st in (state, off):
+        for baumgarte in (None, (3.0, 4.0)):
+            for t in (None, tau):
+                ev = system.blocks(st, t, baumgarte)
+                ref = system.blocks(st, t, baumgarte, reference=True)
+                assert_evaluations_equal(ev, ref)
+    # the comparison is not vacuous: off the manifold, Baumgarte changes c
+    ev0, ev1 = system.blocks(off), system.blocks(off, None, (3.0, 4.0))
+    assert np.abs(ev0.blocks.c - ev1.blocks.c).max() > 1e-6
+    assert np.abs(ev0.constraints.phi).max() > 1e-6
+
+
+def test_every_surface_and_tip_placement_is_exercised():
+    """The systems of the comparison above cover what the constraint kernel distinguishes."""
+    seen = set()
+    for seed in range(10):
+        system, *_ = random_system_and_state(seed, 1 + seed % 8)
+        ints, floats = kernels.contact_tables(system.constraint_set)
+        for row_i, row_f in zip(ints, floats, strict=True):
+            kind = ("plane" if row_f[12] else "curved", "inside" if row_f[11] < 0 else "out",
+                    "tool-tip" if row_i[3] else "object-tip")
+            seen.add(kind)
+        seen.add(("padding", system.N_max > int(system.constraint_set.N.min())))
+        seen.add(("dof padding", system.arm_set.nv_max > int(system.arm_set.nv_arm.min())))
+    for needed in [("plane", "out", "tool-tip"), ("plane", "out", "object-tip"),
+                   ("curved", "out", "tool-tip"), ("curved", "out", "object-tip"),
+                   ("curved", "inside", "tool-tip"), ("curved", "inside", "object-tip"),
+                   ("padding", True), ("dof padding", True)]:
+        assert needed in seen, needed
+
+
+def test_evaluations_do_not_alias_later_calls():
+    system, state, off, tau = random_system_and_state(3, 4)
+    ev = system.blocks(state, tau, (1.0, 2.0))
+    sol, ev_fd = system.forward_dynamics(state, tau)
+    keep = {f: getattr(ev.blocks, f).copy() for f in ("M", "h", "W", "W_o", "c", "M_o", "h_o")}
+    phi = ev.constraints.phi.copy()
+    a_o = sol.a_o.copy()
+    system.blocks(off, -tau)
+    system.forward_dynamics(off, -tau)
+    for f, value in keep.items():
+        np.testing.assert_array_equal(getattr(ev.blocks, f), value)
+    np.testing.assert_array_equal(ev.constraints.phi, phi)
+    np.testing.assert_array_equal(sol.a_o, a_o)
+    assert sol.blocks is ev_fd.blocks
+
+
+def test_lazy_views_behave_like_the_dataclasses():
+    system, state, _, tau = random_system_and_state(5, 3)
+    ev = system.blocks(state, tau)
+    ref = system.blocks(state, tau, reference=True)
+    assert isinstance(ev.blocks, SystemBlocks)
+    assert ev.arms.M is ev.arms.M  # cached after the first access
+    assert np.shares_memory(ev.arms.M, ev.blocks.M)
+    for obj in (ev.blocks, ev.arms, ev.constraints):
+        assert {f.name for f in dataclasses.fields(obj)} <= set(dir(obj))
+    ev.blocks.check_padding()
+    ev.blocks.check_finite()
+    # the public constructor and with_torques still validate and work from the views
+    b2 = ev.blocks.with_torques(system.pad(tau))
+    np.testing.assert_allclose(b2.h, ev.blocks.h + system.pad(tau))
+    with pytest.raises(InputError):
+        ev.blocks.with_torques(np.zeros((1, 1)))
+    rebuilt = SystemBlocks(*(getattr(ev.blocks, f) for f in BLOCK_FIELDS[:9]))
+    assert_close(solve(rebuilt).qdd, solve(ref.blocks).qdd, "qdd")
+
+
+# ------------------------------------------------------------------ solve
+@pytest.mark.parametrize("seed,n_arms", [(s, 1 + (3 * s) % 8) for s in range(10, 18)])
+def test_compiled_step_equals_numpy_solvers(seed, n_arms):
+    system, state, _, tau = random_system_and_state(seed, n_arms)
+    for baumgarte in (None, (2.0, 3.0)):
+        ref_blocks = system.blocks(state, tau, baumgarte, reference=True).blocks
+        ref = solve(ref_blocks, "object_first_numpy")
+        kkt = solve(ref_blocks, "dense_kkt")
+        for solver in ("auto", "object_first"):
+            sol, ev = system.forward_dynamics(state, tau, solver, baumgarte)
+            alone = solve(ev.blocks, solver)
+            assert sol.solver == alone.solver == "object_first" and sol.singular_arms == ()
+            for s in (sol, alone):
+                for f in ("a_o", "qdd", "mu"):
+                    assert_close(getattr(s, f), getattr(ref, f), f)
+                    scale = np.abs(getattr(kkt, f)).max()
+                    assert np.abs(getattr(s, f) - getattr(kkt, f)).max() <= 1e-9 * scale
+                assert s.residuals().relative < 1e-11
+                assert not s.qdd[~ev.blocks.dof_mask].any()
+                assert not s.mu[~ev.blocks.constraint_mask].any()
+
+
+def welded_ur5s(elbow: float):
+    """Two UR5s welded to a box, arm 1 with its elbow at ``elbow`` rad (0: straight)."""
+    from test_system import make_arm
+
+    from multiarm_pin.rigid_object import RigidObject
+    from multiarm_pin.system import MultiArmSystem
+
+    arms = [make_arm("ur5", f"w{i}", np.pi * i) for i in range(2)]
+    q0 = [np.array([0.0, -1.2, 1.5, -1.9, -1.57, 0.0]),
+          np.array([0.3, -1.2, elbow, -1.0, 0.7, 0.2])]
+    obj = RigidObject.box((0.4, 0.3, 0.2), 5.0)
+    system, state = MultiArmSystem.from_initial_state(arms, obj, ["weld", "weld"], q0,
+                                                      (0.0, 0.0, 0.3))
+    rng = np.random.default_rng(7)
+    return system, moving_state(system, state, rng), rng.normal(size=system.nv)
+
+
+def test_singular_arm_falls_back_exactly_as_before():
+    system, state, tau = welded_ur5s(0.0)
+    J = system.blocks(state).arms.J[1]
+    assert np.linalg.svd(J, compute_uv=False)[-1] < 1e-12  # a genuine singularity
+    b = system.blocks(state, tau).blocks
+    out = (np.empty(6), np.empty((2, 6)), np.empty((2, 6)))
+    status = kernels.object_first(b.M, b.h, b.W, b.W_o, b.c, b.M_o, b.h_o, b.N, 1e-7, 1e-7,
+                                  *out)
+    assert status == kernels.SOLVE_ARM_SINGULAR
+    sol, _ = system.forward_dynamics(state, tau, "auto")
+    assert sol.solver == "singular" and sol.singular_arms == (1,)
+    ref = solve(system.blocks(state, tau, reference=True).blocks, "dense_kkt")
+    for f in ("a_o", "qdd"):
+        assert np.abs(getattr(sol, f) - getattr(ref, f)).max() < 1e-9 * np.abs(ref.qdd).max()
+    assert solve(b, "auto").singular_arms == (1,)
+    for call in (lambda: system.forward_dynamics(state, tau, "object_first"),
+                 lambda: solve(b, "object_first")):
+        with pytest.raises(SingularityError, match=r"arm\(s\) \[1\]"):
+            call()
+
+
+@pytest.mark.parametrize("elbow", [1e-1, 1e-2, 1e-3, 1e-5, 1e-8])
+def test_near_singular_decision_matches_numpy(elbow):
+    """Approaching the elbow singularity the compiled and numpy solvers switch alike."""
+    system, state, tau = welded_ur5s(elbow)
+    b = system.blocks(state, tau).blocks
+    auto = solve(b, "auto")
+    sol, _ = system.forward_dynamics(state, tau, "auto")
+    assert sol.solver == auto.solver
+    try:
+        ref = solve(b, "object_first_numpy")
+    except SingularityError:
+        ref = None
+        with pytest.raises(SingularityError):
+            solve(b, "object_first")
+    if ref is not None:  # Cholesky vs LU: round-off amplified by cond(S_i) ~ 1/rcond here
+        qdd = solve(b, "object_first").qdd
+        assert np.abs(qdd - ref.qdd).max() < 1e-9 * np.abs(ref.qdd).max()
+    kkt = solve(b, "dense_kkt")
+    assert np.abs(sol.qdd - kkt.qdd).max() < 1e-9 * np.abs(kkt.qdd).max()
+
+
+@pytest.mark.parametrize("heavy", [1e9, 1e12])
+def test_badly_conditioned_object_matrix_is_flagged(heavy):
+    rng = np.random.default_rng(3)
+    b, _, _ = random_system(rng, [6], [5])
+    big = SystemBlocks(b.M * heavy, b.h * heavy, b.W, b.W_o, b.c, b.M_o, b.h_o, b.nv, b.N)
+    out = (np.empty(6), np.empty((1, 6)), np.empty((1, 5)))
+    status = kernels.object_first(big.M, big.h, big.W, big.W_o, big.c, big.M_o, big.h_o,
+                                  big.N, 1e-7, 1e-7, *out)
+    assert status == kernels.SOLVE_OBJECT_SINGULAR
+    assert kernels.object_first(b.M, b.h, b.W, b.W_o, b.c, b.M_o, b.h_o, b.N, 1e-7, 1e-7,
+                                *out) == kernels.SOLVE_OK
+    with pytest.raises(SingularityError, match="reduced object matrix"):
+        solve(big, "object_first")
+    assert solve(big, "auto").solver == "singular"
+
+
+# ------------------------------------------------------------------ small linear algebra
+@pytest.mark.parametrize("size", [1, 3, 6, 7])
+def test_cholesky_solve_and_inverse_diagonal(size):
+    rng = np.random.default_rng(size)
+    B = rng.normal(size=(size, size))
+    A = B @ B.T + 0.1 * np.eye(size)
+    L = np.zeros((size, size))
+    assert kernels.cholesky(A, L, size)
+    np.testing.assert_allclose(np.tril(L), np.linalg.cholesky(A), rtol=1e-12, atol=1e-13)
+    X = rng.normal(size=(size, 3))
+    Y = X.copy()
+    kernels.cholesky_solve(L, Y, size, 3)
+    np.testing.assert_allclose(A @ Y, X, atol=1e-10 * np.abs(X).max() * np.linalg.cond(A))
+    d = np.empty(size)
+    kernels.inverse_diagonal(L, size, d, np.empty(size))
+    np.testing.assert_allclose(d, np.diag(np.linalg.inv(A)), rtol=1e-10)
+    indefinite = A - 2 * np.linalg.eigvalsh(A)[-1] * np.eye(size)
+    assert not kernels.cholesky(indefinite, L, size)
+    A[0, 0] = np.nan
+    assert not kernels.cholesky(A, L, size)
+
+
+# ------------------------------------------------------------------ errors
+def test_bad_input_raises_the_same_clear_errors():
+    system, state, _, tau = random_system_and_state(2, 2)
+    o = state.obj
+    bad_q = state.q.copy()
+    bad_q[1] = np.nan
+    bad_twist = o.twist.copy()
+    bad_twist[4] = np.inf
+    bad_tau = tau.copy()
+    bad_tau[0] = np.nan
+    cases = [
+        (SystemState(bad_q, state.v, o), None, DynamicsError, "arms' q"),
+        (SystemState(state.q, state.v, ObjectState(o.position, o.quaternion, bad_twist)), None,
+         DynamicsError, "object twist"),
+        (state, bad_tau, DynamicsError, "tau"),
+        (state, tau[:-1], InputError, "tau"),
+        (SystemState(state.q[:-1], state.v, o), None, InputError, "arms' q"),
+        ("not a state", None, InputError, "SystemState"),
+    ]
+    for st, t, exc, text in cases:
+        for call in (lambda st=st, t=t: system.blocks(st, t),
+                     lambda st=st, t=t: system.blocks(st, t, reference=True),
+                     lambda st=st, t=t: system.forward_dynamics(st, t)):
+            with pytest.raises(exc, match=text):
+                call()
+    with pytest.raises(InputError, match="baumgarte"):
+        system.forward_dynamics(state, tau, baumgarte=(-1.0, 2.0))
+    with pytest.raises(InputError, match="unknown solver"):
+        system.forward_dynamics(state, tau, solver="nope")
+
+
+def test_layout_covers_the_buffer():
+    off, size = kernels.buffer_layout(3, 7, 5)
+    shapes = kernels.segment_shapes(3, 7, 5)
+    assert list(shapes) == list(kernels.SEGMENTS)
+    assert off[0] == 0 and off[-1] == size
+    assert all(off[j + 1] - off[j] == np.prod(shapes[s])
+               for j, s in enumerate(kernels.SEGMENTS))
