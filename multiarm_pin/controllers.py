@@ -16,13 +16,13 @@ without recomputing them. Build one by name with :func:`make_controller`:
   ``a_d = a_ref + K_d (v_ref - v_o) + K_p [p_ref - p; log(R_ref Rᵀ)]``. The internal forces
   come from :func:`multiarm_pin.dynamics.force_distribution.distribute_forces` (every
   unilateral contact pushes with at least ``margin``, forces as small as possible). The
-  secondary objective holds every tool at its first-call pose *relative to the object* (the
-  relative motion ``T_i α_i`` of thesis Sec 3.5, Eq 3.5-3.6): a PD on the tool's placement in
-  the object frame gives a desired relative acceleration, the tool's desired classical
-  acceleration is that of the object-fixed frame at the tool under ``a_d`` plus this
-  correction (:func:`tool_acceleration_from_object`), and the desired joint accelerations are
-  its least-squares solution through the tool Jacobian, with a joint-space PD on the
-  Jacobian's null space for redundant arms. The inverse dynamics
+  secondary objective holds every contact's tip centre at its first-call place *relative to
+  the object* (the relative motion ``T_i α_i`` of thesis Sec 3.5, Eq 3.5-3.6): a PD on each
+  point's position in the object frame gives a desired relative acceleration, the point's
+  desired classical acceleration is that of the object's material point there under ``a_d``
+  plus this correction (:func:`tool_acceleration_from_object`), and the desired joint
+  accelerations are the least-squares solution of these point tasks, with a joint-space PD
+  on the motions they leave free. The inverse dynamics
   (:func:`~multiarm_pin.dynamics.inverse_dynamics.inverse_dynamics`, Eq 3.10) keeps of them
   what the constraint rows leave free and gives the torques. With these torques the forward
   dynamics returns exactly ``a_d`` and those multipliers, and frictionless fingertips do not
@@ -181,32 +181,37 @@ def _transport(r, v_o, a_o, rel_v, rel_a) -> np.ndarray:
 
 
 JACOBIAN_DAMPING = 1e-8
-"""Damping ``ε`` of ``object_pd``'s tool-Jacobian pseudo-inverse ``Jᵀ (J Jᵀ + ε I)⁻¹``,
-relative to the mean eigenvalue of ``J Jᵀ`` (keeps it finite at singular poses and for arms
-with fewer than six joints; changes regular arms' solutions by about ``ε/σ²_min``)."""
-
-_EYE6 = np.eye(6)
+"""Damping ``ε`` of ``object_pd``'s least-squares hold ``(AᵀA + ε I)⁻¹ Aᵀ``, relative to the
+mean diagonal of ``AᵀA`` (keeps it finite at singular poses; changes regular arms' solutions
+by about ``ε/σ²_min`` relative)."""
 
 
 class ObjectPD(Controller):
     """Object-level computed torque on the inverse dynamics with force distribution.
 
     Primary objective: the object follows ``trajectory`` (PD on its pose). Secondary
-    objective (the relative motion ``T_i α_i`` of thesis Sec 3.5): every tool keeps its
-    placement *in the object frame* at the first call, so that grasps (frictionless
-    fingertips that could slide along their faces, revolute handles that could turn) stay
-    where they were. Per arm i, with ``r_i = p_i - x_o``:
+    objective (the relative motion ``T_i α_i`` of thesis Sec 3.5): every contact's tip centre
+    (a point fixed on the tool; for a tip carried by the object, the tool point under it at
+    the first call) keeps its place *in the object frame* of the first call, so fingertips
+    do not slide along their faces and joints do not drift. Three or more non-collinear
+    points per tool (a rigid three-finger gripper, weld, revolute ...) hold the tool's whole
+    pose relative to the object; fewer (one or two fingertips) hold only what the grasp
+    needs and leave the tool's other motions to the joint PD, instead of dragging the arm
+    along the object's rotation into a singularity. Per arm i and held point k (world
+    position ``x_ik = p_i + d_ik``, ``r_ik = x_ik - x_o``):
 
-    1. hold error, world axes: ``e_i = [x_o + R_o p_i,ref - p_i; log(R_o R_i,ref R_iᵀ)]``
-       (``p_i,ref``, ``R_i,ref`` the tool placement in the object frame at the first call);
-       relative twist ``ν_i = [ṗ_i - ẋ_o - ω_o × r_i; ω_i - ω_o]``;
-    2. desired relative acceleration ``α_i = hold_kp e_i - hold_kd ν_i`` (a PD on the tool's
+    1. error ``e_ik = x_o + R_o s_ik - x_ik`` (``s_ik`` its object-frame place at the first
+       call) and relative velocity ``u_ik = ẋ_ik - ẋ_o - ω_o × r_ik``;
+    2. desired relative acceleration ``hold_kp e_ik - hold_kd u_ik`` (a PD on the point's
        coordinates in the object frame);
-    3. desired tool acceleration ``a_i`` = :func:`tool_acceleration_from_object` of ``a_d``,
-       ``ν_i`` and ``α_i``;
-    4. ``q̈_i = J_i⁺ (a_i - J̇q̇_i) + (I - J_i⁺ J_i) z_i``, ``z_i = null_kp (q_ref ⊖ q)_i -
-       null_kd v_i`` (least squares through the LWA tool Jacobian, damped by
-       :data:`JACOBIAN_DAMPING`; the second term moves only redundant arms' self-motion);
+    3. desired point acceleration ``a_ik``: the linear part of
+       :func:`tool_acceleration_from_object` (transport of ``a_d`` to ``r_ik``, plus
+       ``2 ω_o × u_ik`` and step 2);
+    4. with ``A_i`` the points' stacked Jacobian rows ``J_v + J_ω × d_ik`` and ``b_i`` their
+       classical accelerations at ``q̈ = 0``:
+       ``q̈_i = z_i + (A_iᵀ A_i + ε I)⁻¹ A_iᵀ (a_i - b_i - A_i z_i)``,
+       ``z_i = null_kp (q_ref ⊖ q)_i - null_kd v_i`` (least squares, damped by
+       :data:`JACOBIAN_DAMPING`; ``z_i`` survives only on the task's null space);
     5. :func:`~multiarm_pin.dynamics.inverse_dynamics.inverse_dynamics` takes the ``q̈_i``
        closest to these that satisfy the constraint rows, and returns the torques.
 
@@ -219,23 +224,25 @@ class ObjectPD(Controller):
         kd: pose damping [1/s], scalar or (6,).
         margin: least push [N] of every unilateral contact.
         null_kp: stiffness [1/s²] of the joint-space PD toward the first call's ``q``, acting
-            only in the null space of each tool Jacobian (self-motion of redundant arms; no
-            effect on 6-joint arms). Before the relative hold existed it acted on all the
-            joints' free motions, which let tools slide along the object; that role is now
+            only on the joint motions that leave the held points in place (redundant arms'
+            self-motion, a single fingertip's rotation about its tip; none for a 6-joint arm
+            with three fingertips). Before the relative hold existed it acted on all the
+            joints' free motions, which let tips slide along the object; that role is now
             ``hold_kp``'s.
         null_kd: its damping [1/s].
-        hold_kp: stiffness [1/s²] of the tools' pose relative to the object (step 2).
+        hold_kp: stiffness [1/s²] of the held points' positions relative to the object
+            (step 2).
         hold_kd: its damping [1/s].
 
     Attributes:
         last: the :class:`~multiarm_pin.dynamics.inverse_dynamics.InverseDynamicsResult` of
             the last call (its ``mu`` are the planned forces).
-        hold_position: (n, 3) tool positions in the object frame held (first call) [m], or
-            None before the first call.
-        hold_rotation: (n, 3, 3) tool orientations in the object frame held (tool axes ->
-            object axes), or None before the first call.
-        last_tool_acceleration: (n, 6) the desired tool accelerations ``a_i`` of the last
-            call, world axes [m/s², rad/s²].
+        hold_mask: (n, m_max) bool, True for real held points (arm i has one per contact
+            of its joint), None before the first call.
+        hold_points_in_tool: (n, m_max, 3) held points in the tool frame [m].
+        hold_points_in_object: (n, m_max, 3) their places in the object frame [m].
+        last_point_acceleration: (n, m_max, 3) the desired point accelerations ``a_ik`` of
+            the last call, world axes [m/s²] (meaningless on padding).
     """
 
     name = "object_pd"
@@ -263,10 +270,11 @@ class ObjectPD(Controller):
             raise InputError(f"object_pd margin: expected a force >= 0 [N], got {margin!r}")
         self.margin = float(margin)
         self.q_ref: np.ndarray | None = None
-        self.hold_position: np.ndarray | None = None
-        self.hold_rotation: np.ndarray | None = None
+        self.hold_mask: np.ndarray | None = None
+        self.hold_points_in_tool: np.ndarray | None = None
+        self.hold_points_in_object: np.ndarray | None = None
         self.last: InverseDynamicsResult | None = None
-        self.last_tool_acceleration: np.ndarray | None = None
+        self.last_point_acceleration: np.ndarray | None = None
 
     def desired_acceleration(self, t: float, state: SystemState) -> np.ndarray:
         """(6,) ``a_d = a_ref + K_d (v_ref - v_o) + K_p e`` [m/s², rad/s²], world at the COM."""
@@ -277,61 +285,103 @@ class ObjectPD(Controller):
         e = pose_error(ref.position, ref.rotation, o.position, o.rotation)
         return ref.acceleration + self.kd * (ref.twist - o.twist) + self.kp * e
 
+    def _init_hold(self, state: SystemState, evaluation: Evaluation) -> None:
+        """Fix the held points: each contact's tip centre, as a tool-fixed point."""
+        o = state.obj
+        tools = evaluation.arms.tools
+        points = []
+        for i, joint in enumerate(self.system.joints):
+            centres = []
+            for c in joint.contacts:  # the tip centre in world, wherever it is carried
+                if c.point_on == "tool":
+                    centres.append(tools.position[i] + tools.rotation[i] @ c.point)
+                else:
+                    centres.append(o.position + o.rotation @ c.point)
+            points.append(np.array(centres))
+        m = max(len(c) for c in points)
+        n = len(points)
+        self.hold_mask = np.zeros((n, m), dtype=bool)
+        self.hold_points_in_tool = np.zeros((n, m, 3))
+        self.hold_points_in_object = np.zeros((n, m, 3))
+        for i, c in enumerate(points):
+            k = len(c)
+            self.hold_mask[i, :k] = True
+            self.hold_points_in_tool[i, :k] = (c - tools.position[i]) @ tools.rotation[i]
+            self.hold_points_in_object[i, :k] = (c - o.position) @ o.rotation
+
     def hold_error(self, state: SystemState, evaluation: Evaluation
                    ) -> tuple[np.ndarray, np.ndarray]:
-        """Tools' pose errors and twists relative to the object (steps 1 of the class doc).
+        """Held points' position errors and velocities relative to the object (step 1).
 
-        The first call fixes the held placements (``hold_position``, ``hold_rotation``).
+        The first call fixes the held points (``hold_points_in_tool``,
+        ``hold_points_in_object``, ``hold_mask``).
 
         Args:
             state: the system state.
             evaluation: its evaluation (tool kinematics from ``evaluation.arms.tools``).
 
         Returns:
-            ``(e, nu)``, both (n, 6) world axes: ``e`` the pose error ``[m; rad]`` from the
-            tool to its held placement, ``nu`` the relative twist ``[ṗ - ẋ_o - ω_o × r;
-            ω - ω_o]`` [m/s; rad/s].
+            ``(e, u)``, both (n, m_max, 3) world axes (zero on padding): ``e`` from each
+            point to its held place on the object [m], ``u`` its velocity relative to the
+            object's material point there, ``ṗ - ẋ_o - ω_o × r`` [m/s].
         """
+        if self.hold_mask is None:
+            self._init_hold(state, evaluation)
+        return self._hold_terms(state, evaluation)[:2]
+
+    def _hold_terms(self, state, evaluation):
         o = state.obj
         tools = evaluation.arms.tools
-        R_o = o.rotation
-        r = tools.position - o.position
-        if self.hold_position is None:
-            self.hold_position = r @ R_o
-            self.hold_rotation = np.einsum("ji,njk->nik", R_o, tools.rotation)
-        e = np.empty((len(r), 6))
-        e[:, :3] = self.hold_position @ R_o.T - r
-        R_des = np.einsum("ij,njk->nik", R_o, self.hold_rotation)
-        for i in range(len(r)):  # a few arms: log3 per arm
-            e[i, 3:] = pin.log3(R_des[i] @ tools.rotation[i].T)
-        w = o.twist[3:]
-        nu = tools.twist - o.twist
-        nu[:, :3] -= cross(w, r)
-        return e, nu
+        d = np.einsum("nij,nmj->nmi", tools.rotation, self.hold_points_in_tool)
+        x = tools.position[:, None] + d
+        w_t = tools.twist[:, None, 3:]
+        r = x - o.position
+        u = tools.twist[:, None, :3] + cross(w_t, d) - o.twist[:3] - cross(o.twist[3:], r)
+        e = o.position + self.hold_points_in_object @ o.rotation.T - x
+        mask = self.hold_mask[:, :, None]
+        return np.where(mask, e, 0.0), np.where(mask, u, 0.0), d, r
 
     def __call__(self, t, state, evaluation) -> np.ndarray:
         """(nv,) torques [N m]."""
         s = self.system
         b = evaluation.blocks
         arms = evaluation.arms
+        o = state.obj
         if self.q_ref is None:
             self.q_ref = np.array(state.q, dtype=float)
+        if self.hold_mask is None:
+            self._init_hold(state, evaluation)
         a_d = self.desired_acceleration(t, state)
         fd = distribute_forces(b, b.M_o @ a_d - b.h_o, s.unilateral, self.margin)
-        e, nu = self.hold_error(state, evaluation)
-        a_tool = _transport(arms.tools.position - state.obj.position, state.obj.twist, a_d,
-                            nu, self.hold_kp * e - self.hold_kd * nu)
-        self.last_tool_acceleration = a_tool
-        # q̈ = z + J⁺ (a - J̇q̇ - J z), z the joint-space PD; J⁺ = Jᵀ (J Jᵀ + ε I)⁻¹ (one
-        # batched 6 x 6 solve per call; padded columns of J are zero).
+        e, u, d, r = self._hold_terms(state, evaluation)
+        n, m = self.hold_mask.shape
+        zero = np.zeros((n * m, 3))
+        rel_a = np.concatenate([self.hold_kp * e - self.hold_kd * u, np.zeros_like(e)], axis=2)
+        a_pts = _transport(r.reshape(-1, 3), o.twist, a_d,
+                           np.concatenate([u.reshape(-1, 3), zero], axis=1),
+                           rel_a.reshape(-1, 6))[:, :3].reshape(n, m, 3)
+        self.last_point_acceleration = a_pts
+        # Task rows of the tool-fixed points: ṗ = v_t + ω_t × d, i.e. A = J_v + J_ω × d;
+        # their classical acceleration at q̈ = 0: J̇q̇_v + J̇q̇_ω × d + ω_t × (ω_t × d).
         J = arms.J
-        Jt = J.transpose(0, 2, 1)
-        JJt = J @ Jt
-        JJt += (JACOBIAN_DAMPING / 6.0 * np.trace(JJt, axis1=1, axis2=2))[:, None, None] * _EYE6
+        mask = self.hold_mask[:, :, None]
+        A = J[:, None, :3, :] + cross(J[:, None, 3:, :].transpose(0, 1, 3, 2),
+                                       d[:, :, None, :]).transpose(0, 1, 3, 2)
+        A = np.where(mask[..., None], A, 0.0).reshape(n, 3 * m, -1)
+        w_t = arms.tools.twist[:, None, 3:]
+        Jdq = arms.Jdot_qdot
+        a0 = Jdq[:, None, :3] + cross(Jdq[:, None, 3:], d) + cross(w_t, cross(w_t, d))
+        rhs = np.where(mask, a_pts - a0, 0.0).reshape(n, 3 * m)
+        # q̈ = z + (AᵀA + ε I)⁻¹ Aᵀ (rhs - A z), z the joint-space PD: the least-squares
+        # hold, and z on the task's null space (one batched nv_max x nv_max solve).
         err = pin.difference(s.arm_set.model, state.q, self.q_ref)
         z = s.pad(self.null_kp * err - self.null_kd * state.v)
-        rhs = a_tool - arms.Jdot_qdot - (J @ z[:, :, None])[:, :, 0]
-        qdd_desired = z + (Jt @ np.linalg.solve(JJt, rhs[:, :, None]))[:, :, 0]
+        At = A.transpose(0, 2, 1)
+        AtA = At @ A
+        scale = np.trace(AtA, axis1=1, axis2=2) / b.nv
+        AtA += (JACOBIAN_DAMPING * scale)[:, None, None] * np.eye(AtA.shape[1])
+        resid = rhs - (A @ z[:, :, None])[:, :, 0]
+        qdd_desired = z + np.linalg.solve(AtA, (At @ resid[:, :, None]))[:, :, 0]
         self.last = inverse_dynamics(b, a_d, qdd_desired, fd.mu_I, fd.basis)
         return s.unpad(self.last.tau)
 
