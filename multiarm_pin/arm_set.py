@@ -22,6 +22,39 @@ from multiarm_pin.exceptions import InputError
 from multiarm_pin.kinematics import BodyKinematics
 from multiarm_pin.spatial import as_array
 
+GROUP_SIZE = 16
+"""Most arms in one combined Pinocchio model of the hot path (:meth:`ArmSet.pinocchio_pass`).
+
+Pinocchio 4.1's algorithms slow down and its ``Data`` grows superlinearly with the size of
+one combined model (``Data`` of 64 UR5s: 3.8 GB). Measured here, the three calls of an
+evaluation cost per UR5 arm 3.8 µs in models of 4-8 arms, 4.0 µs at 16, 7.2 µs at 32 and
+~22 µs at 64; so larger systems are split into groups of at most 16 consecutive arms, each
+with its own combined model and ``Data``."""
+
+
+@dataclass(frozen=True)
+class ArmGroup:
+    """Consecutive arms evaluated together in one combined Pinocchio model (hot path).
+
+    Attributes:
+        model: the group's combined model (the arms' bases baked in, names prefixed).
+        data: its ``Data`` (written by :meth:`ArmSet.pinocchio_pass`).
+        arms: slice of the group's arms in the arm order.
+        q: slice of the group's configuration in the combined ``q``.
+        v: slice of the group's velocity in the combined ``v``.
+        tool_ids: frame ids of the group's tools in ``model``.
+        views: ``(data.J, data.dJ, data.M, data.nle)`` numpy views, made once (Pinocchio
+            writes these in place).
+    """
+
+    model: pin.Model
+    data: pin.Data
+    arms: slice
+    q: slice
+    v: slice
+    tool_ids: list
+    views: tuple
+
 
 @dataclass(frozen=True)
 class ArmSetTerms:
@@ -52,23 +85,31 @@ class ArmSet:
 
     Args:
         arms: the arms; their names must be unique.
+        group_size: most arms per combined Pinocchio model of the hot path (None:
+            :data:`GROUP_SIZE`); with more arms, :meth:`pinocchio_pass` runs on groups.
+
+    Attributes:
+        model: the combined model of all arms.
+        data: its ``Data``, created on first use when the arms are grouped (it is large for
+            many arms: 3.8 GB for 64 UR5s); :meth:`evaluate` and the energy/momentum helpers
+            of the system use it, the hot path uses the groups'.
+        groups: the :class:`ArmGroup` list (one group, sharing ``model`` and ``data``, when
+            ``n <= group_size``).
     """
 
-    def __init__(self, arms: list[Arm]):
+    def __init__(self, arms: list[Arm], group_size: int | None = None):
         if not arms:
             raise InputError("an ArmSet needs at least one arm")
         names = [a.name for a in arms]
         if len(set(names)) != len(names):
             raise InputError(f"arm names must be unique, got {names}")
+        group_size = GROUP_SIZE if group_size is None else group_size
+        if not (isinstance(group_size, int | np.integer) and group_size >= 1):
+            raise InputError(f"group_size: expected a positive integer, got {group_size!r}")
         self.arms = list(arms)
-        model = pin.Model()
-        model.gravity = arms[0].model.gravity
-        for arm in arms:
-            model = pin.appendModel(
-                model, _prefixed(arm.model, f"{arm.name}/"), 0, pin.SE3.Identity()
-            )
+        model = _combined(self.arms)
         self.model = model
-        self.data = model.createData()
+        self._data = None
         self.n = len(arms)
         self.nq = model.nq
         self.nv = model.nv
@@ -107,9 +148,6 @@ class ArmSet:
             self._eye_pad[i, pad, pad] = 1.0
         self._mask2 = (mask[:, :, None] & mask[:, None, :]).astype(float)
         self._mask_f = mask.astype(float)
-        self._tool_ids = [int(f) for f in self.tool_frame_ids]
-        self._views_of = None
-        self._views: tuple = ()
         # fast path: every arm has nv_max joints and all of them move its tool, so the
         # stacked blocks are plain reshapes of Pinocchio's (column-major) matrices
         self._uniform = bool(mask.all() and support.all())
@@ -118,6 +156,35 @@ class ArmSet:
         self._block_cols = idx[:, None, :]
         self._diag_blocks = (np.arange(self.n)[:, None, None] * k + np.arange(k)[None, :, None],
                              np.arange(self.n)[:, None, None] * k + np.arange(k)[None, None, :])
+        self._tool_ids = [int(f) for f in self.tool_frame_ids]
+        self._views_of = None
+        self._views: tuple = ()
+        self.groups: list[ArmGroup] = []
+        for a0 in range(0, self.n, int(group_size)):
+            a1 = min(self.n, a0 + int(group_size))
+            qs = slice(q_starts[a0], q_starts[a0] + sum(a.nq for a in arms[a0:a1]))
+            vs = slice(v_starts[a0], v_starts[a0] + sum(a.nv for a in arms[a0:a1]))
+            if a1 - a0 == self.n:
+                gm, gd, ids = model, self.data, self._tool_ids
+            else:
+                gm = _combined(self.arms[a0:a1])
+                gd = gm.createData()
+                ids = [gm.getFrameId(f"{a.name}/{a.model.frames[a.tool_frame_id].name}")
+                       for a in arms[a0:a1]]
+            self.groups.append(ArmGroup(gm, gd, slice(a0, a1), qs, vs, ids,
+                                        (gd.J, gd.dJ, gd.M, gd.nle)))
+        self.v_starts = np.array(v_starts, dtype=np.int64)
+
+    @property
+    def data(self) -> pin.Data:
+        """``Data`` of the combined model of all arms (created on first use if grouped)."""
+        if self._data is None:
+            self._data = self.model.createData()
+        return self._data
+
+    @data.setter
+    def data(self, value: pin.Data) -> None:
+        self._data = value
 
     # ------------------------------------------------------------------ state helpers
     def neutral(self) -> np.ndarray:
@@ -164,8 +231,8 @@ class ArmSet:
         Returns:
             :class:`ArmSetTerms`, world frame, tool quantities LOCAL_WORLD_ALIGNED.
         """
+        H = self._full_pass(q, v)
         data = self.data
-        H = self.pinocchio_pass(q, v)
         p = H[:, :3, 3]
         n, k = self.n, self.nv_max
         if self._uniform:
@@ -203,11 +270,12 @@ class ArmSet:
     def pinocchio_pass(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """The three Pinocchio calls of an evaluation, and the tools' world placements.
 
-        Runs ``computeJointJacobiansTimeVariation`` (forward kinematics, ``data.J``,
+        Per group of arms (:attr:`groups`; one group for ``n <= GROUP_SIZE``), runs
+        ``computeJointJacobiansTimeVariation`` (forward kinematics, ``data.J``,
         ``data.dJ``: world Jacobian columns at the world origin), ``crba`` (``data.M``, full
-        symmetric) and ``nonLinearEffects`` (``data.nle``) on the combined model; the results
-        stay in ``self.data`` (they are read by :meth:`evaluate` and the compiled kernels of
-        :mod:`multiarm_pin.kernels`).
+        symmetric) and ``nonLinearEffects`` (``data.nle``) on the group's combined model; the
+        results stay in each group's ``data`` (``self.data`` for one group; read by
+        :meth:`evaluate` and the compiled kernels of :mod:`multiarm_pin.kernels`).
 
         Tool placements: one ``pin.updateFramePlacement`` per tool. Measured on 2 / 10 UR5s:
         3.7 / 7.6 µs, against 5.3 / 15 µs for ``pin.updateFramePlacements`` (every frame) and
@@ -221,6 +289,21 @@ class ArmSet:
         Returns:
             (n, 4, 4) homogeneous world placements of the n tool frames [m].
         """
+        if len(self.groups) == 1:
+            return self._full_pass(q, v)
+        upd = pin.updateFramePlacement
+        H = []
+        for g in self.groups:  # results stay in each group's data
+            model, data = g.model, g.data
+            qg, vg = q[g.q], v[g.v]
+            pin.computeJointJacobiansTimeVariation(model, data, qg, vg)
+            pin.crba(model, data, qg)
+            pin.nonLinearEffects(model, data, qg, vg)
+            H.extend([upd(model, data, f).np for f in g.tool_ids])
+        return np.array(H)
+
+    def _full_pass(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """:meth:`pinocchio_pass` on the model of all arms (``self.data``), ungrouped."""
         model, data = self.model, self.data
         pin.computeJointJacobiansTimeVariation(model, data, q, v)  # FK, J and dJ (world)
         pin.crba(model, data, q)
@@ -243,20 +326,27 @@ class ArmSet:
 
     def gravity(self, q: np.ndarray) -> np.ndarray:
         """(n, nv_max) gravity torques of all arms at the combined configuration ``q`` [N m]."""
-        g = pin.computeGeneralizedGravity(self.model, self.data, q)
-        return g[self._idx] * self._mask_f
+        return self.gravity_combined(q)[self._idx] * self._mask_f
+
+    def gravity_combined(self, q: np.ndarray) -> np.ndarray:
+        """(nv,) gravity torques of all arms at ``q`` [N m], computed per group."""
+        if len(self.groups) == 1:
+            return pin.computeGeneralizedGravity(self.model, self.data, q).copy()
+        return np.concatenate([pin.computeGeneralizedGravity(g.model, g.data, q[g.q])
+                               for g in self.groups])
 
     def tool_kinematics(self, q: np.ndarray, v: np.ndarray | None = None) -> BodyKinematics:
         """World placements and LWA twists of the n tools at ``(q, v)``."""
         v = np.zeros(self.nv) if v is None else v
-        pin.forwardKinematics(self.model, self.data, q, v)
         LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         p, R, tw = [], [], []
-        for f in self.tool_frame_ids:
-            m = pin.updateFramePlacement(self.model, self.data, int(f))
-            p.append(m.translation.copy())
-            R.append(m.rotation.copy())
-            tw.append(pin.getFrameVelocity(self.model, self.data, int(f), LWA).vector.copy())
+        for g in self.groups:
+            pin.forwardKinematics(g.model, g.data, q[g.q], v[g.v])
+            for f in g.tool_ids:
+                m = pin.updateFramePlacement(g.model, g.data, int(f))
+                p.append(m.translation.copy())
+                R.append(m.rotation.copy())
+                tw.append(pin.getFrameVelocity(g.model, g.data, int(f), LWA).vector.copy())
         return BodyKinematics(np.array(p), np.array(R), np.array(tw))
 
 
@@ -264,6 +354,16 @@ _EPS = np.zeros((3, 3, 3))
 _EPS[0, 1, 2] = _EPS[1, 2, 0] = _EPS[2, 0, 1] = 1.0
 _EPS[0, 2, 1] = _EPS[2, 1, 0] = _EPS[1, 0, 2] = -1.0
 """Levi-Civita symbol: ``(a × b)_i = ε_ijk a_j b_k`` (one einsum instead of ``np.cross``)."""
+
+
+def _combined(arms: list[Arm]) -> pin.Model:
+    """One Pinocchio model of the arms (names prefixed ``<arm name>/``), first arm's gravity."""
+    model = pin.Model()
+    model.gravity = arms[0].model.gravity
+    for arm in arms:
+        model = pin.appendModel(model, _prefixed(arm.model, f"{arm.name}/"), 0,
+                                pin.SE3.Identity())
+    return model
 
 
 def _prefixed(model: pin.Model, prefix: str) -> pin.Model:

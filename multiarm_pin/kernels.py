@@ -105,6 +105,16 @@ def contact_tables(constraint_set) -> tuple[np.ndarray, np.ndarray]:
     return ints, floats
 
 
+SOLVE_OK = 0
+"""Status of :func:`object_first`: solved."""
+SOLVE_ARM_SINGULAR = 1
+"""Status: some ``M_i`` or ``S_i`` failed to factor, or ``S_i`` is badly conditioned."""
+SOLVE_OBJECT_SINGULAR = 2
+"""Status: the reduced object matrix is badly conditioned or the result is not finite."""
+SOLVE_NOT_FINITE = 3
+"""Status of :func:`step_system`: the state or the torques hold NaN or infinity."""
+
+
 # ------------------------------------------------------------------ small dense linear algebra
 @njit(cache=True, error_model="numpy")
 def cholesky(A, L, size):  # pragma: no cover - compiled
@@ -509,9 +519,100 @@ def _segments(buf, n, k, m):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def evaluate_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, ints, floats,
-                    params, dims, buf):  # pragma: no cover - compiled
+def group_arm_terms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, dims, v_offset,
+                    first_arm, buf):  # pragma: no cover - compiled
+    """:func:`arm_terms` of one group of consecutive arms into their rows of the buffer.
+
+    Args:
+        J_world: (6, nv_g) ``data.J`` of the group's combined Pinocchio model.
+        dJ_world: (6, nv_g) ``data.dJ``.
+        M_full: (nv_g, nv_g) ``data.M``.
+        nle_full: (nv_g,) ``data.nle``.
+        H: (n_g, 4, 4) the group's tool placements.
+        x: (13 + nq + 2 nv,) the concatenated state and torques (see :func:`evaluate_system`).
+        arm_ints: (n_g, 1 + 2k) the group's rows of the arm table, joint indices relative
+            to the group's velocity vector.
+        dims: (4,) int ``(k, m, nv, n)``: nv_max, N_max, total joints and arms.
+        v_offset: index of the group's first joint in the combined velocity.
+        first_arm: index of the group's first arm.
+        buf: the flat output buffer.
+    """
+    k, m, nv, n = dims[0], dims[1], dims[2], dims[3]
+    (M, nle, J, Jdq, p, R, tw, vp, rows, h, W, W_o, c, M_o, h_o, a_o, qdd,
+     mu) = _segments(buf, n, k, m)
+    ng = H.shape[0]
+    lo, hi = first_arm, first_arm + ng
+    start = x.shape[0] - 2 * nv + v_offset
+    v = x[start:start + M_full.shape[0]]
+    arm_terms(J_world, dJ_world, M_full, nle_full, v, H, arm_ints[:, 1:1 + k],
+              arm_ints[:, 0], arm_ints[:, 1 + k:1 + 2 * k], M[lo:hi], nle[lo:hi], J[lo:hi],
+              Jdq[lo:hi], p[lo:hi], R[lo:hi], tw[lo:hi], vp[lo:hi])
+
+
+@njit(cache=True, error_model="numpy")
+def finish_system(x, arm_ints, v_starts, ints, floats, params, dims,
+                  buf):  # pragma: no cover - compiled
+    """Constraint rows and blocks from the arm terms already in ``buf``.
+
+    Args:
+        x: (13 + nq + 2 nv,) the concatenated state and torques (see :func:`evaluate_system`).
+        arm_ints: (n, 1 + 2k) the arm table (see :func:`evaluate_system`).
+        v_starts: (n,) int index of each arm's first joint in the combined velocity (joint
+            indices of ``arm_ints`` may be relative to a group).
+        ints: (K, 4) int contact table (:func:`contact_tables`).
+        floats: (K, 14) float contact table.
+        params: (18,) object and Baumgarte parameters (see :func:`evaluate_system`).
+        dims: (4,) int ``(k, m, nv, n)``.
+        buf: the flat buffer (arm segments read, the others written).
+
+    Returns:
+        False (and nothing computed) if some entry of ``x`` is NaN or infinite.
+    """
+    for a in range(x.shape[0]):
+        if not math.isfinite(x[a]):
+            return False
+    k, m, nv, n = dims[0], dims[1], dims[2], dims[3]
+    (M, nle, J, Jdq, p, R, tw, vp, rows, h, W, W_o, c, M_o, h_o, a_o, qdd,
+     mu) = _segments(buf, n, k, m)
+    obj_R = np.empty((3, 3))
+    quaternion_rotation(x[3:7], obj_R)
+    obj_tw = x[7:13]
+    constraint_rows(p, R, tw, x[0:3], obj_R, obj_tw, ints, floats, rows)
+    tau = x[x.shape[0] - nv:]
+    tau_p = np.zeros((n, k))
+    for i in range(n):
+        for a in range(arm_ints[i, 0]):
+            tau_p[i, a] = tau[v_starts[i] + a]
+    assemble(J, Jdq, nle, tau_p, rows, params[13:16], obj_R, params[0],
+             params[1:10].reshape((3, 3)), params[10:13], obj_tw, h, W, W_o, c, M_o, h_o)
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def solve_buffer(N, params, dims, buf):  # pragma: no cover - compiled
+    """:func:`object_first` on the blocks of the buffer, solution into its last segments.
+
+    Args:
+        N: (n,) int constraint rows per arm.
+        params: (18,), the last two entries the solver thresholds.
+        dims: (4,) int ``(k, m, nv, n)``.
+        buf: the flat buffer.
+
+    Returns:
+        The status of :func:`object_first`.
+    """
+    (M, nle, J, Jdq, p, R, tw, vp, rows, h, W, W_o, c, M_o, h_o, a_o, qdd,
+     mu) = _segments(buf, dims[3], dims[0], dims[1])
+    return object_first(M, h, W, W_o, c, M_o, h_o, N, params[16], params[17], a_o, qdd, mu)
+
+
+@njit(cache=True, error_model="numpy")
+def evaluate_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, ints,
+                    floats, params, dims, buf):  # pragma: no cover - compiled
     """Arm terms, constraint rows and blocks of one state into the flat buffer ``buf``.
+
+    All arms in one combined Pinocchio model (one group); see :func:`group_arm_terms` and
+    :func:`finish_system` for several.
 
     Args:
         J_world: (6, nv) ``data.J`` (see :func:`arm_terms`).
@@ -524,46 +625,24 @@ def evaluate_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, ints, f
             [N m] (zeros for none): one array so that one finiteness test covers all.
         arm_ints: (n, 1 + 2k) int: joints per arm, then joint indices (see ``idx`` of
             :func:`arm_terms`), then the tool-support mask.
+        v_starts: (n,) int index of each arm's first joint in the combined velocity.
         ints: (K, 4) int contact table (:func:`contact_tables`).
         floats: (K, 14) float contact table.
         params: (18,) object mass [kg], inertia about the COM in object axes (9, row-major)
             [kg m²], gravity (3) [m/s²], Baumgarte ``(α, β, on)``, then the solver thresholds
-            ``rcond_tol``, ``object_rcond_tol`` (read by :func:`step_system` only).
-        dims: (3,) int ``(k, m, nv) = (nv_max, N_max, total joints)``.
+            ``rcond_tol``, ``object_rcond_tol`` (read by :func:`solve_buffer` only).
+        dims: (4,) int ``(k, m, nv, n) = (nv_max, N_max, total joints, arms)``.
         buf: output, the flat buffer (segments :data:`SEGMENTS`, see the module docstring).
 
     Returns:
-        False (and nothing computed) if some entry of ``x`` is NaN or infinite.
+        False (and the buffer meaningless) if some entry of ``x`` is NaN or infinite.
     """
-    for a in range(x.shape[0]):
-        if not math.isfinite(x[a]):
-            return False
-    n = H.shape[0]
-    k, m, nv = dims[0], dims[1], dims[2]
-    (M, nle, J, Jdq, p, R, tw, vp, rows, h, W, W_o, c, M_o, h_o, a_o, qdd,
-     mu) = _segments(buf, n, k, m)
-    nv_arm = arm_ints[:, 0]
-    idx = arm_ints[:, 1:1 + k]
-    support = arm_ints[:, 1 + k:1 + 2 * k]
-    v = x[x.shape[0] - 2 * nv:x.shape[0] - nv]
-    tau = x[x.shape[0] - nv:]
-    arm_terms(J_world, dJ_world, M_full, nle_full, v, H, idx, nv_arm, support,
-              M, nle, J, Jdq, p, R, tw, vp)
-    obj_R = np.empty((3, 3))
-    quaternion_rotation(x[3:7], obj_R)
-    obj_tw = x[7:13]
-    constraint_rows(p, R, tw, x[0:3], obj_R, obj_tw, ints, floats, rows)
-    tau_p = np.zeros((n, k))
-    for i in range(n):
-        for a in range(nv_arm[i]):
-            tau_p[i, a] = tau[idx[i, a]]
-    assemble(J, Jdq, nle, tau_p, rows, params[13:16], obj_R, params[0],
-             params[1:10].reshape((3, 3)), params[10:13], obj_tw, h, W, W_o, c, M_o, h_o)
-    return True
+    group_arm_terms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, dims, 0, 0, buf)
+    return finish_system(x, arm_ints, v_starts, ints, floats, params, dims, buf)
 
 
 @njit(cache=True, error_model="numpy")
-def step_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, ints, floats,
+def step_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, ints, floats,
                 params, dims, N, buf):  # pragma: no cover - compiled
     """:func:`evaluate_system` then :func:`object_first` on the buffer (one full step).
 
@@ -575,10 +654,11 @@ def step_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, ints, float
         H: (n, 4, 4).
         x: (13 + nq + 2 nv,).
         arm_ints: (n, 1 + 2k).
+        v_starts: (n,).
         ints: (K, 4).
         floats: (K, 14).
         params: (18,), the last two entries the solver thresholds.
-        dims: (3,).
+        dims: (4,).
         N: (n,) int constraint rows per arm.
         buf: output buffer; the segments ``a_o``, ``qdd``, ``mu`` receive the solution.
 
@@ -586,26 +666,13 @@ def step_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, ints, float
         The status of :func:`object_first`, or ``SOLVE_NOT_FINITE`` if ``x`` holds NaN or
         infinity (nothing computed then).
     """
-    if not evaluate_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, ints, floats,
-                           params, dims, buf):
+    if not evaluate_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts,
+                           ints, floats, params, dims, buf):
         return SOLVE_NOT_FINITE
-    n = H.shape[0]
-    (M, nle, J, Jdq, p, R, tw, vp, rows, h, W, W_o, c, M_o, h_o, a_o, qdd,
-     mu) = _segments(buf, n, dims[0], dims[1])
-    return object_first(M, h, W, W_o, c, M_o, h_o, N, params[16], params[17], a_o, qdd, mu)
+    return solve_buffer(N, params, dims, buf)
 
 
 # ------------------------------------------------------------------ 4. object-first solve
-SOLVE_OK = 0
-"""Status of :func:`object_first`: solved."""
-SOLVE_ARM_SINGULAR = 1
-"""Status: some ``M_i`` or ``S_i`` failed to factor, or ``S_i`` is badly conditioned."""
-SOLVE_OBJECT_SINGULAR = 2
-"""Status: the reduced object matrix is badly conditioned or the result is not finite."""
-SOLVE_NOT_FINITE = 3
-"""Status of :func:`step_system`: the state or the torques hold NaN or infinity."""
-
-
 @njit(cache=True, error_model="numpy")
 def object_first(M, h, W, W_o, c, M_o, h_o, N, rcond_tol, object_rcond_tol,
                  a_o, qdd, mu):  # pragma: no cover - compiled

@@ -200,7 +200,9 @@ class MultiArmSystem:
             )
         self.gravity = as_array(gravity, (3,), "gravity [m/s^2]")
         self.arm_set = ArmSet(list(arms))
-        self.arm_set.model.gravity = pin.Motion(self.gravity, np.zeros(3))
+        for model in {id(m): m for m in [self.arm_set.model]
+                      + [g.model for g in self.arm_set.groups]}.values():
+            model.gravity = pin.Motion(self.gravity, np.zeros(3))
         self.constraint_set = ConstraintSet(joints)
         self.obj = obj
         self.joints = list(joints)
@@ -227,7 +229,14 @@ class MultiArmSystem:
         self._k_params = np.concatenate(
             ([self.obj.mass], self.obj.inertia.ravel(), self.gravity, [0.0, 0.0, 0.0],
              [DEFAULT_RCOND_TOL, OBJECT_RCOND_TOL])).astype(float)
-        self._k_dims = np.array([k, m, self.nv], dtype=np.int64)
+        self._k_dims = np.array([k, m, self.nv, n], dtype=np.int64)
+        self._k_v_starts = aset.v_starts
+        self._k_single = len(aset.groups) == 1
+        self._k_group_ints = []
+        for g in aset.groups:  # joint indices relative to the group's velocity vector
+            gi = self._k_arm_ints[g.arms].copy()
+            gi[:, 1:1 + k] = np.maximum(gi[:, 1:1 + k] - g.v.start, 0)
+            self._k_group_ints.append(gi)
         self._k_N = np.ascontiguousarray(self._N, dtype=np.int64)
         off, self._k_size = kernels.buffer_layout(n, k, m)
         shapes = kernels.segment_shapes(n, k, m)
@@ -469,15 +478,26 @@ class MultiArmSystem:
             params[13:16] = a, b, 1.0
         aset = self.arm_set
         H = aset.pinocchio_pass(q, v)
-        J, dJ, M, nle = aset.data_arrays()
         buf = np.empty(self._k_size)
-        args = (J, dJ, M, nle, H, x, self._k_arm_ints, self._k_ints, self._k_floats, params,
-                self._k_dims)
-        if step:
-            status = kernels.step_system(*args, self._k_N, buf)
-            finite = status != kernels.SOLVE_NOT_FINITE
-        else:
-            finite = kernels.evaluate_system(*args, buf)
+        status = kernels.SOLVE_OK
+        if self._k_single:  # one compiled call
+            J, dJ, M, nle = aset.data_arrays()
+            args = (J, dJ, M, nle, H, x, self._k_arm_ints, self._k_v_starts, self._k_ints,
+                    self._k_floats, params, self._k_dims)
+            if step:
+                status = kernels.step_system(*args, self._k_N, buf)
+                finite = status != kernels.SOLVE_NOT_FINITE
+            else:
+                finite = kernels.evaluate_system(*args, buf)
+        else:  # arm terms group by group, then the rest in one call
+            for g, gi in zip(aset.groups, self._k_group_ints, strict=True):
+                kernels.group_arm_terms(*g.views, H[g.arms], x, gi, self._k_dims, g.v.start,
+                                        g.arms.start, buf)
+            finite = kernels.finish_system(x, self._k_arm_ints, self._k_v_starts,
+                                           self._k_ints, self._k_floats, params, self._k_dims,
+                                           buf)
+            if step and finite:
+                status = kernels.solve_buffer(self._k_N, params, self._k_dims, buf)
         if not finite:
             self._check_state_and_tau(state, t)  # raises naming the field
         seg = self._k_segments
@@ -559,7 +579,7 @@ class MultiArmSystem:
     # ------------------------------------------------------------------ physics
     def gravity_torques(self, q: np.ndarray) -> np.ndarray:
         """(nv,) joint torques that hold the arms (alone) against gravity [N m]."""
-        return pin.computeGeneralizedGravity(self.arm_set.model, self.arm_set.data, q).copy()
+        return self.arm_set.gravity_combined(q)
 
     def kinetic_energy(self, state: SystemState) -> float:
         """Arms' ``½ vᵀ M v`` plus the object's ``½ m |ẋ|² + ½ ωᵀ I_w ω`` [J]."""

@@ -178,6 +178,34 @@ def test_lazy_views_behave_like_the_dataclasses():
     assert_close(solve(rebuilt).qdd, solve(ref.blocks).qdd, "qdd")
 
 
+def test_grouped_pinocchio_models_give_the_same_terms(monkeypatch):
+    """Arms split over several combined Pinocchio models (as for > GROUP_SIZE arms)."""
+    import multiarm_pin.arm_set as arm_set_module
+
+    monkeypatch.setattr(arm_set_module, "GROUP_SIZE", 2)
+    for seed, n_arms in ((21, 5), (22, 4)):
+        system, state, off, tau = random_system_and_state(seed, n_arms)
+        aset = system.arm_set
+        assert [g.arms for g in aset.groups][:2] == [slice(0, 2), slice(2, 4)]
+        assert len(aset.groups) == (n_arms + 1) // 2
+        for st in (state, off):
+            ev = system.blocks(st, tau, (1.0, 2.0))
+            assert_evaluations_equal(ev, system.blocks(st, tau, (1.0, 2.0), reference=True))
+            sol, _ = system.forward_dynamics(st, tau)
+            ref = solve(system.blocks(st, tau, reference=True).blocks, "object_first_numpy")
+            for f in ("a_o", "qdd", "mu"):
+                assert_close(getattr(sol, f), getattr(ref, f), f)
+        full = pin.computeGeneralizedGravity(aset.model, aset.data, state.q)
+        assert_close(system.gravity_torques(state.q), full, "gravity")
+        assert_close(aset.gravity(state.q), aset.pad_v(full), "padded gravity")
+        tk = aset.tool_kinematics(state.q, state.v)
+        ref_terms = aset.evaluate(state.q, state.v)
+        for f in ("position", "rotation", "twist"):
+            assert_close(getattr(tk, f), getattr(ref_terms.tools, f), f)
+        with pytest.raises(InputError, match="group_size"):
+            arm_set_module.ArmSet(system.arms, group_size=0)
+
+
 # ------------------------------------------------------------------ solve
 @pytest.mark.parametrize("seed,n_arms", [(s, 1 + (3 * s) % 8) for s in range(10, 18)])
 def test_compiled_step_equals_numpy_solvers(seed, n_arms):
