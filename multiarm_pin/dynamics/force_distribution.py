@@ -131,10 +131,19 @@ def _best_margin(mu_p_U: np.ndarray, G: np.ndarray, cap: float) -> float:
 
 def _raise_infeasible(mu_p_U: np.ndarray, G: np.ndarray, margin: float) -> None:
     best = _best_margin(mu_p_U, G, margin)
+    size = float(np.abs(mu_p_U).max()) if mu_p_U.size else 0.0
+    if np.isfinite(best) and best >= margin - 1e-9 * max(1.0, margin, size):
+        # the LP reaches the margin: the least-norm solve failed for numerical reasons
+        raise DynamicsError(
+            f"the internal forces for a {margin:g} N margin exist (a linear program reaches it) "
+            f"but the least-norm solve failed; the required contact forces are of order "
+            f"{size:.3g} N, which suggests a runaway object wrench (check the controller gains "
+            "and the state)"
+        )
     raise DynamicsError(
         f"no internal force keeps every unilateral contact force >= {margin:g} N: the largest "
         f"achievable smallest force is {best:.6g} N (the grasp is not form closure for this "
-        "load, or the margin is too large)"
+        f"load, or the margin is too large; required forces of order {size:.3g} N)"
     )
 
 
