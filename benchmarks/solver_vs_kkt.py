@@ -8,8 +8,10 @@ compensation):
 - ``revolute`` (thesis Sec 4.4, Table 4.4, and scaling): n 6-joint arms, each holding one
   large box through a revolute joint (5 frictionless point contacts). For each n:
   ``t``  = time to build the coefficient blocks (``MultiArmSystem.blocks``: Pinocchio terms
-  of all arms in one combined model + the vectorised constraint layer), ``t1`` = object-first
-  solve, ``t2`` = dense KKT solve (``multiarm_pin.dynamics.solve(blocks, name)``).
+  of the arms in combined models of at most 16 arms + the compiled constraint rows and
+  assembly), ``t1`` = object-first solve (compiled), ``t1np`` = the vectorised numpy
+  object-first solve (``object_first_numpy``, the reference), ``t2`` = dense KKT solve
+  (``multiarm_pin.dynamics.solve(blocks, name)``).
 - ``weld`` (peer): the same systems with weld grasps (6 contacts), our full step
   (``MultiArmSystem.forward_dynamics``: blocks + object-first solve) against one call of
   ``pin.constraintDynamics`` on one combined Pinocchio model (free-flyer object + arms,
@@ -22,7 +24,7 @@ collector off, states cycled, warm-up calls excluded). Outputs in ``--out``:
 
 Usage::
 
-    .venv/bin/python benchmarks/solver_vs_kkt.py                 # full run (~15 min)
+    .venv/bin/python benchmarks/solver_vs_kkt.py                 # full run (~5 min)
     .venv/bin/python benchmarks/solver_vs_kkt.py --quick --out /tmp/bench
     .venv/bin/python benchmarks/solver_vs_kkt.py --arms 2,4,8 --peer-arms 2,4 --repeat 500
 """
@@ -73,7 +75,7 @@ THESIS_TABLE_4_4 = {
 }
 """Thesis Table 4.4 (Matlab 4.2a, msolve vs msolve03), averages."""
 
-DEFAULT_ARMS = (2, 3, 4, 5, 6, 7, 8, 9, 10, 16, 32, 64)
+DEFAULT_ARMS = (2, 3, 4, 5, 6, 7, 8, 9, 10, 16, 32, 64, 128)
 DEFAULT_PEER_ARMS = (2, 3, 4, 6, 8, 10, 12, 16, 24, 32)
 DEFAULT_PROFILE_ARMS = (2, 10, 64)
 QUICK_ARMS = (2, 3)
@@ -291,6 +293,7 @@ class Row:
     n_constraints: int
     t_coeff_s: float
     t_object_first_s: float
+    t_object_first_numpy_s: float
     t_dense_kkt_s: float
     t_full_step_s: float
     t_pinocchio_s: float
@@ -309,68 +312,73 @@ def measure_case(bench: Bench, case: str, timer: Timer, peer: PinocchioPeer | No
     fns = [
         lambda k: system.blocks(states[k], taus[k]),
         lambda k: solve(blocks[k], "object_first"),
+        lambda k: solve(blocks[k], "object_first_numpy"),
         lambda k: solve(blocks[k], "dense_kkt"),
         lambda k: system.forward_dynamics(states[k], taus[k], "object_first"),
     ]
     if peer is not None:
         fns.append(peer.step)
     times, reps = timer.medians(fns, K)
-    t_coeff, t1, t2, t_full = times[:4]
+    t_coeff, t1, t1np, t2, t_full = times[:5]
     t_pin, diff_pin = math.nan, math.nan
     if peer is not None:
-        t_pin = times[4]
+        t_pin = times[5]
         diff_pin = peer_difference(bench, peer)
-    return Row(case, system.n_arms, system.nv, int(blocks[0].n_constraints), t_coeff, t1, t2,
-               t_full, t_pin, reps, kkt_difference(bench), diff_pin)
+    return Row(case, system.n_arms, system.nv, int(blocks[0].n_constraints), t_coeff, t1, t1np,
+               t2, t_full, t_pin, reps, kkt_difference(bench), diff_pin)
 
 
 STAGES = (
-    ("check_state", "state validation (`check_state`)"),
-    ("pinocchio", "Pinocchio: `computeJointJacobiansTimeVariation` + `crba` + `nonLinearEffects`"),
-    ("arm_numpy", "arm terms in numpy (gather, tool kinematics, LWA Jacobians, J̇q̇)"),
-    ("constraints", "constraint layer (`ConstraintSet.evaluate`)"),
-    ("assembly", "block assembly (W, c, h, M_o, h_o, `SystemBlocks`)"),
-    ("solve", "object-first solve (`solve(blocks, 'object_first')`)"),
+    ("pinocchio", "Pinocchio: `computeJointJacobiansTimeVariation` + `crba` + "
+                  "`nonLinearEffects` (groups of <= 16 arms) + tool placements"),
+    ("kernels", "compiled arm terms + constraint rows + assembly (`multiarm_pin.kernels`)"),
+    ("solve", "compiled object-first solve inside the step"),
+    ("glue", "Python glue: input checks, state concatenation, result objects"),
 )
+"""Stages of one compiled full step (``forward_dynamics``), in order."""
 
 
 def profile_stages(bench: Bench, timer: Timer) -> dict[str, float]:
     """Median time of each stage of one full step (weld or revolute system).
 
-    The stages are timed separately with the same inputs; ``arm_numpy`` and ``assembly`` are
-    differences of nested medians (``ArmSet.evaluate`` minus its Pinocchio calls, ``blocks``
-    minus its parts).
+    ``pinocchio`` = :meth:`ArmSet.pinocchio_pass`; ``kernels`` = the compiled evaluation on
+    its results; ``solve`` = the compiled step minus the evaluation; ``glue`` = the full step
+    minus all that. Also returned: ``solve_alone`` = ``solve(blocks, 'object_first')`` with its
+    Python wrapper, ``solve_numpy`` = ``object_first_numpy``, ``blocks`` =
+    ``MultiArmSystem.blocks``.
     """
     system, states, taus, blocks = bench.system, bench.states, bench.taus, bench.blocks
     K = len(states)
-    aset, cset = system.arm_set, system.constraint_set
-    model, data = aset.model, aset.data
+    aset = system.arm_set
+    xs = [np.concatenate((s.obj.position, s.obj.quaternion, s.obj.twist, s.q, s.v, t))
+          for s, t in zip(states, taus, strict=True)]
+    Hs = [aset.pinocchio_pass(s.q, s.v) for s in states]
+    buf = np.empty(system._k_size)
+    params = system._k_params
 
-    def pin_calls(k):
-        q, v = states[k].q, states[k].v
-        pin.computeJointJacobiansTimeVariation(model, data, q, v)
-        pin.crba(model, data, q)
-        pin.nonLinearEffects(model, data, q, v)
+    def kernels_only(k, step):  # Pinocchio first, so that its data belong to state k
+        aset.pinocchio_pass(states[k].q, states[k].v)
+        return system._kernel_pass(Hs[k], xs[k], params, buf, step)
 
-    terms = [aset.evaluate(s.q, s.v) for s in states]
-    objk = [s.obj.kinematics() for s in states]
-    (t_check, t_pin, t_arm, t_con, t_blocks, t_solve, t_full), _ = timer.medians([
-        lambda k: system.check_state(states[k]),
-        pin_calls,
-        lambda k: aset.evaluate(states[k].q, states[k].v),
-        lambda k: cset.evaluate(terms[k].tools, objk[k]),
+    (t_pin, t_pk, t_pks, t_blocks, t_solve, t_np, t_full), _ = timer.medians([
+        lambda k: aset.pinocchio_pass(states[k].q, states[k].v),
+        lambda k: kernels_only(k, False),
+        lambda k: kernels_only(k, True),
         lambda k: system.blocks(states[k], taus[k]),
         lambda k: solve(blocks[k], "object_first"),
+        lambda k: solve(blocks[k], "object_first_numpy"),
         lambda k: system.forward_dynamics(states[k], taus[k], "object_first"),
     ], K)
+    t_k, t_ks = max(t_pk - t_pin, 0.0), max(t_pks - t_pin, 0.0)
     return {
-        "check_state": t_check,
         "pinocchio": t_pin,
-        "arm_numpy": max(t_arm - t_pin, 0.0),
-        "constraints": t_con,
-        "assembly": max(t_blocks - t_check - t_arm - t_con, 0.0),
-        "solve": t_solve,
+        "kernels": t_k,
+        "solve": max(t_ks - t_k, 0.0),
+        "glue": max(t_full - t_pin - t_ks, 0.0),
         "full_step": t_full,
+        "blocks": t_blocks,
+        "solve_alone": t_solve,
+        "solve_numpy": t_np,
     }
 
 
@@ -444,9 +452,18 @@ def environment() -> dict[str, str]:
         "numpy": np.__version__,
         "scipy": scipy.__version__,
         "pinocchio": pin.__version__,
+        "numba": _numba_version(),
         "multiarm_pin": getattr(multiarm_pin, "__version__", "?"),
         "platform": platform.platform(),
     }
+
+
+def _numba_version() -> str:
+    try:
+        import numba
+    except ImportError:  # pragma: no cover
+        return "not installed"
+    return numba.__version__
 
 
 def write_report(path: Path, rows: Sequence[Row], profiles: dict[tuple[str, int], dict],
@@ -473,12 +490,15 @@ def write_report(path: Path, rows: Sequence[Row], profiles: dict[tuple[str, int]
         f"up to {args.repeat} rounds per row (fewer for slow calls: ~"
         f"{args.budget:g} s budget, at least 5), after {args.warmup} warm-up rounds that "
         "are excluded; the garbage collector is off while timing.\n"
-        "- `t` = `MultiArmSystem.blocks(state, tau)` (Pinocchio terms of all arms in one "
-        "combined model + vectorised constraint layer + block assembly, with input checks); "
-        "`t1` = `solve(blocks, 'object_first')`; `t2` = `solve(blocks, 'dense_kkt')` "
+        "- `t` = `MultiArmSystem.blocks(state, tau)` (Pinocchio terms of the arms in "
+        "combined models of at most 16 arms + compiled (numba) arm terms, constraint rows and "
+        "block assembly, with input checks); `t1` = `solve(blocks, 'object_first')` (compiled "
+        "kernel: per-arm Cholesky); `t1np` = `solve(blocks, 'object_first_numpy')` (the "
+        "vectorised numpy object-first solver, batched LAPACK: the reference and previous "
+        "implementation); `t2` = `solve(blocks, 'dense_kkt')` "
         "(assembles and LU-solves the full KKT matrix, like the thesis's `msolve03`); "
         "full step = `MultiArmSystem.forward_dynamics(state, tau, 'object_first')` "
-        "(= `t` + `t1` + dispatch).\n"
+        "(blocks and solve in one compiled call).\n"
         "- Pinocchio peer: one `pin.Model` with a free-flyer object followed by all arms "
         "(`pin.appendModel`), one `CONTACT_6D` `RigidConstraintModel` per arm (tool joint ↔ "
         "object joint, LOCAL), one call of `pin.constraintDynamics` with `ProximalSettings(1e-12, "
@@ -492,37 +512,41 @@ def write_report(path: Path, rows: Sequence[Row], profiles: dict[tuple[str, int]
         L.append("## Thesis case (Table 4.4): 6-joint arms, revolute grasps\n")
         L.append("`t`, `t1`, `t2` in µs. Thesis figures (Matlab 4.2a, 1990s hardware) in "
                  "brackets; its time saved is in ms.\n")
-        L.append("| n | constraints | t | t1 object-first | t2 dense KKT | total speed-up "
-                 "(t2+t)/(t1+t) [thesis] | solve speed-up t2/t1 [thesis] | time saved t2-t1 µs "
-                 "[thesis ms] | diff vs KKT |")
-        L.append("|---|---|---|---|---|---|---|---|---|")
+        L.append("| n | constraints | t | t1 object-first | t1np numpy object-first | t2 dense "
+                 "KKT | total speed-up (t2+t)/(t1+t) [thesis] | solve speed-up t2/t1 [thesis] | "
+                 "t2/t1np | time saved t2-t1 µs [thesis ms] | diff vs KKT |")
+        L.append("|---|---|---|---|---|---|---|---|---|---|---|")
         for r in rev:
             th = THESIS_TABLE_4_4.get(r.n_arms)
             tt, t1, t2 = r.t_coeff_s, r.t_object_first_s, r.t_dense_kkt_s
             b = [f" [{x:g}]" for x in th] if th else ["", "", ""]
-            L.append(f"| {r.n_arms} | {r.n_constraints} | {_us(tt)} | {_us(t1)} | {_us(t2)} | "
+            L.append(f"| {r.n_arms} | {r.n_constraints} | {_us(tt)} | {_us(t1)} | "
+                     f"{_us(r.t_object_first_numpy_s)} | {_us(t2)} | "
                      f"{(t2 + tt) / (t1 + tt):.2f}{b[0]} | {t2 / t1:.2f}{b[1]} | "
+                     f"{t2 / r.t_object_first_numpy_s:.2f} | "
                      f"{(t2 - t1) * 1e6:.1f}{b[2]} | {r.max_rel_diff_kkt:.1e} |")
         L.append("")
         L.append("## Scaling with the number of arms (revolute grasps)\n")
-        L.append("| n | t per arm µs | t1 per arm µs | t2 per arm µs | full step µs | "
-                 "full step per arm µs |")
-        L.append("|---|---|---|---|---|---|")
+        L.append("| n | t per arm µs | t1 per arm µs | t1np per arm µs | t2 per arm µs | "
+                 "full step µs | full step per arm µs |")
+        L.append("|---|---|---|---|---|---|---|")
         for r in rev:
             n = r.n_arms
             L.append(f"| {n} | {_us(r.t_coeff_s / n)} | {_us(r.t_object_first_s / n)} | "
+                     f"{_us(r.t_object_first_numpy_s / n)} | "
                      f"{_us(r.t_dense_kkt_s / n)} | {_us(r.t_full_step_s)} | "
                      f"{_us(r.t_full_step_s / n)} |")
         L.append("")
     if weld:
         L.append("## Peer: weld grasps, our full step vs `pin.constraintDynamics`\n")
         L.append("| n | t full step µs | t Pinocchio µs | ours / Pinocchio | t µs | t1 µs | "
-                 "t2 µs | diff vs Pinocchio | diff vs KKT |")
-        L.append("|---|---|---|---|---|---|---|---|---|")
+                 "t1np µs | t2 µs | diff vs Pinocchio | diff vs KKT |")
+        L.append("|---|---|---|---|---|---|---|---|---|---|")
         for r in weld:
             L.append(f"| {r.n_arms} | {_us(r.t_full_step_s)} | {_us(r.t_pinocchio_s)} | "
                      f"{r.t_full_step_s / r.t_pinocchio_s:.2f} | {_us(r.t_coeff_s)} | "
-                     f"{_us(r.t_object_first_s)} | {_us(r.t_dense_kkt_s)} | "
+                     f"{_us(r.t_object_first_s)} | {_us(r.t_object_first_numpy_s)} | "
+                     f"{_us(r.t_dense_kkt_s)} | "
                      f"{r.max_rel_diff_pinocchio:.1e} | {r.max_rel_diff_kkt:.1e} |")
         n_ahead = crossover(weld)
         L.append("")
@@ -533,9 +557,12 @@ def write_report(path: Path, rows: Sequence[Row], profiles: dict[tuple[str, int]
         L.append("")
     if profiles:
         L.append("## Where the time of one full step goes\n")
-        L.append("Median µs per stage, each stage timed alone on the same states "
-                 "(`arm terms in numpy` and `block assembly` are differences of medians). "
-                 "Share = stage / full step.\n")
+        L.append("Median µs per stage of the compiled step, stages timed on the same states "
+                 "(`kernels` = compiled evaluation after Pinocchio, minus Pinocchio; `solve` = "
+                 "compiled step minus compiled evaluation; `glue` = full step minus the rest). "
+                 "Share = stage / full step. Below the line, for comparison: `blocks` alone, "
+                 "the compiled solve called alone (with its Python wrapper) and the numpy "
+                 "object-first solve.\n")
         keys = sorted(profiles)
         L.append("| stage | " + " | ".join(f"{c} n={n}" for c, n in keys) + " |")
         L.append("|---|" + "---|" * len(keys))
@@ -547,6 +574,11 @@ def write_report(path: Path, rows: Sequence[Row], profiles: dict[tuple[str, int]
             L.append(f"| {label} | " + " | ".join(cells) + " |")
         L.append("| **full step** (`forward_dynamics`) | "
                  + " | ".join(f"**{profiles[k]['full_step'] * 1e6:.1f}**" for k in keys) + " |")
+        for name, label in (("blocks", "`MultiArmSystem.blocks` alone"),
+                            ("solve_alone", "`solve(blocks, 'object_first')` alone"),
+                            ("solve_numpy", "`solve(blocks, 'object_first_numpy')`")):
+            L.append(f"| {label} | " + " | ".join(f"{profiles[k][name] * 1e6:.1f}"
+                                                   for k in keys) + " |")
         L.append("")
     L.append("## Targets (issue 7)\n")
     L += targets(rev, weld)

@@ -140,18 +140,27 @@ def cholesky(A, L, size):  # pragma: no cover - compiled
 
 @njit(cache=True, error_model="numpy")
 def cholesky_solve(L, B, size, ncols):  # pragma: no cover - compiled
-    """``B[:size, :ncols] ← A⁻¹ B`` in place, ``A = L Lᵀ`` (L from :func:`cholesky`)."""
-    for col in range(ncols):
-        for i in range(size):
-            t = B[i, col]
-            for p in range(i):
-                t -= L[i, p] * B[p, col]
-            B[i, col] = t / L[i, i]
-        for i in range(size - 1, -1, -1):
-            t = B[i, col]
-            for p in range(i + 1, size):
-                t -= L[p, i] * B[p, col]
-            B[i, col] = t / L[i, i]
+    """``B[:size, :ncols] ← A⁻¹ B`` in place, ``A = L Lᵀ`` (L from :func:`cholesky`).
+
+    Row-oriented: the innermost loops run along the right-hand sides, independent of each
+    other (no dependency chain; the compiler vectorises them).
+    """
+    for i in range(size):
+        for p in range(i):
+            lip = L[i, p]
+            for col in range(ncols):
+                B[i, col] -= lip * B[p, col]
+        d = 1.0 / L[i, i]
+        for col in range(ncols):
+            B[i, col] *= d
+    for i in range(size - 1, -1, -1):
+        for p in range(i + 1, size):
+            lpi = L[p, i]
+            for col in range(ncols):
+                B[i, col] -= lpi * B[p, col]
+        d = 1.0 / L[i, i]
+        for col in range(ncols):
+            B[i, col] *= d
 
 
 @njit(cache=True, error_model="numpy")
@@ -710,6 +719,7 @@ def object_first(M, h, W, W_o, c, M_o, h_o, N, rcond_tol, object_rcond_tol,
     Z = np.empty((n, m, 7))
     L = np.zeros((k, k))
     S = np.empty((m, m))
+    WX = np.empty((m, m + 1))
     LS = np.zeros((m, m))
     dinv = np.empty(m)
     col = np.empty(m)
@@ -733,16 +743,18 @@ def object_first(M, h, W, W_o, c, M_o, h_o, N, rcond_tol, object_rcond_tol,
             Xi[a, m] = h[i, a]
         cholesky_solve(L, Xi, k, m + 1)
         Zi = Z[i]
+        for s in range(m):  # [S  Wᵀ M⁻¹ h] = Wᵀ X, inner loop along X's rows
+            for t in range(m + 1):
+                WX[s, t] = 0.0
+            for a in range(k):
+                w = W[i, a, s]
+                for t in range(m + 1):
+                    WX[s, t] += w * Xi[a, t]
         smax = -np.inf
         for s in range(m):
-            for t in range(m + 1):
-                acc = 0.0
-                for a in range(k):
-                    acc += W[i, a, s] * Xi[a, t]
-                if t < m:
-                    S[s, t] = acc
-                else:
-                    Zi[s, 6] = c[i, s] - acc  # r_i
+            for t in range(m):
+                S[s, t] = WX[s, t]
+            Zi[s, 6] = c[i, s] - WX[s, m]  # r_i
             if S[s, s] > smax:
                 smax = S[s, s]
         if has_padding:

@@ -246,7 +246,7 @@ class MultiArmSystem:
         self._k_solution = [where[name] for name in ("a_o", "qdd", "mu")]
         self._k_rows_range = where["rows"]
         self._k_nx = 13 + self.nq + 2 * self.nv
-        self._N_shared, self._mask_shared = cs.N, cs.mask
+        self._k_rows_spec = (*self._k_rows_range, cs.N, cs.mask)
         self._k_zero_tau = np.zeros(self.nv)
         self._k_zero_tau.setflags(write=False)
         # the derived (constant) fields of SystemBlocks, computed once by a validated build
@@ -476,9 +476,42 @@ class MultiArmSystem:
             a, b = _baumgarte(baumgarte)
             params = params.copy()
             params[13:16] = a, b, 1.0
-        aset = self.arm_set
-        H = aset.pinocchio_pass(q, v)
+        H = self.arm_set.pinocchio_pass(q, v)
         buf = np.empty(self._k_size)
+        finite, status = self._kernel_pass(H, x, params, buf, step)
+        if not finite:
+            self._check_state_and_tau(state, t)  # raises naming the field
+            raise DynamicsError("state or torques contain NaN or infinity")
+        blocks = object.__new__(_BlocksView)  # trusted construction (see _trusted)
+        d = blocks.__dict__
+        d.update(self._k_blocks_constant)
+        d["_buf"] = buf
+        d["_seg"] = self._k_segments
+        ev = object.__new__(_EvaluationView)
+        d = ev.__dict__
+        d["blocks"] = blocks
+        d["_rows"] = self._k_rows_spec
+        if step and status == kernels.SOLVE_OK:
+            a_o, qdd, mu = [buf[lo:hi].reshape(shape) for lo, hi, shape in self._k_solution]
+            return ev, Solution(a_o, qdd, mu, "object_first", (), blocks)
+        return ev, None
+
+    def _kernel_pass(self, H: np.ndarray, x: np.ndarray, params: np.ndarray, buf: np.ndarray,
+                     step: bool) -> tuple[bool, int]:
+        """The compiled kernels after :meth:`ArmSet.pinocchio_pass` (which gave ``H``).
+
+        Args:
+            H: (n, 4, 4) tool placements.
+            x: (13 + nq + 2 nv,) object state, ``q``, ``v``, ``τ`` concatenated.
+            params: (18,) kernel parameters (object, Baumgarte, solver thresholds).
+            buf: the output buffer (:func:`multiarm_pin.kernels.buffer_layout`).
+            step: also solve (object-first) into the buffer.
+
+        Returns:
+            ``(finite, status)``: False if ``x`` holds NaN or infinity; the solve status
+            (``kernels.SOLVE_OK`` when not solving).
+        """
+        aset = self.arm_set
         status = kernels.SOLVE_OK
         if self._k_single:  # one compiled call
             J, dJ, M, nle = aset.data_arrays()
@@ -486,31 +519,16 @@ class MultiArmSystem:
                     self._k_floats, params, self._k_dims)
             if step:
                 status = kernels.step_system(*args, self._k_N, buf)
-                finite = status != kernels.SOLVE_NOT_FINITE
-            else:
-                finite = kernels.evaluate_system(*args, buf)
-        else:  # arm terms group by group, then the rest in one call
-            for g, gi in zip(aset.groups, self._k_group_ints, strict=True):
-                kernels.group_arm_terms(*g.views, H[g.arms], x, gi, self._k_dims, g.v.start,
-                                        g.arms.start, buf)
-            finite = kernels.finish_system(x, self._k_arm_ints, self._k_v_starts,
-                                           self._k_ints, self._k_floats, params, self._k_dims,
-                                           buf)
-            if step and finite:
-                status = kernels.solve_buffer(self._k_N, params, self._k_dims, buf)
-        if not finite:
-            self._check_state_and_tau(state, t)  # raises naming the field
-        seg = self._k_segments
-        blocks = _trusted(_BlocksView, _buf=buf, _seg=seg, **self._k_blocks_constant)
-        lo, hi, rows = self._k_rows_range
-        ev = _trusted(Evaluation, blocks=blocks,
-                      arms=_trusted(_ArmTermsView, _buf=buf, _seg=seg),
-                      constraints=_trusted(_ConstraintTermsView, _rows=buf[lo:hi].reshape(rows),
-                                           N=self._N_shared, mask=self._mask_shared))
-        if step and status == kernels.SOLVE_OK:
-            a_o, qdd, mu = [buf[lo:hi].reshape(shape) for lo, hi, shape in self._k_solution]
-            return ev, Solution(a_o, qdd, mu, "object_first", (), blocks)
-        return ev, None
+                return status != kernels.SOLVE_NOT_FINITE, status
+            return kernels.evaluate_system(*args, buf), status
+        for g, gi in zip(aset.groups, self._k_group_ints, strict=True):  # arm terms by group
+            kernels.group_arm_terms(*g.views, H[g.arms], x, gi, self._k_dims, g.v.start,
+                                    g.arms.start, buf)
+        finite = kernels.finish_system(x, self._k_arm_ints, self._k_v_starts, self._k_ints,
+                                       self._k_floats, params, self._k_dims, buf)
+        if step and finite:
+            status = kernels.solve_buffer(self._k_N, params, self._k_dims, buf)
+        return finite, status
 
     def _check_state_and_tau(self, state: SystemState, tau: np.ndarray) -> None:
         """Slow path of the checks: raise naming the field that is wrong or not finite."""
@@ -607,6 +625,26 @@ class MultiArmSystem:
         ang = (hg.angular + cross(com, hg.linear) + ho[3:]
                + cross(state.obj.position, ho[:3]))
         return np.concatenate([lin, ang])
+
+
+class _EvaluationView(Evaluation):
+    """:class:`Evaluation` of the compiled path, ``arms`` and ``constraints`` made on demand.
+
+    Both are views of the buffer of ``blocks``; ``_rows`` is ``(lo, hi, shape, N, mask)`` of
+    the packed constraint rows. Built by :meth:`MultiArmSystem._compiled` only.
+    """
+
+    @cached_property
+    def arms(self) -> ArmSetTerms:
+        """The arms' terms (views of the buffer)."""
+        return _trusted(_ArmTermsView, _buf=self.blocks._buf, _seg=self.blocks._seg)
+
+    @cached_property
+    def constraints(self) -> ConstraintTerms:
+        """The constraint rows (views of the buffer)."""
+        lo, hi, shape, N, mask = self._rows
+        return _trusted(_ConstraintTermsView, _rows=self.blocks._buf[lo:hi].reshape(shape),
+                        N=N, mask=mask)
 
 
 class _BufferView:
