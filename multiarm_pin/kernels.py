@@ -486,45 +486,86 @@ def quaternion_rotation(quat, R):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def _segments(buf, n, k, m):  # pragma: no cover - compiled
-    """Views of the flat buffer's segments (order of :data:`SEGMENTS`)."""
-    o = 0
-    M = buf[o:o + n * k * k].reshape((n, k, k))
-    o += n * k * k
-    nle = buf[o:o + n * k].reshape((n, k))
-    o += n * k
-    J = buf[o:o + n * 6 * k].reshape((n, 6, k))
-    o += n * 6 * k
-    Jdq = buf[o:o + n * 6].reshape((n, 6))
-    o += n * 6
-    p = buf[o:o + n * 3].reshape((n, 3))
-    o += n * 3
-    R = buf[o:o + n * 9].reshape((n, 3, 3))
-    o += n * 9
-    tw = buf[o:o + n * 6].reshape((n, 6))
-    o += n * 6
-    vp = buf[o:o + n * k].reshape((n, k))
-    o += n * k
-    rows = buf[o:o + n * m * ROW_WIDTH].reshape((n, m, ROW_WIDTH))
-    o += n * m * ROW_WIDTH
-    h = buf[o:o + n * k].reshape((n, k))
-    o += n * k
-    W = buf[o:o + n * k * m].reshape((n, k, m))
-    o += n * k * m
-    W_o = buf[o:o + n * 6 * m].reshape((n, 6, m))
-    o += n * 6 * m
-    c = buf[o:o + n * m].reshape((n, m))
-    o += n * m
-    M_o = buf[o:o + 36].reshape((6, 6))
-    o += 36
-    h_o = buf[o:o + 6]
-    o += 6
-    a_o = buf[o:o + 6]
-    o += 6
-    qdd = buf[o:o + n * k].reshape((n, k))
-    o += n * k
-    mu = buf[o:o + n * m].reshape((n, m))
-    return M, nle, J, Jdq, p, R, tw, vp, rows, h, W, W_o, c, M_o, h_o, a_o, qdd, mu
+def _offsets(n, k, m):  # pragma: no cover - compiled
+    """Start offsets of the segments of :data:`SEGMENTS` (and the total size)."""
+    sizes = (n * k * k, n * k, n * 6 * k, n * 6, n * 3, n * 9, n * 6, n * k,
+             n * m * ROW_WIDTH, n * k, n * k * m, n * 6 * m, n * m, 36, 6, 6, n * k, n * m)
+    off = np.empty(len(sizes) + 1, dtype=np.int64)
+    off[0] = 0
+    for j in range(len(sizes)):
+        off[j + 1] = off[j] + sizes[j]
+    return off
+
+
+@njit(cache=True, error_model="numpy")
+def _arm_views(buf, off, n, k):  # pragma: no cover - compiled
+    """Views of the arm segments: M, nle, J, Jdot_qdot, position, rotation, twist, v."""
+    return (buf[off[0]:off[1]].reshape((n, k, k)), buf[off[1]:off[2]].reshape((n, k)),
+            buf[off[2]:off[3]].reshape((n, 6, k)), buf[off[3]:off[4]].reshape((n, 6)),
+            buf[off[4]:off[5]].reshape((n, 3)), buf[off[5]:off[6]].reshape((n, 3, 3)),
+            buf[off[6]:off[7]].reshape((n, 6)), buf[off[7]:off[8]].reshape((n, k)))
+
+
+@njit(cache=True, error_model="numpy")
+def _block_views(buf, off, n, k, m):  # pragma: no cover - compiled
+    """Views of the constraint rows and block segments: rows, h, W, W_o, c, M_o, h_o."""
+    return (buf[off[8]:off[9]].reshape((n, m, ROW_WIDTH)), buf[off[9]:off[10]].reshape((n, k)),
+            buf[off[10]:off[11]].reshape((n, k, m)), buf[off[11]:off[12]].reshape((n, 6, m)),
+            buf[off[12]:off[13]].reshape((n, m)), buf[off[13]:off[14]].reshape((6, 6)),
+            buf[off[14]:off[15]])
+
+
+@njit(cache=True, error_model="numpy")
+def _solution_views(buf, off, n, k, m):  # pragma: no cover - compiled
+    """Views of the solution segments: a_o, qdd, mu."""
+    return (buf[off[15]:off[16]], buf[off[16]:off[17]].reshape((n, k)),
+            buf[off[17]:off[18]].reshape((n, m)))
+
+
+@njit(cache=True, error_model="numpy")
+def _group_arms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_offset, lo, arms
+                ):  # pragma: no cover - compiled
+    """:func:`arm_terms` of the group of arms ``lo..lo + len(H)`` into the arm views."""
+    M, nle, J, Jdq, p, R, tw, vp = arms
+    k = M.shape[1]
+    hi = lo + H.shape[0]
+    start = x.shape[0] - 2 * nv + v_offset
+    v = x[start:start + M_full.shape[0]]
+    arm_terms(J_world, dJ_world, M_full, nle_full, v, H, arm_ints[:, 1:1 + k],
+              arm_ints[:, 0], arm_ints[:, 1 + k:1 + 2 * k], M[lo:hi], nle[lo:hi], J[lo:hi],
+              Jdq[lo:hi], p[lo:hi], R[lo:hi], tw[lo:hi], vp[lo:hi])
+
+
+@njit(cache=True, error_model="numpy")
+def _finish(x, arm_ints, v_starts, ints, floats, params, nv, arms,
+            blocks):  # pragma: no cover - compiled
+    """Constraint rows and blocks from the arm views; False if ``x`` is not finite."""
+    for a in range(x.shape[0]):
+        if not math.isfinite(x[a]):
+            return False
+    M, nle, J, Jdq, p, R, tw, vp = arms
+    rows, h, W, W_o, c, M_o, h_o = blocks
+    n, k = nle.shape
+    obj_R = np.empty((3, 3))
+    quaternion_rotation(x[3:7], obj_R)
+    obj_tw = x[7:13]
+    constraint_rows(p, R, tw, x[0:3], obj_R, obj_tw, ints, floats, rows)
+    tau = x[x.shape[0] - nv:]
+    tau_p = np.zeros((n, k))
+    for i in range(n):
+        for a in range(arm_ints[i, 0]):
+            tau_p[i, a] = tau[v_starts[i] + a]
+    assemble(J, Jdq, nle, tau_p, rows, params[13:16], obj_R, params[0],
+             params[1:10].reshape((3, 3)), params[10:13], obj_tw, h, W, W_o, c, M_o, h_o)
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _solve(N, params, M, blocks, solution):  # pragma: no cover - compiled
+    """:func:`object_first` on the block views into the solution views."""
+    rows, h, W, W_o, c, M_o, h_o = blocks
+    a_o, qdd, mu = solution
+    return object_first(M, h, W, W_o, c, M_o, h_o, N, params[16], params[17], a_o, qdd, mu)
 
 
 @njit(cache=True, error_model="numpy")
@@ -547,15 +588,9 @@ def group_arm_terms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, dims, v
         buf: the flat output buffer.
     """
     k, m, nv, n = dims[0], dims[1], dims[2], dims[3]
-    (M, nle, J, Jdq, p, R, tw, vp, rows, h, W, W_o, c, M_o, h_o, a_o, qdd,
-     mu) = _segments(buf, n, k, m)
-    ng = H.shape[0]
-    lo, hi = first_arm, first_arm + ng
-    start = x.shape[0] - 2 * nv + v_offset
-    v = x[start:start + M_full.shape[0]]
-    arm_terms(J_world, dJ_world, M_full, nle_full, v, H, arm_ints[:, 1:1 + k],
-              arm_ints[:, 0], arm_ints[:, 1 + k:1 + 2 * k], M[lo:hi], nle[lo:hi], J[lo:hi],
-              Jdq[lo:hi], p[lo:hi], R[lo:hi], tw[lo:hi], vp[lo:hi])
+    arms = _arm_views(buf, _offsets(n, k, m), n, k)
+    _group_arms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_offset, first_arm,
+                arms)
 
 
 @njit(cache=True, error_model="numpy")
@@ -577,24 +612,10 @@ def finish_system(x, arm_ints, v_starts, ints, floats, params, dims,
     Returns:
         False (and nothing computed) if some entry of ``x`` is NaN or infinite.
     """
-    for a in range(x.shape[0]):
-        if not math.isfinite(x[a]):
-            return False
     k, m, nv, n = dims[0], dims[1], dims[2], dims[3]
-    (M, nle, J, Jdq, p, R, tw, vp, rows, h, W, W_o, c, M_o, h_o, a_o, qdd,
-     mu) = _segments(buf, n, k, m)
-    obj_R = np.empty((3, 3))
-    quaternion_rotation(x[3:7], obj_R)
-    obj_tw = x[7:13]
-    constraint_rows(p, R, tw, x[0:3], obj_R, obj_tw, ints, floats, rows)
-    tau = x[x.shape[0] - nv:]
-    tau_p = np.zeros((n, k))
-    for i in range(n):
-        for a in range(arm_ints[i, 0]):
-            tau_p[i, a] = tau[v_starts[i] + a]
-    assemble(J, Jdq, nle, tau_p, rows, params[13:16], obj_R, params[0],
-             params[1:10].reshape((3, 3)), params[10:13], obj_tw, h, W, W_o, c, M_o, h_o)
-    return True
+    off = _offsets(n, k, m)
+    return _finish(x, arm_ints, v_starts, ints, floats, params, nv, _arm_views(buf, off, n, k),
+                   _block_views(buf, off, n, k, m))
 
 
 @njit(cache=True, error_model="numpy")
@@ -610,9 +631,10 @@ def solve_buffer(N, params, dims, buf):  # pragma: no cover - compiled
     Returns:
         The status of :func:`object_first`.
     """
-    (M, nle, J, Jdq, p, R, tw, vp, rows, h, W, W_o, c, M_o, h_o, a_o, qdd,
-     mu) = _segments(buf, dims[3], dims[0], dims[1])
-    return object_first(M, h, W, W_o, c, M_o, h_o, N, params[16], params[17], a_o, qdd, mu)
+    k, m, n = dims[0], dims[1], dims[3]
+    off = _offsets(n, k, m)
+    return _solve(N, params, buf[off[0]:off[1]].reshape((n, k, k)),
+                  _block_views(buf, off, n, k, m), _solution_views(buf, off, n, k, m))
 
 
 @njit(cache=True, error_model="numpy")
@@ -646,8 +668,12 @@ def evaluate_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_start
     Returns:
         False (and the buffer meaningless) if some entry of ``x`` is NaN or infinite.
     """
-    group_arm_terms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, dims, 0, 0, buf)
-    return finish_system(x, arm_ints, v_starts, ints, floats, params, dims, buf)
+    k, m, nv, n = dims[0], dims[1], dims[2], dims[3]
+    off = _offsets(n, k, m)
+    arms = _arm_views(buf, off, n, k)
+    _group_arms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, 0, 0, arms)
+    return _finish(x, arm_ints, v_starts, ints, floats, params, nv, arms,
+                   _block_views(buf, off, n, k, m))
 
 
 @njit(cache=True, error_model="numpy")
@@ -675,10 +701,14 @@ def step_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, i
         The status of :func:`object_first`, or ``SOLVE_NOT_FINITE`` if ``x`` holds NaN or
         infinity (nothing computed then).
     """
-    if not evaluate_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts,
-                           ints, floats, params, dims, buf):
+    k, m, nv, n = dims[0], dims[1], dims[2], dims[3]
+    off = _offsets(n, k, m)
+    arms = _arm_views(buf, off, n, k)
+    blocks = _block_views(buf, off, n, k, m)
+    _group_arms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, 0, 0, arms)
+    if not _finish(x, arm_ints, v_starts, ints, floats, params, nv, arms, blocks):
         return SOLVE_NOT_FINITE
-    return solve_buffer(N, params, dims, buf)
+    return _solve(N, params, arms[0], blocks, _solution_views(buf, off, n, k, m))
 
 
 # ------------------------------------------------------------------ 4. object-first solve
