@@ -24,7 +24,7 @@ collector off, states cycled, warm-up calls excluded). Outputs in ``--out``:
 
 Usage::
 
-    .venv/bin/python benchmarks/solver_vs_kkt.py                 # full run (~5 min)
+    .venv/bin/python benchmarks/solver_vs_kkt.py                 # full run (~2 min)
     .venv/bin/python benchmarks/solver_vs_kkt.py --quick --out /tmp/bench
     .venv/bin/python benchmarks/solver_vs_kkt.py --arms 2,4,8 --peer-arms 2,4 --repeat 500
 """
