@@ -4,7 +4,11 @@ Per-arm Python calls would dominate the cost of every dynamics evaluation. :clas
 appends every arm's model (base already baked in, names prefixed with ``<arm name>/``) into one
 Pinocchio model with ``pin.appendModel``, so each Pinocchio algorithm (CRBA, nonlinear effects,
 Jacobians and their time variation) is a single call whatever the number of arms. The per-arm
-results are then gathered into stacked, padded arrays with a few numpy operations.
+results are then gathered into stacked, padded arrays with a few numpy operations
+(:meth:`ArmSet.evaluate`, the reference) or by the compiled kernels of
+:mod:`multiarm_pin.kernels` (the hot path, after :meth:`ArmSet.pinocchio_pass`). Because
+Pinocchio's cost per arm and its ``Data`` grow superlinearly in one combined model, the hot
+path uses groups of at most :data:`GROUP_SIZE` arms, each with its own combined model.
 
 State layout: ``q`` is the concatenation of the arms' configurations in arm order
 (``ArmSet.q_slices``), ``v`` likewise (``ArmSet.v_slices``).

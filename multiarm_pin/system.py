@@ -3,9 +3,12 @@
 :class:`MultiArmSystem` owns one :class:`~multiarm_pin.arm_set.ArmSet` (all arms as one
 combined Pinocchio model, with the system's gravity) and one
 :class:`~multiarm_pin.constraints.ConstraintSet`. For a :class:`SystemState` it computes, with
-one Pinocchio pass, one vectorised constraint evaluation and a few ``einsum`` calls (no Python
-loop over arms), the padded :class:`~multiarm_pin.dynamics.SystemBlocks` of
-``docs/ARCHITECTURE.md``::
+one Pinocchio pass (per group of at most 16 arms) and one call of the compiled kernels of
+:mod:`multiarm_pin.kernels` (no Python loop over arms), the padded
+:class:`~multiarm_pin.dynamics.SystemBlocks` of ``docs/ARCHITECTURE.md``; the numpy
+implementation (one vectorised constraint evaluation and a few ``einsum`` calls) stays as the
+reference, ``blocks(..., reference=True)``. :meth:`MultiArmSystem.forward_dynamics` with
+``"auto"`` or ``"object_first"`` runs blocks and solve in the same compiled call::
 
     W_i = J_iᵀ G_tool,iᵀ        W_o,i = G_object,iᵀ        h_i = τ_i - nle_i
     c_i = -G_tool,i J̇q̇_i - κ_i  (Baumgarte: - 2α φ̇_i - β² φ_i)

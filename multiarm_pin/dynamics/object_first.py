@@ -7,7 +7,13 @@ every ``μ_i`` from the object equation::
     (M_o + Σ W_o,i S_i⁻¹ W_o,iᵀ) a_o = h_o + Σ W_o,i S_i⁻¹ r_i
     μ_i = S_i⁻¹ (r_i - W_o,iᵀ a_o),     q̈_i = M_i⁻¹ (h_i + W_i μ_i)
 
-All per-arm work is done on stacked arrays with batched LAPACK calls: one solve with
+:func:`solve_object_first` runs the compiled kernel
+:func:`multiarm_pin.kernels.object_first` (per-arm Cholesky factorisations of ``M_i`` and
+``S_i``, same conditioning criteria) and hands every doubtful case to
+:func:`solve_object_first_numpy`, the vectorised reference described next.
+
+In :func:`solve_object_first_numpy` all per-arm work is done on stacked arrays with batched
+LAPACK calls: one solve with
 ``M`` (right-hand sides ``[W h]`` together), one solve with ``S`` (right-hand sides
 ``[W_oᵀ r I]`` together: the identity gives ``diag(S⁻¹)`` for the conditioning test), then a
 6 x 6 Cholesky solve with a LAPACK condition estimate. No Python loop over arms. (A
