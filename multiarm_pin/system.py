@@ -603,30 +603,34 @@ class MultiArmSystem:
         return self.arm_set.gravity_combined(q)
 
     def kinetic_energy(self, state: SystemState) -> float:
-        """Arms' ``½ vᵀ M v`` plus the object's ``½ m |ẋ|² + ½ ωᵀ I_w ω`` [J]."""
-        model, data = self.arm_set.model, self.arm_set.data
-        e = pin.computeKineticEnergy(model, data, state.q, state.v)
-        return float(e) + self.obj.kinetic_energy(state.obj)
+        """Arms' ``½ vᵀ M v`` plus the object's ``½ m |ẋ|² + ½ ωᵀ I_w ω`` [J].
+
+        Summed over the arm groups' Pinocchio models (:attr:`ArmSet.groups`), so that large
+        systems never need the ``Data`` of one model of all arms.
+        """
+        e = sum(float(pin.computeKineticEnergy(g.model, g.data, state.q[g.q], state.v[g.v]))
+                for g in self.arm_set.groups)
+        return e + self.obj.kinetic_energy(state.obj)
 
     def potential_energy(self, state: SystemState) -> float:
         """Gravitational potential energy ``-Σ m g·c`` of arms and object [J] (zero at z = 0)."""
-        model, data = self.arm_set.model, self.arm_set.data
-        e = pin.computePotentialEnergy(model, data, state.q)
-        return float(e) - self.obj.mass * float(self.gravity @ state.obj.position)
+        e = sum(float(pin.computePotentialEnergy(g.model, g.data, state.q[g.q]))
+                for g in self.arm_set.groups)
+        return e - self.obj.mass * float(self.gravity @ state.obj.position)
 
     def momentum(self, state: SystemState) -> np.ndarray:
         """(6,) total ``[linear; angular]`` momentum of arms and object about the world origin.
 
-        Arms: ``pin.computeCentroidalMomentum`` (about their COM) shifted to the origin;
-        object: ``[m ẋ; I_w ω + x × m ẋ]``. Units [kg m/s, kg m²/s], world axes.
+        Arms: ``pin.computeCentroidalMomentum`` of each arm group (about its COM) shifted to
+        the origin; object: ``[m ẋ; I_w ω + x × m ẋ]``. Units [kg m/s, kg m²/s], world axes.
         """
-        model, data = self.arm_set.model, self.arm_set.data
-        hg = pin.computeCentroidalMomentum(model, data, state.q, state.v)
-        com = data.com[0]
-        lin = hg.linear + self.obj.mass * state.obj.twist[:3]
+        lin = self.obj.mass * state.obj.twist[:3]
         ho = self.obj.momentum(state.obj)
-        ang = (hg.angular + cross(com, hg.linear) + ho[3:]
-               + cross(state.obj.position, ho[:3]))
+        ang = ho[3:] + cross(state.obj.position, ho[:3])
+        for g in self.arm_set.groups:
+            hg = pin.computeCentroidalMomentum(g.model, g.data, state.q[g.q], state.v[g.v])
+            lin = lin + hg.linear
+            ang = ang + hg.angular + cross(g.data.com[0], hg.linear)
         return np.concatenate([lin, ang])
 
 

@@ -202,6 +202,14 @@ def test_grouped_pinocchio_models_give_the_same_terms(monkeypatch):
         ref_terms = aset.evaluate(state.q, state.v)
         for f in ("position", "rotation", "twist"):
             assert_close(getattr(tk, f), getattr(ref_terms.tools, f), f)
+        for f in ("kinetic_energy", "potential_energy", "momentum"):  # per group vs all
+            grouped = getattr(system, f)(off)
+            monkeypatch.setattr(aset, "groups", [dataclasses.replace(
+                aset.groups[0], model=aset.model, data=aset.data, arms=slice(0, n_arms),
+                q=slice(0, system.nq), v=slice(0, system.nv))])
+            assert_close(grouped, getattr(system, f)(off), f)
+            monkeypatch.undo()
+            monkeypatch.setattr(arm_set_module, "GROUP_SIZE", 2)
         with pytest.raises(InputError, match="group_size"):
             arm_set_module.ArmSet(system.arms, group_size=0)
 
