@@ -18,6 +18,7 @@ from multiarm_pin.dynamics.object_first import (
     ArmReduction,
     reduce_arms,
     solve_object_first,
+    solve_object_first_numpy,
 )
 from multiarm_pin.dynamics.singular import solve_singular
 from multiarm_pin.dynamics.solve import SOLVERS, solve
@@ -41,5 +42,6 @@ __all__ = [
     "solve",
     "solve_dense_kkt",
     "solve_object_first",
+    "solve_object_first_numpy",
     "solve_singular",
 ]
