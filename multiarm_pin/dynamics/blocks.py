@@ -15,6 +15,7 @@ multipliers solve to zero.
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -275,9 +276,12 @@ class SystemBlocks:
         t = _as_float(tau, "tau", shape=(self.n, self.nv_max))
         if np.any(t[~self.dof_mask]):
             raise InputError("tau: expected zeros on padded dofs (beyond nv_i for arm i)")
-        return SystemBlocks(
-            self.M, self.h + t, self.W, self.W_o, self.c, self.M_o, self.h_o, self.nv, self.N
-        )
+        # Only h changes and self is already validated: a shallow copy skips re-validating
+        # (shapes, Cholesky of M_o) on every simulation step. It keeps the class of self, so
+        # the compiled path's lazy views stay lazy; the new h shadows them in __dict__.
+        out = copy.copy(self)
+        out.__dict__["h"] = self.h + t
+        return out
 
     def stacked_W_o(self) -> np.ndarray:
         """``W_o = [W_o,1 ... W_o,n]`` without padding, shape (6, Σ N_i), arm-major columns."""

@@ -335,7 +335,13 @@ def test_with_torques_adds_to_h():
     blocks, _, _ = random_system(np.random.default_rng(8), [6, 7], [3, 4])
     tau = np.zeros((2, 7))
     tau[0, :6] = 1.0
-    assert np.array_equal(blocks.with_torques(tau).h, blocks.h + tau)
+    h_before = blocks.h.copy()
+    driven = blocks.with_torques(tau)
+    assert np.array_equal(driven.h, blocks.h + tau)
+    assert np.array_equal(blocks.h, h_before)  # the original blocks are untouched
+    for name in ("M", "W", "W_o", "c", "M_o", "h_o", "nv", "N", "dof_mask", "constraint_mask"):
+        assert np.array_equal(getattr(driven, name), getattr(blocks, name))
+    assert np.allclose(solve(driven, "object_first").qdd, solve(driven, "dense_kkt").qdd)
     tau[0, 6] = 1.0
     with pytest.raises(InputError, match="padded"):
         blocks.with_torques(tau)
