@@ -50,7 +50,8 @@ class ProgressBar:
     """A one-line text progress bar on a stream (stderr by default).
 
     Redraws at most every ``min_interval`` seconds; shows nothing for runs shorter than
-    ``delay`` seconds of wall time (short runs stay quiet).
+    ``delay`` seconds of wall time (short runs stay quiet). On a stream that is not a
+    terminal (a log file, CI) it writes one line per tenth of the run instead of redrawing.
     """
 
     def __init__(self, label: str, total_time: float, stream=None, width: int = 30,
@@ -61,6 +62,9 @@ class ProgressBar:
         self.start = time.perf_counter()
         self._last = -1.0
         self.shown = False
+        isatty = getattr(self.stream, "isatty", None)
+        self.interactive = bool(isatty()) if callable(isatty) else False
+        self._next_tenth = 0.1
 
     def __call__(self, fraction: float) -> None:
         """Update with the fraction done (0..1)."""
@@ -70,21 +74,26 @@ class ProgressBar:
             return
         if fraction < 1.0 and now - self._last < self.min_interval:
             return
-        self._last = now
         f = min(max(float(fraction), 0.0), 1.0)
+        if not self.interactive:
+            if f < self._next_tenth and f < 1.0:
+                return
+            self._next_tenth = (int(f * 10 + 1e-9) + 1) / 10
+        self._last = now
         n = int(round(f * self.width))
         eta = elapsed * (1 - f) / f if f > 0 else float("nan")
+        start, end = ("\r", "") if self.interactive else ("", "\n")
         self.stream.write(
-            f"\r{self.label} [{'#' * n}{'-' * (self.width - n)}] {100 * f:5.1f}% "
+            f"{start}{self.label} [{'#' * n}{'-' * (self.width - n)}] {100 * f:5.1f}% "
             f"t = {f * self.total_time:.3f}/{self.total_time:.3f} s, "
-            f"{elapsed:.1f} s elapsed, ~{eta:.1f} s left "
+            f"{elapsed:.1f} s elapsed, ~{eta:.1f} s left {end}"
         )
         self.stream.flush()
         self.shown = True
 
     def close(self) -> None:
         """End the line if anything was drawn."""
-        if self.shown:
+        if self.shown and self.interactive:
             self.stream.write("\n")
             self.stream.flush()
 

@@ -142,6 +142,29 @@ def test_progress_bar_draws_and_ends_line():
     assert quiet.getvalue() == ""
 
 
+class _Terminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_progress_bar_redraws_on_a_terminal_and_logs_tenths_elsewhere():
+    tty = _Terminal()
+    bar = ProgressBar("x", 1.0, stream=tty, delay=0.0, min_interval=0.0)
+    for k in range(1, 101):
+        bar(k / 100)
+    bar.close()
+    text = tty.getvalue()
+    assert text.count("\r") == 100 and text.endswith("\n") and text.count("\n") == 1
+    log = io.StringIO()  # not a terminal: one line per tenth, no carriage returns
+    bar = ProgressBar("x", 1.0, stream=log, delay=0.0, min_interval=0.0)
+    for k in range(1, 101):
+        bar(k / 100)
+    bar.close()
+    lines = log.getvalue().splitlines()
+    assert "\r" not in log.getvalue() and len(lines) == 10
+    assert lines[0].startswith("x [###") and "10.0%" in lines[0] and "100.0%" in lines[-1]
+
+
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (make browser)")
 def test_replay_page_renders_in_headless_chromium(run_dir, tmp_path):
     from PIL import Image
