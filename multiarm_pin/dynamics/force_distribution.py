@@ -56,6 +56,7 @@ def min_norm_forces(
     unilateral,
     margin: float = 0.0,
     tol: float = 1e-9,
+    svd_basis: InternalForceBasis | None = None,
 ) -> np.ndarray:
     """Smallest multipliers producing ``wrench`` with every unilateral one >= ``margin``.
 
@@ -66,6 +67,8 @@ def min_norm_forces(
         unilateral: (K,) bool, True for multipliers that must be >= ``margin``.
         margin: the margin ``m >= 0`` [N].
         tol: relative tolerance (reachability of the wrench, feasibility).
+        svd_basis: the ``"svd"`` :class:`InternalForceBasis` of ``W_o`` when the caller has
+            it already (it must be orthonormal); built here otherwise.
 
     Returns:
         ``μ`` (K,) minimising ``‖μ‖²`` under the constraints.
@@ -83,7 +86,12 @@ def min_norm_forces(
         raise InputError(f"unilateral: expected a bool array of shape ({K},), got {U!r}")
     if not (np.isfinite(margin) and margin >= 0.0):
         raise InputError(f"margin: expected a finite number >= 0 [N], got {margin!r}")
-    basis = internal_force_basis(W, "svd")
+    if svd_basis is None:
+        basis = internal_force_basis(W, "svd")
+    elif svd_basis.method != "svd" or svd_basis.A_o.shape[0] != K:
+        raise InputError(f"svd_basis: expected the 'svd' basis of a 6 x {K} W_o")
+    else:
+        basis = svd_basis
     mu_p = basis.W_o_pinv @ w
     miss = np.linalg.norm(W @ mu_p - w)
     if miss > tol * max(np.linalg.norm(w), 1e-12):
@@ -179,10 +187,12 @@ def distribute_forces(
             f"got {mask!r}"
         )
     W_o = blocks.stacked_W_o()
-    mu_flat = min_norm_forces(W_o, wrench, blocks.flatten_mu(mask), margin)
     if isinstance(basis, str):
         basis = internal_force_basis(W_o, basis)
     U = blocks.flatten_mu(mask)
+    # the minimum-norm solve needs the orthonormal (SVD) basis: reuse it when it is the one
+    svd = basis if basis.method == "svd" else None
+    mu_flat = min_norm_forces(W_o, wrench, U, margin, svd_basis=svd)
     return ForceDistribution(
         mu=blocks.unflatten_mu(mu_flat),
         mu_flat=mu_flat,
