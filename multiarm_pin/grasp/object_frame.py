@@ -27,7 +27,7 @@ from scipy.spatial.transform import Rotation
 
 from multiarm_pin.exceptions import GraspError, SingularityError
 from multiarm_pin.polyhedron import Polyhedron, box
-from multiarm_pin.spatial import as_array
+from multiarm_pin.spatial import as_array, skew
 
 
 @dataclass(frozen=True)
@@ -101,7 +101,7 @@ def objfrm(
     sols = []
     for n1 in cands:
         # Eq 2.11-2.13: d3ᵀ R2ᵀ y = l2, n1ᵀ y = 0, d4ᵀ R3ᵀ (n1 × y) = l3, y = R2 n2
-        A = np.vstack([d3 @ R2.T, n1, d4 @ R3.T @ _skew(n1)])
+        A = np.vstack([d3 @ R2.T, n1, d4 @ R3.T @ skew(n1)])
         try:
             y = np.linalg.solve(A, np.array([l2, 0.0, l3]))
         except np.linalg.LinAlgError:
@@ -243,6 +243,3 @@ def _residuals(R, t, P, poly: Polyhedron, idx) -> np.ndarray:
     q = (P - t) @ R  # object-frame coordinates
     return np.einsum("ij,ij->i", poly.normals[idx], q) - poly.offsets[idx]
 
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
