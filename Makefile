@@ -20,9 +20,17 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(VENV)/bin/multiarm-pin demo --out results/demo
 
-## The whole test suite (installs headless Chromium for the browser test when it can).
+# Tests of the compiled (numba) kernels, run a second time as plain Python with
+# NUMBA_DISABLE_JIT=1: numpy's bounds checks then catch an out-of-range index that the
+# compiled code would read silently.
+KERNEL_TESTS := tests/test_kernels.py tests/test_arm_set_fast_path.py tests/test_system.py \
+	tests/dynamics/test_solvers.py
+
+## The whole test suite (installs headless Chromium for the browser test when it can),
+## then the compiled kernels' tests again without compilation (bounds-checked).
 test: $(STAMP) browser
 	$(VENV)/bin/python -m pytest -q
+	NUMBA_DISABLE_JIT=1 $(VENV)/bin/python -m pytest -q -p no:cacheprovider $(KERNEL_TESTS)
 
 ## Headless Chromium for the replay-page browser test (Debian package; needs root/apt).
 browser:

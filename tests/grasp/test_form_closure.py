@@ -33,14 +33,28 @@ def test_lp_verdict_agrees_with_nnls_on_random_grasps(rng):
         W = g.wrenches()
         res = form_closure(g)
         counts[res.form_closure] += 1
+        # verdicts by construction: every drawn case is far from the rank (1e-9) and LP
+        # (1e-9) thresholds: a rank-deficient wrench matrix (two contacts on one face line
+        # up, ...) has σ_min/σ_max ~1e-17, a full-rank one > 1e-6; closed grasps have
+        # ε* >= 7e-3 here, full-rank open ones ε* <= 0 up to round-off
+        sv = res.singular_values
+        rank_deficient = sv.size < 6 or sv.min() < 1e-12 * sv.max()
+        assert rank_deficient or sv.min() > 1e-6 * sv.max()
+        if res.form_closure:
+            assert res.lp_epsilon > 1e-4 and not rank_deficient
+        else:
+            assert rank_deficient or not res.lp_epsilon > 1e-12
         # independent check: closure <=> every ±e_k is a non-negative combination
         axes = np.vstack([np.eye(6), -np.eye(6)])
-        basis_ok = all(_reachable(W, u) < 1e-8 for u in axes)
-        assert res.form_closure == basis_ok
-        # without closure the cone lies in a half-space: random directions fail half the time
         dirs = rng.normal(size=(64, 6))
-        misses = sum(_reachable(W, u / np.linalg.norm(u)) > 1e-8 for u in dirs)
-        assert (misses == 0) == res.form_closure
+        basis = np.array([_reachable(W, u) for u in axes])
+        rand = np.array([_reachable(W, u / np.linalg.norm(u)) for u in dirs])
+        # and far from the NNLS threshold (1e-8): reachable ~1e-15, unreachable >= 2.7e-4
+        both = np.concatenate([basis, rand])
+        assert not np.any((both > 1e-12) & (both < 1e-5)), both
+        assert res.form_closure == bool(np.all(basis < 1e-8))
+        # without closure the cone lies in a half-space: random directions fail half the time
+        assert (np.sum(rand > 1e-8) == 0) == res.form_closure
         if res.form_closure:
             lam = res.coefficients
             assert np.all(lam >= res.margin - 1e-12)
