@@ -151,7 +151,12 @@ def _ordered_face(vertices: np.ndarray, n: np.ndarray, d: float, tol: float = 1e
     u = a / np.linalg.norm(a)
     v = np.cross(n, u)
     ang = np.arctan2((vertices[idx] - c) @ v, (vertices[idx] - c) @ u)
-    return tuple(int(i) for i in idx[np.argsort(ang)])
+    # Counter-clockwise from the first vertex, in [0, 2π): the first vertex is at angle 0 by
+    # construction (rounding may give it -1e-17), and a vertex opposite it lies at ±π up to
+    # rounding; with angles in (-π, π] its place would depend on the BLAS kernel's sign of 0.
+    ang = np.where(ang < 0.0, ang + 2.0 * np.pi, ang)
+    ang[0] = 0.0
+    return tuple(int(i) for i in idx[np.argsort(ang, kind="stable")])
 
 
 def _solid_integrals(poly: Polyhedron) -> tuple[float, np.ndarray, np.ndarray]:
