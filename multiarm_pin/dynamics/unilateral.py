@@ -712,7 +712,7 @@ def solve_impact(
     if bad.any():
         i, k = np.argwhere(bad)[0]
         raise InputError(
-            f"restitution: expected Newton coefficients in [0, 1], got {e[i, k]!r} at arm "
+            f"restitution: expected Newton coefficients in [0, 1], got {float(e[i, k])!r} at arm "
             f"{i}, row {k}"
         )
     D = delassus_operator(b, with_h=False)
