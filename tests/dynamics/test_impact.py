@@ -213,6 +213,9 @@ def test_bad_input():
         solve_impact(b, uni, act, vm, "high")
     with pytest.raises(InputError, match="active: expected a bool array"):
         solve_impact(b, uni, None, vm, e)
+    b, uni, vm, e = next(c for c in map(random_impact, range(30))
+                         if not c[0].constraint_mask.all())
     pad = ~b.constraint_mask
+    act = b.constraint_mask.copy()
     with pytest.raises(InputError, match="unilateral: True on padding"):
         solve_impact(b, pad, act, vm, e)
