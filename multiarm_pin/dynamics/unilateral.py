@@ -512,6 +512,139 @@ def _finish(G, b, uni, act, na, GA, L, rhs, mu, phi, in_a, pivots):  # pragma: n
     return _OK, pivots, -1
 
 
+_BAD_MASS, _NOT_FINITE = 4, 5
+
+
+@njit(cache=True, error_model="numpy")
+def _contact_kernel(M, h, W, W_o, c, M_o, h_o, nv, N, uni, act, dep_rtol, viol_rtol,
+                    cons_rtol, a_o, qdd, mu, Av):  # pragma: no cover - compiled
+    """The whole unilateral solve, compiled: object-first Delassus, :func:`_mlcp`, motion.
+
+    Per arm a Cholesky factorisation of ``M_i`` and ``X_i = M_i⁻¹ [W_i h_i]``; one 6 x 6
+    Cholesky solve ``Y = M_o⁻¹ [W_o,active h_o]``; ``G`` and ``b`` on the active rows only
+    (per-arm blocks ``W_iᵀ X_i`` plus the object coupling ``W_oᵀ Y``); the mixed LCP; then
+    ``a_o``, ``q̈``, ``μ`` (padded outputs) and ``Av = W_oᵀ a_o + Wᵀ q̈`` on every real row.
+
+    Returns:
+        ``(status, pivots, arm, row, value)``: status as :func:`_mlcp` (arm and row of the
+        offending row, its ``φ``), 4 singular ``M_i`` (arm), 5 non-finite result.
+    """
+    n, k, m = W.shape
+    P = 0
+    for i in range(n):
+        for r in range(N[i]):
+            if act[i, r]:
+                P += 1
+    arm_of = np.empty(P, dtype=np.int64)
+    row_of = np.empty(P, dtype=np.int64)
+    a = 0
+    for i in range(n):
+        for r in range(N[i]):
+            if act[i, r]:
+                arm_of[a] = i
+                row_of[a] = r
+                a += 1
+    # per arm: X_i = M_i⁻¹ [W_i h_i] (columns 0..N_i-1 and N_i)
+    X = np.zeros((n, k, m + 1))
+    L = np.zeros((k, k))
+    for i in range(n):
+        ni, Ni = nv[i], N[i]
+        if ni == 0:
+            continue
+        if not _kernels.cholesky(M[i], L, ni):
+            return _BAD_MASS, 0, i, -1, 0.0
+        Xi = X[i]
+        for j in range(ni):
+            for r in range(Ni):
+                Xi[j, r] = W[i, j, r]
+            Xi[j, Ni] = h[i, j]
+        _kernels.cholesky_solve(L, Xi, ni, Ni + 1)
+    # object: Y = M_o⁻¹ [W_o of the active rows, h_o]
+    Lo = np.zeros((6, 6))
+    if not _kernels.cholesky(M_o, Lo, 6):
+        return _NOT_FINITE, 0, -1, -1, 0.0
+    Y = np.zeros((6, P + 1))
+    for a in range(P):
+        for r in range(6):
+            Y[r, a] = W_o[arm_of[a], r, row_of[a]]
+    for r in range(6):
+        Y[r, P] = h_o[r]
+    _kernels.cholesky_solve(Lo, Y, 6, P + 1)
+    # Delassus operator and free normal accelerations of the active rows
+    G = np.zeros((P, P))
+    bvec = np.zeros(P)
+    for a in range(P):
+        ia, ra = arm_of[a], row_of[a]
+        for bb in range(a, P):
+            ib, rb = arm_of[bb], row_of[bb]
+            g = 0.0
+            for r in range(6):
+                g += W_o[ia, r, ra] * Y[r, bb]
+            if ia == ib:
+                for j in range(nv[ia]):
+                    g += W[ia, j, ra] * X[ia, j, rb]
+            G[a, bb] = g
+        t = -c[ia, ra]
+        for r in range(6):
+            t += W_o[ia, r, ra] * Y[r, P]
+        for j in range(nv[ia]):
+            t += W[ia, j, ra] * X[ia, j, N[ia]]
+        bvec[a] = t
+    for a in range(P):
+        for bb in range(a):
+            G[a, bb] = G[bb, a]
+    scale = 0.0
+    for a in range(P):
+        scale = max(scale, abs(bvec[a]))
+    if not (scale < np.inf):
+        return _NOT_FINITE, 0, -1, -1, 0.0
+    uni_a = np.empty(P, dtype=np.bool_)
+    for a in range(P):
+        uni_a[a] = uni[arm_of[a], row_of[a]]
+    mu_a = np.empty(P)
+    phi = np.empty(P)
+    in_a = np.empty(P, dtype=np.bool_)
+    status, pivots, q = _mlcp(G, bvec, uni_a, dep_rtol, viol_rtol * scale, cons_rtol * scale,
+                              1000 + 20 * P, True, mu_a, phi, in_a)
+    if status != _OK:
+        return status, pivots, arm_of[q], row_of[q], phi[q]
+    # motion
+    for i in range(n):
+        for r in range(m):
+            mu[i, r] = 0.0
+    for a in range(P):
+        mu[arm_of[a], row_of[a]] = mu_a[a]
+    for r in range(6):
+        t = Y[r, P]
+        for a in range(P):
+            t += Y[r, a] * mu_a[a]
+        a_o[r] = t
+    ok = True
+    for i in range(n):
+        ni, Ni = nv[i], N[i]
+        for j in range(k):
+            qdd[i, j] = 0.0
+        for j in range(ni):
+            t = X[i, j, Ni]
+            for r in range(Ni):
+                t += X[i, j, r] * mu[i, r]
+            qdd[i, j] = t
+        for r in range(m):
+            Av[i, r] = 0.0
+        for r in range(Ni):
+            t = 0.0
+            for s in range(6):
+                t += W_o[i, s, r] * a_o[s]
+            for j in range(ni):
+                t += W[i, j, r] * qdd[i, j]
+            Av[i, r] = t
+            if not (abs(t) < np.inf):
+                ok = False
+    if not ok:
+        return _NOT_FINITE, pivots, -1, -1, 0.0
+    return _OK, pivots, -1, -1, 0.0
+
+
 # ------------------------------------------------------------------ inputs
 def _mask(value, name: str, blocks: SystemBlocks) -> np.ndarray:
     shape = (blocks.n, blocks.N_max)
@@ -557,44 +690,76 @@ def _row_name(blocks: SystemBlocks, flat_index: int) -> str:
 
 
 # ------------------------------------------------------------------ solvers
-def _solve_core(blocks: SystemBlocks, D: DelassusOperator, b_flat: np.ndarray,
-                unilateral: np.ndarray, active: np.ndarray, what: str
-                ) -> tuple[np.ndarray, int]:
-    """Run the compiled mixed-LCP on the active rows; padded multipliers and pivot count."""
-    cm = blocks.constraint_mask
-    act_flat = active[cm]
-    idx = np.flatnonzero(act_flat)
+def _c(a: np.ndarray) -> np.ndarray:
+    """C-contiguous (one compiled specialisation of the kernels for every input)."""
+    return a if a.flags.c_contiguous else np.ascontiguousarray(a)
+
+
+def _solve(b: SystemBlocks, h: np.ndarray, h_o: np.ndarray, c: np.ndarray, uni: np.ndarray,
+           act: np.ndarray, what: str, reference: bool):
+    """Mixed LCP of the blocks with ``h``, ``h_o``, ``c`` given (impacts: zeros and ``-rhs``).
+
+    Returns:
+        ``(a_o (6,), qdd (n, nv_max), mu (n, N_max), Av (n, N_max), pivots)`` with
+        ``Av = W_oᵀ a_o + Wᵀ q̈`` on the real rows (zero on padding).
+    """
+    if not reference:
+        n, k, m = b.W.shape
+        a_o, qdd, mu, Av = np.empty(6), np.empty((n, k)), np.empty((n, m)), np.empty((n, m))
+        status, pivots, arm, row, value = _contact_kernel(
+            _c(b.M), _c(h), _c(b.W), _c(b.W_o), _c(c), _c(b.M_o), _c(h_o), b.nv, b.N,
+            _c(uni), _c(act), DEPENDENCY_RTOL, VIOLATION_RTOL, CONSISTENCY_RTOL,
+            a_o, qdd, mu, Av)
+        if status == _OK:
+            return a_o, qdd, mu, Av, int(pivots)
+        if status in (_INFEASIBLE, _INCONSISTENT, _MAX_PIVOTS):
+            raise _lcp_error(what, status, f"arm {arm}, row {row}", value, pivots)
+        # singular M_i or a non-finite result: the numpy reference decides and names it
+    return _solve_numpy(b, h, h_o, c, uni, act, what)
+
+
+def _solve_numpy(b: SystemBlocks, h: np.ndarray, h_o: np.ndarray, c: np.ndarray,
+                 uni: np.ndarray, act: np.ndarray, what: str):
+    """Reference path of :func:`_solve`: numpy :func:`delassus_operator` + the compiled core."""
+    if h is not b.h or h_o is not b.h_o or c is not b.c:
+        b = SystemBlocks(b.M, h, b.W, b.W_o, c, b.M_o, h_o, b.nv, b.N)
+    D = delassus_operator(b)
+    cm = b.constraint_mask
+    idx = np.flatnonzero(act[cm])
     G = np.ascontiguousarray(D.G[np.ix_(idx, idx)])
-    bb = np.ascontiguousarray(b_flat[idx])
-    uni = np.ascontiguousarray(unilateral[cm][idx])
+    bb = np.ascontiguousarray(D.b[idx])
     scale = float(np.abs(bb).max()) if bb.size else 0.0
     p = idx.size
-    mu = np.empty(p)
-    phi = np.empty(p)
-    in_a = np.empty(p, dtype=np.bool_)
-    status, pivots, row = _mlcp(G, bb, uni, DEPENDENCY_RTOL, VIOLATION_RTOL * scale,
-                                CONSISTENCY_RTOL * scale, 1000 + 20 * p, True, mu, phi, in_a)
+    mu_a, phi, in_a = np.empty(p), np.empty(p), np.empty(p, dtype=np.bool_)
+    status, pivots, q = _mlcp(G, bb, np.ascontiguousarray(uni[cm][idx]), DEPENDENCY_RTOL,
+                              VIOLATION_RTOL * scale, CONSISTENCY_RTOL * scale,
+                              1000 + 20 * p, True, mu_a, phi, in_a)
     if status != _OK:
-        name = _row_name(blocks, int(idx[row]))
-        if status == _INFEASIBLE:
-            raise DynamicsError(
-                f"{what}: the contacts cannot all hold: unilateral row ({name}) would "
-                f"penetrate ({phi[row]:.3g}) and no force can prevent it; the bilateral "
-                "constraints or the other contacts forbid the motion"
-            )
-        if status == _INCONSISTENT:
-            raise DynamicsError(
-                f"{what}: the bilateral constraints are inconsistent: row ({name}) depends "
-                f"on the other active rows but its rate cannot be zeroed (residual "
-                f"{phi[row]:.3g}); check c (velocity consistency) and W"
-            )
-        raise DynamicsError(  # pragma: no cover - safety net of the finite method
-            f"{what}: the active-set method did not terminate in {pivots} pivots "
-            f"(last row {name}); round-off cycling, please report the state"
+        raise _lcp_error(what, status, _row_name(b, int(idx[q])), phi[q], pivots)
+    flat = np.zeros(b.n_constraints)
+    flat[idx] = mu_a
+    mu = b.unflatten_mu(flat)
+    a_o, qdd = D.motion(mu, b)
+    return a_o, qdd, mu, _rates(b, a_o, qdd, np.zeros_like(b.c)), int(pivots)
+
+
+def _lcp_error(what: str, status: int, name: str, value: float, pivots: int) -> DynamicsError:
+    if status == _INFEASIBLE:
+        return DynamicsError(
+            f"{what}: the contacts cannot all hold: unilateral row ({name}) would penetrate "
+            f"({value:.3g}) and no force can prevent it; the bilateral constraints or the "
+            "other contacts forbid the motion"
         )
-    flat = np.zeros(blocks.n_constraints)
-    flat[idx] = mu
-    return blocks.unflatten_mu(flat), int(pivots)
+    if status == _INCONSISTENT:
+        return DynamicsError(
+            f"{what}: the bilateral constraints are inconsistent: row ({name}) depends on the "
+            f"other active rows but its rate cannot be zeroed (residual {value:.3g}); check "
+            "c (velocity consistency) and W"
+        )
+    return DynamicsError(  # pragma: no cover - safety net of the finite method
+        f"{what}: the active-set method did not terminate in {pivots} pivots (last row "
+        f"{name}); round-off cycling, please report the state"
+    )
 
 
 def solve_unilateral(
@@ -603,6 +768,7 @@ def solve_unilateral(
     active: np.ndarray | None = None,
     *,
     fast_path: bool = True,
+    reference: bool = False,
 ) -> ContactSolution:
     """Forward dynamics with mixed bilateral / unilateral contacts (mixed LCP, exact).
 
@@ -624,6 +790,8 @@ def solve_unilateral(
             rows); None means every real row. False on padding.
         fast_path: try the bilateral solve first (see the module docstring); False runs
             the active-set method in any case (for checks).
+        reference: use the numpy :func:`delassus_operator` (and no fast path) instead of
+            the compiled kernel (for checks; same core).
 
     Returns:
         :class:`ContactSolution` with ``a_o`` (6,) [m/s², rad/s²], ``qdd`` (n, nv_max),
@@ -639,15 +807,14 @@ def solve_unilateral(
     b = blocks
     uni = _mask(unilateral, "unilateral", b)
     act = b.constraint_mask.copy() if active is None else _mask(active, "active", b)
-    if fast_path and np.array_equal(act, b.constraint_mask):
+    if fast_path and not reference and np.array_equal(act, b.constraint_mask) \
+            and bool((b.nv >= b.N).all()):  # else some S_i is singular by structure
         fast = _bilateral_fast_path(b, uni)
         if fast is not None:
             return fast
-    D = delassus_operator(b)
-    mu, pivots = _solve_core(b, D, D.b, uni, act, "solve_unilateral")
-    a_o, qdd = D.motion(mu, b)
-    phi_dd = _rates(b, a_o, qdd, b.c)
-    return ContactSolution(a_o, qdd, mu, phi_dd, "active_set", pivots, uni, act, b)
+    a_o, qdd, mu, Av, pivots = _solve(b, b.h, b.h_o, b.c, uni, act, "solve_unilateral",
+                                      reference)
+    return ContactSolution(a_o, qdd, mu, Av - b.c, "active_set", pivots, uni, act, b)
 
 
 def _bilateral_fast_path(b: SystemBlocks, uni: np.ndarray) -> ContactSolution | None:
@@ -676,6 +843,8 @@ def solve_impact(
     active: np.ndarray,
     phi_dot_minus: np.ndarray,
     restitution: np.ndarray,
+    *,
+    reference: bool = False,
 ) -> ImpactSolution:
     """Velocity-level impact law (Newton restitution) with the object-first structure.
 
@@ -693,6 +862,8 @@ def solve_impact(
             padding are ignored).
         restitution: (n, N_max) Newton coefficients ``e`` in [0, 1] (ignored on padding and
             on bilateral rows).
+        reference: use the numpy :func:`delassus_operator` instead of the compiled kernel
+            (for checks; same core).
 
     Returns:
         :class:`ImpactSolution` with ``dv_o`` (6,), ``dqd`` (n, nv_max), ``P`` (n, N_max)
@@ -715,10 +886,7 @@ def solve_impact(
             f"restitution: expected Newton coefficients in [0, 1], got {float(e[i, k])!r} at arm "
             f"{i}, row {k}"
         )
-    D = delassus_operator(b, with_h=False)
-    cm = b.constraint_mask
-    rhs = np.where(uni, (1.0 + e) * vm, vm)[cm]
-    P, pivots = _solve_core(b, D, rhs, uni, act, "solve_impact")
-    dv_o, dqd = D.motion(P, b)
-    phi_dot_plus = _rates(b, dv_o, dqd, -vm)
-    return ImpactSolution(dv_o, dqd, P, phi_dot_plus, "active_set", pivots, vm, e, uni, act, b)
+    rhs = np.where(uni, (1.0 + e) * vm, vm)
+    dv_o, dqd, P, Av, pivots = _solve(b, np.zeros_like(b.h), np.zeros(6), -rhs, uni, act,
+                                      "solve_impact", reference)
+    return ImpactSolution(dv_o, dqd, P, Av + vm, "active_set", pivots, vm, e, uni, act, b)

@@ -145,6 +145,9 @@ def test_random_impacts_match_enumeration(seed):
     assert not sol.P[~b.constraint_mask].any()
     r = sol.residuals()
     assert max(r.object, r.arms) <= 1e-12 * r.scale
+    ref = solve_impact(b, uni, act, vm, e, reference=True)  # numpy Delassus, same core
+    assert np.abs(ref.dv_o - sol.dv_o).max() <= 1e-12 * scale
+    assert np.abs(ref.phi_dot_plus - sol.phi_dot_plus).max() <= 1e-12 * max(np.abs(vm).max(), 1)
 
 
 def test_random_impacts_are_not_trivial():

@@ -100,6 +100,23 @@ def test_enumeration_covers_separation_and_redundancy():
     assert separated >= 40 and pushing >= 40 and redundant >= 15 and supports >= 15
 
 
+@pytest.mark.parametrize("seed", range(15))
+def test_compiled_kernel_equals_numpy_reference(seed):
+    """The compiled kernel (Delassus, core, motion) and the numpy Delassus + the same core."""
+    blocks, uni, _ = random_case(seed)
+    rng = np.random.default_rng(200 + seed)
+    active = blocks.constraint_mask & (rng.uniform(size=uni.shape) < 0.8)
+    for act in (None, active):
+        sol = solve_unilateral(blocks, uni, act, fast_path=False)
+        ref = solve_unilateral(blocks, uni, act, reference=True)
+        assert ref.solver == sol.solver == "active_set"
+        scale = max(np.abs(ref.a_o).max(), np.abs(ref.qdd).max())
+        assert rel(sol.a_o, ref.a_o, scale) < 1e-12 and rel(sol.qdd, ref.qdd, scale) < 1e-12
+        assert rel(sol.phi_dd, ref.phi_dd, max(np.abs(ref.phi_dd).max(), 1.0)) < 1e-12
+        assert sol.pivots == ref.pivots
+        assert np.array_equal(sol.mu > 0, ref.mu > 0)
+
+
 @pytest.mark.parametrize("seed", range(10))
 def test_inactive_rows_are_dropped(seed):
     blocks, uni, _ = random_case(seed)
@@ -280,6 +297,18 @@ def test_infeasible_and_inconsistent_raise():
                                      np.eye(6), rng.standard_normal(6))
     with pytest.raises(DynamicsError, match="bilateral constraints are inconsistent"):
         solve_unilateral(blocks, np.zeros((1, 2), dtype=bool))
+
+
+def test_singular_mass_matrix_is_named():
+    blocks, uni, _ = random_case(4)
+    M = blocks.M.copy()
+    M[1, 0, :] = M[1, :, 0] = 0.0
+    bad = SystemBlocks(M, blocks.h, blocks.W, blocks.W_o, blocks.c, blocks.M_o, blocks.h_o,
+                       blocks.nv, blocks.N)
+    assert blocks.nv[1] > 0
+    for kw in ({}, {"reference": True}):
+        with pytest.raises(DynamicsError, match=r"mass matrix M_i of arm\(s\) \[1\]"):
+            solve_unilateral(bad, uni, **kw)
 
 
 def test_bad_input():
