@@ -512,7 +512,7 @@ def _finish(G, b, uni, act, na, GA, L, rhs, mu, phi, in_a, pivots):  # pragma: n
     return _OK, pivots, -1
 
 
-_BAD_MASS, _NOT_FINITE = 4, 5
+_BAD_MASS, _NOT_FINITE, _UNI_PADDING, _ACT_PADDING = 4, 5, 6, 7
 
 
 @njit(cache=True, error_model="numpy")
@@ -527,9 +527,16 @@ def _contact_kernel(M, h, W, W_o, c, M_o, h_o, nv, N, uni, act, dep_rtol, viol_r
 
     Returns:
         ``(status, pivots, arm, row, value)``: status as :func:`_mlcp` (arm and row of the
-        offending row, its ``φ``), 4 singular ``M_i`` (arm), 5 non-finite result.
+        offending row, its ``φ``), 4 singular ``M_i`` (arm), 5 non-finite result, 6 / 7
+        ``uni`` / ``act`` True on the padding row (arm, row).
     """
     n, k, m = W.shape
+    for i in range(n):
+        for r in range(N[i], m):
+            if uni[i, r]:
+                return _UNI_PADDING, 0, i, r, 0.0
+            if act[i, r]:
+                return _ACT_PADDING, 0, i, r, 0.0
     P = 0
     for i in range(n):
         for r in range(N[i]):
@@ -646,7 +653,8 @@ def _contact_kernel(M, h, W, W_o, c, M_o, h_o, nv, N, uni, act, dep_rtol, viol_r
 
 
 # ------------------------------------------------------------------ inputs
-def _mask(value, name: str, blocks: SystemBlocks) -> np.ndarray:
+def _mask(value, name: str, blocks: SystemBlocks, padding: bool = True) -> np.ndarray:
+    """Check a (n, N_max) bool mask (and, with ``padding``, that it is False on padding)."""
     shape = (blocks.n, blocks.N_max)
     arr = np.asarray(value)
     if arr.shape != shape or arr.dtype != np.bool_:
@@ -654,14 +662,17 @@ def _mask(value, name: str, blocks: SystemBlocks) -> np.ndarray:
             f"{name}: expected a bool array of shape (n, N_max) = {shape}, got "
             f"{arr.dtype} array of shape {arr.shape}"
         )
-    pad = arr & ~blocks.constraint_mask
-    if pad.any():
-        i, k = np.argwhere(pad)[0]
-        raise InputError(
-            f"{name}: True on padding (arm {i}, row {k}, but arm {i} has N_{i} = "
-            f"{blocks.N[i]} rows); expected False beyond N_i"
-        )
+    if padding and (arr > blocks.constraint_mask).any():
+        i, k = np.argwhere(arr > blocks.constraint_mask)[0]
+        raise _padding_error(name, blocks, int(i), int(k))
     return arr
+
+
+def _padding_error(name: str, blocks: SystemBlocks, i: int, k: int) -> InputError:
+    return InputError(
+        f"{name}: True on padding (arm {i}, row {k}, but arm {i} has N_{i} = "
+        f"{blocks.N[i]} rows); expected False beyond N_i"
+    )
 
 
 def _rows(value, name: str, blocks: SystemBlocks) -> np.ndarray:
@@ -712,6 +723,9 @@ def _solve(b: SystemBlocks, h: np.ndarray, h_o: np.ndarray, c: np.ndarray, uni: 
             a_o, qdd, mu, Av)
         if status == _OK:
             return a_o, qdd, mu, Av, int(pivots)
+        if status in (_UNI_PADDING, _ACT_PADDING):
+            name = "unilateral" if status == _UNI_PADDING else "active"
+            raise _padding_error(name, b, int(arm), int(row))
         if status in (_INFEASIBLE, _INCONSISTENT, _MAX_PIVOTS):
             raise _lcp_error(what, status, f"arm {arm}, row {row}", value, pivots)
         # singular M_i or a non-finite result: the numpy reference decides and names it
@@ -805,16 +819,20 @@ def solve_unilateral(
     """
     _check_blocks(blocks)
     b = blocks
-    uni = _mask(unilateral, "unilateral", b)
-    act = b.constraint_mask.copy() if active is None else _mask(active, "active", b)
-    if fast_path and not reference and np.array_equal(act, b.constraint_mask) \
-            and bool((b.nv >= b.N).all()):  # else some S_i is singular by structure
+    # padding of the masks is checked here for the reference, else by the compiled kernel
+    uni = _mask(unilateral, "unilateral", b, reference)
+    act = b.constraint_mask if active is None else _mask(active, "active", b, reference)
+    if fast_path and not reference and bool((b.nv >= b.N).all()) \
+            and (active is None or np.array_equal(act, b.constraint_mask)):
+        # (with nv_i < N_i, S_i is singular by structure: the bilateral solve cannot be regular)
+        _mask(unilateral, "unilateral", b)
         fast = _bilateral_fast_path(b, uni)
         if fast is not None:
             return fast
     a_o, qdd, mu, Av, pivots = _solve(b, b.h, b.h_o, b.c, uni, act, "solve_unilateral",
                                       reference)
-    return ContactSolution(a_o, qdd, mu, Av - b.c, "active_set", pivots, uni, act, b)
+    return ContactSolution(a_o, qdd, mu, Av - b.c, "active_set", pivots, uni.copy(),
+                           act.copy(), b)
 
 
 def _bilateral_fast_path(b: SystemBlocks, uni: np.ndarray) -> ContactSolution | None:
@@ -826,7 +844,7 @@ def _bilateral_fast_path(b: SystemBlocks, uni: np.ndarray) -> ContactSolution | 
     if not (sol.mu[uni] >= 0.0).all():
         return None
     phi_dd = _rates(b, sol.a_o, sol.qdd, b.c)
-    return ContactSolution(sol.a_o, sol.qdd, sol.mu, phi_dd, "bilateral", 0, uni,
+    return ContactSolution(sol.a_o, sol.qdd, sol.mu, phi_dd, "bilateral", 0, uni.copy(),
                            b.constraint_mask.copy(), b)
 
 
