@@ -822,7 +822,7 @@ def solve_unilateral(
     # padding of the masks is checked here for the reference, else by the compiled kernel
     uni = _mask(unilateral, "unilateral", b, reference)
     act = b.constraint_mask if active is None else _mask(active, "active", b, reference)
-    if fast_path and not reference and bool((b.nv >= b.N).all()) \
+    if fast_path and not reference and b.n > 0 and bool((b.nv >= b.N).all()) \
             and (active is None or np.array_equal(act, b.constraint_mask)):
         # (with nv_i < N_i, S_i is singular by structure: the bilateral solve cannot be regular)
         _mask(unilateral, "unilateral", b)

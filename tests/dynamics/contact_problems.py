@@ -198,3 +198,51 @@ def admm_lcp(G: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, bool, int]:
         pin.DelassusOperatorDense(G), g, pin.StdVec_ConstraintModel([pin.ConstraintModel(cm)]),
         pin.StdVec_ConstraintData([pin.ConstraintData(cd)]), st, res)
     return np.array(res.retrieveConstraintImpulses()), bool(ok), int(res.iterations)
+
+
+def with_support_rows(b: SystemBlocks, W_support: np.ndarray) -> SystemBlocks:
+    """The blocks plus one zero-dof support arm whose rows (``W_o`` columns, ``c = 0``) are
+    given: (6, p) wrenches at the COM, world axes, per unit force."""
+    arms = range(b.n)
+    p = W_support.shape[1]
+    return SystemBlocks.from_lists(
+        [b.M[i, : b.nv[i], : b.nv[i]] for i in arms] + [np.zeros((0, 0))],
+        [b.h[i, : b.nv[i]] for i in arms] + [np.zeros(0)],
+        [b.W[i, : b.nv[i], : b.N[i]] for i in arms] + [np.zeros((0, p))],
+        [b.W_o[i, :, : b.N[i]] for i in arms] + [W_support],
+        [b.c[i, : b.N[i]] for i in arms] + [np.zeros(p)],
+        b.M_o, b.h_o)
+
+
+def two_gripper_table_states(n_states: int, seed: int) -> list[SystemBlocks]:
+    """Blocks of the two-gripper form-closure scenario (7 fingertip rows on two 6-joint arms)
+    plus 4 table rows under the box's lowest vertices (a zero-dof support arm, ``c = 0``).
+
+    Random consistent states (velocities projected on the constraints), torques = gravity
+    compensation + 15 N squeeze per fingertip + N(0, 2 N m) noise.
+    """
+    from pathlib import Path
+
+    from multiarm_pin.scenario import build_scenario, load_scenario
+    from multiarm_pin.spatial import quaternion_to_rotation
+
+    path = Path(__file__).resolve().parents[2] / "scenarios" / "two_gripper_form_closure.yaml"
+    built = build_scenario(load_scenario(path))
+    system, s0 = built.system, built.initial_state
+    rng = np.random.default_rng(seed)
+    g = system.gravity_torques(s0.q)
+    z = np.array([0.0, 0.0, 1.0])
+    out = []
+    for _ in range(n_states):
+        st = system.project_velocities(system.state(
+            s0.q, rng.normal(0.0, 0.3, system.nv), s0.obj.position, s0.obj.quaternion,
+            rng.normal(0.0, 0.1, 6)))
+        b0 = system.blocks(st).blocks
+        squeeze = np.concatenate([-b0.W[i, : b0.nv[i], : b0.N[i]] @ np.full(b0.N[i], 15.0)
+                                  for i in range(b0.n)])
+        b = system.blocks(st, g + squeeze + rng.normal(0.0, 2.0, system.nv)).blocks
+        world = built.obj.shape.vertices @ quaternion_to_rotation(st.obj.quaternion).T
+        low = np.argsort(world[:, 2], kind="stable")[:4]
+        Wt = np.array([np.concatenate((z, np.cross(world[k], z))) for k in low]).T
+        out.append(with_support_rows(b, Wt))
+    return out

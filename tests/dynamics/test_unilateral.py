@@ -290,13 +290,15 @@ def test_infeasible_and_inconsistent_raise():
                                      [np.hstack((Wo, Wo))], [np.array([0.0, 1.0])],
                                      np.eye(6), rng.standard_normal(6))
     uni = np.array([[False, True]])
-    with pytest.raises(DynamicsError, match="cannot all hold.*arm 0, row 1"):
-        solve_unilateral(blocks, uni)
+    for kw in ({}, {"reference": True}):
+        with pytest.raises(DynamicsError, match="cannot all hold.*arm 0, row 1"):
+            solve_unilateral(blocks, uni, **kw)
     blocks = SystemBlocks.from_lists([np.zeros((0, 0))], [np.zeros(0)], [np.zeros((0, 2))],
                                      [np.hstack((Wo, Wo))], [np.array([0.0, 1.0])],
                                      np.eye(6), rng.standard_normal(6))
-    with pytest.raises(DynamicsError, match="bilateral constraints are inconsistent"):
-        solve_unilateral(blocks, np.zeros((1, 2), dtype=bool))
+    for kw in ({}, {"reference": True}):
+        with pytest.raises(DynamicsError, match=r"inconsistent: row \(arm 0, row [01]\)"):
+            solve_unilateral(blocks, np.zeros((1, 2), dtype=bool), **kw)
 
 
 def test_singular_mass_matrix_is_named():
@@ -319,10 +321,11 @@ def test_bad_input():
         solve_unilateral(blocks, uni.astype(float))
     pad = uni.copy()
     pad[1, blocks.N[1]] = True
-    with pytest.raises(InputError, match=r"unilateral: True on padding \(arm 1, row 1"):
-        solve_unilateral(blocks, pad)
-    with pytest.raises(InputError, match=r"active: True on padding"):
-        solve_unilateral(blocks, uni, pad)
+    for kw in ({}, {"reference": True}, {"fast_path": False}):
+        with pytest.raises(InputError, match=r"unilateral: True on padding \(arm 1, row 1"):
+            solve_unilateral(blocks, pad, **kw)
+        with pytest.raises(InputError, match=r"active: True on padding \(arm 1, row 1"):
+            solve_unilateral(blocks, uni, pad, **kw)
     with pytest.raises(InputError, match="expected SystemBlocks"):
         solve_unilateral("blocks", uni)
     nan = SystemBlocks(blocks.M, blocks.h.copy(), blocks.W, blocks.W_o, blocks.c, blocks.M_o,
