@@ -102,6 +102,9 @@ CONSISTENCY_RTOL = 1e-8
 (multiplier 0) when ``|φ̈| ≤ CONSISTENCY_RTOL · max|b|`` (as the bilateral singular solver's
 consistency test); larger means inconsistent bilateral constraints (:class:`DynamicsError`)."""
 
+SEPARATION_RTOL = 1e-9
+""":attr:`ContactSolution.separating` needs ``φ̈ > SEPARATION_RTOL · max |φ̈|``."""
+
 _OK, _INFEASIBLE, _INCONSISTENT, _MAX_PIVOTS = 0, 1, 2, 3
 
 
@@ -202,8 +205,14 @@ class ContactSolution:
 
     @property
     def separating(self) -> np.ndarray:
-        """(n, N_max) bool: active unilateral rows with ``μ = 0`` and ``φ̈ > 0`` (separating)."""
-        return self.active & self.unilateral & (self.mu == 0.0) & (self.phi_dd > 0.0)
+        """(n, N_max) bool: active unilateral rows that carry no force and accelerate apart.
+
+        ``μ = 0`` and ``φ̈ > SEPARATION_RTOL · max |φ̈|`` (over the real rows): a row whose
+        ``φ̈`` is zero to round-off (e.g. the fourth of four coplanar table rows, dependent
+        on the others) is touching, not separating.
+        """
+        tol = SEPARATION_RTOL * float(np.abs(self.phi_dd).max(initial=0.0))
+        return self.active & self.unilateral & (self.mu == 0.0) & (self.phi_dd > tol)
 
     @property
     def complementarity(self) -> float:

@@ -11,8 +11,10 @@ import numpy as np
 import pytest
 
 from multiarm_pin.dynamics import (
+    DEFAULT_RCOND_TOL,
     SystemBlocks,
     delassus_operator,
+    reduce_arms,
     solve,
     solve_unilateral,
 )
@@ -103,7 +105,7 @@ def test_enumeration_covers_separation_and_redundancy():
 @pytest.mark.parametrize("seed", range(15))
 def test_compiled_kernel_equals_numpy_reference(seed):
     """The compiled kernel (Delassus, core, motion) and the numpy Delassus + the same core."""
-    blocks, uni, _ = random_case(seed)
+    blocks, uni, unique_mu = random_case(seed)
     rng = np.random.default_rng(200 + seed)
     active = blocks.constraint_mask & (rng.uniform(size=uni.shape) < 0.8)
     for act in (None, active):
@@ -113,8 +115,8 @@ def test_compiled_kernel_equals_numpy_reference(seed):
         scale = max(np.abs(ref.a_o).max(), np.abs(ref.qdd).max())
         assert rel(sol.a_o, ref.a_o, scale) < 1e-12 and rel(sol.qdd, ref.qdd, scale) < 1e-12
         assert rel(sol.phi_dd, ref.phi_dd, max(np.abs(ref.phi_dd).max(), 1.0)) < 1e-12
-        assert sol.pivots == ref.pivots
-        assert np.array_equal(sol.mu > 0, ref.mu > 0)
+        if unique_mu:
+            assert rel(sol.mu, ref.mu, max(np.abs(ref.mu).max(), 1.0)) < 1e-12
 
 
 @pytest.mark.parametrize("seed", range(10))
@@ -161,7 +163,11 @@ def test_all_pushing_equals_bilateral_solve(seed):
                            blocks.W_o * sign[:, None, :], blocks.c * sign, blocks.M_o,
                            blocks.h_o, blocks.nv, blocks.N)
     ref = solve(flipped, "auto")
-    assert (ref.mu[flipped.constraint_mask] > 0).all()
+    # verdicts with margins (any CPU): every S_i regular far above the object-first
+    # threshold, every multiplier pushing far above round-off
+    assert reduce_arms(flipped).rcond.min() > 100 * DEFAULT_RCOND_TOL
+    mu_real = ref.mu[flipped.constraint_mask]
+    assert mu_real.min() > 1e-6 * np.abs(mu_real).max()
     uni = flipped.constraint_mask.copy()
     uni[0, 0] = False  # one bilateral row among them
     sol = solve_unilateral(flipped, uni)
@@ -170,6 +176,8 @@ def test_all_pushing_equals_bilateral_solve(seed):
     assert np.array_equal(sol.mu, ref.mu)
     # the active-set method (warm start: all rows) agrees to round-off
     sol2 = solve_unilateral(flipped, uni, fast_path=False)
+    G = delassus_operator(flipped).G
+    assert np.linalg.eigvalsh(G)[0] > 1e-6 * np.diag(G).min()  # warm start: G_AA regular
     assert sol2.solver == "active_set" and sol2.pivots == 0
     scale = max(np.abs(ref.a_o).max(), np.abs(ref.qdd).max())
     assert rel(sol2.a_o, ref.a_o, scale) < 1e-12 and rel(sol2.qdd, ref.qdd, scale) < 1e-12
