@@ -119,6 +119,35 @@ def test_compiled_kernel_equals_numpy_reference(seed):
             assert rel(sol.mu, ref.mu, max(np.abs(ref.mu).max(), 1.0)) < 1e-12
 
 
+def test_guess_is_only_a_starting_point():
+    """Any warm-start guess gives the same motion; the previous answer's pushing rows (with a
+    margin above round-off) are the final active set at once: no pivot."""
+    exact = 0
+    for seed in range(30):
+        blocks, uni, _ = random_case(seed)
+        ref = solve_unilateral(blocks, uni, fast_path=False)
+        scale = max(np.abs(ref.a_o).max(), np.abs(ref.qdd).max())
+        rng = np.random.default_rng(300 + seed)
+        pushing = ref.mu > 0
+        for guess in (pushing, blocks.constraint_mask & (rng.uniform(size=uni.shape) < 0.5),
+                      np.zeros_like(uni), blocks.constraint_mask.copy()):
+            for kw in ({}, {"reference": True}):
+                sol = solve_unilateral(blocks, uni, fast_path=False, guess=guess, **kw)
+                assert rel(sol.a_o, ref.a_o, scale) < 1e-10
+                assert rel(sol.qdd, ref.qdd, scale) < 1e-10
+                check_contact_conditions(sol)
+        mu_push = np.abs(ref.mu[pushing & uni])
+        if mu_push.size and mu_push.min() > 1e-6 * np.abs(ref.mu).max():
+            exact += 1
+            assert solve_unilateral(blocks, uni, fast_path=False, guess=pushing).pivots == 0
+    assert exact >= 15
+    blocks, uni, _ = random_case(1)
+    pad = ~blocks.constraint_mask
+    assert pad.any()
+    with pytest.raises(InputError, match="guess: True on padding"):
+        solve_unilateral(blocks, uni, guess=pad)
+
+
 @pytest.mark.parametrize("seed", range(10))
 def test_inactive_rows_are_dropped(seed):
     blocks, uni, _ = random_case(seed)
