@@ -925,6 +925,12 @@ def solve_impact(
     ``h_o``, ``c`` are ignored). The same mixed LCP as :func:`solve_unilateral` with
     ``b = (1 + e) φ̇⁻`` (unilateral) or ``φ̇⁻`` (bilateral); always the active-set method.
 
+    This is Moreau's form of Newton's law, applied to every active row, the ones already
+    separating (``φ̇⁻_k > 0``) included: such a row may take an impulse and leave with
+    ``φ̇⁺_k = -e_k φ̇⁻_k < 0`` when the other impulses push it down. The kinetic energy changes
+    by ``½ Σ_k P_k (1 - e_k) φ̇⁻_k``: it cannot increase when the rows that take an impulse
+    were closing, and it is conserved when every ``e_k = 1``.
+
     Args:
         blocks: the system blocks.
         unilateral: (n, N_max) bool, unilateral rows (False on padding).
