@@ -159,7 +159,7 @@ def _residuals(b: SystemBlocks, a_o, qdd, mu, h_o, h, rate, unilateral, active, 
     )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ContactSolution:
     """Result of :func:`solve_unilateral`.
 
@@ -229,7 +229,7 @@ class ContactSolution:
                           self.unilateral, self.active, self.phi_dd)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ImpactSolution:
     """Result of :func:`solve_impact`.
 
@@ -279,7 +279,7 @@ class ImpactSolution:
 
 
 # ------------------------------------------------------------------ Delassus operator
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class DelassusOperator:
     """Delassus operator of the real constraint rows, built object-first.
 
