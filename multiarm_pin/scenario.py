@@ -44,11 +44,11 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-import yaml
 
 from multiarm_pin.dynamics import SOLVERS
 from multiarm_pin.exceptions import (
     FrameNotFoundError,
+    JointNotFoundError,
     MultiArmError,
     RobotNotFoundError,
     ScenarioError,
@@ -350,17 +350,14 @@ def load_scenario(path) -> Scenario:
         The :class:`Scenario` (no robot loaded yet; see :func:`build_scenario`).
 
     Raises:
-        ScenarioError: unreadable file, YAML syntax error, or invalid content (names the key
-            path and what was expected).
+        ScenarioError: unreadable or non-UTF-8 file, YAML syntax error, a duplicate key
+            (naming both lines), or invalid content (names the key path and what was
+            expected).
     """
+    from multiarm_pin.yaml_strict import load_yaml_file
+
     path = Path(path)
-    if not path.is_file():
-        raise ScenarioError(str(path), "", "file not found")
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        raise ScenarioError(str(path), "", f"YAML syntax error: {exc}") from exc
-    return parse_scenario(data, str(path))
+    return parse_scenario(load_yaml_file(path), str(path))
 
 
 def parse_scenario(data, file: str = "<scenario>") -> Scenario:
@@ -618,6 +615,7 @@ def build_arm(scenario: Scenario, spec: ArmSpec, load_visuals: bool = True):
         if spec.robot is not None:
             return Arm.from_robot_name(spec.robot, spec.tool_frame, name=spec.name,
                                        base_placement=spec.base, tool_offset=spec.tool_offset,
+                                       locked_joints=spec.locked_joints,
                                        load_visuals=load_visuals)
         return Arm.from_urdf(spec.urdf, spec.tool_frame, name=spec.name,
                              base_placement=spec.base, tool_offset=spec.tool_offset,
@@ -637,6 +635,8 @@ def build_arm(scenario: Scenario, spec: ArmSpec, load_visuals: bool = True):
         ) from exc
     except URDFError as exc:
         raise ScenarioError(scenario.file, f"{key}.urdf", str(exc)) from exc
+    except JointNotFoundError as exc:
+        raise ScenarioError(scenario.file, f"{key}.locked_joints", str(exc)) from exc
     except MultiArmError as exc:
         raise ScenarioError(scenario.file, key, str(exc)) from exc
 
@@ -797,6 +797,7 @@ def build_scenario(scenario: Scenario, load_visuals: bool = False) -> BuiltScena
             (key ``arms[i].q0``, with the gap).
     """
     from multiarm_pin.kinematics import BodyKinematics
+    from multiarm_pin.scenario_checks import check_within_limits
     from multiarm_pin.system import MultiArmSystem
 
     obj = build_object(scenario)
@@ -812,6 +813,7 @@ def build_scenario(scenario: Scenario, load_visuals: bool = False) -> BuiltScena
                 raise ScenarioError(scenario.file, f"{key}.q0",
                                     f"expected {arm.nq} numbers (nq of {arm.source}), got "
                                     f"{len(spec.q0)}")
+            check_within_limits(scenario.file, f"{key}.q0", arm, spec.q0)
             q, ik = spec.q0.copy(), None
         else:
             ik = _solve_arm_ik(scenario, spec, arm, obj.shape, oMo)
