@@ -53,7 +53,7 @@ def safe_component(name: str, default: str = "run") -> str:
         A non-empty string without path separators, not starting with a dot, at most 100
         characters.
     """
-    s = _SAFE.sub("_", str(name)).lstrip(".")[:100].strip("_") or default
+    s = _SAFE.sub("_", str(name)).strip("._")[:100].strip("._") or default
     return s
 
 

@@ -262,12 +262,21 @@ def replay_parts(arms, obj, trajectory: dict):
     """
     from multiarm_pin.replay import ReplayArm, ReplayContacts, ReplayObject
 
+    def finite(a, limit=1e12):  # a failed run may end on huge or NaN values: drawable
+        return np.clip(np.nan_to_num(np.asarray(a, float), nan=0.0, posinf=limit,
+                                     neginf=-limit), -limit, limit)
+
     rarms = [ReplayArm(a.name, a.model, a.visual_model, pin.SE3.Identity(),
-                       trajectory[f"q_{a.name}"]) for a in arms]
-    robj = ReplayObject(obj.shape, trajectory["object_position"], trajectory["object_quaternion"])
+                       finite(trajectory[f"q_{a.name}"], 1e3)) for a in arms]
+    quat = np.array(trajectory["object_quaternion"], float)
+    bad = ~np.all(np.isfinite(quat), axis=1) | (np.linalg.norm(np.nan_to_num(quat), axis=1)
+                                                 < 1e-9)
+    quat[bad] = [0.0, 0.0, 0.0, 1.0]
+    robj = ReplayObject(obj.shape, finite(trajectory["object_position"], 1e6), quat)
     rc = None
     if trajectory["contact_points"].shape[1] > 0:
-        rc = ReplayContacts(trajectory["contact_points"], trajectory["contact_forces"])
+        rc = ReplayContacts(finite(trajectory["contact_points"], 1e6),
+                            finite(trajectory["contact_forces"]))
     return rarms, robj, rc
 
 
@@ -393,9 +402,9 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
                 raise ScenarioError(sc.file, "", str(exc)) from exc
             status = "failed"
             error = f"{sc.file}: simulation failed: {exc}"
-            if len(result.t) == 0:
-                raise RunFailedError(f"{error}; nothing simulated, nothing written", None, None,
-                                     str(exc)) from exc
+            if len(result.t) == 0:  # the set-up cannot even start: an input error
+                key = "controller" if "controller" in str(exc) else ""
+                raise ScenarioError(sc.file, key, f"the simulation cannot start: {exc}") from exc
         finally:
             if bar is not None:
                 bar.close()
@@ -443,9 +452,10 @@ def simulate_built(built: BuiltScenario, controller, duration: float, dt: float,
     from multiarm_pin.simulation import simulate
 
     sim = built.scenario.simulation
-    return simulate(built.system, built.initial_state, controller, duration, dt,
-                    integrator=sim.integrator, solver=solver, baumgarte=sim.baumgarte,
-                    progress=progress)
+    with np.errstate(over="ignore", invalid="ignore"):  # NaN/inf are caught and reported
+        return simulate(built.system, built.initial_state, controller, duration, dt,
+                        integrator=sim.integrator, solver=solver, baumgarte=sim.baumgarte,
+                        progress=progress)
 
 
 def _write_results(folder: Path, built: BuiltScenario, result, solver: str, wall: float,

@@ -8,6 +8,7 @@ while building):
 Warnings (:func:`input_warnings`; printed on stderr before a run and kept in
 ``summary.json``):
 
+- an object heavier than :data:`MASS_LIMIT` (numbers may overflow);
 - ``object_pd`` waypoints after the end of the run (never reached);
 - a placed joint (weld, revolute...) whose frame lies inside the object, more than
   :data:`INSIDE_TOLERANCE` from its surface (the tool would be inside the object).
@@ -21,6 +22,9 @@ from multiarm_pin.exceptions import ScenarioError
 
 LIMIT_TOLERANCE = 1e-9
 """Slack [rad or m] allowed beyond a joint position limit (rounding of written values)."""
+
+MASS_LIMIT = 1e6
+"""Object mass [kg] above which a warning is given (a building, not a payload)."""
 
 INSIDE_TOLERANCE = 1e-3
 """Depth [m] below the object's surface from which a joint frame counts as inside it."""
@@ -91,11 +95,16 @@ def input_warnings(built, duration: float) -> list[str]:
     out = []
     if sc.controller.type == "object_pd":
         raw = sc.data.get("controller", {}).get("waypoints") or []
-        for k, w in enumerate(raw):
-            t = w.get("t") if isinstance(w, dict) else None
-            if isinstance(t, int | float) and t > duration:
-                out.append(f"{sc.file}: controller.waypoints[{k}].t: t = {t:g} s is after the "
-                           f"end of the run ({duration:g} s); the object never gets there")
+        late = [(k, w["t"]) for k, w in enumerate(raw) if isinstance(w, dict)
+                and isinstance(w.get("t"), int | float) and w["t"] > duration]
+        if late:
+            k, t = late[0]
+            more = f" (and {len(late) - 1} later ones)" if len(late) > 1 else ""
+            out.append(f"{sc.file}: controller.waypoints[{k}].t: t = {t:g} s is after the end "
+                       f"of the run ({duration:g} s){more}; the object never gets there")
+    if sc.object.mass > MASS_LIMIT:
+        out.append(f"{sc.file}: object.mass: {sc.object.mass:g} kg is more than "
+                   f"{MASS_LIMIT:g} kg; forces and accelerations may overflow")
     shape = built.obj.shape
     for spec in sc.arms:
         J_o = spec.joint.placement_in_object
@@ -113,6 +122,7 @@ def input_warnings(built, duration: float) -> list[str]:
 __all__ = [
     "INSIDE_TOLERANCE",
     "LIMIT_TOLERANCE",
+    "MASS_LIMIT",
     "check_within_limits",
     "input_warnings",
     "one_dof_limits",

@@ -32,7 +32,7 @@ import pinocchio as pin
 
 from multiarm_pin.dynamics import SOLVERS, Solution
 from multiarm_pin.dynamics import solve as solve_dynamics
-from multiarm_pin.exceptions import DynamicsError, InputError
+from multiarm_pin.exceptions import DynamicsError, InputError, MultiArmError
 from multiarm_pin.rigid_object import ObjectState
 from multiarm_pin.spatial import integrate_quaternion, quaternion_derivative
 from multiarm_pin.system import Evaluation, MultiArmSystem, SystemState
@@ -133,7 +133,10 @@ class _Stepper:
             tau = np.zeros(s.nv)
             blocks = ev.blocks
         else:
-            tau = np.asarray(self.controller(t, state, ev), dtype=float)
+            try:
+                tau = np.asarray(self.controller(t, state, ev), dtype=float)
+            except MultiArmError as exc:  # NaN or no solution at this state: with the time
+                raise DynamicsError(f"t = {t:.6g} s: controller: {exc}") from exc
             if tau.shape != (s.nv,):
                 raise InputError(
                     f"controller returned torques of shape {tau.shape}, expected ({s.nv},)"

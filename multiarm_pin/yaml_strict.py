@@ -8,11 +8,27 @@ traceback. :func:`load_yaml_file` refuses both with a
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import yaml
 
 from multiarm_pin.exceptions import ScenarioError
+
+
+class StrictLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that also reads YAML 1.2 floats such as ``1e12`` or ``2E-3``.
+
+    YAML 1.1 (PyYAML's default) wants a dot and a signed exponent (``1.0e+12``) and reads
+    ``1e12`` as the *string* ``"1e12"``, which then fails as "expected a number".
+    """
+
+
+StrictLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
 
 
 def _check_duplicates(node: yaml.Node, file: str, path: str = "") -> None:
@@ -43,16 +59,17 @@ def load_yaml_text(text: str, file: str):
         file: where it came from (for messages).
 
     Returns:
-        The parsed data (``yaml.safe_load``), None for an empty document.
+        The parsed data (as ``yaml.safe_load``, plus YAML 1.2 floats like ``1e12``), None
+        for an empty document.
 
     Raises:
         ScenarioError: syntax error or a duplicate key (naming both lines).
     """
     try:
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
+        node = yaml.compose(text, Loader=StrictLoader)
         if node is not None:
             _check_duplicates(node, file)
-        return yaml.safe_load(text)
+        return yaml.load(text, Loader=StrictLoader)  # noqa: S506 (a SafeLoader subclass)
     except yaml.YAMLError as exc:
         raise ScenarioError(file, "", f"YAML syntax error: {exc}") from None
     except RecursionError:
@@ -93,4 +110,4 @@ def load_yaml_file(path) -> object:
     return load_yaml_text(text, f)
 
 
-__all__ = ["load_yaml_file", "load_yaml_text"]
+__all__ = ["StrictLoader", "load_yaml_file", "load_yaml_text"]
