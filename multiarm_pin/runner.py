@@ -410,8 +410,8 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
                 bar.close()
         wall = time.perf_counter() - t0
         t_end = float(result.t[-1])
-        _say(f"writing results to {target}", quiet)
         try:
+            _say(f"writing results to {target}", quiet)
             files, traj, summary = _write_results(writer.path, built, result, solver, wall,
                                                   T, sc, html, plots, status, error,
                                                   input_warns)
