@@ -9,13 +9,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from run_helpers import Q0_UR5, one_arm_scenario, write
 
 from multiarm_pin import cli
 from multiarm_pin.exceptions import InputError, ScenarioError
 from multiarm_pin.replay import close_visualizer, write_replay_html
 from multiarm_pin.runner import ProgressBar, http_status, load_run, run_scenario, serve_run
-
-from run_helpers import Q0_UR5, one_arm_scenario, write
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT = REPO / "scenarios" / "two_ur5_box.yaml"
