@@ -13,6 +13,7 @@ For a state ``(q, v)`` :meth:`Arm.terms` computes, once, everything the dynamics
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -61,6 +62,19 @@ def frame_id(model: pin.Model, name: str, source: str = "") -> int:
             if model.frames[i].type == kind:
                 return i
     return ids[0]
+
+
+@functools.cache
+def _load_example_robot(robot: str) -> tuple[pin.Model, pin.GeometryModel]:
+    """``example_robot_data.load(robot)``'s model and visual model, loaded once per process.
+
+    Loading parses the URDF and reads every mesh (seconds for some robots); callers never
+    modify the cached objects (reducing and appending them makes copies).
+    """
+    import example_robot_data as erd
+
+    wrapper = erd.load(robot)
+    return wrapper.model, wrapper.visual_model
 
 
 def _unique_frame_names(model: pin.Model) -> pin.Model:
@@ -290,11 +304,8 @@ class Arm:
         """
         if robot not in ROBOTS:
             raise RobotNotFoundError(robot, available_robots())
-        import example_robot_data as erd
-
         entry = ROBOTS[robot]
-        wrapper = erd.load(robot)
-        model, visual = wrapper.model, wrapper.visual_model
+        model, visual = _load_example_robot(robot)
         locked = tuple(dict.fromkeys((*entry.locked_joints, *locked_joints)))
         if locked:
             model, visual = _lock(model, visual, locked, f"example_robot_data:{robot}")
