@@ -10,7 +10,11 @@
   (T, K, 3) [N] (force on the object, world axes) of the K contacts of all arms in order;
   ``kinetic_energy``, ``potential_energy`` (T,) [J]; ``momentum`` (T, 6).
 - ``summary.json``: scenario name, solver, steps, wall time, max constraint violation,
-  min contact force, warnings (contact separations, solver switches), per-arm details.
+  min contact force, warnings (contact separations, solver switches), ``input_warnings``
+  (legal but suspicious input values, also printed on stderr before the run), per-arm
+  details (tool frame and offset, q0 and where it came from), ``status`` (``complete``,
+  ``failed`` or ``interrupted``), ``error`` (the message, or null) and ``t_end`` (the last
+  simulated time [s]).
 - ``object_pose.png``, ``contact_forces.png``, ``constraint_violation.png``.
 - ``replay.html``: a self-contained Meshcat page replaying the run offline.
 - ``scenario.yaml``: the scenario (URDF paths absolute), so that ``multiarm-pin replay DIR``
@@ -467,7 +471,7 @@ def _write_results(folder: Path, built: BuiltScenario, result, solver: str, wall
     files["trajectory"] = folder / "trajectory.npz"
     np.savez_compressed(files["trajectory"], **traj)
     summary = summarize(built, result, solver, wall)
-    summary["warnings"] = [*input_warns, *summary["warnings"]]
+    summary["input_warnings"] = list(input_warns)
     summary["requested"]["duration"] = T
     summary.update(status=status, error=error, t_end=float(result.t[-1]))
     files["scenario"] = folder / "scenario.yaml"

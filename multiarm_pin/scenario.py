@@ -717,22 +717,55 @@ def _contact_targets(scenario, spec: ArmSpec, poly, oMo: pin.SE3):
     return targets
 
 
-def _solve_arm_ik(scenario, spec: ArmSpec, arm, poly, oMo):
-    from multiarm_pin.ik import PoseTarget, UnreachableError, solve_ik
+def _joint_targets(spec: ArmSpec, tool: str, oMo: pin.SE3) -> tuple[list, str]:
+    """IK targets of a placed joint: only what the joint constrains.
 
+    The joint frame ``J_t`` on the tool must meet ``J_o`` on the object: its origin alone for
+    a spherical joint; origin and z axis for a revolute one; z axis and the origin on the z
+    line for a cylindrical one; the full placement for weld, prismatic and universal.
+
+    Returns:
+        ``(targets, description)``.
+    """
+    from multiarm_pin.ik import AxisTarget, PlaneTarget, PointTarget, PoseTarget
+
+    J_t = spec.joint.placement_in_tool or pin.SE3.Identity()
+    oMj = oMo * spec.joint.placement_in_object
+    kind = spec.joint.type
+    o, z = J_t.translation, J_t.rotation[:, 2]
+    if kind == "spherical":
+        return [PointTarget(tool, oMj.translation, offset=o)], "joint centre at its point"
+    if kind == "revolute":
+        return ([PointTarget(tool, oMj.translation, offset=o),
+                 AxisTarget(tool, z, oMj.rotation[:, 2])], "joint centre and axis")
+    if kind == "cylindrical":
+        R, p = oMj.rotation, oMj.translation
+        return ([AxisTarget(tool, z, R[:, 2]),
+                 PlaneTarget(tool, R[:, 0], float(R[:, 0] @ p), point=o),
+                 PlaneTarget(tool, R[:, 1], float(R[:, 1] @ p), point=o)],
+                "joint axis on its line")
+    return [PoseTarget(tool, _placed_target(spec, oMo))], "tool at joint.placement_in_object"
+
+
+def _solve_arm_ik(scenario, spec: ArmSpec, arm, poly, oMo):
+    from multiarm_pin.ik import PostureTarget, UnreachableError, solve_ik
+
+    seed = spec.q_seed
+    if seed is not None and len(seed) != arm.nq:
+        raise ScenarioError(scenario.file, f"arms[{spec.index}].q_seed",
+                            f"expected {arm.nq} numbers (nq of {arm.source}), got {len(seed)}")
     if spec.joint.type == "contacts":
         targets = _contact_targets(scenario, spec, poly, oMo)
         what = f"arm {spec.name!r}: fingertips on faces"
         key = f"arms[{spec.index}].joint.contacts"
     else:
         tool = arm.model.frames[arm.tool_frame_id].name
-        targets = [PoseTarget(tool, _placed_target(spec, oMo))]
-        what = f"arm {spec.name!r}: tool at joint.placement_in_object"
+        targets, goal = _joint_targets(spec, tool, oMo)
+        what = f"arm {spec.name!r} ({spec.joint.type} joint): {goal}"
         key = f"arms[{spec.index}].joint.placement_in_object"
-    seed = spec.q_seed
-    if seed is not None and len(seed) != arm.nq:
-        raise ScenarioError(scenario.file, f"arms[{spec.index}].q_seed",
-                            f"expected {arm.nq} numbers (nq of {arm.source}), got {len(seed)}")
+        # among the configurations meeting the joint, prefer one near the seed (fingertips
+        # have their points as preferences instead: those fix the gripper)
+        targets.append(PostureTarget(seed if seed is not None else arm.neutral()))
     try:
         return solve_ik(arm.model, targets, seed, what=what)
     except UnreachableError as exc:

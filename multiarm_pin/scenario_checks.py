@@ -5,8 +5,8 @@ while building):
 
 - ``q0`` outside the joint position limits of the arm's model.
 
-Warnings (:func:`input_warnings`; printed on stderr before a run and kept in
-``summary.json``):
+Warnings (:func:`input_warnings`; printed on stderr before a run and kept in the
+``input_warnings`` of ``summary.json``):
 
 - an object heavier than :data:`MASS_LIMIT` (numbers may overflow);
 - ``object_pd`` waypoints after the end of the run (never reached);

@@ -331,7 +331,7 @@ def test_huge_mass_fails_with_time_and_a_warning(tmp_path, capsys):
     assert "object.mass: 1e+300 kg is more than" in err
     assert "simulation failed: t = " in err and "NaN" in err and "Traceback" not in err
     s = _summary(out)
-    assert s["status"] == "failed" and any("object.mass" in w for w in s["warnings"])
+    assert s["status"] == "failed" and any("object.mass" in w for w in s["input_warnings"])
 
 
 @pytest.mark.parametrize("content", [b"", b"PK\x03\x04truncated", b"not a zip at all"])
@@ -381,7 +381,7 @@ def test_late_waypoints_warn_on_stderr_and_in_summary(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "controller.waypoints[1].t: t = 5 s is after the end of the run (0.01 s) " \
            "(and 1 later ones)" in err
-    assert any("waypoints[1]" in w for w in _summary(tmp_path / "o")["warnings"])
+    assert any("waypoints[1]" in w for w in _summary(tmp_path / "o")["input_warnings"])
 
 
 def test_bad_files_give_messages_not_tracebacks(tmp_path, capsys):
