@@ -39,12 +39,16 @@ def _check_duplicates(node: yaml.Node, file: str, path: str = "") -> None:
             key = key_node.value if isinstance(key_node, yaml.ScalarNode) else None
             child = f"{path}.{key}" if path else str(key)
             if key is not None and key != "<<":
+                mark = key_node.start_mark
                 if key in seen:
-                    raise ScenarioError(
-                        file, child,
-                        f"duplicate key {key!r} on line {key_node.start_mark.line + 1} (first on "
-                        f"line {seen[key] + 1}); each key may appear once")
-                seen[key] = key_node.start_mark.line
+                    first = seen[key]
+                    here, there = f"line {mark.line + 1}", f"line {first.line + 1}"
+                    if first.line == mark.line:
+                        here += f" column {mark.column + 1}"
+                        there += f" column {first.column + 1}"
+                    raise ScenarioError(file, child, f"duplicate key {key!r} on {here} (first on "
+                                        f"{there}); each key may appear once")
+                seen[key] = mark
             _check_duplicates(value_node, file, child)
     elif isinstance(node, yaml.SequenceNode):
         for i, item in enumerate(node.value):
