@@ -28,11 +28,15 @@ Joint types: ``weld``, ``revolute``, ``prismatic``, ``cylindrical``, ``universal
 (spherical fingertips on named faces: ``tip_radius`` and ``contacts: [{tip: frame, face:
 +x, point: [..]}, ...]``). Without ``placement_in_object`` a joint is built where the tool is
 at ``q0``. Without ``q0`` the arm is placed by inverse kinematics (:mod:`multiarm_pin.ik`)
-from ``q_seed``: its tool at the joint's placement, or each fingertip touching its face, as
-near to the given point as the gripper allows.
+from ``q_seed``, meeting only what the joint constrains (the centre of a spherical joint;
+centre and axis of a revolute one; axis and line of a cylindrical one; the full placement
+of weld, prismatic and universal joints; each fingertip touching its face, as near to the
+given point as the gripper allows), near the seed.
 
-Every error is a :class:`~multiarm_pin.exceptions.ScenarioError` naming the file, the key
-path (``arms[1].joint.type``) and what was expected.
+Files are read strictly (:mod:`multiarm_pin.yaml_strict`: UTF-8, no duplicate keys). Every
+error is a :class:`~multiarm_pin.exceptions.ScenarioError` naming the file, the key path
+(``arms[1].joint.type``) and what was expected; ``q0`` outside the joint limits is one
+(:mod:`multiarm_pin.scenario_checks`).
 """
 
 from __future__ import annotations
