@@ -127,6 +127,15 @@ class _Stepper:
         self.model = system.arm_set.model
 
     def evaluate(self, t: float, state: SystemState):
+        """Blocks, controller and forward dynamics at ``(t, state)``; errors carry the time."""
+        try:
+            return self._evaluate(t, state)
+        except MultiArmError as exc:  # same type, message prefixed with the time
+            if exc.args and isinstance(exc.args[0], str) and not exc.args[0].startswith("t = "):
+                exc.args = (f"t = {t:.6g} s: {exc.args[0]}", *exc.args[1:])
+            raise
+
+    def _evaluate(self, t: float, state: SystemState):
         s = self.system
         ev = s.blocks(state, None, self.baumgarte)
         if self.controller is None:
