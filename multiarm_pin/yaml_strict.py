@@ -75,7 +75,7 @@ def load_yaml_text(text: str, file: str):
             _check_duplicates(node, file)
         return yaml.load(text, Loader=StrictLoader)  # noqa: S506 (a SafeLoader subclass)
     except yaml.YAMLError as exc:
-        raise ScenarioError(file, "", f"YAML syntax error: {exc}") from None
+        raise ScenarioError(file, "", f"invalid YAML (YAML syntax error): {exc}") from None
     except RecursionError:
         raise ScenarioError(file, "", "YAML nested too deeply") from None
 
