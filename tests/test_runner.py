@@ -209,22 +209,23 @@ def test_out_of_another_run_is_refused_then_replaced_whole(tmp_path, capsys):
     a = write(tmp_path / "a.yaml", one_arm_scenario("same_name"))
     b = write(tmp_path / "b.yaml", one_arm_scenario("same_name", mass=3.0))
     out = tmp_path / "out"
-    assert cli.main(["run", str(a), "--out", str(out), "--quiet", "--duration", "0.004"]) == 0
-    assert (out / "replay.html").is_file()
+    fast = {"duration": 0.004, "html": False, "plots": False}
+    run_scenario(a, out, **fast)
     old = _summary(out)
-    # rerunning the same scenario file replaces its own results
-    assert cli.main(["run", str(a), "--out", str(out), "--quiet", "--no-html",
-                     "--duration", "0.004"]) == 0
+    # a replay page of an earlier run with html (written by hand: any stale file will do)
+    (out / "replay.html").write_text("stale")
+    # rerunning the same scenario file replaces its own results, whole
+    run_scenario(a, out, **fast)
     assert not (out / "replay.html").exists()  # no stale file of the previous run
-    assert cli.main(["run", str(a), "--out", str(out), "--quiet", "--duration", "0.004"]) == 0
+    (out / "replay.html").write_text("stale")
     capsys.readouterr()
-    code = cli.main(["run", str(b), "--out", str(out), "--quiet", "--no-html"])
-    assert code == 2
+    assert cli.main(["run", str(b), "--out", str(out), "--quiet", "--no-html"]) == 2
     err = capsys.readouterr().err
     assert "holds the results of another run" in err and "--overwrite" in err
     assert _summary(out)["scenario_file"] == old["scenario_file"]
-    assert cli.main(["run", str(b), "--out", str(out), "--quiet", "--no-html", "--overwrite",
-                     "--duration", "0.004"]) == 0
+    assert (out / "replay.html").read_text() == "stale"  # refused: untouched
+    assert cli.main(["run", str(b), "--out", str(out), "--quiet", "--no-html", "--duration",
+                     "0.004", "--overwrite"]) == 0
     s = _summary(out)
     assert s["scenario_file"] == str(b) and s["status"] == "complete"
     assert not (out / "replay.html").exists()  # replaced whole: the old page is gone
