@@ -421,10 +421,13 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
                                                   input_warns)
             writer.publish()
         except KeyboardInterrupt as exc:
-            raise RunInterrupted(
-                f"interrupted by {getattr(exc, 'signal_name', 'SIGINT')} while writing the "
-                f"results; {target} left as it was", t_end, None,
-                getattr(exc, "signal_name", "SIGINT")) from None
+            name = getattr(exc, "signal_name", "SIGINT")
+            if writer.published:  # the signal was held back during the swap: all written
+                raise RunInterrupted(f"interrupted by {name} just after the results were "
+                                     f"written to {target} (complete)", t_end, target,
+                                     name) from None
+            raise RunInterrupted(f"interrupted by {name} while writing the results; {target} "
+                                 "left as it was", t_end, None, name) from None
         except OSError as exc:
             raise OutputError(f"--out {target}: cannot write the results: "
                               f"{exc.strerror or exc}") from exc
@@ -624,9 +627,13 @@ def run_command(args: argparse.Namespace) -> int:
     except RunInterrupted as exc:
         print(f"interrupted: {exc}", file=sys.stderr)
         if exc.out_dir is not None:
-            print(f"partial results (status interrupted, t_end = {exc.t_end:.6g} s): "
-                  f"{exc.out_dir}; replay them with: multiarm-pin replay {exc.out_dir}",
-                  file=sys.stderr)
+            status = "interrupted"
+            with contextlib.suppress(OSError, ValueError):
+                status = json.loads((Path(exc.out_dir) / "summary.json").read_text(
+                    encoding="utf-8")).get("status", status)
+            what = "partial results" if status != "complete" else "results"
+            print(f"{what} (status {status}, t_end = {exc.t_end:.6g} s): {exc.out_dir}; "
+                  f"replay them with: multiarm-pin replay {exc.out_dir}", file=sys.stderr)
         return 130
     s = res.summary
     out = res.out_dir.resolve()

@@ -421,3 +421,37 @@ def test_version(capsys):
         cli.main(["--version"])
     assert exc.value.code == 0
     assert capsys.readouterr().out.strip() == f"multiarm-pin {__version__}"
+
+
+def test_interrupt_while_writing_leaves_old_results_or_reports_new_ones(tmp_path, monkeypatch):
+    import multiarm_pin.runner as runner
+    from multiarm_pin.exceptions import RunInterrupted
+
+    sc = write(tmp_path / "s.yaml", one_arm_scenario())
+    out = tmp_path / "out"
+    fast = {"duration": 0.004, "html": False, "plots": False}
+    run_scenario(sc, out, **fast)
+    old = (out / "summary.json").read_bytes()
+    real_write, real_publish = runner._write_results, runner.ResultsWriter.publish
+
+    def write_then_interrupt(*args, **kwargs):
+        real_write(*args, **kwargs)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runner, "_write_results", write_then_interrupt)
+    with pytest.raises(RunInterrupted, match="left as it was") as info:
+        run_scenario(sc, out, **fast)
+    assert info.value.out_dir is None and (out / "summary.json").read_bytes() == old
+
+    def publish_then_interrupt(self):
+        real_publish(self)
+        raise KeyboardInterrupt  # a signal held back during the swap arrives here
+
+    monkeypatch.setattr(runner, "_write_results", real_write)
+    monkeypatch.setattr(runner.ResultsWriter, "publish", publish_then_interrupt)
+    with pytest.raises(RunInterrupted, match="just after the results were written") as info:
+        run_scenario(sc, out, duration=0.006, html=False, plots=False)
+    assert info.value.out_dir == out.resolve()
+    s = _summary(out)
+    assert s["status"] == "complete" and s["t_end"] == pytest.approx(0.006)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "s.yaml"]
