@@ -390,7 +390,7 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
             print(f"warning: {w}", file=sys.stderr, flush=True)
         bar = None if quiet else ProgressBar(f"{safe_component(sc.name)}", T)
         t0 = time.perf_counter()
-        status, error = "complete", None
+        status, error, internal = "complete", None, None
         try:
             result = simulate_built(built, controller, T, dt, solver, bar)
         except KeyboardInterrupt as exc:
@@ -409,6 +409,12 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
             if len(result.t) == 0:  # the set-up cannot even start: an input error
                 key = "controller" if "controller" in str(exc) else ""
                 raise ScenarioError(sc.file, key, f"the simulation cannot start: {exc}") from exc
+        except Exception as exc:  # a bug: keep what was simulated, then let it surface
+            result, internal = partial_result(exc), exc
+            if result is None or len(result.t) == 0:
+                raise
+            status = "failed"
+            error = f"{sc.file}: internal error (a bug): {type(exc).__name__}: {exc}"
         finally:
             if bar is not None:
                 bar.close()
@@ -424,7 +430,7 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
             name = getattr(exc, "signal_name", "SIGINT")
             if writer.published:  # the signal was held back during the swap: all written
                 raise RunInterrupted(f"interrupted by {name} just after the results were "
-                                     f"written to {target} (complete)", t_end, target,
+                                     f"written to {target} (status {status})", t_end, target,
                                      name) from None
             raise RunInterrupted(f"interrupted by {name} while writing the results; {target} "
                                  "left as it was", t_end, None, name) from None
@@ -432,6 +438,9 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
             raise OutputError(f"--out {target}: cannot write the results: "
                               f"{exc.strerror or exc}") from exc
     files = {k: target / p.name for k, p in files.items()}
+    if internal is not None:
+        _say(f"partial results (status failed, t_end = {t_end:.6g} s) in {target}", False)
+        raise internal
     if status == "interrupted":
         raise RunInterrupted(f"{sc.file}: {error} at t = {t_end:.6g} s of {T:g} s; partial "
                              f"results in {target}", t_end, target, signal_name)

@@ -455,3 +455,27 @@ def test_interrupt_while_writing_leaves_old_results_or_reports_new_ones(tmp_path
     s = _summary(out)
     assert s["status"] == "complete" and s["t_end"] == pytest.approx(0.006)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "s.yaml"]
+
+
+def test_a_bug_mid_run_keeps_the_partial_results_and_surfaces(tmp_path, monkeypatch):
+    import multiarm_pin.runner as runner
+
+    real = runner.make_controller
+
+    def make(built):
+        inner = real(built)
+
+        def controller(t, state, ev):
+            if t >= 0.005:
+                raise ZeroDivisionError("a bug in a controller")
+            return inner(t, state, ev)
+
+        return controller
+
+    monkeypatch.setattr(runner, "make_controller", make)
+    sc = write(tmp_path / "s.yaml", one_arm_scenario(duration=0.02))
+    with pytest.raises(ZeroDivisionError, match="a bug"):
+        run_scenario(sc, tmp_path / "out", html=False, plots=False)
+    s = _summary(tmp_path / "out")
+    assert s["status"] == "failed" and "internal error (a bug): ZeroDivisionError" in s["error"]
+    assert s["t_end"] == pytest.approx(0.004)
