@@ -391,18 +391,11 @@ def test_bad_files_give_messages_not_tracebacks(tmp_path, capsys):
     assert cli.main(["run", str(bad), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert f"{bad}: not a UTF-8 text file: byte 9 (line 1) is 0xe9" in err
-    assert cli.main(["grasp", str(bad)]) == 2
-    assert "not a UTF-8 text file" in capsys.readouterr().err
     dup = write(tmp_path / "dup.yaml", one_arm_scenario().replace(
         "  mass: 2.0\n", "  mass: 4\n  mass: 400\n"))
     assert cli.main(["run", str(dup), "--out", str(tmp_path / "o")]) == 2
     assert "object.mass: duplicate key 'mass' on line 5 (first on line 4)" in \
         capsys.readouterr().err
-    grasp = REPO / "scenarios" / "grasps" / "box_form_closure.yaml"
-    assert cli.main(["grasp", str(grasp), "--picture", str(tmp_path / "p.txt")]) == 2
-    err = capsys.readouterr().err
-    assert "--picture" in err and "unsupported picture format 'txt'" in err and ".png" in err
-    assert not (tmp_path / "p.txt").exists()
 
 
 def test_q0_outside_the_joint_limits_is_an_error(tmp_path):
