@@ -43,8 +43,13 @@ def write(path: Path, text: str) -> Path:
 
 
 def cli_command(*args: str) -> list[str]:
-    """The ``multiarm-pin`` command line run by this interpreter."""
-    return [sys.executable, "-m", "multiarm_pin.cli", *map(str, args)]
+    """The ``multiarm-pin`` command line (the console script of this interpreter's venv).
+
+    Falls back to ``python -m multiarm_pin.cli`` when the script is not installed.
+    """
+    script = Path(sys.executable).parent / "multiarm-pin"
+    head = [str(script)] if script.is_file() else [sys.executable, "-m", "multiarm_pin.cli"]
+    return [*head, *map(str, args)]
 
 
 def run_cli(*args: str, cwd=None, timeout: float = 300) -> subprocess.CompletedProcess:
