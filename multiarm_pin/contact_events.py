@@ -1,0 +1,96 @@
+"""Contact events of a simulation: the active set of unilateral rows, separations, touchdowns.
+
+Integration scheme (event-driven; see docs/ARCHITECTURE.md, "Unilateral contacts"):
+
+- Between events the smooth integrator (``rk4`` or ``semi_implicit``) runs with the *active
+  set* fixed during a step. Every evaluation solves the mixed LCP of part S
+  (:func:`multiarm_pin.dynamics.unilateral.solve_unilateral`) on the active rows: bilateral
+  rows ``φ̈ = 0``, active unilateral rows ``0 <= μ ⟂ φ̈ >= 0`` (with Baumgarte terms, which
+  therefore act on active rows only); inactive rows have ``μ = 0``.
+- **Separation**: at the start of every step (and after every impact), an active unilateral
+  row whose solution has ``μ = 0`` and ``φ̈ > SEPARATION_ACCELERATION`` leaves the active set
+  (event ``"separation"`` at that time). Inside a step the LCP already lets such a row lift
+  off (``φ̈ >= 0``), so the recorded time is within one step ``dt`` after the force vanished.
+- **Touchdown**: after every step, an inactive unilateral row whose gap fell below
+  ``-GAP_TOLERANCE`` has touched down inside the step. The time is located by the Illinois
+  (modified regula falsi) method on ``θ ∈ [0, 1]`` of the step, re-integrating from the step's
+  start with step ``θ h``, until the smallest such gap lies in ``[-GAP_TOLERANCE, 0]`` (or the
+  bracket is below ``TIME_TOLERANCE``). There the impact law of part S
+  (:func:`~multiarm_pin.dynamics.unilateral.solve_impact`, ``0 <= P ⟂ φ̇⁺ + e φ̇⁻ >= 0`` on
+  the active and touching unilateral rows, ``φ̇⁺ = 0`` on bilateral rows) changes the
+  velocities; a touching row that leaves with ``φ̇⁺ > REBOUND_SPEED`` rebounds and stays
+  inactive, the others join the active set (event ``"touchdown"``); an active row that the
+  impact makes leave (``φ̇⁺ > REBOUND_SPEED``) separates. Impacts slower than
+  ``RESTING_SPEED`` are plastic (``e = 0``), so that a bouncing body comes to rest after
+  finitely many events instead of an infinite (Zeno) sequence. The step is then finished
+  from the event time with the new active set.
+
+The scheme is exact at events up to the stated tolerances and keeps the smooth integrator's
+order between them; velocity-level time stepping (Moreau-Jean) would be more robust for many
+simultaneous impacts but is first order everywhere. The sampling grid stays ``k dt``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+GAP_TOLERANCE = 1e-9
+"""[m] A row touches down when its gap falls below ``-GAP_TOLERANCE``; located to within it."""
+
+TIME_TOLERANCE = 1e-13
+"""[s] Touchdown location stops when the bracket is shorter than this."""
+
+SEPARATION_ACCELERATION = 1e-9
+"""[m/s²] An active unilateral row with ``μ = 0`` separates when ``φ̈`` exceeds this."""
+
+REBOUND_SPEED = 1e-6
+"""[m/s] After an impact a row leaving faster than this is separated (rebound)."""
+
+RESTING_SPEED = 1e-3
+"""[m/s] Impacts with a closing speed below this are plastic (``e = 0``): no micro-bounces."""
+
+MAX_EVENTS_PER_STEP = 50
+"""Touchdowns handled within one step before the simulation gives up (DynamicsError)."""
+
+
+@dataclass(frozen=True)
+class ContactEvent:
+    """A unilateral contact separating or touching down.
+
+    Attributes:
+        t: time [s].
+        kind: ``"separation"`` or ``"touchdown"`` (``rebound`` True: it left again at once).
+        block: block index (an arm, or ``n_arms`` for the supports); row: row in the block.
+        label: ``"<arm>:<contact>"`` or ``"<support>[point]"``.
+        body: the arm's or the support's name.
+        phi_dot: gap rate [m/s] before the event (``φ̇⁻`` at a touchdown).
+        phi_dot_after: gap rate [m/s] after it (``φ̇⁺`` at a touchdown).
+        impulse: contact impulse ``P`` [N s] of the impact (0 for a separation by force).
+        rebound: True if the row left again at once after its impact (restitution).
+    """
+
+    t: float
+    kind: str
+    block: int
+    row: int
+    label: str
+    body: str
+    phi_dot: float = 0.0
+    phi_dot_after: float = 0.0
+    impulse: float = 0.0
+    rebound: bool = False
+
+    def as_dict(self) -> dict:
+        """Plain JSON-ready mapping."""
+        return {k: (float(v) if isinstance(v, float) else v) for k, v in asdict(self).items()}
+
+
+__all__ = [
+    "GAP_TOLERANCE",
+    "MAX_EVENTS_PER_STEP",
+    "REBOUND_SPEED",
+    "RESTING_SPEED",
+    "SEPARATION_ACCELERATION",
+    "TIME_TOLERANCE",
+    "ContactEvent",
+]
