@@ -6,11 +6,17 @@
   ``[x, y, z, w]``), ``object_twist`` (T, 6, ``[ẋ; ω]`` world axes), for each arm A
   ``q_A`` (T, nq), ``v_A`` (T, nv), ``tau_A`` (T, nv), ``mu_A`` (T, N_A) (contact multipliers
   [N], positive = pushing), ``phi_A`` (T, N_A) (gaps [m]); ``constraint_violation`` (T,)
-  = max |φ| over all contacts [m]; ``contact_points`` (T, K, 3) [m] and ``contact_forces``
-  (T, K, 3) [N] (force on the object, world axes) of the K contacts of all arms in order;
+  = max |φ| over held contacts and the penetration of separated ones [m];
+  ``contact_points`` (T, K, 3) [m] and ``contact_forces`` (T, K, 3) [N] (force on the
+  object, world axes) of the K contacts of all arms in order, then of the supports;
+  ``contact_labels`` (K,) and ``contact_active`` (T, K) (touching: in the active set, or
+  bilateral); for each support S ``mu_S``, ``phi_S`` (T, P_S); ``external_wrench`` (T, 6);
+  the contact events ``event_t`` (E,) [s], ``event_contact`` (E,) (index in K) and
+  ``event_kind`` (E,) (``separation`` / ``touchdown``);
   ``kinetic_energy``, ``potential_energy`` (T,) [J]; ``momentum`` (T, 6).
 - ``summary.json``: scenario name, solver, steps, wall time, max constraint violation,
-  min contact force, warnings (contact separations, solver switches), per-arm details.
+  min contact force, warnings (contact separations, solver switches), per-arm details,
+  ``events`` (every separation and touchdown: time, contact, arm or support).
 - ``object_pose.png``, ``contact_forces.png``, ``constraint_violation.png``.
 - ``replay.html``: a self-contained Meshcat page replaying the run offline.
 - ``scenario.yaml``: the scenario (URDF paths absolute), so that ``multiarm-pin replay DIR``
@@ -130,6 +136,12 @@ def make_controller(built: BuiltScenario):
         ScenarioError: unknown or bad controller parameters (key ``controller``).
     """
     spec = built.scenario.controller
+    if not built.system.n_arms:
+        if spec.type != "none":
+            raise ScenarioError(built.scenario.file, "controller.type",
+                                f"the scenario has no arms, so no controller {spec.type!r}; "
+                                "expected 'none' (or no controller key)")
+        return None
     try:
         from multiarm_pin.controllers import make_controller as factory
     except ImportError:
@@ -171,16 +183,35 @@ def trajectory_arrays(built: BuiltScenario, result) -> dict[str, np.ndarray]:
         out[f"phi_{arm.name}"] = result.phi[:, i, :N]
         points.append(result.contact_points[:, i, :N])
         forces.append(result.mu[:, i, :N, None] * result.normals[:, i, :N])
+    n, sup = system.n_arms, system.supports
+    for k, spt in enumerate(sup.supports):
+        rows = np.flatnonzero(sup.support_index == k)
+        out[f"mu_{spt.name}"] = result.mu[:, n, rows]
+        out[f"phi_{spt.name}"] = result.phi[:, n, rows]
+    if sup.n_rows:
+        K = sup.n_rows
+        points.append(result.contact_points[:, n, :K])
+        forces.append(result.mu[:, n, :K, None] * result.normals[:, n, :K])
     out["contact_points"] = np.concatenate(points, axis=1)
     out["contact_forces"] = np.concatenate(forces, axis=1)
+    mask = system.contact_mask
+    held = result.active | (mask & ~system.contact_unilateral)[None]
+    out["contact_active"] = held[:, mask]
+    out["contact_labels"] = np.array([lab for _, _, lab in system.contact_labels], dtype=str)
+    out["external_wrench"] = result.external_wrench
+    flat = -np.ones(mask.shape, dtype=int)
+    flat[mask] = np.arange(int(mask.sum()))
+    out["event_t"] = np.array([e.t for e in result.events], dtype=float)
+    out["event_contact"] = np.array([flat[e.block, e.row] for e in result.events], dtype=int)
+    out["event_kind"] = np.array([e.kind for e in result.events], dtype=str)
     return {k: np.ascontiguousarray(v) for k, v in out.items()}
 
 
 def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> dict:
     """The ``summary.json`` content: run settings, physical checks and warnings."""
     system = built.system
-    mask = np.asarray(system.constraint_set.mask)
-    uni = np.asarray(system.unilateral)
+    mask = np.asarray(system.contact_mask)
+    uni = np.asarray(system.contact_unilateral)
     mu = result.mu
     real = mu[:, mask]
     uni_mu = mu[:, uni]
@@ -233,6 +264,12 @@ def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> di
                            (result.q, result.v, result.mu, result.object_position,
                             result.object_twist))),
         "arms": arms,
+        "supports": [{"name": sp.name, "point": sp.point.tolist(), "normal": sp.normal.tolist(),
+                      "points": int(len(sp.points)), "restitution": sp.restitution}
+                     for sp in system.supports.supports],
+        "external_wrench": [{"from": a, "to": b, "wrench": w.tolist()}
+                            for a, b, w in built.scenario.object.external_wrench],
+        "events": [e.as_dict() for e in result.events],
         "warnings": warnings,
         "requested": {"duration": sim.duration, "dt": sim.dt},
     }
@@ -308,7 +345,7 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
     try:
         result = simulate(built.system, built.initial_state, controller, T, dt,
                           integrator=sim.integrator, solver=solver, baumgarte=sim.baumgarte,
-                          progress=bar)
+                          progress=bar, external_wrench=sc.object.external_wrench or None)
     finally:
         if bar is not None:
             bar.close()
@@ -323,7 +360,8 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
     if plots:
         from multiarm_pin.plots import write_plots
 
-        for p in write_plots(out_dir, traj, [a.name for a in built.arms], sc.name):
+        for p in write_plots(out_dir, traj, [a.name for a in built.arms], sc.name,
+                             [sp.name for sp in built.system.supports.supports]):
             files[p.stem] = p
     if html:
         from multiarm_pin.replay import write_replay_html

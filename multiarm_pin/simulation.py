@@ -283,11 +283,7 @@ class _Stepper:
             g_hi = float(self.gaps(new)[watch].min())
             if g_hi >= -tol:
                 return new
-            g_lo = float(self.gaps(state)[watch].min())
-            if g_lo <= 0.0:  # already touching at the step's start (within tolerance)
-                theta, s_e = 0.0, state
-            else:
-                theta, s_e = self._locate(integrator, t, state, sol, h, watch, g_lo, g_hi)
+            theta, s_e = self._locate(integrator, t, state, sol, h, watch, g_hi)
             t = t + theta * h
             state = self._impact(t, s_e)
             sol, _, _, rows = self.evaluate(t, state)
@@ -298,12 +294,33 @@ class _Stepper:
         raise DynamicsError(f"t = {t:.6g} s: more than {ce.MAX_EVENTS_PER_STEP} contact events "
                             "in one step")
 
-    def _locate(self, integrator, t, state, sol, h, watch, g_lo, g_hi):
-        """Illinois method for ``θ`` with the smallest watched gap in ``[-tol, 0]``."""
+    def _locate(self, integrator, t, state, sol, h, watch, g_hi):
+        """``θ`` of the step where the smallest watched gap first reaches ``[-tol, 0]``.
+
+        A bracket ``[lo, hi]`` with the gap above the band at ``lo`` and below it at ``hi``
+        is refined by the Illinois method. When the step starts inside the band (a row
+        that just rebounded, or one touching), ``θ = 0`` if some such row approaches;
+        otherwise ``lo`` is searched by halving ``θ`` (the row rises, then comes back).
+        """
         tol = ce.GAP_TOLERANCE
         target = -0.5 * tol
         lo, hi = 0.0, 1.0
-        f_lo, f_hi = g_lo - target, g_hi - target
+        _, rows0 = self._blocks_at(t, state)
+        f_lo, f_hi = float(rows0.phi[watch].min()) - target, g_hi - target
+        if f_lo <= 0.5 * tol:  # a watched row starts within (or below) the band
+            if np.any(watch & (rows0.phi <= 0.0) & (rows0.phi_dot < 0.0)):
+                return 0.0, state
+            theta = 1.0
+            while True:
+                theta *= 0.5
+                if theta * h < ce.TIME_TOLERANCE:
+                    return 0.0, state
+                f = float(self.gaps(self.step(integrator, t, state, sol, theta * h))[watch]
+                          .min()) - target
+                if f > 0.5 * tol:
+                    lo, f_lo = theta, f
+                    break
+                hi, f_hi = theta, f
         side = 0
         theta, s_e = hi, None
         for _ in range(200):
