@@ -8,7 +8,8 @@ Integration scheme (event-driven; see docs/ARCHITECTURE.md, "Unilateral contacts
   rows ``φ̈ = 0``, active unilateral rows ``0 <= μ ⟂ φ̈ >= 0`` (with Baumgarte terms, which
   therefore act on active rows only); inactive rows have ``μ = 0``.
 - **Separation**: at the start of every step (and after every impact), an active unilateral
-  row whose solution has ``μ = 0`` and ``φ̈ > SEPARATION_ACCELERATION`` leaves the active set
+  row whose solution has ``μ = 0`` and ``φ̈ > SEPARATION_ACCELERATION`` (or a gap above
+  ``SEPARATION_GAP``) leaves the active set
   (event ``"separation"`` at that time). Inside a step the LCP already lets such a row lift
   off (``φ̈ >= 0``), so the recorded time is within one step ``dt`` after the force vanished.
 - **Touchdown**: after every step, an inactive unilateral row whose gap fell below
@@ -18,12 +19,13 @@ Integration scheme (event-driven; see docs/ARCHITECTURE.md, "Unilateral contacts
   bracket is below ``TIME_TOLERANCE``). There the impact law of part S
   (:func:`~multiarm_pin.dynamics.unilateral.solve_impact`, ``0 <= P ⟂ φ̇⁺ + e φ̇⁻ >= 0`` on
   the active and touching unilateral rows, ``φ̇⁺ = 0`` on bilateral rows) changes the
-  velocities; a touching row that leaves with ``φ̇⁺ > REBOUND_SPEED`` rebounds and stays
+  velocities; a touching row that leaves with ``φ̇⁺ > RESTING_SPEED`` rebounds and stays
   inactive, the others join the active set (event ``"touchdown"``); an active row that the
-  impact makes leave (``φ̇⁺ > REBOUND_SPEED``) separates. Impacts slower than
-  ``RESTING_SPEED`` are plastic (``e = 0``), so that a bouncing body comes to rest after
-  finitely many events instead of an infinite (Zeno) sequence. The step is then finished
-  from the event time with the new active set.
+  impact makes leave (``φ̇⁺ > RESTING_SPEED``) separates. Impacts slower than
+  ``RESTING_SPEED`` are plastic (``e = 0``) and rows leaving slower than it stay active,
+  so that a bouncing body (or fingertips knocked off by an impact, which hit back in turn)
+  comes to rest after finitely many events instead of an infinite (Zeno) sequence. The
+  step is then finished from the event time with the new active set.
 
 The scheme is exact at events up to the stated tolerances and keeps the smooth integrator's
 order between them; velocity-level time stepping (Moreau-Jean) would be more robust for many
@@ -40,14 +42,22 @@ GAP_TOLERANCE = 1e-9
 TIME_TOLERANCE = 1e-13
 """[s] Touchdown location stops when the bracket is shorter than this."""
 
-SEPARATION_ACCELERATION = 1e-9
-"""[m/s²] An active unilateral row with ``μ = 0`` separates when ``φ̈`` exceeds this."""
+SEPARATION_ACCELERATION = 1e-3
+"""[m/s²] An active unilateral row with ``μ = 0`` separates when ``φ̈`` exceeds this.
+
+Below it the row stays in the active set, where the complementarity problem still lets it
+lift (``φ̈ >= 0`` with ``μ = 0``); a lift that small stays below ``GAP_TOLERANCE`` over a
+millisecond step, so leaving the active set for it would only make touchdown chatter."""
+
+SEPARATION_GAP = 1e-6
+"""[m] An active unilateral row with ``μ = 0`` whose gap exceeds this separates too."""
 
 REBOUND_SPEED = 1e-6
-"""[m/s] After an impact a row leaving faster than this is separated (rebound)."""
+"""[m/s] A touching row closes (its impact is applied at once) when ``φ̇ < -REBOUND_SPEED``."""
 
 RESTING_SPEED = 1e-3
-"""[m/s] Impacts with a closing speed below this are plastic (``e = 0``): no micro-bounces."""
+"""[m/s] Impacts with a closing speed below this are plastic (``e = 0``), and after an impact
+only rows leaving faster than this leave the active set: no micro-bounces."""
 
 MAX_EVENTS_PER_STEP = 50
 """Touchdowns handled within one step before the simulation gives up (DynamicsError)."""
@@ -91,6 +101,7 @@ __all__ = [
     "REBOUND_SPEED",
     "RESTING_SPEED",
     "SEPARATION_ACCELERATION",
+    "SEPARATION_GAP",
     "TIME_TOLERANCE",
     "ContactEvent",
 ]

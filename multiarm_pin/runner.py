@@ -211,10 +211,11 @@ def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> di
     """The ``summary.json`` content: run settings, physical checks and warnings."""
     system = built.system
     mask = np.asarray(system.contact_mask)
-    uni = np.asarray(system.contact_unilateral)
     mu = result.mu
     real = mu[:, mask]
-    uni_mu = mu[:, uni]
+    n = system.n_arms
+    uni_mu = mu[:, :n, :system.N_max][:, np.asarray(system.unilateral)]  # the arms' rows
+    sup_mu = mu[:, n, :system.supports.n_rows] if system.supports.n_rows else mu[:, :0, 0]
     e = result.kinetic_energy + result.potential_energy
     arms = []
     for i, (arm, spec) in enumerate(zip(built.arms, built.scenario.arms, strict=True)):
@@ -230,6 +231,8 @@ def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> di
             "ik_residual": None if ik is None else float(ik.residual),
             "min_contact_force": float(mu[:, i, mask[i]].min()),
             "max_contact_force": float(mu[:, i, mask[i]].max()),
+            "separations": sum(1 for e in result.events
+                               if e.block == i and e.kind == "separation"),
         })
     warnings = list(result.warnings)
     if uni_mu.size and uni_mu.min() < 0:
@@ -257,6 +260,7 @@ def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> di
         "min_contact_force": float(real.min()) if real.size else None,
         "max_contact_force": float(real.max()) if real.size else None,
         "min_unilateral_contact_force": float(uni_mu.min()) if uni_mu.size else None,
+        "max_support_force": float(sup_mu.max()) if sup_mu.size else None,
         "energy_change": float(e[-1] - e[0]),
         "object_displacement": float(np.linalg.norm(result.object_position[-1]
                                                     - result.object_position[0])),

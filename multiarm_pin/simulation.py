@@ -240,13 +240,19 @@ class _Stepper:
         s = self.system
         self.active = s.contact_mask & (~s.contact_unilateral | (rows.phi <= tol))
 
-    def separations(self, t: float, sol, rows: ContactRows) -> bool:
-        """Drop active unilateral rows that the solution lets go; True if any was dropped."""
+    def separations(self, t: float, sol, rows: ContactRows, keep=None) -> bool:
+        """Drop active unilateral rows that the solution lets go; True if any was dropped.
+
+        ``keep``: (B, R) bool rows not to drop now (those that just touched down: they stay
+        active until the next sample, where the check runs again).
+        """
         if not self.unilateral:
             return False
         s = self.system
         leave = (self.active & s.contact_unilateral & (sol.mu <= 0.0)
-                 & (sol.phi_dd > ce.SEPARATION_ACCELERATION))
+                 & ((sol.phi_dd > ce.SEPARATION_ACCELERATION) | (rows.phi > ce.SEPARATION_GAP)))
+        if keep is not None:
+            leave &= ~keep
         for b, r in zip(*np.nonzero(leave), strict=True):
             self._event(t, "separation", b, r, phi_dot=float(rows.phi_dot[b, r]),
                         phi_dot_after=float(rows.phi_dot[b, r]))
@@ -285,9 +291,9 @@ class _Stepper:
                 return new
             theta, s_e = self._locate(integrator, t, state, sol, h, watch, g_hi)
             t = t + theta * h
-            state = self._impact(t, s_e)
+            state, joined = self._impact(t, s_e)
             sol, _, _, rows = self.evaluate(t, state)
-            if self.separations(t, sol, rows):
+            if self.separations(t, sol, rows, keep=joined):
                 sol = self.evaluate(t, state)[0]
             if t_end - t <= ce.TIME_TOLERANCE:
                 return state
@@ -308,7 +314,7 @@ class _Stepper:
         _, rows0 = self._blocks_at(t, state)
         f_lo, f_hi = float(rows0.phi[watch].min()) - target, g_hi - target
         if f_lo <= 0.5 * tol:  # a watched row starts within (or below) the band
-            if np.any(watch & (rows0.phi <= 0.0) & (rows0.phi_dot < 0.0)):
+            if np.any(watch & (rows0.phi <= 0.0) & (rows0.phi_dot < -ce.REBOUND_SPEED)):
                 return 0.0, state
             theta = 1.0
             while True:
@@ -343,8 +349,12 @@ class _Stepper:
                 side = -1
         return theta, s_e
 
-    def _impact(self, t: float, state: SystemState) -> SystemState:
-        """Apply the impact law at a touchdown and update the active set."""
+    def _impact(self, t: float, state: SystemState) -> tuple[SystemState, np.ndarray]:
+        """Apply the impact law at a touchdown, update the active set.
+
+        Returns:
+            The state after the impact and the (B, R) mask of rows that joined the active set.
+        """
         from multiarm_pin.dynamics.unilateral import solve_impact
 
         s = self.system
@@ -360,7 +370,9 @@ class _Stepper:
         o = state.obj
         new = SystemState(state.q, state.v + s.unpad(imp.dqd),
                           ObjectState(o.position, o.quaternion, o.twist + imp.dv_o))
-        leave = candidates & s.contact_unilateral & (imp.phi_dot_plus > ce.REBOUND_SPEED)
+        # a row leaving slower than RESTING_SPEED stays active (the complementarity problem
+        # lets it lift if it must): no chatter of impacts knocking each other off
+        leave = candidates & s.contact_unilateral & (imp.phi_dot_plus > ce.RESTING_SPEED)
         for b, r in zip(*np.nonzero(touching), strict=True):
             self._event(t, "touchdown", b, r, phi_dot=float(rows.phi_dot[b, r]),
                         phi_dot_after=float(imp.phi_dot_plus[b, r]),
@@ -369,8 +381,9 @@ class _Stepper:
             self._event(t, "separation", b, r, phi_dot=float(rows.phi_dot[b, r]),
                         phi_dot_after=float(imp.phi_dot_plus[b, r]),
                         impulse=float(imp.P[b, r]))
+        joined = touching & ~leave
         self.active = candidates & ~leave
-        return new
+        return new, joined
 
     def _blocks_at(self, t: float, state: SystemState):
         """``(blocks, rows)`` of every contact row at a state, without torques.
