@@ -13,7 +13,10 @@ Integration scheme (event-driven; see docs/ARCHITECTURE.md, "Unilateral contacts
   (event ``"separation"`` at that time). Inside a step the LCP already lets such a row lift
   off (``φ̈ >= 0``), so the recorded time is within one step ``dt`` after the force vanished.
 - **Touchdown**: after every step, an inactive unilateral row whose gap fell below
-  ``-GAP_TOLERANCE`` has touched down inside the step. The time is located by the Illinois
+  ``-GAP_TOLERANCE`` has touched down inside the step (only rows that started the step
+  above that: gaps are distances to the contact surface extended to infinity, so a
+  separated fingertip that goes round an edge of its face gets a negative gap without
+  touching anything; such a row is ignored until its gap is positive again). The time is located by the Illinois
   (modified regula falsi) method on ``θ ∈ [0, 1]`` of the step, re-integrating from the step's
   start with step ``θ h``, until the smallest such gap lies in ``[-GAP_TOLERANCE, 0]`` (or the
   bracket is below ``TIME_TOLERANCE``). There the impact law of part S

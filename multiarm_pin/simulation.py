@@ -286,12 +286,17 @@ class _Stepper:
             watch = self._watch()
             if not watch.any():
                 return new
+            # a row already below the band at the step's start is not watched: its tip went
+            # round an edge, behind the (infinite) plane of its face, and touches nothing
+            watch &= self.gaps(state) >= -tol
+            if not watch.any():
+                return new
             g_hi = float(self.gaps(new)[watch].min())
             if g_hi >= -tol:
                 return new
             theta, s_e = self._locate(integrator, t, state, sol, h, watch, g_hi)
             t = t + theta * h
-            state, joined = self._impact(t, s_e)
+            state, joined = self._impact(t, s_e, watch)
             sol, _, _, rows = self.evaluate(t, state)
             if self.separations(t, sol, rows, keep=joined):
                 sol = self.evaluate(t, state)[0]
@@ -349,7 +354,8 @@ class _Stepper:
                 side = -1
         return theta, s_e
 
-    def _impact(self, t: float, state: SystemState) -> tuple[SystemState, np.ndarray]:
+    def _impact(self, t: float, state: SystemState, watch: np.ndarray
+                ) -> tuple[SystemState, np.ndarray]:
         """Apply the impact law at a touchdown, update the active set.
 
         Returns:
@@ -359,7 +365,6 @@ class _Stepper:
 
         s = self.system
         full, rows = self._blocks_at(t, state)
-        watch = self._watch()
         touching = watch & (rows.phi <= ce.GAP_TOLERANCE)
         candidates = self.active | touching
         e = np.where(np.abs(rows.phi_dot) < ce.RESTING_SPEED, 0.0, s.contact_restitution)
