@@ -22,16 +22,3 @@ def panda() -> Arm:
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
 
-
-def _install_unilateral_standin() -> None:
-    """Until part S's exact solver is merged, tests run on a dense stand-in (test helper)."""
-    import importlib.util
-    import sys
-
-    if importlib.util.find_spec("multiarm_pin.dynamics.unilateral") is None:
-        import unilateral_standin
-
-        sys.modules["multiarm_pin.dynamics.unilateral"] = unilateral_standin
-
-
-_install_unilateral_standin()
