@@ -16,10 +16,11 @@ Integration scheme (event-driven; see docs/ARCHITECTURE.md, "Unilateral contacts
   ``-GAP_TOLERANCE`` has touched down inside the step (only rows that started the step
   above that: gaps are distances to the contact surface extended to infinity, so a
   separated fingertip that goes round an edge of its face gets a negative gap without
-  touching anything; such a row is ignored until its gap is positive again). The time is located by the Illinois
-  (modified regula falsi) method on ``θ ∈ [0, 1]`` of the step, re-integrating from the step's
-  start with step ``θ h``, until the smallest such gap lies in ``[-GAP_TOLERANCE, 0]`` (or the
-  bracket is below ``TIME_TOLERANCE``). There the impact law of part S
+  touching anything; such a row is ignored until its gap is positive again). The time is
+  located by the Illinois (modified regula falsi) method on ``θ ∈ [0, 1]`` of the step,
+  re-integrating from the step's start with step ``θ h``, until the smallest such gap lies
+  in ``[-GAP_TOLERANCE, 0]`` (or the bracket is below ``TIME_TOLERANCE``). There the impact
+  law of part S
   (:func:`~multiarm_pin.dynamics.unilateral.solve_impact`, ``0 <= P ⟂ φ̇⁺ + e φ̇⁻ >= 0`` on
   the active and touching unilateral rows, ``φ̇⁺ = 0`` on bilateral rows) changes the
   velocities; a touching row that leaves with ``φ̇⁺ > RESTING_SPEED`` rebounds and stays

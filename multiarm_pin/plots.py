@@ -225,7 +225,7 @@ def write_plots(out_dir, trajectory: Mapping[str, np.ndarray], arm_names, title:
             out / "contact_states.png", t, trajectory["contact_active"],
             trajectory["contact_labels"],
             list(zip(ev_t.tolist(), ev_kind.tolist(), ev_k.tolist(), strict=True)),
-            pre + "contacts: touching (bar) / separated; x separation, o touchdown"))
+            pre + "contacts touching (bars); x separation, o touchdown"))
     return extra + [
         plot_object_pose(out / "object_pose.png", t, trajectory["object_position"],
                          trajectory["object_quaternion"], pre + "object pose"),
