@@ -99,3 +99,26 @@ def test_pick_from_table_records_lift_off_and_touchdown(tmp_path):
     labels = list(z["contact_labels"])
     assert [labels[k] for k in z["event_contact"]] == [e.label for e in r.events]
     assert (tmp_path / "contact_states.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_grasp_failure_shows_which_contact_goes_first(tmp_path):
+    """grasp_failure up to just after its push starts (t = 0.15 s, 60 N down at the COM).
+
+    With margin 5 N every fingertip pushes before the push (min force >= 5 N). The push
+    exceeds what the top fingertips' preload can take: the one nearest the corner,
+    four_finger:tip[2], lets go first, at the push's onset (the first sample where the
+    wrench acts), and is recorded as the run's first event, in summary.json too.
+    """
+    sc = _scenario("grasp_failure", simulation={"duration": 0.17, "dt": 0.002,
+                                                "integrator": "rk4", "solver": "object_first"})
+    res = run_scenario(sc, tmp_path, html=False, plots=False)
+    r = res.result
+    uni = r.unilateral
+    before = r.t < 0.15 - 1e-12
+    assert r.mu[before][:, uni].min() >= 5.0 - 1e-6
+    first = r.events[0]
+    assert (first.kind, first.label, first.body) == ("separation", "four_finger:tip[2]",
+                                                     "four_finger")
+    assert abs(first.t - 0.15) < 1e-12
+    assert res.summary["events"][0]["label"] == "four_finger:tip[2]"
+    assert res.summary["warnings"][0].startswith("t = 0.15 s: arm 0 (four_finger) contact 2")
