@@ -23,13 +23,17 @@ Integration scheme (event-driven; see docs/ARCHITECTURE.md, "Unilateral contacts
   law of part S
   (:func:`~multiarm_pin.dynamics.unilateral.solve_impact`, ``0 <= P ⟂ φ̇⁺ + e φ̇⁻ >= 0`` on
   the active and touching unilateral rows, ``φ̇⁺ = 0`` on bilateral rows) changes the
-  velocities; a touching row that leaves with ``φ̇⁺ > RESTING_SPEED`` rebounds and stays
+  velocities; a touching row that leaves with ``φ̇⁺ > REBOUND_SPEED`` rebounds and stays
   inactive, the others join the active set (event ``"touchdown"``); an active row that the
-  impact makes leave (``φ̇⁺ > RESTING_SPEED``) separates. Impacts slower than
-  ``RESTING_SPEED`` are plastic (``e = 0``) and rows leaving slower than it stay active,
-  so that a bouncing body (or fingertips knocked off by an impact, which hit back in turn)
-  comes to rest after finitely many events instead of an infinite (Zeno) sequence. The
-  step is then finished from the event time with the new active set.
+  impact makes leave separates. Impacts slower than ``RESTING_SPEED`` are plastic
+  (``e = 0``), and a row that would leave slower than ``RESTING_SPEED`` is *captured*: the
+  impact is solved again with it held at ``φ̇⁺ = 0`` (as a bilateral row, so its impulse may
+  be slightly negative, of order ``m RESTING_SPEED``). So a bouncing body, or fingertips
+  knocking each other off through the object, come to rest after finitely many events
+  instead of an infinite (Zeno) sequence, and no active row ever has ``φ̇ > 0`` (the
+  acceleration-level complementarity, with its Baumgarte terms, is only right for rows at
+  ``φ ≈ 0``, ``φ̇ ≈ 0``). The step is then finished from the event time with the new
+  active set.
 
 The scheme is exact at events up to the stated tolerances and keeps the smooth integrator's
 order between them; velocity-level time stepping (Moreau-Jean) would be more robust for many
@@ -57,11 +61,12 @@ SEPARATION_GAP = 1e-6
 """[m] An active unilateral row with ``μ = 0`` whose gap exceeds this separates too."""
 
 REBOUND_SPEED = 1e-6
-"""[m/s] A touching row closes (its impact is applied at once) when ``φ̇ < -REBOUND_SPEED``."""
+"""[m/s] Speed above round-off: a row leaves after an impact when ``φ̇⁺ > REBOUND_SPEED``, a
+touching row closes (its impact is applied at once) when ``φ̇ < -REBOUND_SPEED``."""
 
 RESTING_SPEED = 1e-3
-"""[m/s] Impacts with a closing speed below this are plastic (``e = 0``), and after an impact
-only rows leaving faster than this leave the active set: no micro-bounces."""
+"""[m/s] Impacts with a closing speed below this are plastic (``e = 0``), and rows that an
+impact would send off slower than this are held (``φ̇⁺ = 0``): no micro-bounces."""
 
 MAX_EVENTS_PER_STEP = 50
 """Touchdowns handled within one step before the simulation gives up (DynamicsError)."""

@@ -10,7 +10,8 @@
   ``contact_points`` (T, K, 3) [m] and ``contact_forces`` (T, K, 3) [N] (force on the
   object, world axes) of the K contacts of all arms in order, then of the supports;
   ``contact_labels`` (K,) and ``contact_active`` (T, K) (touching: in the active set, or
-  bilateral); for each support S ``mu_S``, ``phi_S`` (T, P_S); ``external_wrench`` (T, 6);
+  bilateral); for each support S ``mu_S``, ``phi_S`` (T, P_S); ``support_names`` (S,) and
+  ``support_planes`` (S, 6) (plane point and normal, world); ``external_wrench`` (T, 6);
   the contact events ``event_t`` (E,) [s], ``event_contact`` (E,) (index in K) and
   ``event_kind`` (E,) (``separation`` / ``touchdown``);
   ``kinetic_energy``, ``potential_energy`` (T,) [J]; ``momentum`` (T, 6).
@@ -199,6 +200,9 @@ def trajectory_arrays(built: BuiltScenario, result) -> dict[str, np.ndarray]:
     out["contact_active"] = held[:, mask]
     out["contact_labels"] = np.array([lab for _, _, lab in system.contact_labels], dtype=str)
     out["external_wrench"] = result.external_wrench
+    out["support_names"] = np.array([sp.name for sp in sup.supports], dtype=str)
+    out["support_planes"] = np.array([np.concatenate([sp.point, sp.normal])
+                                      for sp in sup.supports]).reshape(-1, 6)
     flat = -np.ones(mask.shape, dtype=int)
     flat[mask] = np.arange(int(mask.sum()))
     out["event_t"] = np.array([e.t for e in result.events], dtype=float)
@@ -285,14 +289,28 @@ def replay_parts(arms, obj, trajectory: dict):
     Returns:
         ``(replay_arms, replay_object, replay_contacts)``.
     """
-    from multiarm_pin.replay import ReplayArm, ReplayContacts, ReplayObject
+    from multiarm_pin.replay import ReplayArm, ReplayContacts, ReplayObject, ReplaySupport
 
     rarms = [ReplayArm(a.name, a.model, a.visual_model, pin.SE3.Identity(),
                        trajectory[f"q_{a.name}"]) for a in arms]
     robj = ReplayObject(obj.shape, trajectory["object_position"], trajectory["object_quaternion"])
     rc = None
     if trajectory["contact_points"].shape[1] > 0:
-        rc = ReplayContacts(trajectory["contact_points"], trajectory["contact_forces"])
+        labels = [str(x) for x in trajectory.get("contact_labels", [])]
+        supports = []
+        for name, plane in zip(trajectory.get("support_names", []),
+                               trajectory.get("support_planes", np.zeros((0, 6))), strict=True):
+            rows = [k for k, lab in enumerate(labels) if lab.startswith(f"{name}[")]
+            a, n = plane[:3], plane[3:]
+            pts = trajectory["contact_points"][0, rows]
+            pts = pts - ((pts - a) @ n)[:, None] * n  # projected onto the plane
+            c = pts.mean(axis=0)
+            half = float(np.max(np.linalg.norm(pts - c, axis=1), initial=0.0)) + 0.1
+            supports.append(ReplaySupport(str(name), c, n, half))
+        touching = trajectory.get("contact_active")
+        rc = ReplayContacts(trajectory["contact_points"], trajectory["contact_forces"],
+                            None if touching is None else np.asarray(touching, dtype=bool),
+                            supports)
     return rarms, robj, rc
 
 

@@ -368,16 +368,22 @@ class _Stepper:
         touching = watch & (rows.phi <= ce.GAP_TOLERANCE)
         candidates = self.active | touching
         e = np.where(np.abs(rows.phi_dot) < ce.RESTING_SPEED, 0.0, s.contact_restitution)
+        uni = s.contact_unilateral
         try:
-            imp = solve_impact(full, s.contact_unilateral, candidates, rows.phi_dot, e)
+            imp = solve_impact(full, uni, candidates, rows.phi_dot, e)
+            for _ in range(3):  # capture rows that would leave slower than RESTING_SPEED
+                slow = (candidates & uni & (imp.phi_dot_plus > ce.REBOUND_SPEED)
+                        & (imp.phi_dot_plus <= ce.RESTING_SPEED))
+                if not slow.any():
+                    break
+                uni = uni & ~slow  # held at φ̇⁺ = 0 by this impact (as bilateral rows)
+                imp = solve_impact(full, uni, candidates, rows.phi_dot, e)
         except DynamicsError as exc:
             raise DynamicsError(f"t = {t:.6g} s: impact: {exc}") from exc
         o = state.obj
         new = SystemState(state.q, state.v + s.unpad(imp.dqd),
                           ObjectState(o.position, o.quaternion, o.twist + imp.dv_o))
-        # a row leaving slower than RESTING_SPEED stays active (the complementarity problem
-        # lets it lift if it must): no chatter of impacts knocking each other off
-        leave = candidates & s.contact_unilateral & (imp.phi_dot_plus > ce.RESTING_SPEED)
+        leave = candidates & s.contact_unilateral & (imp.phi_dot_plus > ce.REBOUND_SPEED)
         for b, r in zip(*np.nonzero(touching), strict=True):
             self._event(t, "touchdown", b, r, phi_dot=float(rows.phi_dot[b, r]),
                         phi_dot_after=float(imp.phi_dot_plus[b, r]),
