@@ -468,6 +468,10 @@ def run_command(args: argparse.Namespace) -> int:
           f"({s['integrator']}, solver {s['solver']}) in {s['wall_time']:.2f} s wall time")
     print(f"  max constraint violation {s['max_constraint_violation']:.3g} m, contact forces "
           f"{s['min_contact_force']:.4g} .. {s['max_contact_force']:.4g} N")
+    if s.get("events"):
+        e0 = s["events"][0]
+        print(f"  {len(s['events'])} contact events (separations, touchdowns); first: "
+              f"{e0['kind']} of {e0['label']} at t = {e0['t']:.4g} s")
     for w in s["warnings"][:10]:
         print(f"  warning: {w}")
     if len(s["warnings"]) > 10:
