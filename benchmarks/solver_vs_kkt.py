@@ -412,6 +412,7 @@ class ContactRow:
     t_bilateral_s: float
     t_unilateral_s: float
     t_bilateral_fingertips_s: float
+    t_unilateral_guess_s: float
     ratio: float
     mean_pivots: float
     separating_rows: int
@@ -482,11 +483,13 @@ def measure_contacts(family: str, pairs: list[tuple[SystemBlocks, SystemBlocks]]
     blocks = [p[0] for p in pairs]
     tips = [p[1] for p in pairs]
     unis = [b.constraint_mask.copy() for b in blocks]
+    guesses = [solve_unilateral(b, u).mu > 0 for b, u in zip(blocks, unis, strict=True)]
     K = len(blocks)
     fns = [lambda k: solve(blocks[k], "auto"),
            lambda k: solve_unilateral(blocks[k], unis[k]),
-           lambda k: solve(tips[k], "auto")]
-    (t_bil, t_uni, t_tips), reps = timer.medians(fns, K)
+           lambda k: solve(tips[k], "auto"),
+           lambda k: solve_unilateral(blocks[k], unis[k], guess=guesses[k])]
+    (t_bil, t_uni, t_tips, t_guess), reps = timer.medians(fns, K)
     pivots, separating, fast, comp, diff, compared = [], 0, 0, 0.0, 0.0, 0
     for b, uni in zip(blocks, unis, strict=True):
         sol = solve_unilateral(b, uni)
@@ -500,7 +503,7 @@ def measure_contacts(family: str, pairs: list[tuple[SystemBlocks, SystemBlocks]]
             scale = max(1.0, np.abs(ref.a_o).max(), np.abs(ref.qdd).max())
             diff = max(diff, float(max(np.abs(sol.a_o - ref.a_o).max(),
                                        np.abs(sol.qdd - ref.qdd).max()) / scale))
-    return ContactRow(family, K, int(blocks[0].n_constraints), t_bil, t_uni, t_tips,
+    return ContactRow(family, K, int(blocks[0].n_constraints), t_bil, t_uni, t_tips, t_guess,
                       t_uni / t_bil, float(np.mean(pivots)), separating, fast, comp,
                       diff if compared else math.nan, compared, reps)
 
@@ -520,17 +523,20 @@ def contact_section(rows: Sequence[ContactRow]) -> list[str]:
          "motion difference from the bilateral solve over the states where no contact "
          "separates (n/a: none). For context, *fingertips bilateral* = "
          "`solve(blocks, 'auto')` of the 7 fingertip rows alone (no support arm: the compiled "
-         "object-first kernel).\n",
+         "object-first kernel); *unilateral, warm* = `solve_unilateral(..., guess=mu > 0)` "
+         "with the pushing rows of the same state's answer as warm start (a simulation step "
+         "whose contact state has not changed: no pivot).\n",
          "| family | states | rows | bilateral µs | unilateral µs | unilateral / bilateral | "
-         "fingertips bilateral µs | mean pivots | separating rows | fast-path states | "
-         "max complementarity | diff (states) |",
-         "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+         "unilateral, warm µs | fingertips bilateral µs | mean pivots | separating rows | "
+         "fast-path states | max complementarity | diff (states) |",
+         "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         diff = ("n/a" if not r.states_compared else
                 f"{r.max_rel_diff_bilateral:.1e} ({r.states_compared})")
         L.append(f"| {r.family} | {r.n_states} | {r.n_rows} | {_us(r.t_bilateral_s)} | "
-                 f"{_us(r.t_unilateral_s)} | {r.ratio:.2f} | {_us(r.t_bilateral_fingertips_s)} "
-                 f"| {r.mean_pivots:.1f} | {r.separating_rows} | {r.fast_path_states} | "
+                 f"{_us(r.t_unilateral_s)} | {r.ratio:.2f} | {_us(r.t_unilateral_guess_s)} | "
+                 f"{_us(r.t_bilateral_fingertips_s)} | {r.mean_pivots:.1f} | "
+                 f"{r.separating_rows} | {r.fast_path_states} | "
                  f"{r.max_complementarity:.1e} | {diff} |")
     worst = max(r.ratio for r in rows)
     L.append("")
@@ -545,7 +551,8 @@ def run_contacts(args: argparse.Namespace, timer: Timer) -> list[ContactRow]:
     rows = [measure_contacts(f, bl, timer) for f, bl in benches.items()]
     for r in rows:
         print(f"unilateral {r.family:8s} bilateral {r.t_bilateral_s * 1e6:8.1f}  unilateral "
-              f"{r.t_unilateral_s * 1e6:8.1f} µs  ratio {r.ratio:.2f}  tips bilateral "
+              f"{r.t_unilateral_s * 1e6:8.1f} µs  ratio {r.ratio:.2f}  warm "
+              f"{r.t_unilateral_guess_s * 1e6:6.1f}  tips bilateral "
               f"{r.t_bilateral_fingertips_s * 1e6:6.1f} µs  pivots "
               f"{r.mean_pivots:.1f}  separating {r.separating_rows}  comp "
               f"{r.max_complementarity:.1e}", flush=True)

@@ -61,7 +61,8 @@ def test_quick_run_unilateral_rows(quick_run):
     assert [r["family"] for r in rows] == ["random", "squeeze"]
     for r in rows:
         assert int(r["n_rows"]) == 11
-        for col in ("t_bilateral_s", "t_unilateral_s", "t_bilateral_fingertips_s", "ratio"):
+        for col in ("t_bilateral_s", "t_unilateral_s", "t_bilateral_fingertips_s",
+                    "t_unilateral_guess_s", "ratio"):
             t = float(r[col])
             assert math.isfinite(t) and t > 0, (r["family"], col, t)
         assert float(r["max_complementarity"]) < 1e-10

@@ -65,9 +65,9 @@ Cost: per arm one ``nv_i``-Cholesky and ``N_i + 1`` solves (as the bilateral sol
 ``O(p²)`` for ``G`` on the ``p`` active rows and ``O(|A|³)`` per pivot (``G_AA`` is
 refactored; about ``p`` pivots from a cold start): negligible against the per-arm work for
 tens of contacts. Measured (``benchmarks/results/unilateral.md``): 11 rows of the
-two-gripper scenario + table, ~75 µs, against ~750 µs for the bilateral ``"auto"`` solve of
-the same rows (singular-arm path) and ~26 µs for the compiled bilateral solve of the 7
-fingertip rows alone.
+two-gripper scenario + table, ~65 µs (~52 µs warm-started with ``guess``), against ~700 µs
+for the bilateral ``"auto"`` solve of the same rows (singular-arm path) and ~25 µs for the
+compiled bilateral solve of the 7 fingertip rows alone.
 
 Impacts (:func:`solve_impact`) are the same problem at velocity level: with ``h = h_o = 0``
 the impulse ``P`` gives ``φ̇⁺ = φ̇⁻ + G P``, and Newton's law
@@ -159,7 +159,7 @@ def _residuals(b: SystemBlocks, a_o, qdd, mu, h_o, h, rate, unilateral, active, 
     )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ContactSolution:
     """Result of :func:`solve_unilateral`.
 
@@ -229,7 +229,7 @@ class ContactSolution:
                           self.unilateral, self.active, self.phi_dd)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ImpactSolution:
     """Result of :func:`solve_impact`.
 
@@ -279,7 +279,7 @@ class ImpactSolution:
 
 
 # ------------------------------------------------------------------ Delassus operator
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class DelassusOperator:
     """Delassus operator of the real constraint rows, built object-first.
 
@@ -383,7 +383,7 @@ def _factor_active(G, act, na, GA, L):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def _mlcp(G, b, uni, dep_rtol, viol_tol, cons_tol, max_pivots, warm,
+def _mlcp(G, b, uni, dep_rtol, viol_tol, cons_tol, max_pivots, start,
           mu, phi, in_a):  # pragma: no cover - compiled
     """Mixed LCP ``φ = G μ + b``: bilateral ``φ = 0``; unilateral ``0 ≤ μ ⟂ φ ≥ 0``.
 
@@ -397,7 +397,10 @@ def _mlcp(G, b, uni, dep_rtol, viol_tol, cons_tol, max_pivots, warm,
         viol_tol: violation tolerance on ``φ`` (absolute).
         cons_tol: consistency tolerance of dependent bilateral rows (absolute).
         max_pivots: safety cap on active-set changes.
-        warm: try the set of all rows first.
+        start: (p,) bool, rows of the initial active set (warm start): used if they are
+            independent and their multipliers push on unilateral rows, else the method
+            starts from the empty set. The result does not depend on it (up to the choice
+            of ``μ`` among equivalent ones with redundant rows).
         mu: (p,) output, multipliers.
         phi: (p,) output, ``G μ + b``.
         in_a: (p,) bool output, rows of the final active set.
@@ -419,28 +422,37 @@ def _mlcp(G, b, uni, dep_rtol, viol_tol, cons_tol, max_pivots, warm,
         in_a[j] = False
     if p == 0:
         return _OK, 0, -1
-    # ---- warm start: every row active, if independent and pushing everywhere
-    if warm:
-        for j in range(p):
-            act[j] = j
-        ok = _factor_active(G, act, p, GA, L)
-        if ok:
-            for j in range(p):
-                if L[j, j] * L[j, j] <= dep_rtol * G[j, j]:
-                    ok = False
-        if ok:
-            for j in range(p):
-                rhs[j, 0] = -b[j]
-            _kernels.cholesky_solve(L, rhs, p, 1)
-            for j in range(p):
-                if uni[j] and not rhs[j, 0] >= 0.0:
-                    ok = False
-        if ok:
-            for j in range(p):
-                in_a[j] = True
-            na = p
-            return _finish(G, b, uni, act, na, GA, L, rhs, mu, phi, in_a, 0)
+    # ---- warm start: the rows of `start`, if independent and pushing on unilateral rows
     na = 0
+    for j in range(p):
+        if start[j]:
+            act[na] = j
+            na += 1
+    ok = na > 0 and _factor_active(G, act, na, GA, L)
+    if ok:
+        for a in range(na):
+            if L[a, a] * L[a, a] <= dep_rtol * G[act[a], act[a]]:
+                ok = False
+    if ok:
+        for a in range(na):
+            rhs[a, 0] = -b[act[a]]
+        _kernels.cholesky_solve(L, rhs, na, 1)
+        for a in range(na):
+            if uni[act[a]] and not rhs[a, 0] >= 0.0:
+                ok = False
+    if ok:
+        for a in range(na):
+            mu[act[a]] = rhs[a, 0]
+            in_a[act[a]] = True
+        for i in range(p):
+            t = b[i]
+            for a in range(na):
+                t += G[i, act[a]] * mu[act[a]]
+            phi[i] = t
+        for a in range(na):
+            phi[act[a]] = 0.0
+    else:
+        na = 0
     pivots = 0
     while True:
         # ---- choose a violated row: bilateral first, then the most negative unilateral
@@ -543,14 +555,16 @@ _BAD_MASS, _NOT_FINITE, _UNI_PADDING, _ACT_PADDING = 4, 5, 6, 7
 
 
 @njit(cache=True, error_model="numpy")
-def _contact_kernel(M, h, W, W_o, c, M_o, h_o, nv, N, uni, act, dep_rtol, viol_rtol,
-                    cons_rtol, a_o, qdd, mu, Av):  # pragma: no cover - compiled
+def _contact_kernel(M, h, W, W_o, c, M_o, h_o, nv, N, uni, act, guess, use_guess, dep_rtol,
+                    viol_rtol, cons_rtol, a_o, qdd, mu, Av):  # pragma: no cover - compiled
     """The whole unilateral solve, compiled: object-first Delassus, :func:`_mlcp`, motion.
 
     Per arm a Cholesky factorisation of ``M_i`` and ``X_i = M_i⁻¹ [W_i h_i]``; one 6 x 6
     Cholesky solve ``Y = M_o⁻¹ [W_o,active h_o]``; ``G`` and ``b`` on the active rows only
     (per-arm blocks ``W_iᵀ X_i`` plus the object coupling ``W_oᵀ Y``); the mixed LCP; then
     ``a_o``, ``q̈``, ``μ`` (padded outputs) and ``Av = W_oᵀ a_o + Wᵀ q̈`` on every real row.
+    The warm start is every active row, or with ``use_guess`` the active rows that are
+    bilateral or in ``guess`` (n, N_max) bool.
 
     Returns:
         ``(status, pivots, arm, row, value)``: status as :func:`_mlcp` (arm and row of the
@@ -633,13 +647,15 @@ def _contact_kernel(M, h, W, W_o, c, M_o, h_o, nv, N, uni, act, dep_rtol, viol_r
     if not (scale < np.inf):
         return _NOT_FINITE, 0, -1, -1, 0.0
     uni_a = np.empty(P, dtype=np.bool_)
+    start = np.empty(P, dtype=np.bool_)
     for a in range(P):
         uni_a[a] = uni[arm_of[a], row_of[a]]
+        start[a] = (guess[arm_of[a], row_of[a]] or not uni_a[a]) if use_guess else True
     mu_a = np.empty(P)
     phi = np.empty(P)
     in_a = np.empty(P, dtype=np.bool_)
     status, pivots, q = _mlcp(G, bvec, uni_a, dep_rtol, viol_rtol * scale, cons_rtol * scale,
-                              1000 + 20 * P, True, mu_a, phi, in_a)
+                              1000 + 20 * P, start, mu_a, phi, in_a)
     if status != _OK:
         return status, pivots, arm_of[q], row_of[q], phi[q]
     # motion
@@ -734,7 +750,7 @@ def _c(a: np.ndarray) -> np.ndarray:
 
 
 def _solve(b: SystemBlocks, h: np.ndarray, h_o: np.ndarray, c: np.ndarray, uni: np.ndarray,
-           act: np.ndarray, what: str, reference: bool):
+           act: np.ndarray, what: str, reference: bool, guess: np.ndarray | None = None):
     """Mixed LCP of the blocks with ``h``, ``h_o``, ``c`` given (impacts: zeros and ``-rhs``).
 
     Returns:
@@ -746,8 +762,8 @@ def _solve(b: SystemBlocks, h: np.ndarray, h_o: np.ndarray, c: np.ndarray, uni: 
         a_o, qdd, mu, Av = np.empty(6), np.empty((n, k)), np.empty((n, m)), np.empty((n, m))
         status, pivots, arm, row, value = _contact_kernel(
             _c(b.M), _c(h), _c(b.W), _c(b.W_o), _c(c), _c(b.M_o), _c(h_o), b.nv, b.N,
-            _c(uni), _c(act), DEPENDENCY_RTOL, VIOLATION_RTOL, CONSISTENCY_RTOL,
-            a_o, qdd, mu, Av)
+            _c(uni), _c(act), _c(act if guess is None else guess), guess is not None,
+            DEPENDENCY_RTOL, VIOLATION_RTOL, CONSISTENCY_RTOL, a_o, qdd, mu, Av)
         if status == _OK:
             return a_o, qdd, mu, Av, int(pivots)
         if status in (_UNI_PADDING, _ACT_PADDING):
@@ -756,11 +772,11 @@ def _solve(b: SystemBlocks, h: np.ndarray, h_o: np.ndarray, c: np.ndarray, uni: 
         if status in (_INFEASIBLE, _INCONSISTENT, _MAX_PIVOTS):
             raise _lcp_error(what, status, f"arm {arm}, row {row}", value, pivots)
         # singular M_i or a non-finite result: the numpy reference decides and names it
-    return _solve_numpy(b, h, h_o, c, uni, act, what)
+    return _solve_numpy(b, h, h_o, c, uni, act, what, guess)
 
 
 def _solve_numpy(b: SystemBlocks, h: np.ndarray, h_o: np.ndarray, c: np.ndarray,
-                 uni: np.ndarray, act: np.ndarray, what: str):
+                 uni: np.ndarray, act: np.ndarray, what: str, guess: np.ndarray | None = None):
     """Reference path of :func:`_solve`: numpy :func:`delassus_operator` + the compiled core."""
     if h is not b.h or h_o is not b.h_o or c is not b.c:
         b = SystemBlocks(b.M, h, b.W, b.W_o, c, b.M_o, h_o, b.nv, b.N)
@@ -772,9 +788,10 @@ def _solve_numpy(b: SystemBlocks, h: np.ndarray, h_o: np.ndarray, c: np.ndarray,
     scale = float(np.abs(bb).max()) if bb.size else 0.0
     p = idx.size
     mu_a, phi, in_a = np.empty(p), np.empty(p), np.empty(p, dtype=np.bool_)
+    start = np.ones(p, dtype=np.bool_) if guess is None else (guess | ~uni)[cm][idx]
     status, pivots, q = _mlcp(G, bb, np.ascontiguousarray(uni[cm][idx]), DEPENDENCY_RTOL,
                               VIOLATION_RTOL * scale, CONSISTENCY_RTOL * scale,
-                              1000 + 20 * p, True, mu_a, phi, in_a)
+                              1000 + 20 * p, np.ascontiguousarray(start), mu_a, phi, in_a)
     if status != _OK:
         raise _lcp_error(what, status, _row_name(b, int(idx[q])), phi[q], pivots)
     flat = np.zeros(b.n_constraints)
@@ -810,6 +827,7 @@ def solve_unilateral(
     *,
     fast_path: bool = True,
     reference: bool = False,
+    guess: np.ndarray | None = None,
 ) -> ContactSolution:
     """Forward dynamics with mixed bilateral / unilateral contacts (mixed LCP, exact).
 
@@ -833,6 +851,12 @@ def solve_unilateral(
             the active-set method in any case (for checks).
         reference: use the numpy :func:`delassus_operator` (and no fast path) instead of
             the compiled kernel (for checks; same core).
+        guess: (n, N_max) bool or None: unilateral rows expected to push (e.g. the previous
+            step's ``sol.mu > 0``), with the active bilateral rows the warm start of the
+            active-set method (instead of "all active rows"). Only a starting point: if those
+            rows are dependent or some of their multipliers pull, the method starts cold; the
+            motion never depends on it. Saves the pivots when the contact state has not
+            changed (a simulation between events).
 
     Returns:
         :class:`ContactSolution` with ``a_o`` (6,) [m/s², rad/s²], ``qdd`` (n, nv_max),
@@ -856,8 +880,10 @@ def solve_unilateral(
         fast = _bilateral_fast_path(b, uni)
         if fast is not None:
             return fast
+    if guess is not None:
+        guess = _mask(guess, "guess", b)
     a_o, qdd, mu, Av, pivots = _solve(b, b.h, b.h_o, b.c, uni, act, "solve_unilateral",
-                                      reference)
+                                      reference, guess)
     return ContactSolution(a_o, qdd, mu, Av - b.c, "active_set", pivots, uni.copy(),
                            act.copy(), b)
 
@@ -898,6 +924,12 @@ def solve_impact(
     ``φ̇⁺_k = 0``. Only ``M``, ``W``, ``W_o`` and ``M_o`` of the blocks are used (``h``,
     ``h_o``, ``c`` are ignored). The same mixed LCP as :func:`solve_unilateral` with
     ``b = (1 + e) φ̇⁻`` (unilateral) or ``φ̇⁻`` (bilateral); always the active-set method.
+
+    This is Moreau's form of Newton's law, applied to every active row, the ones already
+    separating (``φ̇⁻_k > 0``) included: such a row may take an impulse and leave with
+    ``φ̇⁺_k = -e_k φ̇⁻_k < 0`` when the other impulses push it down. The kinetic energy changes
+    by ``½ Σ_k P_k (1 - e_k) φ̇⁻_k``: it cannot increase when the rows that take an impulse
+    were closing, and it is conserved when every ``e_k = 1``.
 
     Args:
         blocks: the system blocks.

@@ -119,6 +119,35 @@ def test_compiled_kernel_equals_numpy_reference(seed):
             assert rel(sol.mu, ref.mu, max(np.abs(ref.mu).max(), 1.0)) < 1e-12
 
 
+def test_guess_is_only_a_starting_point():
+    """Any warm-start guess gives the same motion; the previous answer's pushing rows (with a
+    margin above round-off) are the final active set at once: no pivot."""
+    exact = 0
+    for seed in range(30):
+        blocks, uni, _ = random_case(seed)
+        ref = solve_unilateral(blocks, uni, fast_path=False)
+        scale = max(np.abs(ref.a_o).max(), np.abs(ref.qdd).max())
+        rng = np.random.default_rng(300 + seed)
+        pushing = ref.mu > 0
+        for guess in (pushing, blocks.constraint_mask & (rng.uniform(size=uni.shape) < 0.5),
+                      np.zeros_like(uni), blocks.constraint_mask.copy()):
+            for kw in ({}, {"reference": True}):
+                sol = solve_unilateral(blocks, uni, fast_path=False, guess=guess, **kw)
+                assert rel(sol.a_o, ref.a_o, scale) < 1e-10
+                assert rel(sol.qdd, ref.qdd, scale) < 1e-10
+                check_contact_conditions(sol)
+        mu_push = np.abs(ref.mu[pushing & uni])
+        if mu_push.size and mu_push.min() > 1e-6 * np.abs(ref.mu).max():
+            exact += 1
+            assert solve_unilateral(blocks, uni, fast_path=False, guess=pushing).pivots == 0
+    assert exact >= 15
+    blocks, uni, _ = random_case(1)
+    pad = ~blocks.constraint_mask
+    assert pad.any()
+    with pytest.raises(InputError, match="guess: True on padding"):
+        solve_unilateral(blocks, uni, guess=pad)
+
+
 @pytest.mark.parametrize("seed", range(10))
 def test_inactive_rows_are_dropped(seed):
     blocks, uni, _ = random_case(seed)
@@ -193,27 +222,53 @@ def test_admm_recipe_solves_a_known_lcp():
     assert ok and np.abs(lam - [1.0, 0.0]).max() < 1e-12
 
 
-@pytest.mark.parametrize("seed", range(8))
-def test_matches_pinocchio_admm(seed):
-    """All-unilateral problems with independent rows: our μ equals ADMM's λ on ``G λ + b``
-    (G built densely, not by our Delassus code)."""
+def admm_case(seed: int):
+    """A problem with independent rows (30% bilateral for odd seeds) solved by us and by
+    Pinocchio's ADMM. ``G`` and ``b`` are built densely (not by our Delassus code); the
+    bilateral rows are condensed out (Schur complement on ``G_BB``), leaving the plain LCP
+    ``0 ≤ λ_U ⟂ S λ_U + g ≥ 0``, ``S = G_UU - G_UB G_BB⁻¹ G_BU``,
+    ``g = b_U - G_UB G_BB⁻¹ b_B``, for ADMM; then ``μ_B = -G_BB⁻¹ (b_B + G_BU λ_U)``."""
     rng = np.random.default_rng(1000 + seed)
     n = int(rng.integers(1, 4))
     nv = [int(x) for x in rng.choice([0, 6, 7], n)]
-    N = [int(min(x, 6)) for x in rng.integers(1, 5, n)]
-    if sum(max(0, m - k) for k, m in zip(nv, N, strict=True)) > 6:
+    N = [int(x) for x in rng.integers(1, 5, n)]
+    if sum(max(0, m - k) for k, m in zip(nv, N, strict=True)) > 6:  # keep rows independent
         N = [min(m, k) if k else 1 for k, m in zip(nv, N, strict=True)]
-    blocks, _ = random_contact_problem(rng, nv, N, p_bilateral=0.0)
-    uni = blocks.constraint_mask.copy()
+    blocks, uni = random_contact_problem(rng, nv, N, p_bilateral=0.3 if seed % 2 else 0.0)
     M, h, A, c = dense_matrices(blocks)
     G = A @ np.linalg.solve(M, A.T)
-    g = A @ np.linalg.solve(M, h) - c
-    lam, ok, _ = admm_lcp(G, g)
-    sol = solve_unilateral(blocks, uni)
+    b = A @ np.linalg.solve(M, h) - c
+    u = blocks.flatten_mu(uni).astype(bool)
+    B, U = np.flatnonzero(~u), np.flatnonzero(u)
+    X = np.linalg.solve(G[np.ix_(B, B)], np.column_stack((G[np.ix_(B, U)], b[B])))
+    S = G[np.ix_(U, U)] - G[np.ix_(U, B)] @ X[:, :-1]
+    g = b[U] - G[np.ix_(U, B)] @ X[:, -1]
+    lam_u, ok, _ = admm_lcp(0.5 * (S + S.T), g)
     assert ok
+    lam = np.zeros(len(b))
+    lam[U] = lam_u
+    lam[B] = -(X[:, -1] + X[:, :-1] @ lam_u)
+    sol = solve_unilateral(blocks, uni)
+    return blocks, uni, sol, lam
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_matches_pinocchio_admm(seed):
+    """Our μ equals ADMM's λ (unique: independent rows), bilateral rows included."""
+    blocks, uni, sol, lam = admm_case(seed)
     mu = blocks.flatten_mu(sol.mu)
-    assert (mu > 0).any() and (mu == 0).any() or seed % 2  # most cases mix both
     assert rel(mu, lam, max(np.abs(lam).max(), 1.0)) < 1e-10
+    check_contact_conditions(sol)
+
+
+def test_admm_cases_mix_pushing_separating_and_bilateral():
+    pushing = zero = bilateral = 0
+    for seed in range(10):
+        blocks, uni, sol, _ = admm_case(seed)
+        pushing += int((sol.mu[uni] > 0).sum())
+        zero += int((sol.mu[uni] == 0).sum())
+        bilateral += int((blocks.constraint_mask & ~uni).sum())
+    assert pushing >= 8 and zero >= 8 and bilateral >= 4
 
 
 # ------------------------------------------------------------------ closed forms
