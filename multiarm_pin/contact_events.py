@@ -8,15 +8,16 @@ Integration scheme (event-driven; see docs/ARCHITECTURE.md, "Unilateral contacts
   rows ``φ̈ = 0``, active unilateral rows ``0 <= μ ⟂ φ̈ >= 0`` (with Baumgarte terms, which
   therefore act on active rows only); inactive rows have ``μ = 0``.
 - **Separation**: at the start of every step (and after every impact), an active unilateral
-  row whose solution has ``μ = 0`` and ``φ̈ > SEPARATION_ACCELERATION`` (or a gap above
-  ``SEPARATION_GAP``) leaves the active set
+  row whose solution has ``μ = 0`` and ``φ̈ > SEPARATION_ACCELERATION``, or whose gap
+  exceeds ``SEPARATION_GAP`` or gap rate ``SEPARATION_SPEED``, leaves the active set
   (event ``"separation"`` at that time). Inside a step the LCP already lets such a row lift
   off (``φ̈ >= 0``), so the recorded time is within one step ``dt`` after the force vanished.
 - **Touchdown**: after every step, an inactive unilateral row whose gap fell below
   ``-GAP_TOLERANCE`` has touched down inside the step (only rows that started the step
-  above that: gaps are distances to the contact surface extended to infinity, so a
-  separated fingertip that goes round an edge of its face gets a negative gap without
-  touching anything; such a row is ignored until its gap is positive again). The time is
+  above ``-LOST_GAP``: gaps are distances to the contact surface extended to infinity, so
+  a separated fingertip that goes round an edge of its face gets a negative gap without
+  touching anything; such a row is ignored until its gap is back above ``-LOST_GAP``).
+  A row that starts the step inside or just below the band and closes is hit at once. The time is
   located by the Illinois (modified regula falsi) method on ``θ ∈ [0, 1]`` of the step,
   re-integrating from the step's start with step ``θ h``, until the smallest such gap lies
   in ``[-GAP_TOLERANCE, 0]`` (or the bracket is below ``TIME_TOLERANCE``). There the impact
@@ -47,6 +48,11 @@ from dataclasses import asdict, dataclass
 GAP_TOLERANCE = 1e-9
 """[m] A row touches down when its gap falls below ``-GAP_TOLERANCE``; located to within it."""
 
+LOST_GAP = 1e-4
+"""[m] A separated row whose gap is below ``-LOST_GAP`` at a step's start is not watched for
+touchdowns (its tip is behind the infinite plane of its face, off the face: it touches
+nothing). Real penetrations stay far smaller (Baumgarte-corrected drift, ~1e-9 m here)."""
+
 TIME_TOLERANCE = 1e-13
 """[s] Touchdown location stops when the bracket is shorter than this."""
 
@@ -58,7 +64,15 @@ lift (``φ̈ >= 0`` with ``μ = 0``); a lift that small stays below ``GAP_TOLERA
 millisecond step, so leaving the active set for it would only make touchdown chatter."""
 
 SEPARATION_GAP = 1e-6
-"""[m] An active unilateral row with ``μ = 0`` whose gap exceeds this separates too."""
+"""[m] An active unilateral row whose gap exceeds this separates, whatever its ``μ``."""
+
+SEPARATION_SPEED = 1e-4
+"""[m/s] An active unilateral row opening faster than this separates, whatever its ``μ``.
+
+The acceleration-level complementarity (with its Baumgarte terms ``-2αφ̇ - β²φ``) is right
+only for rows at ``φ ≈ 0``, ``φ̇ ≈ 0``: for an opening row it would push to keep the
+row from closing again faster than the Baumgarte rates (a cushion). Such a row leaves the
+active set; if it closes again, that is a touchdown with its impact."""
 
 REBOUND_SPEED = 1e-6
 """[m/s] Speed above round-off: a row leaves after an impact when ``φ̇⁺ > REBOUND_SPEED``, a
@@ -106,11 +120,13 @@ class ContactEvent:
 
 __all__ = [
     "GAP_TOLERANCE",
+    "LOST_GAP",
     "MAX_EVENTS_PER_STEP",
     "REBOUND_SPEED",
     "RESTING_SPEED",
     "SEPARATION_ACCELERATION",
     "SEPARATION_GAP",
+    "SEPARATION_SPEED",
     "TIME_TOLERANCE",
     "ContactEvent",
 ]

@@ -249,8 +249,9 @@ class _Stepper:
         if not self.unilateral:
             return False
         s = self.system
-        leave = (self.active & s.contact_unilateral & (sol.mu <= 0.0)
-                 & ((sol.phi_dd > ce.SEPARATION_ACCELERATION) | (rows.phi > ce.SEPARATION_GAP)))
+        leave = self.active & s.contact_unilateral & (
+            ((sol.mu <= 0.0) & (sol.phi_dd > ce.SEPARATION_ACCELERATION))
+            | (rows.phi > ce.SEPARATION_GAP) | (rows.phi_dot > ce.SEPARATION_SPEED))
         if keep is not None:
             leave &= ~keep
         for b, r in zip(*np.nonzero(leave), strict=True):
@@ -286,9 +287,9 @@ class _Stepper:
             watch = self._watch()
             if not watch.any():
                 return new
-            # a row already below the band at the step's start is not watched: its tip went
+            # a row far below the band at the step's start is not watched: its tip went
             # round an edge, behind the (infinite) plane of its face, and touches nothing
-            watch &= self.gaps(state) >= -tol
+            watch &= self.gaps(state) >= -ce.LOST_GAP
             if not watch.any():
                 return new
             g_hi = float(self.gaps(new)[watch].min())
