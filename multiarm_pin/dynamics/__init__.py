@@ -1,7 +1,12 @@
 """Dynamics layer: coefficient blocks, forward-dynamics solvers, inverse dynamics, forces."""
 
 from multiarm_pin.dynamics.blocks import Residuals, Solution, SystemBlocks
-from multiarm_pin.dynamics.dense_kkt import assemble_kkt, solve_dense_kkt
+from multiarm_pin.dynamics.dense_kkt import (
+    assemble_kkt,
+    constraint_jacobian,
+    redundant_constraints,
+    solve_dense_kkt,
+)
 from multiarm_pin.dynamics.force_distribution import (
     ForceDistribution,
     distribute_forces,
@@ -47,12 +52,14 @@ __all__ = [
     "Solution",
     "SystemBlocks",
     "assemble_kkt",
+    "constraint_jacobian",
     "delassus_operator",
     "distribute_forces",
     "internal_force_basis",
     "inverse_dynamics",
     "min_norm_forces",
     "reduce_arms",
+    "redundant_constraints",
     "solve",
     "solve_dense_kkt",
     "solve_impact",

@@ -7,8 +7,18 @@ unknowns ``[a_o; q̈_1 .. q̈_n; λ]`` with ``λ = -μ`` (the thesis's multiplie
     [ 0     M    W   ] [q̈  ] = [h  ]
     [ W_oᵀ  Wᵀ   0   ] [λ  ]   [c  ]
 
-and solved with one LU factorisation. No least-squares fallback: a singular or badly
-conditioned KKT matrix (redundant constraints) raises; use the ``"singular"`` solver then.
+and solved with one LU factorisation. No least-squares fallback: a singular KKT matrix
+(redundant constraints) raises; use the ``"singular"`` solver then.
+
+Singularity is decided **structurally**, before the LU, not from what the LU's rounding
+produced: with ``M_o`` and every ``M_i`` positive definite (``M_o`` is checked when the blocks
+are built, ``M_i`` by its Cholesky factorisation here), ``K`` is nonsingular exactly when the
+constraint Jacobian ``A = [W_oᵀ  Wᵀ]`` (``Σ N_i`` rows, ``6 + Σ nv_i`` columns) has full row
+rank. Its rank is read off the singular values of ``A`` with each row scaled to unit length
+(a constraint's row scale is arbitrary, so the verdict must not depend on it), counting those
+above ``KKT_RANK_RTOL`` times the largest. Redundant constraints give singular values at the
+level of round-off (~1e-16 relative) on any CPU and BLAS kernel; independent ones of the
+systems we build stay many orders of magnitude above the cut-off.
 """
 
 from __future__ import annotations
@@ -18,8 +28,75 @@ import numpy as np
 from multiarm_pin.dynamics.blocks import Solution, SystemBlocks
 from multiarm_pin.exceptions import DynamicsError
 
+KKT_RANK_RTOL = 1e-10
+"""Singular values of the row-normalised constraint Jacobian below this times the largest count
+as zero (a rank-deficient Jacobian, i.e. redundant constraints, raises)."""
+
 KKT_COND_LIMIT = 1e13
-"""A proven lower bound of the KKT condition number above this raises :class:`DynamicsError`."""
+"""A proven lower bound of the KKT condition number above this raises :class:`DynamicsError`
+(a full-rank but numerically hopeless system: the answer would carry no correct digit)."""
+
+
+def constraint_jacobian(blocks: SystemBlocks) -> tuple[np.ndarray, np.ndarray]:
+    """The stacked constraint Jacobian ``A = [W_oᵀ  Wᵀ]`` of the blocks, without padding.
+
+    Args:
+        blocks: the system blocks.
+
+    Returns:
+        ``(A, arm)``: ``A`` of shape (Σ N_i, 6 + Σ nv_i), columns ordered like the KKT
+        unknowns ``[a_o; q̈ arm-major]``, rows arm-major; ``arm`` (Σ N_i,) int, the arm of
+        each row.
+    """
+    b = blocks
+    nv_tot = int(b.nv.sum())
+    A = np.zeros((b.n_constraints, 6 + nv_tot))
+    arm = np.repeat(np.arange(b.n), b.N)
+    jq, r = 6, 0
+    for i in range(b.n):
+        k, m = int(b.nv[i]), int(b.N[i])
+        A[r:r + m, :6] = b.W_o[i, :, :m].T
+        A[r:r + m, jq:jq + k] = b.W[i, :k, :m].T
+        jq += k
+        r += m
+    return A, arm
+
+
+def redundant_constraints(
+    blocks: SystemBlocks, rtol: float = KKT_RANK_RTOL
+) -> tuple[int, tuple[int, ...]]:
+    """Rank of the constraint Jacobian and the arms whose constraints are linearly dependent.
+
+    The rows of ``A`` (:func:`constraint_jacobian`) are scaled to unit length; the rank is the
+    number of singular values above ``rtol`` times the largest (a zero row counts as
+    dependent). The arms reported are those with a row that takes part in some dependency:
+    a nonzero entry (above ``sqrt(rtol)``) in a left null vector of the scaled ``A``.
+
+    Args:
+        blocks: the system blocks.
+        rtol: relative singular-value cut-off.
+
+    Returns:
+        ``(rank, arms)``: the rank of ``A`` and the sorted arm indices of the dependent rows
+        (empty when ``A`` has full row rank, i.e. ``rank == Σ N_i``).
+    """
+    A, arm = constraint_jacobian(blocks)
+    m = A.shape[0]
+    if m == 0:
+        return 0, ()
+    norms = np.linalg.norm(A, axis=1)
+    zero = norms == 0.0
+    A = A / np.where(zero, 1.0, norms)[:, None]
+    U, s, _ = np.linalg.svd(A, full_matrices=True)
+    s_full = np.zeros(m)
+    s_full[:s.size] = s
+    keep = s_full > rtol * s_full[0] if s_full[0] > 0 else np.zeros(m, dtype=bool)
+    rank = int(keep.sum())
+    if rank == m:
+        return rank, ()
+    null = U[:, ~keep]  # left null space of the scaled A (its columns y: yᵀA ≈ 0)
+    involved = (np.abs(null).max(axis=1) > np.sqrt(rtol)) | zero
+    return rank, tuple(sorted({int(a) for a in arm[involved]}))
 
 
 def assemble_kkt(blocks: SystemBlocks) -> tuple[np.ndarray, np.ndarray]:
@@ -68,22 +145,38 @@ def unpack_kkt(blocks: SystemBlocks, x: np.ndarray) -> tuple[np.ndarray, np.ndar
     return x[:6].copy(), qdd, mu
 
 
-def solve_dense_kkt(blocks: SystemBlocks, cond_limit: float = KKT_COND_LIMIT) -> Solution:
+def solve_dense_kkt(
+    blocks: SystemBlocks, cond_limit: float = KKT_COND_LIMIT, *, check_rank: bool = True
+) -> Solution:
     """Forward dynamics by assembling and solving the full KKT system (Eq 4.9).
 
     Args:
         blocks: the system blocks.
         cond_limit: raise when ``‖x‖∞ ‖K‖∞ / ‖rhs‖∞`` (a lower bound of the condition number
             of ``K``) exceeds this.
+        check_rank: decide singularity structurally first (see the module docstring). Only
+            the benchmark turns this off, to time the bare assembly and LU of the thesis's
+            ``msolve03``; without it a singular ``K`` may go undetected.
 
     Returns:
         The solution (``solver="dense_kkt"``, ``singular_arms=()``).
 
     Raises:
-        DynamicsError: the KKT matrix is singular or too badly conditioned (redundant or
-            conflicting constraints).
+        DynamicsError: the KKT matrix is singular (redundant constraints, named by arm; a
+            singular ``M_i``) or too badly conditioned.
         InputError: NaN or infinity in the blocks.
     """
+    if check_rank:
+        blocks.check_finite()
+        _check_mass_matrices(blocks)
+        rank, arms = redundant_constraints(blocks)
+        if arms:
+            raise DynamicsError(
+                f"the KKT matrix is singular: the constraint Jacobian [W_oᵀ Wᵀ] has rank "
+                f"{rank} < {blocks.n_constraints} rows, the constraints of arm(s) "
+                f"{list(arms)} are redundant (linearly dependent); use solver='singular' or "
+                "'auto' for redundant constraints"
+            )
     K, rhs = assemble_kkt(blocks)
     try:
         x = np.linalg.solve(K, rhs)
@@ -105,3 +198,18 @@ def solve_dense_kkt(blocks: SystemBlocks, cond_limit: float = KKT_COND_LIMIT) ->
         )
     a_o, qdd, mu = unpack_kkt(blocks, x)
     return Solution(a_o, qdd, mu, "dense_kkt", (), blocks)
+
+
+def _check_mass_matrices(blocks: SystemBlocks) -> None:
+    """Raise :class:`DynamicsError` naming the arms whose ``M_i`` is not positive definite."""
+    bad = []
+    for i in range(blocks.n):
+        k = int(blocks.nv[i])
+        try:
+            np.linalg.cholesky(blocks.M[i, :k, :k])
+        except np.linalg.LinAlgError:
+            bad.append(i)
+    if bad:
+        raise DynamicsError(
+            f"the KKT matrix is singular: M_i of arm(s) {bad} is not positive definite"
+        )

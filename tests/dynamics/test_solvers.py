@@ -118,36 +118,84 @@ def test_singular_variant_matches_least_squares_kkt(nv, N, rank_W, expected):
             solve(blocks, name)
 
 
-def test_redundant_fixed_grippers_singular_kkt():
+def redundant_fixed_grippers(seed: int, offset: float = 0.0):
     """Two fixed grippers each welded to the object: 12 multipliers for 6 dofs.
 
-    The KKT matrix is singular; with consistent c = W_oᵀ a the object acceleration must be a
-    (closed form), the multipliers are not unique but must balance the object's equation.
+    The constraint Jacobian ``[W_oᵀ Wᵀ]`` is 12 x 6, so it has rank 6 < 12 by construction
+    (whatever the rounding): the KKT matrix is singular. With ``c = W_oᵀ a`` the constraints
+    are consistent and the object acceleration must be ``a``; ``offset`` makes the second
+    gripper's constraints inconsistent with the first's.
     """
-    rng = np.random.default_rng(7)
+    rng = np.random.default_rng(seed)
     a = rng.standard_normal(6)
     Wos = [rng.standard_normal((6, 6)) for _ in range(2)]
     M_o = random_object_inertia(rng)
     h_o = rng.standard_normal(6)
-    lists = ([np.zeros((0, 0))] * 2, [np.zeros(0)] * 2, [np.zeros((0, 6))] * 2, Wos,
-             [W.T @ a for W in Wos])
-    blocks = SystemBlocks.from_lists(*lists, M_o, h_o)
-    with pytest.raises(DynamicsError, match="KKT matrix is singular"):
+    blocks = SystemBlocks.from_lists(
+        [np.zeros((0, 0))] * 2, [np.zeros(0)] * 2, [np.zeros((0, 6))] * 2, Wos,
+        [Wos[0].T @ a, Wos[1].T @ (a + offset)], M_o, h_o)
+    return blocks, a
+
+
+@pytest.mark.parametrize("seed", range(50))
+def test_redundant_fixed_grippers_singular_kkt(seed):
+    """The dense KKT refuses the redundant system for every seed (structural rank test, not LU
+    rounding: on some CPUs LU ends with a pivot of 1e-16 and returns arbitrary multipliers),
+    naming the rank and both arms; the singular variant gives the closed-form motion and
+    multipliers that balance the object's equation."""
+    blocks, a = redundant_fixed_grippers(seed)
+    with pytest.raises(DynamicsError, match=r"rank 6 < 12 rows.*arm\(s\) \[0, 1\] are redundant"):
         solve(blocks, "dense_kkt")
     for name in ("singular", "auto"):
         sol = solve(blocks, name)
         assert sol.singular_arms == (0, 1)
         np.testing.assert_allclose(sol.a_o, a, rtol=1e-10, atol=1e-12)
         wrench = np.einsum("nij,nj->i", blocks.W_o, sol.mu)
-        np.testing.assert_allclose(wrench, M_o @ a - h_o, rtol=1e-9, atol=1e-10)
+        np.testing.assert_allclose(wrench, blocks.M_o @ a - blocks.h_o, rtol=1e-9, atol=1e-10)
     a_ref, _, _ = lstsq_kkt(blocks)
     np.testing.assert_allclose(a_ref, a, rtol=1e-9)
-    # inconsistent constraints: no solution at all
-    bad = SystemBlocks.from_lists(*lists[:4], [Wos[0].T @ a, Wos[1].T @ (a + 0.1)], M_o, h_o)
+
+
+def test_inconsistent_fixed_grippers_raise():
+    bad, _ = redundant_fixed_grippers(7, offset=0.1)
     with pytest.raises(DynamicsError, match="inconsistent"):
         solve(bad, "auto")
-    with pytest.raises(DynamicsError):
+    with pytest.raises(DynamicsError, match="redundant"):
         solve(bad, "dense_kkt")
+
+
+def test_redundancy_names_only_the_dependent_arms():
+    """Arm 0 has joints, so its rows are independent of everything else; arms 1 and 2 are
+    fixed grippers with 4 + 4 rows acting on the 6 object dofs only: rank 3 + 6 = 9 < 11."""
+    rng = np.random.default_rng(2)
+    arm0, _, _ = random_system(rng, [6], [3])
+    Wos = [arm0.W_o[0]] + [rng.standard_normal((6, 4)) for _ in range(2)]
+    a = rng.standard_normal(6)
+    blocks = SystemBlocks.from_lists(
+        [arm0.M[0], np.zeros((0, 0)), np.zeros((0, 0))],
+        [arm0.h[0], np.zeros(0), np.zeros(0)],
+        [arm0.W[0], np.zeros((0, 4)), np.zeros((0, 4))], Wos,
+        [arm0.c[0], Wos[1].T @ a, Wos[2].T @ a], arm0.M_o, arm0.h_o)
+    assert dyn.redundant_constraints(blocks) == (9, (1, 2))
+    with pytest.raises(DynamicsError, match=r"rank 9 < 11 rows.*arm\(s\) \[1, 2\]"):
+        solve(blocks, "dense_kkt")
+    # an independent system has full rank and nothing redundant
+    assert dyn.redundant_constraints(arm0) == (3, ())
+
+
+def test_rank_verdict_is_invariant_to_row_scaling():
+    """Scaling a constraint row (both its W_o column and its W column) by 1e-8 or 1e8 changes
+    nothing in the rank verdict: a constraint equation's scale is arbitrary."""
+    rng = np.random.default_rng(9)
+    b, _, _ = random_system(rng, [6, 7], [4, 5])
+    for scale in (1e-8, 1e8):
+        W, W_o, c = b.W.copy(), b.W_o.copy(), b.c.copy()
+        W[1, :, 2] *= scale
+        W_o[1, :, 2] *= scale
+        c[1, 2] *= scale
+        scaled = SystemBlocks(b.M, b.h, W, W_o, c, b.M_o, b.h_o, b.nv, b.N)
+        assert dyn.redundant_constraints(scaled) == (9, ())
+        assert rel_diff(solve(scaled, "dense_kkt").a_o, solve(b, "dense_kkt").a_o) < 1e-9
 
 
 def test_any_partition_gives_the_same_motion():
