@@ -106,11 +106,29 @@ class Evaluation:
         blocks: the padded coefficient blocks (``h`` includes the torque given, if any).
         arms: the arms' stacked Pinocchio terms (mass matrices, tool Jacobians, ...).
         constraints: the constraint rows (``φ``, ``φ̇``, ``G``, ``κ``, contact points ...).
+        active: (n, N_max) bool, the arms' contact rows that touch (the active set of the
+            event-driven simulation: bilateral rows and touching unilateral rows), or None
+            (every row touches). :func:`~multiarm_pin.simulation.simulate` sets it on the
+            evaluation it hands to the controller, before the call
+            (:meth:`with_active`); controllers that plan contact forces use it.
     """
 
     blocks: SystemBlocks
     arms: ArmSetTerms
     constraints: ConstraintTerms
+    active: np.ndarray | None = None
+
+    def with_active(self, active: np.ndarray | None) -> Evaluation:
+        """Set :attr:`active` and return ``self``.
+
+        In place: an evaluation belongs to one state and one active set.
+
+        Args:
+            active: (n, N_max) bool mask of the touching rows, or None (all touch).
+        """
+        mask = None if active is None else np.asarray(active, dtype=bool)
+        object.__setattr__(self, "active", mask)
+        return self
 
 
 JointSpec = Joint | str | Mapping | Callable[[pin.SE3, pin.SE3], Joint]
