@@ -297,17 +297,22 @@ class _Stepper:
         return out
 
     def advance_with_events(self, integrator: str, t: float, state: SystemState, sol,
-                            h: float) -> SystemState:
-        """The state at ``t + h``: steps, touchdowns located and impacts applied on the way."""
+                            h: float, t_end: float | None = None) -> SystemState:
+        """The state at ``t + h``: steps, touchdowns located and impacts applied on the way.
+
+        ``t_end``: the grid time ``t + h`` exactly (default ``t + h`` in floating point), so
+        that the step's final evaluation, made to look for separations, is the one the next
+        step starts from (cached) and a wrench switching at a grid time is read there.
+        """
         if not self.unilateral:
             return self.step(integrator, t, state, sol, h)
         tol = ce.GAP_TOLERANCE
-        t_end = t + h
+        t_end = t + h if t_end is None else float(t_end)
         for _ in range(ce.MAX_EVENTS_PER_STEP):
             h = t_end - t
             new = self.step(integrator, t, state, sol, h)
             # a separation inside the step: the step ends there (touchdowns before it first)
-            sep = self._locate_separation(integrator, t, state, sol, h, new)
+            sep = self._locate_separation(integrator, t, state, sol, h, new, t_end)
             if sep is not None:
                 theta_s, new, leaving = sep
                 h = theta_s * h
@@ -354,7 +359,7 @@ class _Stepper:
             return -float(sol.phi_dd[lift].max())
         return float(sol.mu[rows].sum())
 
-    def _locate_separation(self, integrator, t, state, sol, h, new):
+    def _locate_separation(self, integrator, t, state, sol, h, new, t_end):
         """The first separation inside a step, or None.
 
         Rows that separate inside the step: active unilateral rows that, at the step's end,
@@ -376,7 +381,7 @@ class _Stepper:
         pushing = self.active & s.contact_unilateral & (sol.mu > 0.0)
         if not pushing.any():
             return None
-        end = self.evaluate(t + h, new)[0]
+        end = self.evaluate(t_end, new)[0]  # the step's end time exactly (cached)
         rows = (self.active & s.contact_unilateral & (end.mu <= 0.0)
                 & (end.phi_dd > ce.SEPARATION_ACCELERATION))
         if not (rows & pushing).any():
@@ -693,7 +698,6 @@ def _integrate(stepper: _Stepper, rec: _Recorder, state: SystemState, times: np.
                integrator: str, rtol: float, atol: float, report) -> None:
     """Run the integrator over the time grid, recording every sample."""
     n_steps = len(times) - 1
-    dt = float(times[1] - times[0]) if n_steps > 0 else 0.0
     if integrator == "rk45":
         _run_rk45(stepper, rec, state, times, rtol, atol, report)
     else:
@@ -706,7 +710,8 @@ def _integrate(stepper: _Stepper, rec: _Recorder, state: SystemState, times: np.
             rec.record(k, t, state, sol, ev, tau, rows, stepper)
             if k == n_steps:
                 break
-            state = stepper.advance_with_events(integrator, t, state, sol, dt)
+            state = stepper.advance_with_events(integrator, t, state, sol, times[k + 1] - t,
+                                                t_end=times[k + 1])
             if k % every == 0:
                 report((k + 1) / n_steps)
 
