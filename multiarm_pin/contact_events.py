@@ -7,11 +7,20 @@ Integration scheme (event-driven; see docs/ARCHITECTURE.md, "Unilateral contacts
   (:func:`multiarm_pin.dynamics.unilateral.solve_unilateral`) on the active rows: bilateral
   rows ``φ̈ = 0``, active unilateral rows ``0 <= μ ⟂ φ̈ >= 0`` (with Baumgarte terms, which
   therefore act on active rows only); inactive rows have ``μ = 0``.
-- **Separation**: at the start of every step (and after every impact), an active unilateral
-  row whose solution has ``μ = 0`` and ``φ̈ > SEPARATION_ACCELERATION``, or whose gap
-  exceeds ``SEPARATION_GAP`` or gap rate ``SEPARATION_SPEED``, leaves the active set
-  (event ``"separation"`` at that time). Inside a step the LCP already lets such a row lift
-  off (``φ̈ >= 0``), so the recorded time is within one step ``dt`` after the force vanished.
+- **Separation**: an active unilateral row that pushes at a step's start (``μ > 0``) and
+  at its end has ``μ = 0`` and lifts (``φ̈ > SEPARATION_ACCELERATION``) separated inside
+  the step. Its time is where the multiplier ``μ_k(t)`` of the current active set reaches
+  zero and the row starts to lift (the sign of ``-φ̈_k`` of force-free lifting rows, else
+  of the rows' total force), located by the Illinois method on ``θ ∈ [0, 1]`` of the step,
+  re-integrating from the step's start with step ``θ h`` and the active set unchanged,
+  to a bracket shorter than ``SEPARATION_TIME_TOLERANCE``; the step is split there (a
+  touchdown located before it is handled first), the row leaves the active set (event
+  ``"separation"`` at that time) and the step is finished with the new active set. In
+  addition, at the start of every step (and after every impact or separation), an active
+  unilateral row whose solution has ``μ = 0`` and ``φ̈ > SEPARATION_ACCELERATION``, or
+  whose gap exceeds ``SEPARATION_GAP`` or gap rate ``SEPARATION_SPEED``, leaves the active
+  set at that time (rows that let go at t = 0, after an impact, or whose multiplier was
+  already 0 at the step's start).
 - **Touchdown**: after every step, an inactive unilateral row whose gap fell below
   ``-GAP_TOLERANCE`` has touched down inside the step (only rows that started the step
   above ``-LOST_GAP``: gaps are distances to the contact surface extended to infinity, so
@@ -55,6 +64,15 @@ nothing). Real penetrations stay far smaller (Baumgarte-corrected drift, ~1e-9 m
 
 TIME_TOLERANCE = 1e-13
 """[s] Touchdown location stops when the bracket is shorter than this."""
+
+LIFT_ACCELERATION = 1e-8
+"""[m/s²] While a separation is located, a force-free row whose ``φ̈`` exceeds this has
+let go (far above round-off, ~1e-14 here; a lift this slow moves less than 1e-14 m in a
+millisecond)."""
+
+SEPARATION_TIME_TOLERANCE = 1e-10
+"""[s] Separation location stops when the bracket is shorter than this: a recorded
+separation time is at most this late (the bracket's upper end, where ``μ = 0``)."""
 
 SEPARATION_ACCELERATION = 1e-3
 """[m/s²] An active unilateral row with ``μ = 0`` separates when ``φ̈`` exceeds this.
@@ -120,6 +138,7 @@ class ContactEvent:
 
 __all__ = [
     "GAP_TOLERANCE",
+    "LIFT_ACCELERATION",
     "LOST_GAP",
     "MAX_EVENTS_PER_STEP",
     "REBOUND_SPEED",
@@ -127,6 +146,7 @@ __all__ = [
     "SEPARATION_ACCELERATION",
     "SEPARATION_GAP",
     "SEPARATION_SPEED",
+    "SEPARATION_TIME_TOLERANCE",
     "TIME_TOLERANCE",
     "ContactEvent",
 ]

@@ -37,6 +37,7 @@ from typing import ClassVar
 import numpy as np
 import pinocchio as pin
 
+from multiarm_pin.dynamics.blocks import SystemBlocks, expand_rows, restrict_rows
 from multiarm_pin.dynamics.force_distribution import distribute_forces
 from multiarm_pin.dynamics.inverse_dynamics import InverseDynamicsResult, inverse_dynamics
 from multiarm_pin.exceptions import DynamicsError, InputError
@@ -186,6 +187,36 @@ mean diagonal of ``AᵀA`` (keeps it finite at singular poses; changes regular a
 by about ``ε/σ²_min`` relative)."""
 
 
+GRASP_RANK_TOLERANCE = 1e-9
+"""Relative singular value below which the touching contacts' wrench map is rank deficient."""
+
+
+def grasp_rank(blocks: SystemBlocks) -> int:
+    """Rank of the stacked ``W_o`` of the blocks' rows (the wrenches the contacts can make).
+
+    Decided structurally: the singular values of ``W_o`` with every column scaled to unit
+    norm (a contact's unit force and its moment about the COM divided by the object's size
+    would change nothing: the columns are ``[n; r × n]``) that exceed
+    ``GRASP_RANK_TOLERANCE`` times the largest.
+
+    Args:
+        blocks: the system blocks (only ``W_o`` and ``N`` are used).
+
+    Returns:
+        The rank, 0..6; 6 means the contacts can produce any object wrench (with forces of
+        either sign).
+    """
+    W_o = blocks.stacked_W_o()
+    if W_o.shape[1] == 0:
+        return 0
+    norms = np.linalg.norm(W_o, axis=0)
+    W_o = W_o[:, norms > 0] / norms[norms > 0]
+    if W_o.shape[1] == 0:
+        return 0
+    sv = np.linalg.svd(W_o, compute_uv=False)
+    return int((sv > GRASP_RANK_TOLERANCE * sv[0]).sum())
+
+
 class ObjectPD(Controller):
     """Object-level computed torque on the inverse dynamics with force distribution.
 
@@ -246,6 +277,19 @@ class ObjectPD(Controller):
         margin_kept: False when the last call could not keep every unilateral contact
             pushing with ``margin`` (then it planned the least-norm forces, and the contacts
             that would have to pull separate in the simulation).
+        holding: True when the last call held the arms still (see below).
+        warnings: one message per onset of holding, with its time (the simulation adds
+            them to its result's warnings).
+
+    Touching contacts: when the evaluation carries the active set
+    (:attr:`~multiarm_pin.system.Evaluation.active`, set by :func:`simulate`), the forces
+    are planned and the inverse dynamics solved on the touching rows only
+    (:func:`~multiarm_pin.dynamics.blocks.restrict_rows`); separated contacts get no force.
+    When those rows cannot produce every object wrench (:func:`grasp_rank` < 6) or the
+    inverse dynamics has no solution, the controller degrades gracefully instead of raising:
+    it holds the arms still, ``τ = M (null_kp (q_h ⊖ q) - null_kd v) - h`` (computed-torque
+    joint PD toward ``q_h``, the configuration at the onset, with gravity and velocity
+    terms compensated and contact forces ignored), and records one warning per onset.
     """
 
     name = "object_pd"
@@ -279,6 +323,23 @@ class ObjectPD(Controller):
         self.last: InverseDynamicsResult | None = None
         self.last_point_acceleration: np.ndarray | None = None
         self.margin_kept = True
+        self.holding = False
+        self.warnings: list[str] = []
+        self._q_hold: np.ndarray | None = None
+
+    def _hold_still(self, t: float, state: SystemState, blocks: SystemBlocks,
+                    reason: str) -> np.ndarray:
+        """(nv,) torques [N m] holding the arms at the onset's configuration (fallback)."""
+        s = self.system
+        if not self.holding:
+            self.holding = True
+            self._q_hold = np.array(state.q, dtype=float)
+            self.warnings.append(f"t = {t:.6g} s: object_pd: {reason}; holding the arms still "
+                                 "(gravity compensation and joint PD)")
+        err = pin.difference(s.arm_set.model, state.q, self._q_hold)
+        z = s.pad(self.null_kp * err - self.null_kd * state.v)
+        tau = (blocks.M @ z[:, :, None])[:, :, 0] - blocks.h
+        return s.unpad(np.where(blocks.dof_mask, tau, 0.0))
 
     def desired_acceleration(self, t: float, state: SystemState) -> np.ndarray:
         """(6,) ``a_d = a_ref + K_d (v_ref - v_o) + K_p e`` [m/s², rad/s²], world at the COM."""
@@ -356,8 +417,20 @@ class ObjectPD(Controller):
         if self.hold_mask is None:
             self._init_hold(state, evaluation)
         a_d = self.desired_acceleration(t, state)
+        active = getattr(evaluation, "active", None)
+        index = None
+        unilateral = s.unilateral
+        if active is not None and not np.all(np.asarray(active)[b.constraint_mask]):
+            full = b
+            b, index = restrict_rows(full, active)
+            unilateral = np.zeros_like(s.unilateral)
+            i, k = np.nonzero(index >= 0)
+            unilateral[i, k] = s.unilateral[i, index[i, k]]
+            if grasp_rank(b) < 6:
+                return self._hold_still(t, state, full, "the touching contacts cannot make "
+                                        f"every object wrench (rank {grasp_rank(b)} < 6)")
         try:
-            fd = distribute_forces(b, b.M_o @ a_d - b.h_o, s.unilateral, self.margin)
+            fd = distribute_forces(b, b.M_o @ a_d - b.h_o, unilateral, self.margin)
             self.margin_kept = True
         except DynamicsError:
             # The grasp cannot keep every unilateral contact pushing with the margin for this
@@ -394,8 +467,17 @@ class ObjectPD(Controller):
         AtA += (JACOBIAN_DAMPING * scale)[:, None, None] * np.eye(AtA.shape[1])
         resid = rhs - (A @ z[:, :, None])[:, :, 0]
         qdd_desired = z + np.linalg.solve(AtA, (At @ resid[:, :, None]))[:, :, 0]
-        self.last = inverse_dynamics(b, a_d, qdd_desired, fd.mu_I, fd.basis)
-        return s.unpad(self.last.tau)
+        try:
+            last = inverse_dynamics(b, a_d, qdd_desired, fd.mu_I, fd.basis)
+        except DynamicsError as exc:
+            return self._hold_still(t, state, evaluation.blocks,
+                                    f"no inverse dynamics on the touching contacts ({exc})")
+        if index is not None:  # multipliers back at the rows of the full blocks
+            last = InverseDynamicsResult(last.tau, expand_rows(last.mu, index), last.qdd,
+                                         last.a_o, last.mu_I, last.basis)
+        self.last = last
+        self.holding = False
+        return s.unpad(last.tau)
 
 
 CONTROLLERS: dict[str, type[Controller]] = {
@@ -435,7 +517,9 @@ __all__ = [
     "GravityCompensation",
     "JointPD",
     "ObjectPD",
+    "GRASP_RANK_TOLERANCE",
     "ZeroTorque",
+    "grasp_rank",
     "make_controller",
     "tool_acceleration_from_object",
 ]

@@ -156,14 +156,20 @@ class _Stepper:
         self.unilateral = bool(system.contact_unilateral.any())
         self.active = system.contact_mask.copy()
         self.events: list[ContactEvent] = []
+        self._cache = None  # (t, state, active, result) of the last evaluation
 
     def evaluate(self, t: float, state: SystemState):
         """``(solution, evaluation, tau, rows)`` at ``(t, state)`` with the current active set.
 
         Errors carry the time (same type, message prefixed with ``t = ... s``).
         """
+        c = self._cache
+        if c is not None and c[0] == t and c[1] is state and np.array_equal(c[2], self.active):
+            return c[3]
         try:
-            return self._evaluate(t, state)
+            out = self._evaluate(t, state)
+            self._cache = (t, state, self.active.copy(), out)
+            return out
         except MultiArmError as exc:
             if exc.args and isinstance(exc.args[0], str) and not exc.args[0].startswith("t = "):
                 exc.args = (f"t = {t:.6g} s: {exc.args[0]}", *exc.args[1:])
@@ -176,6 +182,8 @@ class _Stepper:
             full, rows = s.contact_blocks(state, None, None, self.baumgarte, w)
             return self._solve(t, full), None, np.zeros(0), rows
         ev = s.blocks(state, None, self.baumgarte)
+        if self.unilateral:  # the controller sees which contacts touch
+            ev = ev.with_active(self.active[:s.n_arms, :s.N_max].copy())
         if self.controller is None:
             tau = np.zeros(s.nv)
             blocks = ev.blocks
@@ -289,26 +297,41 @@ class _Stepper:
         return out
 
     def advance_with_events(self, integrator: str, t: float, state: SystemState, sol,
-                            h: float) -> SystemState:
-        """The state at ``t + h``: steps, touchdowns located and impacts applied on the way."""
+                            h: float, t_end: float | None = None) -> SystemState:
+        """The state at ``t + h``: steps, touchdowns located and impacts applied on the way.
+
+        ``t_end``: the grid time ``t + h`` exactly (default ``t + h`` in floating point), so
+        that the step's final evaluation, made to look for separations, is the one the next
+        step starts from (cached) and a wrench switching at a grid time is read there.
+        """
         if not self.unilateral:
             return self.step(integrator, t, state, sol, h)
         tol = ce.GAP_TOLERANCE
-        t_end = t + h
+        t_end = t + h if t_end is None else float(t_end)
         for _ in range(ce.MAX_EVENTS_PER_STEP):
             h = t_end - t
             new = self.step(integrator, t, state, sol, h)
+            # a separation inside the step: the step ends there (touchdowns before it first)
+            sep = self._locate_separation(integrator, t, state, sol, h, new, t_end)
+            if sep is not None:
+                theta_s, new, leaving = sep
+                h = theta_s * h
             watch = self._watch()
-            if not watch.any():
-                return new
             # a row far below the band at the step's start is not watched: its tip went
             # round an edge, behind the (infinite) plane of its face, and touches nothing
             watch &= self.gaps(state) >= -ce.LOST_GAP
-            if not watch.any():
-                return new
-            g_hi = float(self.gaps(new)[watch].min())
+            g_hi = float(self.gaps(new)[watch].min()) if watch.any() else 0.0
             if g_hi >= -tol:
-                return new
+                if sep is None:
+                    return new
+                t, state = t + h, new
+                self._separate(t, state, leaving)
+                sol, _, _, rows = self.evaluate(t, state)
+                if self.separations(t, sol, rows):
+                    sol = self.evaluate(t, state)[0]
+                if t_end - t <= ce.TIME_TOLERANCE:
+                    return state
+                continue
             theta, s_e = self._locate(integrator, t, state, sol, h, watch, g_hi)
             t = t + theta * h
             state, joined = self._impact(t, s_e, watch)
@@ -319,6 +342,86 @@ class _Stepper:
                 return state
         raise DynamicsError(f"t = {t:.6g} s: more than {ce.MAX_EVENTS_PER_STEP} contact events "
                             "in one step")
+
+    @staticmethod
+    def _release(sol, rows: np.ndarray) -> float:
+        """Signed release function of the ``rows`` group: > 0 while none lifts, < 0 after.
+
+        ``-max φ̈_k`` [m/s²] over the rows that carry no force (``μ_k = 0``) and lift
+        (``φ̈_k > LIFT_ACCELERATION``) if any; otherwise the group's total force ``Σ μ_k``
+        [N] (> 0). For an active unilateral row the LCP gives either ``μ > 0, φ̈ = 0`` or
+        ``μ = 0, φ̈ >= 0``, so the sign changes exactly when the first row of the group lets
+        go; the total force (unique even when the rows are redundant, e.g. one edge of a box
+        on two vertices, where a single row's ``μ`` is not) only guides the secant.
+        """
+        lift = rows & (sol.mu <= 0.0) & (sol.phi_dd > ce.LIFT_ACCELERATION)
+        if lift.any():
+            return -float(sol.phi_dd[lift].max())
+        return float(sol.mu[rows].sum())
+
+    def _locate_separation(self, integrator, t, state, sol, h, new, t_end):
+        """The first separation inside a step, or None.
+
+        Rows that separate inside the step: active unilateral rows that, at the step's end,
+        have ``μ = 0`` and lift (``φ̈ > SEPARATION_ACCELERATION``, the same test as at a
+        step's start), at least one of which pushed at its start (``μ > 0``; otherwise the
+        test at the next step's start takes them). The time is the root of
+        :meth:`_release` on ``θ ∈ [0, 1]`` (the integration re-run from the step's start
+        with step ``θ h`` and the active set unchanged), located by the Illinois method
+        (every third iterate a bisection) to a bracket shorter than
+        ``SEPARATION_TIME_TOLERANCE``.
+
+        Returns:
+            ``(θ, state at t + θ h, (B, R) mask of those rows with μ = 0 there)`` (θ the
+            bracket's upper end, where the first rows have let go), or None.
+        """
+        if not self.unilateral:
+            return None
+        s = self.system
+        pushing = self.active & s.contact_unilateral & (sol.mu > 0.0)
+        if not pushing.any():
+            return None
+        end = self.evaluate(t_end, new)[0]  # the step's end time exactly (cached)
+        rows = (self.active & s.contact_unilateral & (end.mu <= 0.0)
+                & (end.phi_dd > ce.SEPARATION_ACCELERATION))
+        if not (rows & pushing).any():
+            return None
+        lo, hi = 0.0, 1.0
+        f_lo, f_hi = self._release(sol, rows), self._release(end, rows)
+        if not (f_lo > 0.0 > f_hi):
+            return None
+        s_hi, sol_hi, side = new, end, 0
+        for it in range(200):
+            if (hi - lo) * h < ce.SEPARATION_TIME_TOLERANCE:
+                break
+            theta = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+            if it % 3 == 2 or not (lo < theta < hi):
+                theta = 0.5 * (lo + hi)
+            s_e = self.step(integrator, t, state, sol, theta * h)
+            sol_e = self.evaluate(t + theta * h, s_e)[0]
+            f = self._release(sol_e, rows)
+            if f > 0.0:
+                lo, f_lo = theta, f
+                if side == 1:
+                    f_hi *= 0.5
+                side = 1
+            else:
+                hi, f_hi, s_hi, sol_hi = theta, f, s_e, sol_e
+                if side == -1:
+                    f_lo *= 0.5
+                side = -1
+        return hi, s_hi, rows & (sol_hi.mu <= 0.0)
+
+    def _separate(self, t: float, state: SystemState, leaving: np.ndarray) -> None:
+        """Drop ``leaving`` rows from the active set, with their events at ``t``."""
+        leaving = leaving & self.active
+        if not leaving.any():
+            return
+        rows = self._blocks_at(t, state)[1]
+        for b, r in zip(*np.nonzero(leaving), strict=True):
+            self._event(t, "separation", b, r, phi_dot=float(rows.phi_dot[b, r]),
+                        phi_dot_after=float(rows.phi_dot[b, r]))
+        self.active = self.active & ~leaving
 
     def _locate(self, integrator, t, state, sol, h, watch, g_hi):
         """``θ`` of the step where the smallest watched gap first reaches ``[-tol, 0]``.
@@ -595,7 +698,6 @@ def _integrate(stepper: _Stepper, rec: _Recorder, state: SystemState, times: np.
                integrator: str, rtol: float, atol: float, report) -> None:
     """Run the integrator over the time grid, recording every sample."""
     n_steps = len(times) - 1
-    dt = float(times[1] - times[0]) if n_steps > 0 else 0.0
     if integrator == "rk45":
         _run_rk45(stepper, rec, state, times, rtol, atol, report)
     else:
@@ -608,7 +710,8 @@ def _integrate(stepper: _Stepper, rec: _Recorder, state: SystemState, times: np.
             rec.record(k, t, state, sol, ev, tau, rows, stepper)
             if k == n_steps:
                 break
-            state = stepper.advance_with_events(integrator, t, state, sol, dt)
+            state = stepper.advance_with_events(integrator, t, state, sol, times[k + 1] - t,
+                                                t_end=times[k + 1])
             if k % every == 0:
                 report((k + 1) / n_steps)
 
@@ -742,7 +845,8 @@ class _Recorder:
             f"t = {e.t:.6g} s: arm {e.block} ({e.body}) contact {e.row}: separates (multiplier "
             f"μ = 0 N; holding it would need a pulling force)"
             for e in stepper.events if e.kind == "separation" and e.block < s.n_arms
-        ][:MAX_WARNINGS] + list(self.warnings)
+        ][:MAX_WARNINGS] + list(self.warnings) + [  # a controller's own (ObjectPD holding)
+            w for w in getattr(stepper.controller, "warnings", ()) if isinstance(w, str)]
         if self.n_warnings > len(warnings):
             warnings.append(f"... {self.n_warnings - len(warnings)} more separation warnings")
         return SimulationResult(

@@ -106,11 +106,29 @@ class Evaluation:
         blocks: the padded coefficient blocks (``h`` includes the torque given, if any).
         arms: the arms' stacked Pinocchio terms (mass matrices, tool Jacobians, ...).
         constraints: the constraint rows (``φ``, ``φ̇``, ``G``, ``κ``, contact points ...).
+        active: (n, N_max) bool, the arms' contact rows that touch (the active set of the
+            event-driven simulation: bilateral rows and touching unilateral rows), or None
+            (every row touches). :func:`~multiarm_pin.simulation.simulate` sets it on the
+            evaluation it hands to the controller, before the call
+            (:meth:`with_active`); controllers that plan contact forces use it.
     """
 
     blocks: SystemBlocks
     arms: ArmSetTerms
     constraints: ConstraintTerms
+    active: np.ndarray | None = None
+
+    def with_active(self, active: np.ndarray | None) -> Evaluation:
+        """Set :attr:`active` and return ``self``.
+
+        In place: an evaluation belongs to one state and one active set.
+
+        Args:
+            active: (n, N_max) bool mask of the touching rows, or None (all touch).
+        """
+        mask = None if active is None else np.asarray(active, dtype=bool)
+        object.__setattr__(self, "active", mask)
+        return self
 
 
 JointSpec = Joint | str | Mapping | Callable[[pin.SE3, pin.SE3], Joint]
@@ -687,6 +705,57 @@ class MultiArmSystem:
             return sol, ev
         ev = self.blocks(state, tau, baumgarte)
         return solve(ev.blocks, solver), ev
+
+    def contact_dynamics(self, state: SystemState, tau: np.ndarray | None = None,
+                         active: np.ndarray | None = None,
+                         baumgarte: tuple[float, float] | None = None,
+                         external_wrench=None):
+        """Forward dynamics of the whole system: arms, supports and unilateral contacts.
+
+        The mixed complementarity problem of
+        :func:`~multiarm_pin.dynamics.unilateral.solve_unilateral` on every contact row of
+        :meth:`contact_blocks` (the arms' rows, then the supports' block): bilateral rows
+        ``φ̈ = 0``, active unilateral rows ``0 <= μ ⟂ φ̈ >= 0``, inactive rows ``μ = 0``.
+        This is what one evaluation of :func:`~multiarm_pin.simulation.simulate` solves
+        (without the controller); :meth:`forward_dynamics` covers the arms' rows only, all
+        held as equalities.
+
+        Args:
+            state: the state.
+            tau: (nv,) joint torques [N m] (zero when None; must be None without arms).
+            active: (n_blocks, rows_max) bool, the touching rows (bilateral rows must be
+                in it to be held); None: every real row (all contacts touching).
+            baumgarte: ``(α, β)`` [1/s] or None.
+            external_wrench: (6,) ``[f; m]`` at the COM, world axes [N, N m], or None.
+
+        Returns:
+            ``(solution, rows)``: the
+            :class:`~multiarm_pin.dynamics.unilateral.ContactSolution` (``a_o`` (6,),
+            ``qdd`` (n_blocks, nv_max), ``mu`` and ``phi_dd`` (n_blocks, rows_max) in the
+            layout of :meth:`contact_blocks`) and the :class:`ContactRows` (gaps, rates,
+            points, normals) of the same rows.
+
+        Raises:
+            InputError: ``active`` of the wrong shape, or torques for a system without arms.
+            DynamicsError: NaN in the state, or no solution.
+        """
+        from multiarm_pin.dynamics.unilateral import solve_unilateral
+
+        if active is not None:
+            active = np.asarray(active)
+            if active.shape != (self.n_blocks, self.rows_max) or active.dtype != bool:
+                raise InputError(f"active: expected a bool array of shape ({self.n_blocks}, "
+                                 f"{self.rows_max}), got {active.dtype} {active.shape}")
+            active = active & self.contact_mask
+        if self.n_arms:
+            ev = self.blocks(state, tau, baumgarte)
+            full, rows = self.contact_blocks(state, ev.blocks, ev.constraints, baumgarte,
+                                             external_wrench)
+        else:
+            if tau is not None and np.size(tau):
+                raise InputError("tau: the system has no arms, expected None")
+            full, rows = self.contact_blocks(state, None, None, baumgarte, external_wrench)
+        return solve_unilateral(full, self.contact_unilateral, active), rows
 
     # ------------------------------------------------------------------ contacts
     def support_terms(self, state: SystemState):

@@ -162,3 +162,72 @@ def test_rk45_with_unilateral_contacts_is_refused():
     system, box, state = _box_on_table(size, 2.0, V)
     with pytest.raises(InputError, match="not event-aware"):
         simulate(system, state, None, 0.01, 0.005, "rk45")
+
+
+class _RampWrench(WrenchSchedule):
+    """External wrench ``w(t) = w0 + t w1`` at the COM, world axes [N, N m] (a ramp)."""
+
+    def __init__(self, w0, w1):
+        super().__init__([(0.0, 1e9, np.zeros(6))])
+        self.w0, self.w1 = np.asarray(w0, float), np.asarray(w1, float)
+
+    def __call__(self, t: float) -> np.ndarray:
+        return self.w0 + t * self.w1
+
+
+def test_separation_time_of_a_box_under_a_torque_ramp_is_located():
+    """Under ``τ(t) = c t`` about +y the left side lifts exactly at ``t* = W a / (2 c)``.
+
+    Same box and supports as :func:`test_box_on_two_supports_under_a_torque`: both sides
+    press iff ``τ <= W a / 2`` (``F_L = W/2 - τ/a``), and before that the box does not move,
+    so ``F_L(t) = W/2 - c t / a`` vanishes at ``t* = W a / (2 c)``. ``t*`` is put between
+    grid points (0.0123 s with dt = 5 ms); the separation must be recorded within
+    ``SEPARATION_TIME_TOLERANCE`` (1e-10 s, so 1e-9 s here with the integrator's round-off)
+    of ``t*``, far below dt, for both left rows, and no other event.
+    """
+    a, b, c, m = 0.6, 0.4, 0.2, 3.0
+    V = np.array([[sx * a / 2, sy * b / 2, -c / 2] for sx in (-1, 1) for sy in (-1, 1)])
+    system, box, state = _box_on_table([a, b, c], m, V)
+    W = m * G
+    t_star = 0.0123
+    rate = W * a / (2 * t_star)
+    dt = 0.005
+    r = simulate(system, state, None, 0.03, dt, "rk4",
+                 external_wrench=_RampWrench(np.zeros(6), [0, 0, 0, 0, rate, 0]))
+    assert sorted((e.kind, e.row) for e in r.events) == [("separation", 0), ("separation", 1)]
+    for e in r.events:
+        assert abs(e.t - t_star) < 1e-9, (e.t, t_star)
+    k = int(np.ceil(t_star / dt))  # first sample after t*
+    assert not r.active[k, 0, :2].any() and r.active[k, 0, 2:4].all()
+    assert r.active[k - 1, 0, :4].all()
+    # before t*, the left side's force is the closed form
+    np.testing.assert_allclose(r.mu[k - 1, 0, :2].sum(), W / 2 - rate * r.t[k - 1] / a,
+                               rtol=1e-9)
+
+
+def test_body_pressed_by_a_decaying_force_separates_when_the_force_vanishes():
+    """Pressed by ``f_z(t) = -P + c t`` (plus its weight), the box lifts at ``(W + P) / c``.
+
+    A box flat on a table (four bottom vertices), pushed down by ``P - c t``. At rest the
+    table's total force is ``W + P - c t`` (vertical balance), zero at ``t* = (W + P)/c``;
+    afterwards the net force ``c (t - t*)`` is upward and all four rows lift together.
+    With ``t*`` between grid points, every row's separation time equals ``t*`` to 1e-9 s,
+    and afterwards the box rises as ``z - z0 = c (t - t*)³ / (6 m)``.
+    """
+    a, b, c, m = 0.6, 0.4, 0.2, 2.0
+    V = np.array([[sx * a / 2, sy * b / 2, -c / 2] for sx in (-1, 1) for sy in (-1, 1)])
+    system, box, state = _box_on_table([a, b, c], m, V)
+    W, P = m * G, 5.0
+    t_star = 0.0217
+    rate = (W + P) / t_star
+    r = simulate(system, state, None, 0.04, 0.005, "rk4",
+                 external_wrench=_RampWrench([0, 0, -P, 0, 0, 0], [0, 0, rate, 0, 0, 0]))
+    assert sorted(e.row for e in r.events if e.kind == "separation") == [0, 1, 2, 3]
+    assert all(e.kind == "separation" for e in r.events)
+    for e in r.events:
+        assert abs(e.t - t_star) < 1e-9, (e.t, t_star)
+    z0 = state.obj.position[2]
+    after = r.t > t_star
+    np.testing.assert_allclose(r.object_position[after, 2] - z0,
+                               rate * (r.t[after] - t_star) ** 3 / (6 * m), rtol=1e-6,
+                               atol=1e-12)

@@ -285,3 +285,88 @@ def test_energy_and_momentum_against_body_sums(rng):
     assert system.potential_energy(state) == pytest.approx(pe, rel=1e-12)
     np.testing.assert_allclose(system.momentum(state), np.concatenate([h_lin, h_ang]),
                                rtol=1e-11, atol=1e-11)
+
+
+@pytest.mark.parametrize("ratio", [0.8, 1.25])
+def test_contact_dynamics_of_a_box_on_two_supports_under_a_torque(ratio):
+    """Closed form (as in test_contact_events): both sides press iff τ <= W a / 2.
+
+    Box ``a x b x c``, mass m, on its four bottom vertices (plane z = 0), torque τ about +y.
+    Both press: ``F_L = W/2 - τ/a``, ``F_R = W/2 + τ/a`` and the box does not move. Beyond
+    the threshold (25 % above) the left side lifts and ``F_R = (W/m + a τ / (2 I)) /
+    (1/m + a² / (4 I))`` with ``I = m (a² + c²)/12``; the pivot's normal acceleration is 0.
+    """
+    from multiarm_pin.constraints import Support
+
+    a, b, c, m, g = 0.6, 0.4, 0.2, 3.0, 9.81
+    V = np.array([[sx * a / 2, sy * b / 2, -c / 2] for sx in (-1, 1) for sy in (-1, 1)])
+    system = MultiArmSystem([], RigidObject.box([a, b, c], m), [], gravity=(0, 0, -g),
+                            supports=[Support("table", [0, 0, 0], [0, 0, 1], V, 0.0)])
+    state = system.state(np.zeros(0), None, [0.0, 0.0, c / 2])
+    W = m * g
+    tau = ratio * W * a / 2
+    sol, rows = system.contact_dynamics(state, external_wrench=[0, 0, 0, 0, tau, 0])
+    left, right = sol.mu[0, :2].sum(), sol.mu[0, 2:4].sum()
+    np.testing.assert_allclose(rows.phi[0, :4], 0.0, atol=1e-15)
+    if ratio < 1:
+        np.testing.assert_allclose([left, right], [W / 2 - tau / a, W / 2 + tau / a],
+                                   rtol=1e-10)
+        np.testing.assert_allclose(sol.a_o, 0.0, atol=1e-10)
+    else:
+        I_yy = m * (a * a + c * c) / 12
+        F_R = (W / m + a * tau / (2 * I_yy)) / (1 / m + a * a / (4 * I_yy))
+        assert left == 0.0 and sol.phi_dd[0, :2].min() > 0.1
+        np.testing.assert_allclose(right, F_R, rtol=1e-10)
+    with pytest.raises(InputError, match="active: expected a bool array of shape"):
+        system.contact_dynamics(state, active=np.ones((2, 2), dtype=bool))
+
+
+def test_contact_dynamics_equals_solve_unilateral_on_contact_blocks():
+    """pick_from_table (2 arms, 7 fingertips, 4 stand rows): same as the by-hand call.
+
+    Reference: ``solve_unilateral(contact_blocks(...), contact_unilateral, active)`` built
+    step by step from :meth:`blocks` and :meth:`contact_blocks`, with random torques and an
+    active set missing one fingertip and one stand row: equal to 1e-12. And on the
+    two-gripper grasp (no supports) under object_pd's torques, whose planned forces are all
+    at least its 5 N margin, the solution equals the bilateral :meth:`forward_dynamics`
+    (when every unilateral row pushes, the LCP is the bilateral solve) to 1e-9.
+    """
+    from pathlib import Path
+
+    import yaml
+
+    from multiarm_pin.dynamics.unilateral import solve_unilateral
+    from multiarm_pin.scenario import build_scenario, parse_scenario
+
+    root = Path(__file__).resolve().parents[1] / "scenarios"
+    path = root / "pick_from_table.yaml"
+    built = build_scenario(parse_scenario(yaml.safe_load(path.read_text()), str(path)))
+    system, state = built.system, built.initial_state
+    rng = np.random.default_rng(3)
+    tau = rng.normal(scale=5.0, size=system.nv)
+    active = system.contact_mask.copy()
+    active[0, 1] = False
+    active[system.n_arms, 2] = False
+    sol, rows = system.contact_dynamics(state, tau, active, (5.0, 5.0))
+    ev = system.blocks(state, tau, (5.0, 5.0))
+    full, rows_ref = system.contact_blocks(state, ev.blocks, ev.constraints, (5.0, 5.0))
+    ref = solve_unilateral(full, system.contact_unilateral, active)
+    np.testing.assert_allclose(sol.a_o, ref.a_o, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(sol.qdd, ref.qdd, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(sol.mu, ref.mu, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(rows.phi, rows_ref.phi)
+    assert sol.mu[0, 1] == 0.0 and sol.mu[system.n_arms, 2] == 0.0
+    # no supports, every fingertip pushing (object_pd's torques plan >= 5 N on each): the
+    # complementarity problem is the bilateral one
+    from multiarm_pin.controllers import ObjectPD
+
+    path = root / "two_gripper_form_closure.yaml"
+    built = build_scenario(parse_scenario(yaml.safe_load(path.read_text()), str(path)))
+    system, state = built.system, built.initial_state
+    ctrl = ObjectPD(system, margin=5.0)
+    tau = ctrl(0.0, state, system.blocks(state))
+    assert ctrl.last.mu[system.unilateral].min() >= 5.0 - 1e-6
+    sol, _ = system.contact_dynamics(state, tau)
+    bil, _ = system.forward_dynamics(state, tau, "dense_kkt")
+    np.testing.assert_allclose(sol.a_o, bil.a_o, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(sol.mu, bil.mu, rtol=1e-9, atol=1e-9)

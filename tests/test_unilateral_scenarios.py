@@ -122,3 +122,32 @@ def test_grasp_failure_shows_which_contact_goes_first(tmp_path):
     assert abs(first.t - 0.15) < 1e-12
     assert res.summary["events"][0]["label"] == "four_finger:tip[2]"
     assert res.summary["warnings"][0].startswith("t = 0.15 s: arm 0 (four_finger) contact 2")
+
+
+def test_grasp_failure_object_pd_holds_the_arms_once_the_grasp_is_lost(tmp_path):
+    """grasp_failure up to 0.26 s: tip[3] separates inside a step, object_pd then holds.
+
+    After four_finger:tip[2] (0.15 s), four_finger:tip[3] separates where its multiplier
+    reaches zero, located by root finding between grid points (not at a multiple of dt).
+    The five touching contacts left span rank 5 < 6 wrenches, so object_pd holds the
+    arms still from that very evaluation: exactly one object_pd warning, stamped with the
+    separation's time; nothing raises (before, its inverse dynamics failed before 0.5 s).
+    Separated contacts carry no force, and the box, pushed down and no longer held in
+    form closure, moves down.
+    """
+    sc = _scenario("grasp_failure", simulation={"duration": 0.26, "dt": 0.002,
+                                                "integrator": "rk4", "solver": "object_first"})
+    res = run_scenario(sc, tmp_path, html=False, plots=False)
+    r = res.result
+    sep = [e for e in r.events if e.kind == "separation"]
+    assert [e.label for e in sep[:2]] == ["four_finger:tip[2]", "four_finger:tip[3]"]
+    te = sep[1].t
+    assert 0.2 < te < 0.26
+    assert abs(te / r.dt - round(te / r.dt)) > 1e-3  # inside a step, not on the grid
+    holds = [w for w in r.warnings if "object_pd" in w]
+    assert len(holds) == 1 and holds[0].startswith(f"t = {te:.6g} s: object_pd:")
+    assert "rank 5 < 6" in holds[0]
+    assert any("object_pd" in w for w in res.summary["warnings"])
+    after = r.t > te
+    assert np.all(r.mu[after][:, 0, 2:4] == 0.0) and not r.active[after][:, 0, 2:4].any()
+    assert r.object_twist[-1, 2] < -0.1

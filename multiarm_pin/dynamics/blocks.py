@@ -298,6 +298,61 @@ class SystemBlocks:
         return out
 
 
+def restrict_rows(blocks: SystemBlocks, active) -> tuple[SystemBlocks, np.ndarray]:
+    """The blocks of the ``active`` constraint rows only (each arm's kept rows first).
+
+    Args:
+        blocks: the system blocks.
+        active: (n, N_max) bool, True for the rows to keep (padding ignored).
+
+    Returns:
+        ``(restricted, index)``: ``restricted`` has the same ``n``, ``nv``, ``N_max``,
+        ``M``, ``h``, ``M_o``, ``h_o``, with ``N_i`` the number of kept rows of arm i and
+        their ``W``, ``W_o``, ``c`` columns moved to the front (zero padding after);
+        ``index`` (n, N_max) int maps a restricted row to its row in ``blocks`` (-1 on
+        padding). Multipliers ``μ'`` of the restricted blocks are those of the full rows
+        by :func:`expand_rows`.
+
+    Raises:
+        InputError: ``active`` of the wrong shape.
+    """
+    active = np.asarray(active, dtype=bool)
+    if active.shape != (blocks.n, blocks.N_max):
+        raise InputError(f"active: expected a bool array of shape ({blocks.n}, "
+                         f"{blocks.N_max}), got shape {active.shape}")
+    keep = active & blocks.constraint_mask
+    n, m = blocks.n, blocks.N_max
+    index = np.full((n, m), -1, dtype=int)
+    W = np.zeros_like(blocks.W)
+    W_o = np.zeros_like(blocks.W_o)
+    c = np.zeros_like(blocks.c)
+    N = keep.sum(axis=1).astype(blocks.N.dtype)
+    for i in range(n):
+        rows = np.flatnonzero(keep[i])
+        k = len(rows)
+        index[i, :k] = rows
+        W[i, :, :k] = blocks.W[i][:, rows]
+        W_o[i, :, :k] = blocks.W_o[i][:, rows]
+        c[i, :k] = blocks.c[i, rows]
+    out = SystemBlocks(np.array(blocks.M), np.array(blocks.h), W, W_o, c,
+                       np.array(blocks.M_o), np.array(blocks.h_o), np.array(blocks.nv), N)
+    return out, index
+
+
+def expand_rows(values, index: np.ndarray) -> np.ndarray:
+    """(n, N_max) values of restricted rows put back at their rows (zero elsewhere).
+
+    Args:
+        values: (n, N_max) per restricted row (e.g. multipliers [N]).
+        index: the ``index`` of :func:`restrict_rows`.
+    """
+    values = np.asarray(values)
+    out = np.zeros(index.shape, dtype=values.dtype)
+    i, k = np.nonzero(index >= 0)
+    out[i, index[i, k]] = values[i, k]
+    return out
+
+
 def _as_float(value, name: str, shape: tuple | None = None, ndim: int | None = None) -> np.ndarray:
     try:
         arr = np.array(value, dtype=float)
