@@ -32,12 +32,15 @@ without recomputing them. Build one by name with :func:`make_controller`:
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 import pinocchio as pin
 
+from multiarm_pin import controller_kernels
 from multiarm_pin.dynamics.force_distribution import distribute_forces
+from multiarm_pin.dynamics.force_qp import WarmForceDistribution
 from multiarm_pin.dynamics.inverse_dynamics import InverseDynamicsResult, inverse_dynamics
 from multiarm_pin.exceptions import InputError
 from multiarm_pin.spatial import as_array, cross
@@ -186,6 +189,23 @@ mean diagonal of ``AᵀA`` (keeps it finite at singular poses; changes regular a
 by about ``ε/σ²_min`` relative)."""
 
 
+@dataclass(frozen=True)
+class ObjectPDPlan:
+    """What the compiled :class:`ObjectPD` planned at its last call.
+
+    Attributes:
+        tau: (n, nv_max) joint torques [N m] (zero on padding).
+        mu: (n, N_max) planned contact multipliers [N] (positive = pushing).
+        qdd: (n, nv_max) planned joint accelerations.
+        a_o: (6,) desired object acceleration ``[ẍ; ω̇]`` at the COM, world axes.
+    """
+
+    tau: np.ndarray
+    mu: np.ndarray
+    qdd: np.ndarray
+    a_o: np.ndarray
+
+
 class ObjectPD(Controller):
     """Object-level computed torque on the inverse dynamics with force distribution.
 
@@ -233,10 +253,14 @@ class ObjectPD(Controller):
         hold_kp: stiffness [1/s²] of the held points' positions relative to the object
             (step 2).
         hold_kd: its damping [1/s].
+        compiled: use the compiled kernels on evaluations of the compiled path (default);
+            False always runs :meth:`reference` (for tests and benchmarks).
 
     Attributes:
-        last: the :class:`~multiarm_pin.dynamics.inverse_dynamics.InverseDynamicsResult` of
-            the last call (its ``mu`` are the planned forces).
+        last: the plan of the last call: ``tau``, ``mu`` (the planned forces), ``qdd``, ``a_o``
+            (an :class:`ObjectPDPlan` from the compiled path, the
+            :class:`~multiarm_pin.dynamics.inverse_dynamics.InverseDynamicsResult` of the
+            reference).
         hold_mask: (n, m_max) bool, True for real held points (arm i has one per contact
             of its joint), None before the first call.
         hold_points_in_tool: (n, m_max, 3) held points in the tool frame [m].
@@ -249,7 +273,7 @@ class ObjectPD(Controller):
 
     def __init__(self, system: MultiArmSystem, trajectory=None, kp=100.0, kd=20.0,
                  margin: float = 1.0, null_kp: float = 25.0, null_kd: float = 10.0,
-                 hold_kp: float = 100.0, hold_kd: float = 20.0):
+                 hold_kp: float = 100.0, hold_kd: float = 20.0, compiled: bool = True):
         super().__init__(system)
         if trajectory is not None and not isinstance(trajectory, MinimumJerkTrajectory):
             try:
@@ -273,8 +297,11 @@ class ObjectPD(Controller):
         self.hold_mask: np.ndarray | None = None
         self.hold_points_in_tool: np.ndarray | None = None
         self.hold_points_in_object: np.ndarray | None = None
-        self.last: InverseDynamicsResult | None = None
+        self.last: InverseDynamicsResult | ObjectPDPlan | None = None
         self.last_point_acceleration: np.ndarray | None = None
+        self.compiled = bool(compiled)
+        self._forces: WarmForceDistribution | None = None
+        self._motion_cache: dict = {}
 
     def desired_acceleration(self, t: float, state: SystemState) -> np.ndarray:
         """(6,) ``a_d = a_ref + K_d (v_ref - v_o) + K_p e`` [m/s², rad/s²], world at the COM."""
@@ -284,6 +311,24 @@ class ObjectPD(Controller):
         ref = self.trajectory(t)
         e = pose_error(ref.position, ref.rotation, o.position, o.rotation)
         return ref.acceleration + self.kd * (ref.twist - o.twist) + self.kp * e
+
+    def _desired(self, t: float, o, R: np.ndarray) -> np.ndarray:
+        """:meth:`desired_acceleration` with fewer numpy calls (``R`` the object rotation)."""
+        if self.trajectory is None:
+            self.trajectory = MinimumJerkTrajectory.hold(o.position, o.quaternion)
+        t = float(t)
+        cache = self._motion_cache  # RK4 samples t + dt/2 twice and t + dt again next step
+        ref = cache.get(t)
+        if ref is None or ref[0] is not self.trajectory:
+            ref = (self.trajectory, *self.trajectory.motion(t))
+            if len(cache) >= 4:
+                cache.pop(next(iter(cache)))
+            cache[t] = ref
+        _, p_ref, R_ref, v_ref, a_ref = ref
+        e = np.empty(6)
+        e[:3] = p_ref - o.position
+        e[3:] = pin.log3(R_ref @ R.T)
+        return a_ref + self.kd * (v_ref - o.twist) + self.kp * e
 
     def _init_hold(self, state: SystemState, evaluation: Evaluation) -> None:
         """Fix the held points: each contact's tip centre, as a tool-fixed point."""
@@ -342,7 +387,66 @@ class ObjectPD(Controller):
         return np.where(mask, e, 0.0), np.where(mask, u, 0.0), d, r
 
     def __call__(self, t, state, evaluation) -> np.ndarray:
-        """(nv,) torques [N m]."""
+        """(nv,) torques [N m].
+
+        On an evaluation of the compiled path (:meth:`MultiArmSystem.blocks`) the torques come
+        from :func:`multiarm_pin.controller_kernels.object_pd_torques` (per-arm blocks, the
+        force QP warm-started from the previous call's active set); otherwise, or when the
+        kernel reports a doubtful case, from :meth:`reference`. Both give the same torques
+        (to round-off).
+        """
+        if self.q_ref is None:
+            self.q_ref = np.array(state.q, dtype=float)
+        if self.hold_mask is None:
+            self._init_hold(state, evaluation)
+        buf = evaluation.blocks.__dict__.get("_buf") if self.compiled else None
+        if buf is None:
+            return self.reference(t, state, evaluation)
+        tau = self._compiled_torques(t, state, buf)
+        if tau is None:
+            return self.reference(t, state, evaluation)
+        return tau
+
+    def _compiled_torques(self, t: float, state: SystemState, buf: np.ndarray
+                          ) -> np.ndarray | None:
+        """Torques (nv,) by the compiled kernel, or None if it reported a doubtful case."""
+        s = self.system
+        if self._forces is None:
+            self._forces = WarmForceDistribution(s._k_N, s.unilateral)
+            n, m = self.hold_mask.shape
+            self._hold_n = self.hold_mask.sum(axis=1).astype(np.int64)
+            self._gains = np.array([self.hold_kp, self.hold_kd, JACOBIAN_DAMPING, self.margin])
+            self._unilateral = np.ascontiguousarray(s.unilateral)
+        o = state.obj
+        R = o.rotation
+        obj_x = np.concatenate((o.position, R.ravel(), o.twist))
+        a_d = self._desired(t, o, R)
+        err = pin.difference(s.arm_set.model, state.q, self.q_ref)
+        z = s.pad(self.null_kp * err - self.null_kd * state.v)
+        n, k, m = s.n_arms, s.arm_set.nv_max, s.N_max
+        tau = np.empty((n, k))
+        mu = np.empty((n, m))
+        qdd = np.empty((n, k))
+        a_pts = np.zeros(self.hold_points_in_tool.shape)
+        status = controller_kernels.object_pd_torques(
+            buf, s._k_dims, s._k_N, s._k_arm_ints[:, 0].copy(), self._unilateral, obj_x, a_d,
+            z, self.hold_points_in_tool, self.hold_points_in_object, self._hold_n,
+            self._gains, self._forces.active, tau, mu, qdd, a_pts)
+        if status == controller_kernels.PD_FORCES_FAILED:
+            self._forces.cold_solves += 1
+            return None
+        if status != controller_kernels.PD_OK:
+            return None
+        self.last_point_acceleration = a_pts
+        self.last = ObjectPDPlan(tau, mu, qdd, a_d)
+        return s.unpad(tau)
+
+    def reference(self, t: float, state: SystemState, evaluation: Evaluation) -> np.ndarray:
+        """(nv,) torques [N m] by the numpy reference (SVD basis, NNLS, batched numpy).
+
+        The oracle of the compiled path of :meth:`__call__`, which falls back to it whenever
+        the compiled kernels report a doubtful case; it raises the documented errors.
+        """
         s = self.system
         b = evaluation.blocks
         arms = evaluation.arms
@@ -353,6 +457,8 @@ class ObjectPD(Controller):
             self._init_hold(state, evaluation)
         a_d = self.desired_acceleration(t, state)
         fd = distribute_forces(b, b.M_o @ a_d - b.h_o, s.unilateral, self.margin)
+        if self._forces is not None:  # the next warm start from this solve's active set
+            self._forces.seed(fd.mu, self.margin)
         e, u, d, r = self._hold_terms(state, evaluation)
         n, m = self.hold_mask.shape
         zero = np.zeros((n * m, 3))
@@ -423,6 +529,7 @@ __all__ = [
     "GravityCompensation",
     "JointPD",
     "ObjectPD",
+    "ObjectPDPlan",
     "ZeroTorque",
     "make_controller",
     "tool_acceleration_from_object",

@@ -30,8 +30,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from multiarm_pin.closed_loop import closed_loop_evaluation
 from multiarm_pin.dynamics import SOLVERS, Solution
-from multiarm_pin.dynamics import solve as solve_dynamics
 from multiarm_pin.exceptions import DynamicsError, InputError
 from multiarm_pin.rigid_object import ObjectState
 from multiarm_pin.spatial import integrate_quaternion, quaternion_derivative
@@ -127,25 +127,9 @@ class _Stepper:
         self.model = system.arm_set.model
 
     def evaluate(self, t: float, state: SystemState):
-        s = self.system
-        ev = s.blocks(state, None, self.baumgarte)
-        if self.controller is None:
-            tau = np.zeros(s.nv)
-            blocks = ev.blocks
-        else:
-            tau = np.asarray(self.controller(t, state, ev), dtype=float)
-            if tau.shape != (s.nv,):
-                raise InputError(
-                    f"controller returned torques of shape {tau.shape}, expected ({s.nv},)"
-                )
-            if not np.all(np.isfinite(tau)):
-                raise DynamicsError(f"t = {t:.6g} s: controller returned NaN or infinite torques")
-            blocks = ev.blocks.with_torques(s.pad(tau))
-        try:
-            sol = solve_dynamics(blocks, self.solver)
-        except DynamicsError as exc:
-            raise DynamicsError(f"t = {t:.6g} s: {exc}") from exc
-        return sol, ev, tau
+        """``(solution, evaluation, tau)`` at one stage: one shared, fused evaluation."""
+        return closed_loop_evaluation(self.system, self.controller, t, state, self.solver,
+                                      self.baumgarte)
 
     def derivative(self, state: SystemState, sol: Solution) -> np.ndarray:
         """Tangent ``[q̇ (nv); v̇ (nv); ṗ (3); q̇uat (4); ȧ (6)]``."""
