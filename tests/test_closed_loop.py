@@ -1,0 +1,120 @@
+"""Fused closed-loop evaluation (multiarm_pin.closed_loop, multiarm_pin.controller_kernels)
+against the reference numpy path: controller.reference, then ``blocks.with_torques``, then
+the numpy object-first solver, on reference blocks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from closed_loop_cases import JOINT_KINDS, object_pd, random_case
+
+from multiarm_pin.closed_loop import closed_loop_evaluation
+from multiarm_pin.exceptions import DynamicsError
+
+EPS = np.finfo(float).eps
+TOL = 1e-12
+"""Relative agreement of the fused and the reference path."""
+
+TOL_RANK_DEFICIENT_HOLD = 1e-7
+"""Relative agreement on an arm whose hold task ``A_i`` is rank deficient (every Panda: 7
+joints, a rank-6 task). ``object_pd`` solves that task damped by ``ε = JACOBIAN_DAMPING =
+1e-8`` (relative): the solution's component along the task's null direction is
+``σ_min / (σ_min² + ε s) uᵀr`` with ``σ_min`` at round-off level (~1e-16 σ_max), i.e. noise
+of relative size ``ε_mach / ε ≈ 1e-8`` in either path (the two paths' Jacobians differ at
+round-off, and so do their solves); ten times that bounds the difference."""
+
+CASES = [(seed, 1 + seed % 6) for seed in range(12)]
+
+
+def rel_err(a, b) -> float:
+    return float(np.abs(np.asarray(a) - np.asarray(b)).max()
+                 / max(1.0, np.abs(np.asarray(b)).max()))
+
+
+def hold_task_conditions(ctrl, ev) -> np.ndarray:
+    """(n,) condition numbers ``σ_max / σ_min`` of the arms' hold rows ``A_i = J_v + J_ω × d``
+    (SVD; inf when ``A_i`` has fewer rows than joints)."""
+    out = []
+    for i in range(len(ctrl.hold_mask)):
+        J = ev.arms.J[i][:, :ev.blocks.nv[i]]
+        R = ev.arms.tools.rotation[i]
+        rows = [J[:3] - np.cross(R @ p, J[3:].T).T
+                for p in ctrl.hold_points_in_tool[i][ctrl.hold_mask[i]]]
+        s = np.linalg.svd(np.vstack(rows), compute_uv=False)
+        out.append(s[0] / s[-1] if len(s) == ev.blocks.nv[i] and s[-1] > 0 else np.inf)
+    return np.array(out)
+
+
+def hold_task_full_rank(ctrl, ev) -> np.ndarray:
+    """(n,) bool: the hold rows have full column rank with margin (condition < 1e6)."""
+    return hold_task_conditions(ctrl, ev) < 1e6
+
+
+def evaluate_both(system, state, off, trajectory, t, baumgarte):
+    fused_ctrl = object_pd(system, trajectory)
+    ref_ctrl = object_pd(system, trajectory, compiled=False)
+    out = []
+    for ctrl, reference, solver in ((fused_ctrl, False, "auto"),
+                                    (ref_ctrl, True, "object_first_numpy")):
+        try:
+            ctrl(0.0, state, system.blocks(state))  # fixes q_ref and the held points
+            out.append(closed_loop_evaluation(system, ctrl, t, off, solver, baumgarte,
+                                              reference=reference) + (ctrl,))
+        except DynamicsError as exc:
+            out.append(exc)
+    return out
+
+
+@pytest.mark.parametrize("seed,n_arms", CASES)
+@pytest.mark.parametrize("baumgarte", [None, (5.0, 5.0)])
+def test_fused_closed_loop_equals_reference(seed, n_arms, baumgarte):
+    system, state, off, trajectory = random_case(seed, n_arms)
+    fused, ref = evaluate_both(system, state, off, trajectory, 0.4, baumgarte)
+    if isinstance(ref, Exception):  # e.g. fingertips alone cannot hold the margin
+        assert isinstance(fused, DynamicsError) and str(fused) == str(ref)
+        return
+    sol, ev, tau, ctrl = fused
+    sol_r, ev_r, tau_r, ctrl_r = ref
+    cond = hold_task_conditions(ctrl, ev)
+    full = cond < 1e6
+    scale = max(1.0, np.abs(tau_r).max())
+    for i in range(system.n_arms):  # torques arm by arm; both paths solve the normal
+        # equations of the hold task, whose round-off grows as cond(A_i)²
+        tol = max(TOL, 10 * EPS * cond[i] ** 2) if full[i] else TOL_RANK_DEFICIENT_HOLD
+        err = np.abs(ctrl.last.tau[i] - ctrl_r.last.tau[i]).max() / scale
+        assert err <= tol, (i, system.joints[i].kind, err)
+    tol = max(TOL, 10 * EPS * cond.max() ** 2) if full.all() else TOL_RANK_DEFICIENT_HOLD
+    assert rel_err(sol.a_o, sol_r.a_o) <= tol
+    assert rel_err(sol.qdd, sol_r.qdd) <= tol
+    assert rel_err(sol.mu, sol_r.mu) <= tol
+    assert rel_err(ctrl.last.mu, ctrl_r.last.mu) <= TOL  # the force QP: no damped task
+    assert rel_err(ctrl.last_point_acceleration[ctrl.hold_mask],
+                   ctrl_r.last_point_acceleration[ctrl_r.hold_mask]) <= TOL
+    # the torques realise the plan: the forward dynamics returns the desired a_o and μ
+    assert rel_err(sol.a_o, ctrl.last.a_o) <= 1e-9
+    assert rel_err(sol.mu, ctrl.last.mu) <= 1e-9
+    assert sol.solver == "object_first"  # the fused kernel solved it
+
+
+def test_cases_cover_every_joint_type_and_most_are_compared():
+    seen, compared = set(), 0
+    for seed, n in CASES:
+        system, state, off, trajectory = random_case(seed, n)
+        seen.update(j.kind for j in system.joints)
+        fused, ref = evaluate_both(system, state, off, trajectory, 0.4, None)
+        compared += not isinstance(ref, Exception)
+    assert set(JOINT_KINDS) <= seen, set(JOINT_KINDS) - seen
+    assert compared >= len(CASES) // 2, compared
+
+
+def test_hold_rank_test_sees_both_kinds():
+    """The 1e-12 comparison covers full-rank hold tasks (UR5), the looser one Pandas."""
+    kinds = set()
+    for seed, n in CASES[:6]:
+        system, state, off, trajectory = random_case(seed, n)
+        ctrl = object_pd(system, trajectory)
+        ev = system.blocks(state)
+        ctrl._init_hold(state, ev)
+        full = hold_task_full_rank(ctrl, ev)
+        kinds.update(zip([a.nv for a in system.arms], full.tolist(), strict=True))
+    assert (6, True) in kinds and (7, False) in kinds
