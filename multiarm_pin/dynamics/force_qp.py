@@ -7,11 +7,11 @@ The same problem as :func:`~multiarm_pin.dynamics.force_distribution.min_norm_fo
 solved without the SVD of the stacked ``W_o`` (6 x Σ N_i): for an active set ``A`` (unilateral
 multipliers held at the margin) the KKT conditions give ``μ_A = m``, ``μ_F = W_Fᵀ λ`` with
 ``(W_F W_Fᵀ) λ = w - m W_A 1`` (a 6 x 6 Cholesky; ``W_F W_Fᵀ`` is summed arm by arm over the
-columns of ``W_o,i``) and the bound multipliers ``ν_j = m - w_jᵀ λ`` of the active ones. A
-primal-dual active-set iteration (Hintermüller, Ito & Kunisch 2003) moves a multiplier into
-``A`` when it falls below the margin and out when its ``ν`` is negative, until neither
-happens. Between two control steps the active set rarely changes, so started from the previous
-step's set (:class:`WarmForceDistribution`) it usually stops after one 6 x 6 solve.
+columns of ``W_o,i``) and the bound multipliers ``ν_j = m - w_jᵀ λ`` of the active ones. An
+active-set iteration moves the multiplier furthest below the margin into ``A`` and the one
+with the most negative ``ν`` out of it, until neither exists. Between two control steps the
+active set rarely changes, so started from the previous step's set
+(:class:`WarmForceDistribution`) it usually stops after one 6 x 6 solve.
 
 The result is exact: the kernel returns it only when the KKT conditions hold to
 ``KKT_TOL`` (relative to the size of the forces) and ``W_F W_Fᵀ`` is well conditioned;
@@ -122,7 +122,10 @@ def least_norm_forces(W_o, N, unilateral, wrench, margin, active, mu,
                     mu[i, s] = acc
                     scale = max(scale, abs(acc))
         tol = KKT_TOL * max(scale, 1e-300)
-        changed = False
+        # one change each way per iteration: the most violated bound enters the active set,
+        # the most negative bound multiplier leaves it (all at once can empty the free set)
+        worst_p, ip, sp = -tol, -1, -1
+        worst_d, idd, sd = -tol, -1, -1
         for i in range(n):
             for s in range(N[i]):
                 if not unilateral[i, s]:
@@ -131,12 +134,15 @@ def least_norm_forces(W_o, N, unilateral, wrench, margin, active, mu,
                     nu = margin
                     for a in range(6):
                         nu -= W_o[i, a, s] * lam[a, 0]
-                    if nu < -tol:  # the bound pulls: release it
-                        active[i, s] = 0
-                        changed = True
-                elif mu[i, s] < margin - tol:  # below the margin: hold it there
-                    active[i, s] = 1
-                    changed = True
+                    if nu < worst_d:  # the bound pulls: release it
+                        worst_d, idd, sd = nu, i, s
+                elif mu[i, s] - margin < worst_p:  # below the margin: hold it there
+                    worst_p, ip, sp = mu[i, s] - margin, i, s
+        changed = ip >= 0 or idd >= 0
+        if ip >= 0:
+            active[ip, sp] = 1
+        if idd >= 0:
+            active[idd, sd] = 0
         if not changed:
             total = 0.0
             for i in range(n):
