@@ -52,6 +52,23 @@ def closed_loop_evaluation(system: MultiArmSystem, controller: Callable | None, 
         DynamicsError: NaN torques or state, or no solution (the message gives ``t``).
     """
     ev = system.blocks(state, None, baumgarte, reference=reference)
+    fused = None if reference else getattr(controller, "closed_loop", None)
+    if fused is not None and solver in FUSED_SOLVERS:  # torques and solve in one call
+        out = fused(t, state, ev, True)
+        if out is not None:
+            tau, status = out
+            buf = ev.blocks._buf
+            with_tau = object.__new__(type(ev.blocks))  # lazy views, h with the torques
+            with_tau.__dict__.update(ev.blocks.__dict__)
+            with_tau.__dict__["h"] = ev.blocks.h + controller.last.tau
+            if status == kernels.SOLVE_OK:
+                a_o, qdd, mu = [buf[lo:hi].reshape(shape)
+                                for lo, hi, shape in system._k_solution]
+                return Solution(a_o, qdd, mu, "object_first", (), with_tau), ev, tau
+            try:
+                return solve_dynamics(with_tau, solver), ev, tau
+            except DynamicsError as exc:
+                raise DynamicsError(f"t = {t:.6g} s: {exc}") from exc
     if controller is None:
         tau = np.zeros(system.nv)
     else:

@@ -34,6 +34,7 @@ from multiarm_pin.kernels import (
     cholesky,
     cholesky_solve,
     object_first,
+    quaternion_rotation,
 )
 
 PD_OK = 0
@@ -45,6 +46,9 @@ PD_ARM_RANK = 2
 reference, whose pseudo-inverse decides)."""
 PD_NOT_FINITE = 3
 """Status: NaN or infinity in the result."""
+PD_LARGE_ROTATION = 4
+"""Status: the object's orientation error is within 1e-3 rad of π (the caller uses the
+reference's ``pin.log3``, which handles that case)."""
 
 RANK_MARGIN = 1e-7
 """``W_i`` counts as of full column rank when its smallest QR pivot is above this times the
@@ -303,6 +307,99 @@ def object_pd_torques(buf, dims, N, nv_arm, unilateral, obj_x, a_d, z, hold_tool
 
 
 @njit(cache=True, error_model="numpy")
+def log3(R, out):  # pragma: no cover - compiled
+    """Rotation vector ``θ u`` (3,) of a rotation matrix into ``out`` (``pin.log3``).
+
+    ``θ = atan2(|v| / 2, (tr R - 1) / 2)`` with ``v = vee(R - Rᵀ)``, accurate for every angle
+    up to near π, where ``v`` vanishes: returns False when ``θ > π - 1e-3``.
+    """
+    vx = R[2, 1] - R[1, 2]
+    vy = R[0, 2] - R[2, 0]
+    vz = R[1, 0] - R[0, 1]
+    s = 0.5 * math.sqrt(vx * vx + vy * vy + vz * vz)
+    c = 0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0)
+    theta = math.atan2(s, c)
+    if theta > math.pi - 1e-3:
+        return False
+    f = 0.5 * theta / s if s > 0.0 else 0.5
+    out[0] = f * vx
+    out[1] = f * vy
+    out[2] = f * vz
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold_tool,
+                   hold_obj, hold_n, gains, params, active, tau, mu, qdd, a_pts, a_d,
+                   solve):  # pragma: no cover - compiled
+    """``ObjectPD`` (desired acceleration, torques) and, if ``solve``, the forward dynamics.
+
+    One compiled call per closed-loop evaluation: the PD on the object pose
+    ``a_d = a_ref + K_d (v_ref - v_o) + K_p [p_ref - p; log(R_ref Rᵀ)]``, then
+    :func:`object_pd_torques`, then :func:`solve_with_torques` on the same buffer.
+
+    Args:
+        buf: the flat buffer (blocks at zero torque).
+        dims: (4,) int ``(k, m, nv, n)``.
+        N: (n,) int constraint rows per arm.
+        nv_arm: (n,) int joints per arm.
+        unilateral: (n, m) bool.
+        obj: (13,) object position [m], quaternion ``[x, y, z, w]``, twist ``[ẋ; ω]``.
+        ref: (24,) reference position (3) [m], rotation (9, row-major), twist (6), classical
+            acceleration (6), world axes at the COM.
+        pd_gains: (12,) ``K_p`` (6) [1/s²], ``K_d`` (6) [1/s].
+        z: (n, k) joint-space PD (see :func:`object_pd_torques`).
+        hold_tool: (n, h, 3).
+        hold_obj: (n, h, 3).
+        hold_n: (n,) int.
+        gains: (4,) ``hold_kp``, ``hold_kd``, Jacobian damping, margin.
+        params: (18,) kernel parameters (the last two the solver thresholds).
+        active: (n, m) uint8 warm start of the force QP (updated).
+        tau: output (n, k) torques [N m].
+        mu: output (n, m) planned multipliers [N].
+        qdd: output (n, k) planned joint accelerations.
+        a_pts: output (n, h, 3) desired point accelerations [m/s²].
+        a_d: output (6,) desired object acceleration.
+        solve: also solve the forward dynamics into the buffer's solution segments.
+
+    Returns:
+        ``(pd_status, solve_status)``: :data:`PD_OK` or the reason to use the reference;
+        the status of :func:`multiarm_pin.kernels.object_first` (-1 if not solved).
+    """
+    obj_x = np.empty(18)
+    Ro = np.empty((3, 3))
+    quaternion_rotation(obj[3:7], Ro)
+    for a in range(3):
+        obj_x[a] = obj[a]
+        for b in range(3):
+            obj_x[3 + 3 * a + b] = Ro[a, b]
+    for a in range(6):
+        obj_x[12 + a] = obj[7 + a]
+    # pose error: [p_ref - p; log(R_ref Rᵀ)]
+    E = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            acc = 0.0
+            for p in range(3):
+                acc += ref[3 + 3 * a + p] * Ro[b, p]
+            E[a, b] = acc
+    rot = np.empty(3)
+    if not log3(E, rot):
+        return PD_LARGE_ROTATION, -1
+    for a in range(6):
+        e = ref[a] - obj[a] if a < 3 else rot[a - 3]
+        a_d[a] = ref[18 + a] + pd_gains[6 + a] * (ref[12 + a] - obj[7 + a]) + pd_gains[a] * e
+    k, m, n = dims[0], dims[1], dims[3]
+    off = _offsets(n, k, m)
+    status = _torques(_arm_views(buf, off, n, k), _block_views(buf, off, n, k, m), N, nv_arm,
+                      unilateral, obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains, active,
+                      tau, mu, qdd, a_pts)
+    if status != PD_OK or not solve:
+        return status, -1
+    return status, solve_with_torques(buf, dims, N, params, tau)
+
+
+@njit(cache=True, error_model="numpy")
 def solve_with_torques(buf, dims, N, params, tau):  # pragma: no cover - compiled
     """Object-first forward dynamics of the buffer's blocks with torques ``tau`` added to ``h``.
 
@@ -328,5 +425,6 @@ def solve_with_torques(buf, dims, N, params, tau):  # pragma: no cover - compile
     return object_first(M, ht, W, W_o, c, M_o, h_o, N, params[16], params[17], a_o, qdd, mu)
 
 
-__all__ = ["PD_ARM_RANK", "PD_FORCES_FAILED", "PD_NOT_FINITE", "PD_OK", "min_norm_rows",
-           "object_pd_torques", "solve_with_torques"]
+__all__ = ["PD_ARM_RANK", "PD_FORCES_FAILED", "PD_LARGE_ROTATION", "PD_NOT_FINITE", "PD_OK",
+           "log3", "min_norm_rows", "object_pd_step", "object_pd_torques",
+           "solve_with_torques"]

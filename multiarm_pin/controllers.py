@@ -312,24 +312,6 @@ class ObjectPD(Controller):
         e = pose_error(ref.position, ref.rotation, o.position, o.rotation)
         return ref.acceleration + self.kd * (ref.twist - o.twist) + self.kp * e
 
-    def _desired(self, t: float, o, R: np.ndarray) -> np.ndarray:
-        """:meth:`desired_acceleration` with fewer numpy calls (``R`` the object rotation)."""
-        if self.trajectory is None:
-            self.trajectory = MinimumJerkTrajectory.hold(o.position, o.quaternion)
-        t = float(t)
-        cache = self._motion_cache  # RK4 samples t + dt/2 twice and t + dt again next step
-        ref = cache.get(t)
-        if ref is None or ref[0] is not self.trajectory:
-            ref = (self.trajectory, *self.trajectory.motion(t))
-            if len(cache) >= 4:
-                cache.pop(next(iter(cache)))
-            cache[t] = ref
-        _, p_ref, R_ref, v_ref, a_ref = ref
-        e = np.empty(6)
-        e[:3] = p_ref - o.position
-        e[3:] = pin.log3(R_ref @ R.T)
-        return a_ref + self.kd * (v_ref - o.twist) + self.kp * e
-
     def _init_hold(self, state: SystemState, evaluation: Evaluation) -> None:
         """Fix the held points: each contact's tip centre, as a tool-fixed point."""
         o = state.obj
@@ -399,47 +381,79 @@ class ObjectPD(Controller):
             self.q_ref = np.array(state.q, dtype=float)
         if self.hold_mask is None:
             self._init_hold(state, evaluation)
+        out = self.closed_loop(t, state, evaluation, False)
+        if out is None:
+            return self.reference(t, state, evaluation)
+        return out[0]
+
+    def closed_loop(self, t: float, state: SystemState, evaluation: Evaluation, solve: bool
+                    ) -> tuple[np.ndarray, int] | None:
+        """Torques by one compiled call and, if ``solve``, the forward dynamics they produce.
+
+        :func:`multiarm_pin.controller_kernels.object_pd_step` on the buffer of a compiled
+        evaluation; with ``solve`` the object-first solution of the blocks plus these torques
+        is written into the buffer's solution segments (one shared evaluation, see
+        :func:`multiarm_pin.closed_loop.closed_loop_evaluation`).
+
+        Args:
+            t: time [s].
+            state: the state of ``evaluation``.
+            evaluation: an evaluation of the compiled path at zero torque.
+            solve: also solve the forward dynamics.
+
+        Returns:
+            ``(tau (nv,) [N m], solve_status)`` (``solve_status`` of
+            :func:`multiarm_pin.kernels.object_first`, -1 if not solved), or None when the
+            compiled path does not apply or reported a doubtful case (then call
+            :meth:`reference`).
+        """
         buf = evaluation.blocks.__dict__.get("_buf") if self.compiled else None
         if buf is None:
-            return self.reference(t, state, evaluation)
-        tau = self._compiled_torques(t, state, buf)
-        if tau is None:
-            return self.reference(t, state, evaluation)
-        return tau
-
-    def _compiled_torques(self, t: float, state: SystemState, buf: np.ndarray
-                          ) -> np.ndarray | None:
-        """Torques (nv,) by the compiled kernel, or None if it reported a doubtful case."""
+            return None
+        if self.q_ref is None:
+            self.q_ref = np.array(state.q, dtype=float)
+        if self.hold_mask is None:
+            self._init_hold(state, evaluation)
         s = self.system
         if self._forces is None:
             self._forces = WarmForceDistribution(s._k_N, s.unilateral)
-            n, m = self.hold_mask.shape
             self._hold_n = self.hold_mask.sum(axis=1).astype(np.int64)
             self._gains = np.array([self.hold_kp, self.hold_kd, JACOBIAN_DAMPING, self.margin])
+            self._pd_gains = np.concatenate([self.kp, self.kd])
             self._unilateral = np.ascontiguousarray(s.unilateral)
+            self._nv_arm = np.ascontiguousarray(s._k_arm_ints[:, 0])
+            self._shapes = ((s.n_arms, s.arm_set.nv_max), (s.n_arms, s.N_max))
         o = state.obj
-        R = o.rotation
-        obj_x = np.concatenate((o.position, R.ravel(), o.twist))
-        a_d = self._desired(t, o, R)
+        if self.trajectory is None:
+            self.trajectory = MinimumJerkTrajectory.hold(o.position, o.quaternion)
+        t = float(t)
+        ref = self._motion_cache.get(t)  # RK4 samples t + dt/2 twice, t + dt again next step
+        if ref is None or ref[0] is not self.trajectory:
+            p_ref, R_ref, v_ref, a_ref = self.trajectory.motion(t)
+            ref = (self.trajectory, np.concatenate((p_ref, R_ref.ravel(), v_ref, a_ref)))
+            if len(self._motion_cache) >= 4:
+                self._motion_cache.pop(next(iter(self._motion_cache)))
+            self._motion_cache[t] = ref
         err = pin.difference(s.arm_set.model, state.q, self.q_ref)
         z = s.pad(self.null_kp * err - self.null_kd * state.v)
-        n, k, m = s.n_arms, s.arm_set.nv_max, s.N_max
-        tau = np.empty((n, k))
-        mu = np.empty((n, m))
-        qdd = np.empty((n, k))
+        kshape, mshape = self._shapes
+        tau = np.empty(kshape)
+        mu = np.empty(mshape)
+        qdd = np.empty(kshape)
         a_pts = np.zeros(self.hold_points_in_tool.shape)
-        status = controller_kernels.object_pd_torques(
-            buf, s._k_dims, s._k_N, s._k_arm_ints[:, 0].copy(), self._unilateral, obj_x, a_d,
-            z, self.hold_points_in_tool, self.hold_points_in_object, self._hold_n,
-            self._gains, self._forces.active, tau, mu, qdd, a_pts)
-        if status == controller_kernels.PD_FORCES_FAILED:
-            self._forces.cold_solves += 1
-            return None
+        a_d = np.empty(6)
+        status, solved = controller_kernels.object_pd_step(
+            buf, s._k_dims, s._k_N, self._nv_arm, self._unilateral,
+            np.concatenate((o.position, o.quaternion, o.twist)), ref[1], self._pd_gains, z,
+            self.hold_points_in_tool, self.hold_points_in_object, self._hold_n, self._gains,
+            s._k_params, self._forces.active, tau, mu, qdd, a_pts, a_d, solve)
         if status != controller_kernels.PD_OK:
+            if status == controller_kernels.PD_FORCES_FAILED:
+                self._forces.cold_solves += 1
             return None
         self.last_point_acceleration = a_pts
         self.last = ObjectPDPlan(tau, mu, qdd, a_d)
-        return s.unpad(tau)
+        return s.unpad(tau), solved
 
     def reference(self, t: float, state: SystemState, evaluation: Evaluation) -> np.ndarray:
         """(nv,) torques [N m] by the numpy reference (SVD basis, NNLS, batched numpy).

@@ -7,9 +7,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 import pytest
 from closed_loop_cases import JOINT_KINDS, object_pd, random_case
 
+from multiarm_pin import controller_kernels
 from multiarm_pin.closed_loop import closed_loop_evaluation
 from multiarm_pin.exceptions import DynamicsError
 from multiarm_pin.runner import make_controller
@@ -149,3 +151,16 @@ def test_object_pd_runs_are_unchanged_by_the_compiled_path(name):
                   "mu"):
         assert rel_err(getattr(fast, field), getattr(ref, field)) <= 1e-9, field
     assert np.abs(ref.object_twist).max() > 1e-3  # it moved
+
+
+def test_compiled_log3_equals_pinocchio_and_refuses_near_pi():
+    rng = np.random.default_rng(4)
+    out = np.empty(3)
+    for angle in (0.0, 1e-12, 1e-7, 1e-3, 0.3, 1.0, 2.5, np.pi - 2e-3):
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        R = pin.exp3(angle * axis)
+        assert controller_kernels.log3(R, out)
+        ref = pin.log3(R)
+        assert np.abs(out - ref).max() <= 1e-12 * max(1.0, angle), angle
+    assert not controller_kernels.log3(pin.exp3((np.pi - 5e-4) * axis), out)
