@@ -13,6 +13,7 @@ For a state ``(q, v)`` :meth:`Arm.terms` computes, once, everything the dynamics
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -59,6 +60,19 @@ the joints locked at their neutral value (grippers)."""
 def available_robots() -> list[str]:
     """Names accepted by :meth:`Arm.from_robot_name` (fixed-base arms), sorted."""
     return sorted(ROBOT_DEFAULTS)
+
+
+@functools.cache
+def _robot_models(robot: str) -> tuple[pin.Model, pin.GeometryModel]:
+    """``example_robot_data``'s model and visual model of ``robot``, parsed once per process.
+
+    Parsing the URDF (and its meshes' paths) is the slow part of building an arm (about a
+    second each); several arms of one robot share it. Callers copy before changing them.
+    """
+    import example_robot_data as erd
+
+    wrapper = erd.load(robot)
+    return wrapper.model, wrapper.visual_model
 
 
 @dataclass(frozen=True)
@@ -238,11 +252,9 @@ class Arm:
         """
         if robot not in ROBOT_DEFAULTS:
             raise RobotNotFoundError(robot, available_robots())
-        import example_robot_data as erd
-
         defaults = ROBOT_DEFAULTS[robot]
-        wrapper = erd.load(robot)
-        model, visual = wrapper.model, wrapper.visual_model
+        model, visual = _robot_models(robot)
+        model, visual = pin.Model(model), visual.copy()  # the cached ones stay untouched
         locked = defaults.get("locked_joints", ())
         if locked:
             ids = [model.getJointId(j) for j in locked]
