@@ -52,9 +52,14 @@ def closed_loop_evaluation(system: MultiArmSystem, controller: Callable | None, 
         DynamicsError: NaN torques or state, or no solution (the message gives ``t``).
     """
     ev = system.blocks(state, None, baumgarte, reference=reference)
+    call = controller
+    if reference:
+        call = getattr(controller, "reference", controller)
     fused = None if reference else getattr(controller, "closed_loop", None)
     if fused is not None and solver in FUSED_SOLVERS:  # torques and solve in one call
         out = fused(t, state, ev, True)
+        if out is None:  # the compiled path reported a doubtful case: the reference decides
+            call = getattr(controller, "reference", controller)
         if out is not None:
             tau, status = out
             buf = ev.blocks._buf
@@ -72,7 +77,6 @@ def closed_loop_evaluation(system: MultiArmSystem, controller: Callable | None, 
     if controller is None:
         tau = np.zeros(system.nv)
     else:
-        call = getattr(controller, "reference", controller) if reference else controller
         tau = np.asarray(call(t, state, ev), dtype=float)
         if tau.shape != (system.nv,):
             raise InputError(

@@ -13,10 +13,13 @@ from closed_loop_cases import JOINT_KINDS, object_pd, random_case
 
 from multiarm_pin import controller_kernels
 from multiarm_pin.closed_loop import closed_loop_evaluation
+from multiarm_pin.dynamics import InverseDynamicsResult
 from multiarm_pin.exceptions import DynamicsError
 from multiarm_pin.runner import make_controller
 from multiarm_pin.scenario import build_scenario, load_scenario
 from multiarm_pin.simulation import simulate
+from multiarm_pin.spatial import rotation_to_quaternion
+from multiarm_pin.trajectories import MinimumJerkTrajectory
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 
@@ -164,3 +167,16 @@ def test_compiled_log3_equals_pinocchio_and_refuses_near_pi():
         ref = pin.log3(R)
         assert np.abs(out - ref).max() <= 1e-12 * max(1.0, angle), angle
     assert not controller_kernels.log3(pin.exp3((np.pi - 5e-4) * axis), out)
+
+
+def test_doubtful_cases_fall_back_to_the_reference():
+    """An orientation error near π (where the compiled log3 refuses): the reference runs."""
+    system, state, _, _ = random_case(3, 2, kinds=["weld", "weld"])
+    o = state.obj
+    turned = pin.exp3(np.array([0.0, 0.0, np.pi - 1e-4])) @ o.rotation
+    target = MinimumJerkTrajectory.hold(o.position, rotation_to_quaternion(turned))
+    fused, ref = object_pd(system, target), object_pd(system, target, compiled=False)
+    sol, ev, tau = closed_loop_evaluation(system, fused, 0.0, state, "auto")
+    assert isinstance(fused.last, InverseDynamicsResult)  # the reference planned it
+    np.testing.assert_array_equal(tau, ref(0.0, state, ev))
+    assert fused.closed_loop(0.0, state, ev, True) is None  # the kernel refuses this case
