@@ -20,7 +20,7 @@ import numpy as np
 from multiarm_pin import controller_kernels, kernels
 from multiarm_pin.dynamics import Solution
 from multiarm_pin.dynamics import solve as solve_dynamics
-from multiarm_pin.exceptions import DynamicsError, InputError
+from multiarm_pin.exceptions import DynamicsError, InputError, MultiArmError
 from multiarm_pin.system import Evaluation, MultiArmSystem, SystemState
 
 FUSED_SOLVERS = frozenset({"auto", "object_first"})
@@ -49,7 +49,8 @@ def closed_loop_evaluation(system: MultiArmSystem, controller: Callable | None, 
 
     Raises:
         InputError: torques of the wrong shape.
-        DynamicsError: NaN torques or state, or no solution (the message gives ``t``).
+        DynamicsError: NaN torques or state, no solution, or a controller that failed
+            (``"t = ... s: controller: ..."``); the message gives ``t``.
     """
     ev = system.blocks(state, None, baumgarte, reference=reference)
     call = controller
@@ -57,7 +58,10 @@ def closed_loop_evaluation(system: MultiArmSystem, controller: Callable | None, 
         call = getattr(controller, "reference", controller)
     fused = None if reference else getattr(controller, "closed_loop", None)
     if fused is not None and solver in FUSED_SOLVERS:  # torques and solve in one call
-        out = fused(t, state, ev, True)
+        try:
+            out = fused(t, state, ev, True)
+        except MultiArmError as exc:  # no solution at this state: with the time
+            raise DynamicsError(f"t = {t:.6g} s: controller: {exc}") from exc
         if out is None:  # the compiled path reported a doubtful case: the reference decides
             call = getattr(controller, "reference", controller)
         if out is not None:
@@ -77,7 +81,10 @@ def closed_loop_evaluation(system: MultiArmSystem, controller: Callable | None, 
     if controller is None:
         tau = np.zeros(system.nv)
     else:
-        tau = np.asarray(call(t, state, ev), dtype=float)
+        try:
+            tau = np.asarray(call(t, state, ev), dtype=float)
+        except MultiArmError as exc:  # NaN or no solution at this state: with the time
+            raise DynamicsError(f"t = {t:.6g} s: controller: {exc}") from exc
         if tau.shape != (system.nv,):
             raise InputError(
                 f"controller returned torques of shape {tau.shape}, expected ({system.nv},)"
