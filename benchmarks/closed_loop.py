@@ -62,7 +62,7 @@ from multiarm_pin.controllers import ObjectPD  # noqa: E402
 from multiarm_pin.exceptions import MultiArmError  # noqa: E402
 from multiarm_pin.runner import make_controller  # noqa: E402
 from multiarm_pin.scenario import build_scenario, load_scenario  # noqa: E402
-from multiarm_pin.simulation import simulate  # noqa: E402
+from multiarm_pin.simulation import partial_result, simulate  # noqa: E402
 from multiarm_pin.trajectories import MinimumJerkTrajectory  # noqa: E402
 
 DEFAULT_ARMS = (2, 4, 8, 16, 32, 64)
@@ -175,11 +175,15 @@ def scenario_rows(names: Sequence[str], timer: Timer, duration: float | None) ->
         kw = dict(integrator=sim.integrator, solver=sim.solver, baumgarte=sim.baumgarte)
         simulate(s, built.initial_state, make_controller(built), 2 * sim.dt, sim.dt, **kw)
         note = ""
+        t0 = time.perf_counter()
         try:
             simt, wall = run_rtf(s, built.initial_state, make_controller(built), T, sim.dt, **kw)
-        except MultiArmError as exc:  # the scenario itself fails: say so, time the rest
-            simt, wall = math.nan, math.nan
-            note = f"run failed: {type(exc).__name__}: {str(exc).splitlines()[0][:160]}"
+        except MultiArmError as exc:  # the scenario itself fails: RTF of the part before
+            wall = time.perf_counter() - t0
+            part = partial_result(exc)
+            simt = float(part.t[-1]) if part is not None and len(part.t) else math.nan
+            note = (f"the run fails ({type(exc).__name__}: "
+                    f"{str(exc).splitlines()[0][:90]}...); RTF of the {simt:g} s before")
             print(f"{name}: {note}", flush=True)
         # states and torques of a short run, for the per-call times
         res = simulate(s, built.initial_state, make_controller(built), 40 * sim.dt, sim.dt,
