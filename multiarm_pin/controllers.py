@@ -32,13 +32,16 @@ without recomputing them. Build one by name with :func:`make_controller`:
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 import pinocchio as pin
 
+from multiarm_pin import controller_kernels
 from multiarm_pin.dynamics.blocks import SystemBlocks, expand_rows, restrict_rows
 from multiarm_pin.dynamics.force_distribution import distribute_forces
+from multiarm_pin.dynamics.force_qp import WarmForceDistribution
 from multiarm_pin.dynamics.inverse_dynamics import InverseDynamicsResult, inverse_dynamics
 from multiarm_pin.exceptions import DynamicsError, InputError
 from multiarm_pin.spatial import as_array, cross
@@ -215,6 +218,21 @@ def grasp_rank(blocks: SystemBlocks) -> int:
         return 0
     sv = np.linalg.svd(W_o, compute_uv=False)
     return int((sv > GRASP_RANK_TOLERANCE * sv[0]).sum())
+@dataclass(frozen=True)
+class ObjectPDPlan:
+    """What the compiled :class:`ObjectPD` planned at its last call.
+
+    Attributes:
+        tau: (n, nv_max) joint torques [N m] (zero on padding).
+        mu: (n, N_max) planned contact multipliers [N] (positive = pushing).
+        qdd: (n, nv_max) planned joint accelerations.
+        a_o: (6,) desired object acceleration ``[ẍ; ω̇]`` at the COM, world axes.
+    """
+
+    tau: np.ndarray
+    mu: np.ndarray
+    qdd: np.ndarray
+    a_o: np.ndarray
 
 
 class ObjectPD(Controller):
@@ -264,10 +282,14 @@ class ObjectPD(Controller):
         hold_kp: stiffness [1/s²] of the held points' positions relative to the object
             (step 2).
         hold_kd: its damping [1/s].
+        compiled: use the compiled kernels on evaluations of the compiled path (default);
+            False always runs :meth:`reference` (for tests and benchmarks).
 
     Attributes:
-        last: the :class:`~multiarm_pin.dynamics.inverse_dynamics.InverseDynamicsResult` of
-            the last call (its ``mu`` are the planned forces).
+        last: the plan of the last call: ``tau``, ``mu`` (the planned forces), ``qdd``, ``a_o``
+            (an :class:`ObjectPDPlan` from the compiled path, the
+            :class:`~multiarm_pin.dynamics.inverse_dynamics.InverseDynamicsResult` of the
+            reference).
         hold_mask: (n, m_max) bool, True for real held points (arm i has one per contact
             of its joint), None before the first call.
         hold_points_in_tool: (n, m_max, 3) held points in the tool frame [m].
@@ -296,7 +318,7 @@ class ObjectPD(Controller):
 
     def __init__(self, system: MultiArmSystem, trajectory=None, kp=100.0, kd=20.0,
                  margin: float = 1.0, null_kp: float = 25.0, null_kd: float = 10.0,
-                 hold_kp: float = 100.0, hold_kd: float = 20.0):
+                 hold_kp: float = 100.0, hold_kd: float = 20.0, compiled: bool = True):
         super().__init__(system)
         if trajectory is not None and not isinstance(trajectory, MinimumJerkTrajectory):
             try:
@@ -320,12 +342,15 @@ class ObjectPD(Controller):
         self.hold_mask: np.ndarray | None = None
         self.hold_points_in_tool: np.ndarray | None = None
         self.hold_points_in_object: np.ndarray | None = None
-        self.last: InverseDynamicsResult | None = None
+        self.last: InverseDynamicsResult | ObjectPDPlan | None = None
         self.last_point_acceleration: np.ndarray | None = None
         self.margin_kept = True
         self.holding = False
         self.warnings: list[str] = []
         self._q_hold: np.ndarray | None = None
+        self.compiled = bool(compiled)
+        self._forces: WarmForceDistribution | None = None
+        self._motion_cache: dict = {}
 
     def _hold_still(self, t: float, state: SystemState, blocks: SystemBlocks,
                     reason: str) -> np.ndarray:
@@ -407,7 +432,103 @@ class ObjectPD(Controller):
         return np.where(mask, e, 0.0), np.where(mask, u, 0.0), d, r
 
     def __call__(self, t, state, evaluation) -> np.ndarray:
-        """(nv,) torques [N m]."""
+        """(nv,) torques [N m].
+
+        On an evaluation of the compiled path (:meth:`MultiArmSystem.blocks`) the torques come
+        from :func:`multiarm_pin.controller_kernels.object_pd_torques` (per-arm blocks, the
+        force QP warm-started from the previous call's active set); otherwise, or when the
+        kernel reports a doubtful case, from :meth:`reference`. Both give the same torques
+        (to round-off).
+        """
+        if self.q_ref is None:
+            self.q_ref = np.array(state.q, dtype=float)
+        if self.hold_mask is None:
+            self._init_hold(state, evaluation)
+        out = self.closed_loop(t, state, evaluation, False)
+        if out is None:
+            return self.reference(t, state, evaluation)
+        return out[0]
+
+    def closed_loop(self, t: float, state: SystemState, evaluation: Evaluation, solve: bool
+                    ) -> tuple[np.ndarray, int] | None:
+        """Torques by one compiled call and, if ``solve``, the forward dynamics they produce.
+
+        :func:`multiarm_pin.controller_kernels.object_pd_step` on the buffer of a compiled
+        evaluation; with ``solve`` the object-first solution of the blocks plus these torques
+        is written into the buffer's solution segments (one shared evaluation, see
+        :func:`multiarm_pin.closed_loop.closed_loop_evaluation`).
+
+        Args:
+            t: time [s].
+            state: the state of ``evaluation``.
+            evaluation: an evaluation of the compiled path at zero torque.
+            solve: also solve the forward dynamics.
+
+        Returns:
+            ``(tau (nv,) [N m], solve_status)`` (``solve_status`` of
+            :func:`multiarm_pin.kernels.object_first`, -1 if not solved), or None when the
+            compiled path does not apply or reported a doubtful case (then call
+            :meth:`reference`).
+        """
+        buf = evaluation.blocks.__dict__.get("_buf") if self.compiled else None
+        if buf is None:
+            return None
+        active = getattr(evaluation, "active", None)
+        if active is not None and not np.all(np.asarray(active)[evaluation.blocks.constraint_mask]):
+            return None  # some contacts are separated: the reference plans on the touching ones
+        if self.q_ref is None:
+            self.q_ref = np.array(state.q, dtype=float)
+        if self.hold_mask is None:
+            self._init_hold(state, evaluation)
+        s = self.system
+        if self._forces is None:
+            self._forces = WarmForceDistribution(s._k_N, s.unilateral)
+            self._hold_n = self.hold_mask.sum(axis=1).astype(np.int64)
+            self._gains = np.array([self.hold_kp, self.hold_kd, JACOBIAN_DAMPING, self.margin])
+            self._pd_gains = np.concatenate([self.kp, self.kd])
+            self._unilateral = np.ascontiguousarray(s.unilateral)
+            self._nv_arm = np.ascontiguousarray(s._k_arm_ints[:, 0])
+            self._shapes = ((s.n_arms, s.arm_set.nv_max), (s.n_arms, s.N_max))
+        o = state.obj
+        if self.trajectory is None:
+            self.trajectory = MinimumJerkTrajectory.hold(o.position, o.quaternion)
+        t = float(t)
+        ref = self._motion_cache.get(t)  # RK4 samples t + dt/2 twice, t + dt again next step
+        if ref is None or ref[0] is not self.trajectory:
+            p_ref, R_ref, v_ref, a_ref = self.trajectory.motion(t)
+            ref = (self.trajectory, np.concatenate((p_ref, R_ref.ravel(), v_ref, a_ref)))
+            if len(self._motion_cache) >= 4:
+                self._motion_cache.pop(next(iter(self._motion_cache)))
+            self._motion_cache[t] = ref
+        err = pin.difference(s.arm_set.model, state.q, self.q_ref)
+        z = s.pad(self.null_kp * err - self.null_kd * state.v)
+        kshape, mshape = self._shapes
+        tau = np.empty(kshape)
+        mu = np.empty(mshape)
+        qdd = np.empty(kshape)
+        a_pts = np.zeros(self.hold_points_in_tool.shape)
+        a_d = np.empty(6)
+        status, solved = controller_kernels.object_pd_step(
+            buf, s._k_dims, s._k_N, self._nv_arm, self._unilateral,
+            np.concatenate((o.position, o.quaternion, o.twist)), ref[1], self._pd_gains, z,
+            self.hold_points_in_tool, self.hold_points_in_object, self._hold_n, self._gains,
+            s._k_params, self._forces.active, tau, mu, qdd, a_pts, a_d, solve)
+        if status != controller_kernels.PD_OK:
+            if status == controller_kernels.PD_FORCES_FAILED:
+                self._forces.cold_solves += 1
+            return None
+        self.last_point_acceleration = a_pts
+        self.last = ObjectPDPlan(tau, mu, qdd, a_d)
+        self.margin_kept = True  # the compiled QP solved with the margin
+        self.holding = False  # every contact touches and the grasp is controllable again
+        return s.unpad(tau), solved
+
+    def reference(self, t: float, state: SystemState, evaluation: Evaluation) -> np.ndarray:
+        """(nv,) torques [N m] by the numpy reference (SVD basis, NNLS, batched numpy).
+
+        The oracle of the compiled path of :meth:`__call__`, which falls back to it whenever
+        the compiled kernels report a doubtful case; it raises the documented errors.
+        """
         s = self.system
         b = evaluation.blocks
         arms = evaluation.arms
@@ -438,6 +559,8 @@ class ObjectPD(Controller):
             # separates in the simulation (complementarity), it is not held by a pull.
             fd = distribute_forces(b, b.M_o @ a_d - b.h_o, np.zeros_like(s.unilateral), 0.0)
             self.margin_kept = False
+        if self._forces is not None and index is None:  # next warm start: this active set
+            self._forces.seed(fd.mu, self.margin)
         e, u, d, r = self._hold_terms(state, evaluation)
         n, m = self.hold_mask.shape
         zero = np.zeros((n * m, 3))
@@ -518,6 +641,7 @@ __all__ = [
     "JointPD",
     "ObjectPD",
     "GRASP_RANK_TOLERANCE",
+    "ObjectPDPlan",
     "ZeroTorque",
     "grasp_rank",
     "make_controller",

@@ -40,6 +40,7 @@ import numpy as np
 import pinocchio as pin
 
 from multiarm_pin import contact_events as ce
+from multiarm_pin.closed_loop import closed_loop_evaluation
 from multiarm_pin.contact_events import ContactEvent
 from multiarm_pin.disturbances import WrenchSchedule
 from multiarm_pin.dynamics import SOLVERS, Solution
@@ -181,6 +182,13 @@ class _Stepper:
         if not s.n_arms:
             full, rows = s.contact_blocks(state, None, None, self.baumgarte, w)
             return self._solve(t, full), None, np.zeros(0), rows
+        if not self.unilateral and w is None and not s.supports.n_rows:
+            # arms' bilateral rows only: one shared, fused evaluation (blocks, controller and
+            # forward dynamics on one buffer, multiarm_pin.closed_loop)
+            sol, ev, tau = closed_loop_evaluation(s, self.controller, t, state, self.solver,
+                                                  self.baumgarte)
+            ct = ev.constraints
+            return sol, ev, tau, ContactRows(ct.phi, ct.phi_dot, ct.contact_points, ct.normals)
         ev = s.blocks(state, None, self.baumgarte)
         if self.unilateral:  # the controller sees which contacts touch
             ev = ev.with_active(self.active[:s.n_arms, :s.N_max].copy())

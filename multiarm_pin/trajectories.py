@@ -61,6 +61,10 @@ class PoseSample:
     acceleration: np.ndarray
 
 
+_ZERO6 = np.zeros(6)
+_ZERO6.setflags(write=False)
+
+
 class MinimumJerkTrajectory:
     """Rest-to-rest minimum-jerk segments through pose waypoints.
 
@@ -134,6 +138,36 @@ class MinimumJerkTrajectory:
         twist = np.concatenate([ds * dp, ds * axis_world])
         acc = np.concatenate([dds * dp, dds * axis_world])
         return PoseSample(self.positions[k] + s * dp, rotation_to_quaternion(R), R, twist, acc)
+
+    def motion(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`sample` without the quaternion: the controller's hot path.
+
+        Args:
+            t: time [s] (finite; not re-checked).
+
+        Returns:
+            ``(position (3,) [m], rotation (3, 3), twist (6,) [m/s, rad/s], acceleration (6,)
+            [m/s², rad/s²])``, world axes; the arrays may be the trajectory's own (read only).
+        """
+        times = self.times
+        if t <= times[0] or len(times) == 1:
+            return self.positions[0], self._R[0], _ZERO6, _ZERO6
+        if t >= times[-1]:
+            return self.positions[-1], self._R[-1], _ZERO6, _ZERO6
+        k = int(np.searchsorted(times, t, side="right")) - 1
+        T = times[k + 1] - times[k]
+        s, ds, dds = minimum_jerk((t - times[k]) / T)
+        dp = self.positions[k + 1] - self.positions[k]
+        log = self._log[k]
+        Rk = self._R[k]
+        axis_world = Rk @ log
+        twist = np.empty(6)
+        acc = np.empty(6)
+        twist[:3] = (ds / T) * dp
+        twist[3:] = (ds / T) * axis_world
+        acc[:3] = (dds / (T * T)) * dp
+        acc[3:] = (dds / (T * T)) * axis_world
+        return self.positions[k] + s * dp, Rk @ pin.exp3(s * log), twist, acc
 
     def _still(self, k: int) -> PoseSample:
         return PoseSample(self.positions[k].copy(), self.quaternions[k].copy(),

@@ -133,19 +133,23 @@ def test_bad_input(moving):
 # ----------------------------------------------------------------------------- issue 13
 # Partial records on errors and interrupts; the stepwise rk45; the memory guard.
 def _failing_after(monkeypatch, calls: int, exc: BaseException):
-    """Make the forward-dynamics solve raise ``exc`` from its ``calls``-th call on."""
+    """Make the forward-dynamics solve raise ``exc`` from its ``calls``-th call on.
+
+    The stepper solves once per closed-loop evaluation (fused with the blocks and the
+    controller, ``multiarm_pin.closed_loop``), so the evaluation is what fails here.
+    """
     import multiarm_pin.simulation as simulation
 
-    real = simulation.solve_dynamics
+    real = simulation.closed_loop_evaluation
     count = [0]
 
-    def solve(blocks, solver):
+    def evaluate(*args, **kwargs):
         count[0] += 1
         if count[0] >= calls:
             raise exc
-        return real(blocks, solver)
+        return real(*args, **kwargs)
 
-    monkeypatch.setattr(simulation, "solve_dynamics", solve)
+    monkeypatch.setattr(simulation, "closed_loop_evaluation", evaluate)
 
 
 @pytest.mark.parametrize("integrator, calls", [("rk4", 23), ("semi_implicit", 6),

@@ -1,0 +1,115 @@
+"""One closed-loop evaluation: blocks, controller torques and forward dynamics on one buffer.
+
+:func:`closed_loop_evaluation` is what :func:`multiarm_pin.simulation.simulate` calls at every
+integrator stage. One Pinocchio pass and one set of compiled blocks (at zero torque,
+``h = -nle``) serve both the controller (which reads them through the :class:`Evaluation`) and
+the forward dynamics: for the compiled solvers (``auto``, ``object_first``) the torques are
+added inside :func:`multiarm_pin.controller_kernels.solve_with_torques`, which solves on the
+same buffer; no blocks are rebuilt or re-validated. The reference (numpy) path, controller then
+``blocks.with_torques`` then :func:`multiarm_pin.dynamics.solve`, gives the same solution to
+round-off, and is what a doubtful case (singular arm, badly conditioned object matrix) and
+every other solver run.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from multiarm_pin import controller_kernels, kernels
+from multiarm_pin.dynamics import Solution
+from multiarm_pin.dynamics import solve as solve_dynamics
+from multiarm_pin.exceptions import DynamicsError, InputError, MultiArmError
+from multiarm_pin.system import Evaluation, MultiArmSystem, SystemState
+
+FUSED_SOLVERS = frozenset({"auto", "object_first"})
+"""Solvers whose compiled kernel :func:`closed_loop_evaluation` runs on the shared buffer."""
+
+
+def closed_loop_evaluation(system: MultiArmSystem, controller: Callable | None, t: float,
+                           state: SystemState, solver: str = "auto",
+                           baumgarte: tuple[float, float] | None = None, *,
+                           reference: bool = False) -> tuple[Solution, Evaluation, np.ndarray]:
+    """Controller torques and the forward dynamics they produce, at one state.
+
+    Args:
+        system: the system.
+        controller: ``controller(t, state, evaluation) -> tau (nv,)`` [N m], or None (zero).
+        t: time [s].
+        state: the state.
+        solver: a name of :data:`multiarm_pin.dynamics.SOLVERS`.
+        baumgarte: ``(α, β)`` [1/s] or None.
+        reference: the numpy path instead (reference blocks, the controller's
+            ``reference`` method if it has one, ``with_torques``, :func:`solve`).
+
+    Returns:
+        ``(solution, evaluation, tau)``: the solution (``solution.blocks`` include the
+        torques), the evaluation at zero torque the controller saw, and ``tau`` (nv,).
+
+    Raises:
+        InputError: torques of the wrong shape.
+        DynamicsError: NaN torques or state, no solution, or a controller that failed
+            (``"t = ... s: controller: ..."``); the message gives ``t``.
+    """
+    ev = system.blocks(state, None, baumgarte, reference=reference)
+    call = controller
+    if reference:
+        call = getattr(controller, "reference", controller)
+    fused = None if reference else getattr(controller, "closed_loop", None)
+    if fused is not None and solver in FUSED_SOLVERS:  # torques and solve in one call
+        try:
+            out = fused(t, state, ev, True)
+        except MultiArmError as exc:  # no solution at this state: with the time
+            raise DynamicsError(f"t = {t:.6g} s: controller: {exc}") from exc
+        if out is None:  # the compiled path reported a doubtful case: the reference decides
+            call = getattr(controller, "reference", controller)
+        if out is not None:
+            tau, status = out
+            buf = ev.blocks._buf
+            with_tau = object.__new__(type(ev.blocks))  # lazy views, h with the torques
+            with_tau.__dict__.update(ev.blocks.__dict__)
+            with_tau.__dict__["h"] = ev.blocks.h + controller.last.tau
+            if status == kernels.SOLVE_OK:
+                a_o, qdd, mu = [buf[lo:hi].reshape(shape)
+                                for lo, hi, shape in system._k_solution]
+                return Solution(a_o, qdd, mu, "object_first", (), with_tau), ev, tau
+            try:
+                return solve_dynamics(with_tau, solver), ev, tau
+            except DynamicsError as exc:
+                raise DynamicsError(f"t = {t:.6g} s: {exc}") from exc
+    if controller is None:
+        tau = np.zeros(system.nv)
+    else:
+        try:
+            tau = np.asarray(call(t, state, ev), dtype=float)
+        except MultiArmError as exc:  # NaN or no solution at this state: with the time
+            raise DynamicsError(f"t = {t:.6g} s: controller: {exc}") from exc
+        if tau.shape != (system.nv,):
+            raise InputError(
+                f"controller returned torques of shape {tau.shape}, expected ({system.nv},)"
+            )
+        if not np.all(np.isfinite(tau)):
+            raise DynamicsError(f"t = {t:.6g} s: controller returned NaN or infinite torques")
+    tau_p = system.pad(tau)
+    blocks = ev.blocks
+    buf = None if reference else blocks.__dict__.get("_buf")
+    if buf is not None and solver in FUSED_SOLVERS:
+        status = controller_kernels.solve_with_torques(buf, system._k_dims, system._k_N,
+                                                       system._k_params, tau_p)
+        with_tau = object.__new__(type(blocks))  # the same lazy views, h with the torques
+        with_tau.__dict__.update(blocks.__dict__)
+        with_tau.__dict__["h"] = blocks.h + tau_p
+        if status == kernels.SOLVE_OK:
+            a_o, qdd, mu = [buf[lo:hi].reshape(shape) for lo, hi, shape in system._k_solution]
+            return Solution(a_o, qdd, mu, "object_first", (), with_tau), ev, tau
+    else:
+        with_tau = blocks.with_torques(tau_p)
+    try:
+        sol = solve_dynamics(with_tau, solver)
+    except DynamicsError as exc:
+        raise DynamicsError(f"t = {t:.6g} s: {exc}") from exc
+    return sol, ev, tau
+
+
+__all__ = ["FUSED_SOLVERS", "closed_loop_evaluation"]

@@ -1,0 +1,430 @@
+"""Compiled (numba) object-level controller: ``ObjectPD`` on the buffer of the compiled path.
+
+:class:`~multiarm_pin.controllers.ObjectPD` computes, from the blocks of one state, the held
+points' desired accelerations, the joint accelerations of their damped least-squares task,
+the force distribution and the inverse dynamics of thesis Eq 3.7-3.10. Its numpy version
+(``ObjectPD.reference``) is the oracle; :func:`object_pd_torques` computes the same torques
+arm by arm from the flat buffer of :mod:`multiarm_pin.kernels` (no dense system over all
+arms, no SVD: the internal forces come from
+:func:`~multiarm_pin.dynamics.force_qp.least_norm_forces`, each arm's constraint rows are met
+by a Householder QR of ``W_i``), and :func:`closed_loop_step` then solves the forward dynamics
+with these torques on the same blocks (one Pinocchio pass and one set of blocks per
+evaluation).
+
+Whenever a step is doubtful (an arm's ``W_i`` not of full column rank with margin, the force
+QP not converged or degenerate, NaN) the kernels report it and the caller runs the numpy
+reference, which decides and raises exactly as documented there. Conventions as in
+``docs/ARCHITECTURE.md``: SI units, ``[linear; angular]``, world axes, tool quantities LWA at
+the tool origin, object quantities at the COM, ``μ > 0`` pushing.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from multiarm_pin.dynamics.force_qp import QP_OK, least_norm_forces
+from multiarm_pin.kernels import (
+    _arm_views,
+    _block_views,
+    _offsets,
+    _solution_views,
+    cholesky,
+    cholesky_solve,
+    object_first,
+    quaternion_rotation,
+)
+
+PD_OK = 0
+"""Status of :func:`object_pd_torques`: torques computed."""
+PD_FORCES_FAILED = 1
+"""Status: the warm-started force QP failed (the caller solves it cold)."""
+PD_ARM_RANK = 2
+"""Status: some ``W_i`` is not of full column rank with margin (the caller uses the
+reference, whose pseudo-inverse decides)."""
+PD_NOT_FINITE = 3
+"""Status: NaN or infinity in the result."""
+PD_LARGE_ROTATION = 4
+"""Status: the object's orientation error is within 1e-3 rad of π (the caller uses the
+reference's ``pin.log3``, which handles that case)."""
+
+RANK_MARGIN = 1e-7
+"""``W_i`` counts as of full column rank when its smallest QR pivot is above this times the
+largest: three orders of magnitude above the reference's singular-value threshold
+(``inverse_dynamics.RANK_TOL = 1e-10``), more than the factor between QR pivots and singular
+values for the at most 6-7 columns of an arm's rows."""
+
+
+@njit(cache=True, error_model="numpy")
+def min_norm_rows(W, ncols, nrows, g, x, Q, beta):  # pragma: no cover - compiled
+    """Minimum-norm ``x`` with ``W[:nrows, :ncols]ᵀ x = g`` by Householder QR of ``W``.
+
+    Args:
+        W: (k, m) an arm's ``W_i`` (only ``[:nrows, :ncols]`` read).
+        ncols: constraint rows ``N_i`` (columns of ``W_i``).
+        nrows: joints ``k`` (rows).
+        g: (ncols,) right-hand side.
+        x: output (nrows,).
+        Q: scratch (k, m) (the Householder vectors and ``R``).
+        beta: scratch (m,).
+
+    Returns:
+        False if ``W`` is not of full column rank with the margin :data:`RANK_MARGIN`.
+    """
+    for a in range(nrows):
+        for s in range(ncols):
+            Q[a, s] = W[a, s]
+    rmax = 0.0
+    rmin = np.inf
+    for j in range(ncols):
+        norm = 0.0
+        for a in range(j, nrows):
+            norm += Q[a, j] * Q[a, j]
+        norm = math.sqrt(norm)
+        alpha = -norm if Q[j, j] >= 0.0 else norm
+        v0 = Q[j, j] - alpha
+        vnorm2 = v0 * v0
+        for a in range(j + 1, nrows):
+            vnorm2 += Q[a, j] * Q[a, j]
+        Q[j, j] = v0
+        beta[j] = 2.0 / vnorm2 if vnorm2 > 0.0 else 0.0
+        for t in range(j + 1, ncols):  # apply H_j = I - β v vᵀ to the columns on the right
+            dot = 0.0
+            for a in range(j, nrows):
+                dot += Q[a, j] * Q[a, t]
+            dot *= beta[j]
+            for a in range(j, nrows):
+                Q[a, t] -= dot * Q[a, j]
+        # R[j, j] = alpha; keep v in Q[j:, j], R's diagonal in x for now
+        x[j] = alpha
+        rmax = max(rmax, abs(alpha))
+        rmin = min(rmin, abs(alpha))
+    if not (ncols == 0 or rmin > RANK_MARGIN * rmax):
+        return False
+    # Wᵀ x = Rᵀ Qᵀ x = g: y = R⁻ᵀ g (forward substitution), x = H_0 ... H_{N-1} [y; 0]
+    y = np.empty(ncols)
+    for j in range(ncols):
+        acc = g[j]
+        for p in range(j):
+            acc -= Q[p, j] * y[p]  # R[p, j] (p < j) is stored above the diagonal
+        y[j] = acc / x[j]
+    for a in range(nrows):
+        x[a] = 0.0
+    for j in range(ncols):
+        x[j] = y[j]
+    for j in range(ncols - 1, -1, -1):
+        dot = 0.0
+        for a in range(j, nrows):
+            dot += Q[a, j] * x[a]
+        dot *= beta[j]
+        for a in range(j, nrows):
+            x[a] -= dot * Q[a, j]
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _torques(arms, blocks, N, nv_arm, unilateral, obj_x, a_d, z, hold_tool, hold_obj,
+             hold_n, gains, active, tau, mu, qdd, a_pts):  # pragma: no cover - compiled
+    """:func:`object_pd_torques` on the buffer views."""
+    M, nle, J, Jdq, tp, tR, ttw, vp = arms
+    rows, h, W, W_o, c, M_o, h_o = blocks
+    n, k, m = W.shape
+    hold_kp, hold_kd, damping, margin = gains[0], gains[1], gains[2], gains[3]
+    # 1. internal forces: the least-norm QP, warm-started
+    wrench = np.empty(6)
+    for a in range(6):
+        acc = -h_o[a]
+        for b in range(6):
+            acc += M_o[a, b] * a_d[b]
+        wrench[a] = acc
+    status, _ = least_norm_forces(W_o, N, unilateral, wrench, margin, active, mu,
+                                  20 + 2 * n * m)
+    if status != QP_OK:
+        return PD_FORCES_FAILED
+    # 2. held points' desired accelerations, per arm
+    op = obj_x[0:3]
+    oR = obj_x[3:12].reshape((3, 3))
+    ov = obj_x[12:15]
+    ow = obj_x[15:18]
+    hmax = hold_tool.shape[1]
+    A = np.zeros((3 * hmax, k))
+    rhs = np.zeros(3 * hmax)
+    K = np.empty((k, k))
+    L = np.zeros((k, k))
+    sol = np.empty((k, 1))
+    QR = np.empty((k, m))
+    beta = np.empty(m)
+    gap = np.empty(m)
+    x = np.empty(k)
+    d = np.empty(3)
+    r = np.empty(3)
+    u = np.empty(3)
+    e = np.empty(3)
+    t1 = np.empty(3)
+    for i in range(n):
+        R = tR[i]
+        wt = ttw[i, 3:6]
+        nh = hold_n[i]
+        for p in range(nh):
+            for a in range(3):
+                d[a] = (R[a, 0] * hold_tool[i, p, 0] + R[a, 1] * hold_tool[i, p, 1]
+                        + R[a, 2] * hold_tool[i, p, 2])
+            for a in range(3):
+                xa = tp[i, a] + d[a]
+                r[a] = xa - op[a]
+                e[a] = (op[a] + oR[a, 0] * hold_obj[i, p, 0] + oR[a, 1] * hold_obj[i, p, 1]
+                        + oR[a, 2] * hold_obj[i, p, 2] - xa)
+            # u = v_t + ω_t × d - ẋ_o - ω_o × r
+            u[0] = ttw[i, 0] + wt[1] * d[2] - wt[2] * d[1] - ov[0] - (ow[1] * r[2] - ow[2] * r[1])
+            u[1] = ttw[i, 1] + wt[2] * d[0] - wt[0] * d[2] - ov[1] - (ow[2] * r[0] - ow[0] * r[2])
+            u[2] = ttw[i, 2] + wt[0] * d[1] - wt[1] * d[0] - ov[2] - (ow[0] * r[1] - ow[1] * r[0])
+            # transport: ẍ_o + ω̇_o × r + ω_o × (ω_o × r) + 2 ω_o × u + (kp e - kd u)
+            t1[0] = ow[1] * r[2] - ow[2] * r[1]
+            t1[1] = ow[2] * r[0] - ow[0] * r[2]
+            t1[2] = ow[0] * r[1] - ow[1] * r[0]
+            al = a_d[3:6]
+            apt0 = (a_d[0] + (al[1] * r[2] - al[2] * r[1]) + (ow[1] * t1[2] - ow[2] * t1[1])
+                    + 2.0 * (ow[1] * u[2] - ow[2] * u[1]) + hold_kp * e[0] - hold_kd * u[0])
+            apt1 = (a_d[1] + (al[2] * r[0] - al[0] * r[2]) + (ow[2] * t1[0] - ow[0] * t1[2])
+                    + 2.0 * (ow[2] * u[0] - ow[0] * u[2]) + hold_kp * e[1] - hold_kd * u[1])
+            apt2 = (a_d[2] + (al[0] * r[1] - al[1] * r[0]) + (ow[0] * t1[1] - ow[1] * t1[0])
+                    + 2.0 * (ow[0] * u[1] - ow[1] * u[0]) + hold_kp * e[2] - hold_kd * u[2])
+            a_pts[i, p, 0] = apt0
+            a_pts[i, p, 1] = apt1
+            a_pts[i, p, 2] = apt2
+            # task rows A = J_v + J_ω × d; a0 = J̇q̇_v + J̇q̇_ω × d + ω_t × (ω_t × d)
+            for j in range(k):
+                A[3 * p + 0, j] = J[i, 0, j] + J[i, 4, j] * d[2] - J[i, 5, j] * d[1]
+                A[3 * p + 1, j] = J[i, 1, j] + J[i, 5, j] * d[0] - J[i, 3, j] * d[2]
+                A[3 * p + 2, j] = J[i, 2, j] + J[i, 3, j] * d[1] - J[i, 4, j] * d[0]
+            t1[0] = wt[1] * d[2] - wt[2] * d[1]
+            t1[1] = wt[2] * d[0] - wt[0] * d[2]
+            t1[2] = wt[0] * d[1] - wt[1] * d[0]
+            rhs[3 * p + 0] = apt0 - (Jdq[i, 0] + Jdq[i, 4] * d[2] - Jdq[i, 5] * d[1]
+                                     + wt[1] * t1[2] - wt[2] * t1[1])
+            rhs[3 * p + 1] = apt1 - (Jdq[i, 1] + Jdq[i, 5] * d[0] - Jdq[i, 3] * d[2]
+                                     + wt[2] * t1[0] - wt[0] * t1[2])
+            rhs[3 * p + 2] = apt2 - (Jdq[i, 2] + Jdq[i, 3] * d[1] - Jdq[i, 4] * d[0]
+                                     + wt[0] * t1[1] - wt[1] * t1[0])
+        # 3. q̈_des = z + (AᵀA + ε s I)⁻¹ Aᵀ (rhs - A z), s = trace(AᵀA) / nv_i
+        nr = 3 * nh
+        for p in range(nr):
+            acc = rhs[p]
+            for j in range(k):
+                acc -= A[p, j] * z[i, j]
+            rhs[p] = acc
+        tr = 0.0
+        for a in range(k):
+            for b in range(a + 1):
+                acc = 0.0
+                for p in range(nr):
+                    acc += A[p, a] * A[p, b]
+                K[a, b] = acc
+                K[b, a] = acc
+            tr += K[a, a]
+            acc = 0.0
+            for p in range(nr):
+                acc += A[p, a] * rhs[p]
+            sol[a, 0] = acc
+        eps = damping * tr / nv_arm[i]
+        for a in range(k):
+            K[a, a] += eps
+        if not cholesky(K, L, k):
+            return PD_ARM_RANK
+        cholesky_solve(L, sol, k, 1)
+        # 4. inverse dynamics: the q̈_i closest to q̈_des with W_iᵀ q̈_i = c_i - W_o,iᵀ a_d
+        Ni = N[i]
+        nvi = nv_arm[i]
+        for j in range(k):
+            qdd[i, j] = (z[i, j] + sol[j, 0]) if j < nvi else 0.0
+        for s in range(Ni):
+            acc = c[i, s]
+            for a in range(6):
+                acc -= W_o[i, a, s] * a_d[a]
+            for j in range(k):
+                acc -= W[i, j, s] * qdd[i, j]
+            gap[s] = acc
+        if Ni > k or not min_norm_rows(W[i], Ni, k, gap, x, QR, beta):
+            return PD_ARM_RANK
+        for j in range(k):
+            qdd[i, j] += x[j]
+        # 5. τ_i = M_i q̈_i - h_i - W_i μ_i (zero on padding)
+        for j in range(k):
+            if j >= nvi:
+                tau[i, j] = 0.0
+                continue
+            acc = -h[i, j]
+            for b in range(k):
+                acc += M[i, j, b] * qdd[i, b]
+            for s in range(Ni):
+                acc -= W[i, j, s] * mu[i, s]
+            tau[i, j] = acc
+    total = 0.0
+    for i in range(n):
+        for j in range(k):
+            total += tau[i, j]
+    if not math.isfinite(total):
+        return PD_NOT_FINITE
+    return PD_OK
+
+
+@njit(cache=True, error_model="numpy")
+def object_pd_torques(buf, dims, N, nv_arm, unilateral, obj_x, a_d, z, hold_tool, hold_obj,
+                      hold_n, gains, active, tau, mu, qdd, a_pts):  # pragma: no cover - compiled
+    """``ObjectPD`` torques from the flat buffer of the compiled path (see the module docstring).
+
+    Args:
+        buf: the flat buffer of :func:`multiarm_pin.kernels.evaluate_system` (blocks at zero
+            torque, ``h = -nle``).
+        dims: (4,) int ``(k, m, nv, n)``.
+        N: (n,) int constraint rows per arm.
+        nv_arm: (n,) int joints per arm.
+        unilateral: (n, m) bool mask of unilateral multipliers.
+        obj_x: (18,) object COM position [m], rotation (9, row-major), twist ``[ẋ; ω]``.
+        a_d: (6,) desired object acceleration ``[ẍ; ω̇]`` at the COM [m/s², rad/s²].
+        z: (n, k) joint-space PD ``null_kp (q_ref ⊖ q) - null_kd v`` [rad/s²], zero padding.
+        hold_tool: (n, h, 3) held points in the tool frame [m].
+        hold_obj: (n, h, 3) their places in the object frame [m].
+        hold_n: (n,) int held points per arm (the first ``hold_n[i]`` are real).
+        gains: (4,) ``hold_kp`` [1/s²], ``hold_kd`` [1/s], Jacobian damping (relative),
+            margin [N].
+        active: (n, m) uint8 active set of the force QP (in: warm start, out: the new one).
+        tau: output (n, k) torques [N m] to add to ``h``.
+        mu: output (n, m) planned multipliers [N].
+        qdd: output (n, k) planned joint accelerations.
+        a_pts: output (n, h, 3) desired point accelerations [m/s²] (untouched on padding).
+
+    Returns:
+        :data:`PD_OK`, or the reason the caller must use the reference.
+    """
+    k, m, n = dims[0], dims[1], dims[3]
+    off = _offsets(n, k, m)
+    return _torques(_arm_views(buf, off, n, k), _block_views(buf, off, n, k, m), N, nv_arm,
+                    unilateral, obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains, active,
+                    tau, mu, qdd, a_pts)
+
+
+@njit(cache=True, error_model="numpy")
+def log3(R, out):  # pragma: no cover - compiled
+    """Rotation vector ``θ u`` (3,) of a rotation matrix into ``out`` (``pin.log3``).
+
+    ``θ = atan2(|v| / 2, (tr R - 1) / 2)`` with ``v = vee(R - Rᵀ)``, accurate for every angle
+    up to near π, where ``v`` vanishes: returns False when ``θ > π - 1e-3``.
+    """
+    vx = R[2, 1] - R[1, 2]
+    vy = R[0, 2] - R[2, 0]
+    vz = R[1, 0] - R[0, 1]
+    s = 0.5 * math.sqrt(vx * vx + vy * vy + vz * vz)
+    c = 0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0)
+    theta = math.atan2(s, c)
+    if theta > math.pi - 1e-3:
+        return False
+    f = 0.5 * theta / s if s > 0.0 else 0.5
+    out[0] = f * vx
+    out[1] = f * vy
+    out[2] = f * vz
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold_tool,
+                   hold_obj, hold_n, gains, params, active, tau, mu, qdd, a_pts, a_d,
+                   solve):  # pragma: no cover - compiled
+    """``ObjectPD`` (desired acceleration, torques) and, if ``solve``, the forward dynamics.
+
+    One compiled call per closed-loop evaluation: the PD on the object pose
+    ``a_d = a_ref + K_d (v_ref - v_o) + K_p [p_ref - p; log(R_ref Rᵀ)]``, then
+    :func:`object_pd_torques`, then :func:`solve_with_torques` on the same buffer.
+
+    Args:
+        buf: the flat buffer (blocks at zero torque).
+        dims: (4,) int ``(k, m, nv, n)``.
+        N: (n,) int constraint rows per arm.
+        nv_arm: (n,) int joints per arm.
+        unilateral: (n, m) bool.
+        obj: (13,) object position [m], quaternion ``[x, y, z, w]``, twist ``[ẋ; ω]``.
+        ref: (24,) reference position (3) [m], rotation (9, row-major), twist (6), classical
+            acceleration (6), world axes at the COM.
+        pd_gains: (12,) ``K_p`` (6) [1/s²], ``K_d`` (6) [1/s].
+        z: (n, k) joint-space PD (see :func:`object_pd_torques`).
+        hold_tool: (n, h, 3).
+        hold_obj: (n, h, 3).
+        hold_n: (n,) int.
+        gains: (4,) ``hold_kp``, ``hold_kd``, Jacobian damping, margin.
+        params: (18,) kernel parameters (the last two the solver thresholds).
+        active: (n, m) uint8 warm start of the force QP (updated).
+        tau: output (n, k) torques [N m].
+        mu: output (n, m) planned multipliers [N].
+        qdd: output (n, k) planned joint accelerations.
+        a_pts: output (n, h, 3) desired point accelerations [m/s²].
+        a_d: output (6,) desired object acceleration.
+        solve: also solve the forward dynamics into the buffer's solution segments.
+
+    Returns:
+        ``(pd_status, solve_status)``: :data:`PD_OK` or the reason to use the reference;
+        the status of :func:`multiarm_pin.kernels.object_first` (-1 if not solved).
+    """
+    obj_x = np.empty(18)
+    Ro = np.empty((3, 3))
+    quaternion_rotation(obj[3:7], Ro)
+    for a in range(3):
+        obj_x[a] = obj[a]
+        for b in range(3):
+            obj_x[3 + 3 * a + b] = Ro[a, b]
+    for a in range(6):
+        obj_x[12 + a] = obj[7 + a]
+    # pose error: [p_ref - p; log(R_ref Rᵀ)]
+    E = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            acc = 0.0
+            for p in range(3):
+                acc += ref[3 + 3 * a + p] * Ro[b, p]
+            E[a, b] = acc
+    rot = np.empty(3)
+    if not log3(E, rot):
+        return PD_LARGE_ROTATION, -1
+    for a in range(6):
+        e = ref[a] - obj[a] if a < 3 else rot[a - 3]
+        a_d[a] = ref[18 + a] + pd_gains[6 + a] * (ref[12 + a] - obj[7 + a]) + pd_gains[a] * e
+    k, m, n = dims[0], dims[1], dims[3]
+    off = _offsets(n, k, m)
+    status = _torques(_arm_views(buf, off, n, k), _block_views(buf, off, n, k, m), N, nv_arm,
+                      unilateral, obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains, active,
+                      tau, mu, qdd, a_pts)
+    if status != PD_OK or not solve:
+        return status, -1
+    return status, solve_with_torques(buf, dims, N, params, tau)
+
+
+@njit(cache=True, error_model="numpy")
+def solve_with_torques(buf, dims, N, params, tau):  # pragma: no cover - compiled
+    """Object-first forward dynamics of the buffer's blocks with torques ``tau`` added to ``h``.
+
+    The solution goes to the buffer's ``a_o``, ``qdd``, ``mu`` segments; its ``h`` segment
+    is left at zero torque.
+
+    Args:
+        buf: the flat buffer (blocks at zero torque).
+        dims: (4,) int ``(k, m, nv, n)``.
+        N: (n,) int constraint rows per arm.
+        params: (18,) kernel parameters (the last two the solver thresholds).
+        tau: (n, k) joint torques [N m], zero on padding.
+
+    Returns:
+        The status of :func:`multiarm_pin.kernels.object_first`.
+    """
+    k, m, n = dims[0], dims[1], dims[3]
+    off = _offsets(n, k, m)
+    M = _arm_views(buf, off, n, k)[0]
+    rows, h, W, W_o, c, M_o, h_o = _block_views(buf, off, n, k, m)
+    a_o, qdd, mu = _solution_views(buf, off, n, k, m)
+    ht = h + tau
+    return object_first(M, ht, W, W_o, c, M_o, h_o, N, params[16], params[17], a_o, qdd, mu)
+
+
+__all__ = ["PD_ARM_RANK", "PD_FORCES_FAILED", "PD_LARGE_ROTATION", "PD_NOT_FINITE", "PD_OK",
+           "log3", "min_norm_rows", "object_pd_step", "object_pd_torques",
+           "solve_with_torques"]
