@@ -112,3 +112,12 @@ class ScenarioError(MultiArmError, ValueError):
         self.key = key
         self.message = message
         super().__init__(f"{self.file}: {key}: {message}" if key else f"{self.file}: {message}")
+
+
+class StudyError(ScenarioError):
+    """A study file (``multiarm-pin sweep``), or the way it is run, is invalid.
+
+    Attributes:
+        file: the study file (or the results folder).
+        key: the key path, e.g. ``"parameters[1].normal.sigma"``, or the option.
+    """

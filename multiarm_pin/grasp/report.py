@@ -68,6 +68,17 @@ def load_grasp_file(path: str | Path) -> GraspFile:
         raise ScenarioError(f, "", f"cannot read the file: {exc.strerror or exc}") from exc
     except yaml.YAMLError as exc:
         raise ScenarioError(f, "", f"invalid YAML: {exc}") from exc
+    return grasp_from_data(data, path)
+
+
+def grasp_from_data(data, path: str | Path) -> GraspFile:
+    """Validate a parsed grasp mapping (as read by :func:`load_grasp_file` from ``path``).
+
+    Raises:
+        ScenarioError: an invalid key (names ``path`` and the key path).
+    """
+    path = Path(path)
+    f = str(path)
     if not isinstance(data, dict):
         raise ScenarioError(f, "", "expected a mapping with keys object, contacts")
     unknown = set(data) - {"object", "contacts", "seventh_contact_face", "length_scale", "name",
