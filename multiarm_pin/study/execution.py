@@ -155,6 +155,8 @@ class Study:
                 folder holding another study.
             KeyboardInterrupt: after writing every finished row and the table.
         """
+        if client is None and out is not None and self._nothing_to_run(out):
+            return self._drive(_LoopRunner(), out, resume, progress, on_case)  # no cluster
         own_cluster = own_client = None
         if client is None:
             if scheduler is not None:
@@ -171,6 +173,11 @@ class Study:
                 own_client.close()
             if own_cluster is not None:
                 own_cluster.close()
+
+    def _nothing_to_run(self, out) -> bool:
+        folder = ResultsFolder(out)
+        return (folder.path / "study.json").is_file() and \
+            len(folder.finished(self.cases)) == len(self.cases)
 
     def run_loop(self, out=None, resume: bool = False, progress: bool = False,
                  on_case: Callable[[dict], None] | None = None):
