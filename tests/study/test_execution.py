@@ -71,7 +71,8 @@ def test_dask_rows_identical_to_plain_loop(client, tmp_path):
 
 def test_grasp_study_on_dask_matches_loop_and_failures_are_rows(client, tmp_path):
     study = Study.from_file(tiny_grasp_study(tmp_path, sigmas=(0.001, 0.03), samples=8))
-    d = rows_by_case(study.run(client=client))
+    # through the scheduler's address, as `sweep --scheduler ADDRESS` does (own client)
+    d = rows_by_case(study.run(scheduler=client.scheduler.address))
     lp = rows_by_case(study.run_loop())
     assert sorted(d) == sorted(lp)
     for cid in d:
