@@ -122,6 +122,9 @@ def write_report(out_dir, spec, table) -> Path:
         if p not in cols:
             continue
         rows = summary_by_value(table, spec, p)
+        if rows and max(r["cases"] for r in rows) == 1:  # one case a value: its metrics
+            rows = [{k.removesuffix(" mean").removesuffix(" fraction"): v
+                     for k, v in r.items() if not k.endswith((" min", " max"))} for r in rows]
         lines += [f"## Against `{p}`", ""] + _md_table(rows) + [""]
         for m in spec.metrics:
             if m in BOOLEAN_METRICS and len(grid_params) == 1:

@@ -8,6 +8,7 @@ kill test runs last since it restarts a worker.
 import json
 import os
 import signal
+import time
 
 import numpy as np
 import pytest
@@ -119,16 +120,21 @@ def test_killed_worker_tasks_rerun_elsewhere(client, tmp_path):
     study = Study.from_file(tiny_simulation_study(tmp_path, masses=(2.0, 3.0, 4.0),
                                                   samples=2, duration=0.02))
     killed = {}
+    pids = client.run(os.getpid)  # {worker address: pid}, asked before the study starts
 
     def kill_a_busy_worker(row):
         if killed:
             return
-        processing = client.processing()
-        busy = [w for w, keys in processing.items() if keys] or list(processing)
-        addr = busy[0]
-        pid = client.run(os.getpid, workers=[addr])[addr]
-        killed.update(pid=pid, keys=list(processing.get(addr, ())), after=row["case_id"])
-        os.kill(pid, signal.SIGKILL)
+        deadline = time.monotonic() + 120
+        while True:  # the next case is being handed out: wait until a worker holds one
+            busy = {w: keys for w, keys in client.processing().items() if keys and w in pids}
+            if busy or time.monotonic() > deadline:
+                break
+            time.sleep(0.01)
+        assert busy, "no worker was running a case after the first row"
+        addr, keys = next(iter(busy.items()))
+        os.kill(pids[addr], signal.SIGKILL)
+        killed.update(pid=pids[addr], keys=list(keys), after=row["case_id"])
 
     table = study.run(client=client, out=tmp_path / "out", on_case=kill_a_busy_worker)
     rows = rows_by_case(table)
