@@ -17,6 +17,16 @@ compensation):
   ``pin.constraintDynamics`` on one combined Pinocchio model (free-flyer object + arms,
   ``CONTACT_6D`` constraints). Both answers are compared at every state.
 - a stage profile (where the time of one full step goes) at a few n.
+- ``unilateral`` (issue 12): the exact unilateral (mixed-LCP) solve
+  ``solve_unilateral(blocks, unilateral)`` against the bilateral solve
+  ``solve(blocks, "auto")`` of the same contacts, on states of the two-gripper form-closure
+  scenario (7 fingertip contacts on two 6-joint arms, from
+  ``scenarios/two_gripper_form_closure.yaml``) plus 4 table contacts under the box's lowest
+  vertices appended as a zero-dof support arm (``c = 0``). Two torque families: ``random``
+  (gravity compensation + N(0, 2 N m): some fingertips separate) and ``squeeze`` (gravity
+  compensation + 15 N of squeeze per fingertip: every contact pushes). Written to
+  ``solver_vs_kkt_unilateral.csv`` and to a section of the report; ``--unilateral-only``
+  writes only ``unilateral.csv`` / ``unilateral.md``.
 
 Every time is the median of many single-call timings (``time.perf_counter``, garbage
 collector off, states cycled, warm-up calls excluded). Outputs in ``--out``:
@@ -27,6 +37,7 @@ Usage::
     .venv/bin/python benchmarks/solver_vs_kkt.py                 # full run (~2 min)
     .venv/bin/python benchmarks/solver_vs_kkt.py --quick --out /tmp/bench
     .venv/bin/python benchmarks/solver_vs_kkt.py --arms 2,4,8 --peer-arms 2,4 --repeat 500
+    .venv/bin/python benchmarks/solver_vs_kkt.py --unilateral-only     # issue 12 row (~15 s)
 """
 
 from __future__ import annotations
@@ -57,8 +68,15 @@ if str(ROOT) not in sys.path:  # run from a checkout without installing
     sys.path.insert(0, str(ROOT))
 
 from multiarm_pin.arm import Arm  # noqa: E402
-from multiarm_pin.dynamics import solve, solve_dense_kkt  # noqa: E402
+from multiarm_pin.dynamics import (  # noqa: E402
+    SystemBlocks,
+    solve,
+    solve_dense_kkt,
+    solve_unilateral,
+)
 from multiarm_pin.rigid_object import RigidObject  # noqa: E402
+from multiarm_pin.scenario import build_scenario, load_scenario  # noqa: E402
+from multiarm_pin.spatial import quaternion_to_rotation  # noqa: E402
 from multiarm_pin.system import MultiArmSystem, SystemState  # noqa: E402
 
 THESIS_TABLE_4_4 = {
@@ -384,6 +402,177 @@ def profile_stages(bench: Bench, timer: Timer) -> dict[str, float]:
 
 
 # ---------------------------------------------------------------------------- outputs
+# ---------------------------------------------------------------------------- unilateral
+TWO_GRIPPER = ROOT / "scenarios" / "two_gripper_form_closure.yaml"
+SQUEEZE_N = 15.0
+"""Squeeze force per fingertip of the ``squeeze`` family [N]."""
+
+
+@dataclass
+class ContactRow:
+    """One line of the unilateral CSV: one torque family of the two-gripper + table states."""
+
+    family: str
+    n_states: int
+    n_rows: int
+    t_bilateral_s: float
+    t_unilateral_s: float
+    t_bilateral_fingertips_s: float
+    t_unilateral_guess_s: float
+    ratio: float
+    mean_pivots: float
+    separating_rows: int
+    fast_path_states: int
+    max_complementarity: float
+    max_rel_diff_bilateral: float
+    states_compared: int
+    repeats: int
+
+
+CONTACT_COLUMNS = list(ContactRow.__dataclass_fields__)
+
+
+def with_table(b: SystemBlocks, R: np.ndarray, vertices: np.ndarray) -> SystemBlocks:
+    """The blocks plus a zero-dof support arm: 4 table rows (normal +z) at the lowest vertices.
+
+    ``vertices`` (V, 3) in the object frame about the COM; ``R`` the object rotation. Row k's
+    wrench per unit force is ``[z; (R v_k) × z]`` (world axes at the COM), ``c = 0``.
+    """
+    z = np.array([0.0, 0.0, 1.0])
+    world = vertices @ R.T
+    low = np.argsort(world[:, 2], kind="stable")[:4]
+    Wt = np.array([np.concatenate((z, np.cross(world[k], z))) for k in low]).T
+    arms = range(b.n)
+    return SystemBlocks.from_lists(
+        [b.M[i, : b.nv[i], : b.nv[i]] for i in arms] + [np.zeros((0, 0))],
+        [b.h[i, : b.nv[i]] for i in arms] + [np.zeros(0)],
+        [b.W[i, : b.nv[i], : b.N[i]] for i in arms] + [np.zeros((0, 4))],
+        [b.W_o[i, :, : b.N[i]] for i in arms] + [Wt],
+        [b.c[i, : b.N[i]] for i in arms] + [np.zeros(4)],
+        b.M_o, b.h_o)
+
+
+def build_contact_bench(n_states: int, seed: int
+                        ) -> dict[str, list[tuple[SystemBlocks, SystemBlocks]]]:
+    """Blocks of the two-gripper scenario + 4 table rows at random consistent states.
+
+    Positions are the scenario's initial ones (inverse kinematics); joint and object
+    velocities random (N(0, 0.3), N(0, 0.1)) projected onto the constraints' null space.
+    Torques: gravity compensation + N(0, 2 N m) (``random``) or gravity compensation +
+    ``-W_i f`` with ``f = SQUEEZE_N`` per fingertip (``squeeze``). Each state gives the
+    blocks with the table rows and the fingertip-only blocks.
+    """
+    built = build_scenario(load_scenario(TWO_GRIPPER))
+    system, s0 = built.system, built.initial_state
+    rng = np.random.default_rng(seed)
+    g = system.gravity_torques(s0.q)
+    out: dict[str, list[tuple[SystemBlocks, SystemBlocks]]] = {"random": [], "squeeze": []}
+    for _ in range(n_states):
+        st = system.project_velocities(system.state(
+            s0.q, rng.normal(0.0, 0.3, system.nv), s0.obj.position, s0.obj.quaternion,
+            rng.normal(0.0, 0.1, 6)))
+        R = quaternion_to_rotation(st.obj.quaternion)
+        b0 = system.blocks(st).blocks
+        squeeze = np.concatenate([-b0.W[i, : b0.nv[i], : b0.N[i]] @ np.full(b0.N[i], SQUEEZE_N)
+                                  for i in range(b0.n)])
+        for family, tau in (("random", g + rng.normal(0.0, 2.0, system.nv)),
+                            ("squeeze", g + squeeze)):
+            tips = system.blocks(st, tau).blocks
+            out[family].append((with_table(tips, R, built.obj.shape.vertices), tips))
+    return out
+
+
+def measure_contacts(family: str, pairs: list[tuple[SystemBlocks, SystemBlocks]],
+                     timer: Timer) -> ContactRow:
+    """Time the bilateral and the unilateral solve of the same contacts (and the bilateral
+    solve of the fingertips alone, for context); check the answers."""
+    blocks = [p[0] for p in pairs]
+    tips = [p[1] for p in pairs]
+    unis = [b.constraint_mask.copy() for b in blocks]
+    guesses = [solve_unilateral(b, u).mu > 0 for b, u in zip(blocks, unis, strict=True)]
+    K = len(blocks)
+    fns = [lambda k: solve(blocks[k], "auto"),
+           lambda k: solve_unilateral(blocks[k], unis[k]),
+           lambda k: solve(tips[k], "auto"),
+           lambda k: solve_unilateral(blocks[k], unis[k], guess=guesses[k])]
+    (t_bil, t_uni, t_tips, t_guess), reps = timer.medians(fns, K)
+    pivots, separating, fast, comp, diff, compared = [], 0, 0, 0.0, 0.0, 0
+    for b, uni in zip(blocks, unis, strict=True):
+        sol = solve_unilateral(b, uni)
+        pivots.append(sol.pivots)
+        separating += int(sol.separating.sum())
+        fast += sol.solver == "bilateral"
+        comp = max(comp, sol.complementarity)
+        if not sol.separating.any():  # every contact holds: the motion is the bilateral one
+            compared += 1
+            ref = solve(b, "auto")
+            scale = max(1.0, np.abs(ref.a_o).max(), np.abs(ref.qdd).max())
+            diff = max(diff, float(max(np.abs(sol.a_o - ref.a_o).max(),
+                                       np.abs(sol.qdd - ref.qdd).max()) / scale))
+    return ContactRow(family, K, int(blocks[0].n_constraints), t_bil, t_uni, t_tips, t_guess,
+                      t_uni / t_bil, float(np.mean(pivots)), separating, fast, comp,
+                      diff if compared else math.nan, compared, reps)
+
+
+def contact_section(rows: Sequence[ContactRow]) -> list[str]:
+    """Markdown section of the unilateral benchmark, with its target."""
+    L = ["## Unilateral contacts (issue 12): exact mixed-LCP solve vs bilateral solve\n",
+         "Two-gripper form-closure scenario (`scenarios/two_gripper_form_closure.yaml`: 4 + 3 "
+         "fingertips on two 6-joint arms) at random consistent states, plus 4 table contacts "
+         "under the box's lowest vertices appended as a zero-dof support arm (`c = 0`; built "
+         "here, not by a scenario): 11 rows, all unilateral. `bilateral` = "
+         "`solve(blocks, 'auto')` of the same 11 rows (the support arm makes it take the "
+         "singular-arm path); `unilateral` = `solve_unilateral(blocks, unilateral)` (compiled "
+         "object-first Delassus + active-set method). Families: `random` torques (gravity "
+         "compensation + N(0, 2 N m): fingertips separate), `squeeze` (gravity compensation + "
+         f"{SQUEEZE_N:g} N per fingertip: every contact pushes). *diff* = largest relative "
+         "motion difference from the bilateral solve over the states where no contact "
+         "separates (n/a: none). For context, *fingertips bilateral* = "
+         "`solve(blocks, 'auto')` of the 7 fingertip rows alone (no support arm: the compiled "
+         "object-first kernel); *unilateral, warm* = `solve_unilateral(..., guess=mu > 0)` "
+         "with the pushing rows of the same state's answer as warm start (a simulation step "
+         "whose contact state has not changed: no pivot).\n",
+         "| family | states | rows | bilateral µs | unilateral µs | unilateral / bilateral | "
+         "unilateral, warm µs | fingertips bilateral µs | mean pivots | separating rows | "
+         "fast-path states | max complementarity | diff (states) |",
+         "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        diff = ("n/a" if not r.states_compared else
+                f"{r.max_rel_diff_bilateral:.1e} ({r.states_compared})")
+        L.append(f"| {r.family} | {r.n_states} | {r.n_rows} | {_us(r.t_bilateral_s)} | "
+                 f"{_us(r.t_unilateral_s)} | {r.ratio:.2f} | {_us(r.t_unilateral_guess_s)} | "
+                 f"{_us(r.t_bilateral_fingertips_s)} | {r.mean_pivots:.1f} | "
+                 f"{r.separating_rows} | {r.fast_path_states} | "
+                 f"{r.max_complementarity:.1e} | {diff} |")
+    worst = max(r.ratio for r in rows)
+    L.append("")
+    L.append(f"- [{'x' if worst <= 2 else ' '}] unilateral solve within 2x of the bilateral "
+             f"solve of the same contacts: worst ratio {worst:.2f}")
+    L.append("")
+    return L
+
+
+def run_contacts(args: argparse.Namespace, timer: Timer) -> list[ContactRow]:
+    benches = build_contact_bench(args.states, args.seed + 12)
+    rows = [measure_contacts(f, bl, timer) for f, bl in benches.items()]
+    for r in rows:
+        print(f"unilateral {r.family:8s} bilateral {r.t_bilateral_s * 1e6:8.1f}  unilateral "
+              f"{r.t_unilateral_s * 1e6:8.1f} µs  ratio {r.ratio:.2f}  warm "
+              f"{r.t_unilateral_guess_s * 1e6:6.1f}  tips bilateral "
+              f"{r.t_bilateral_fingertips_s * 1e6:6.1f} µs  pivots "
+              f"{r.mean_pivots:.1f}  separating {r.separating_rows}  comp "
+              f"{r.max_complementarity:.1e}", flush=True)
+    return rows
+
+
+def write_contact_csv(rows: Sequence[ContactRow], path: Path) -> None:
+    with path.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(CONTACT_COLUMNS)
+        for r in rows:
+            w.writerow([_csv_value(getattr(r, c)) for c in CONTACT_COLUMNS])
+
+
 def write_csv(rows: Sequence[Row], path: Path) -> None:
     with path.open("w", newline="") as f:
         w = csv.writer(f)
@@ -468,7 +657,8 @@ def _numba_version() -> str:
 
 
 def write_report(path: Path, rows: Sequence[Row], profiles: dict[tuple[str, int], dict],
-                 env: dict[str, str], args: argparse.Namespace, wall_s: float) -> None:
+                 env: dict[str, str], args: argparse.Namespace, wall_s: float,
+                 contact_rows: Sequence[ContactRow] = ()) -> None:
     rev = sorted([r for r in rows if r.case == "revolute"], key=lambda r: r.n_arms)
     weld = sorted([r for r in rows if r.case == "weld"], key=lambda r: r.n_arms)
     L: list[str] = []
@@ -582,6 +772,8 @@ def write_report(path: Path, rows: Sequence[Row], profiles: dict[tuple[str, int]
             L.append(f"| {label} | " + " | ".join(f"{profiles[k][name] * 1e6:.1f}"
                                                    for k in keys) + " |")
         L.append("")
+    if contact_rows:
+        L += contact_section(contact_rows)
     L.append("## Targets (issue 7)\n")
     L += targets(rev, weld)
     L.append("")
@@ -692,6 +884,9 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     p.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "results")
     p.add_argument("--quick", action="store_true",
                    help="small smoke run (< 1 min): 2-3 arms, few repeats")
+    p.add_argument("--unilateral-only", action="store_true",
+                   help="only the unilateral-contact case (issue 12): writes unilateral.csv "
+                        "and unilateral.md in --out")
     args = p.parse_args(argv)
     q = args.quick
     args.arms = args.arms or (QUICK_ARMS if q else DEFAULT_ARMS)
@@ -712,6 +907,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     args.warmup = 5 if args.quick else 20
     timer = Timer(args.repeat, warmup=args.warmup, budget_s=args.budget)
+    if args.unilateral_only:
+        contact_rows = run_contacts(args, timer)
+        write_contact_csv(contact_rows, args.out / "unilateral.csv")
+        L = ["# Unilateral contacts: exact mixed-LCP solve vs bilateral solve\n",
+             f"Generated by `benchmarks/solver_vs_kkt.py {' '.join(sys.argv[1:])}` in "
+             f"{time.perf_counter() - start:.0f} s; timing method as in `solver_vs_kkt.md` "
+             f"(medians of interleaved single calls, up to {args.repeat} rounds, "
+             f"{args.states} states per family).\n", "## Environment\n"]
+        L += [f"- {k}: {v}" for k, v in env.items()]
+        L.append("")
+        L += contact_section(contact_rows)
+        (args.out / "unilateral.md").write_text("\n".join(L) + "\n")
+        print(f"wrote {args.out}/unilateral.csv, .md", flush=True)
+        return 0
     rows: list[Row] = []
     profiles: dict[tuple[str, int], dict] = {}
     for n in args.arms:
@@ -731,9 +940,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                 f"{k} {v * 1e6:.1f}" for k, v in profiles[("weld", n)].items()), flush=True)
         del bench
         gc.collect()
+    contact_rows = run_contacts(args, timer)
     write_csv(rows, args.out / "solver_vs_kkt.csv")
+    write_contact_csv(contact_rows, args.out / "solver_vs_kkt_unilateral.csv")
     write_report(args.out / "solver_vs_kkt.md", rows, profiles, env, args,
-                 time.perf_counter() - start)
+                 time.perf_counter() - start, contact_rows)
     plot(rows, args.out / "solver_vs_kkt.png")
     print(f"wrote {args.out}/solver_vs_kkt.csv, .md, .png in "
           f"{time.perf_counter() - start:.0f} s", flush=True)

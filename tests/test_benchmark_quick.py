@@ -23,13 +23,15 @@ def quick_run(tmp_path_factory):
 
 
 def test_quick_run_writes_csv_report_and_plot(quick_run):
-    for name in ("solver_vs_kkt.csv", "solver_vs_kkt.md", "solver_vs_kkt.png"):
+    for name in ("solver_vs_kkt.csv", "solver_vs_kkt.md", "solver_vs_kkt.png",
+                 "solver_vs_kkt_unilateral.csv"):
         f = quick_run / name
         assert f.is_file() and f.stat().st_size > 0, name
     assert (quick_run / "solver_vs_kkt.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     report = (quick_run / "solver_vs_kkt.md").read_text()
     for heading in ("## Environment", "## Method", "Table 4.4", "pin.constraintDynamics",
-                    "## Where the time of one full step goes", "## Targets"):
+                    "## Where the time of one full step goes", "## Targets",
+                    "## Unilateral contacts (issue 12)"):
         assert heading in report, heading
 
 
@@ -50,6 +52,22 @@ def test_quick_run_numbers_are_finite_and_answers_agree(quick_run):
             assert float(r["max_rel_diff_pinocchio"]) < 1e-8
         else:
             assert math.isnan(float(r["t_pinocchio_s"]))
+
+
+def test_quick_run_unilateral_rows(quick_run):
+    """Issue 12's row: both torque families, finite times, exact complementarity."""
+    with (quick_run / "solver_vs_kkt_unilateral.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert [r["family"] for r in rows] == ["random", "squeeze"]
+    for r in rows:
+        assert int(r["n_rows"]) == 11
+        for col in ("t_bilateral_s", "t_unilateral_s", "t_bilateral_fingertips_s",
+                    "t_unilateral_guess_s", "ratio"):
+            t = float(r[col])
+            assert math.isfinite(t) and t > 0, (r["family"], col, t)
+        assert float(r["max_complementarity"]) < 1e-10
+        if int(r["states_compared"]):
+            assert float(r["max_rel_diff_bilateral"]) < 1e-10
 
 
 def test_bad_arguments_are_rejected():

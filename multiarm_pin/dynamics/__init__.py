@@ -27,12 +27,25 @@ from multiarm_pin.dynamics.object_first import (
 )
 from multiarm_pin.dynamics.singular import solve_singular
 from multiarm_pin.dynamics.solve import SOLVERS, solve
+from multiarm_pin.dynamics.unilateral import (
+    ContactResiduals,
+    ContactSolution,
+    DelassusOperator,
+    ImpactSolution,
+    delassus_operator,
+    solve_impact,
+    solve_unilateral,
+)
 
 __all__ = [
     "DEFAULT_RCOND_TOL",
     "SOLVERS",
     "ArmReduction",
+    "ContactResiduals",
+    "ContactSolution",
+    "DelassusOperator",
     "ForceDistribution",
+    "ImpactSolution",
     "InternalForceBasis",
     "InverseDynamicsResult",
     "Residuals",
@@ -40,6 +53,7 @@ __all__ = [
     "SystemBlocks",
     "assemble_kkt",
     "constraint_jacobian",
+    "delassus_operator",
     "distribute_forces",
     "internal_force_basis",
     "inverse_dynamics",
@@ -48,7 +62,9 @@ __all__ = [
     "redundant_constraints",
     "solve",
     "solve_dense_kkt",
+    "solve_impact",
     "solve_object_first",
     "solve_object_first_numpy",
     "solve_singular",
+    "solve_unilateral",
 ]
