@@ -133,17 +133,18 @@ def write_report(out_dir, spec, table) -> Path:
                              + (f"; first value where it fails: {_fmt(first_fail)}"
                                 if first_fail is not None else " (the whole range)"))
         lines.append("")
-    errors = [(c, e) for c, s, e in zip(cols.get("case_id", []), status,
-                                        cols.get("error", []), strict=False) if s != "ok"]
+    base = str(spec.base_file)  # the base file by its name: no machine paths in reports
+    errors = [(c, str(e).replace(base, Path(base).name))
+              for c, s, e in zip(cols.get("case_id", []), status, cols.get("error", []),
+                                 strict=False) if s != "ok"]
     if errors:
         kinds: dict[str, int] = {}
         for _, e in errors:
-            k = re.sub(r"[-+]?\d[\d.e+-]*", "#", str(e))[:140]
+            k = re.sub(r"[-+]?\d[\d.e+-]*", "#", str(e))[:220]
             kinds[k] = kinds.get(k, 0) + 1
         lines += ["## Failed cases", ""]
         lines += [f"- {count} x {k}" for k, count in sorted(kinds.items(), key=lambda x: -x[1])]
-        lines += ["", "First failures: " + "; ".join(f"{c}: {_fmt(str(e))}"
-                                                     for c, e in errors[:5]), ""]
+        lines += ["", "First failures:", ""] + [f"- {c}: {e}" for c, e in errors[:5]] + [""]
     plots = _plots(plots_dir, spec, cols)
     if plots:
         lines += ["## Plots", ""] + [f"![{p.stem}](plots/{p.name})" for p in plots] + [""]
