@@ -155,6 +155,8 @@ class Study:
                 folder holding another study.
             KeyboardInterrupt: after writing every finished row and the table.
         """
+        if out is not None:  # a folder that cannot take the study: before any cluster
+            ResultsFolder(out).check(self.spec, resume)
         if client is None and out is not None and self._nothing_to_run(out):
             return self._drive(_LoopRunner(), out, resume, progress, on_case)  # no cluster
         own_cluster = own_client = None

@@ -105,6 +105,24 @@ class ResultsFolder:
             StudyError: ``--resume`` without a study in the folder, or the folder holds
                 another study (another name), or is a file.
         """
+        self.check(spec, resume)
+        self.path.mkdir(parents=True, exist_ok=True)
+        write_atomic(self.path / "study.json", dumps({
+            "name": spec.name, "study_file": str(Path(spec.file).resolve()),
+            "base_file": spec.base_file, "base_sha256": spec.base_text_hash,
+            "mode": spec.mode, "metrics": list(spec.metrics), "parameters": spec.varied,
+            "n_cases": len(cases),
+            "cases": [{"case_id": c.case_id, "key": c.key, "params": c.params,
+                       "overrides": c.overrides} for c in cases],
+        }))
+        return self.finished(cases)
+
+    def check(self, spec, resume: bool) -> None:
+        """Check, writing nothing, that the folder may receive this study.
+
+        Raises:
+            StudyError: see :meth:`prepare`.
+        """
         study_file = self.path / "study.json"
         if self.path.exists() and not self.path.is_dir():
             raise StudyError(str(self.path), "--out", "exists and is not a folder")
@@ -123,16 +141,6 @@ class ResultsFolder:
         elif self.path.is_dir() and any(self.path.iterdir()):
             raise StudyError(str(self.path), "--out", "exists and is not empty, and holds no "
                              "study: choose another folder")
-        self.path.mkdir(parents=True, exist_ok=True)
-        write_atomic(study_file, dumps({
-            "name": spec.name, "study_file": str(Path(spec.file).resolve()),
-            "base_file": spec.base_file, "base_sha256": spec.base_text_hash,
-            "mode": spec.mode, "metrics": list(spec.metrics), "parameters": spec.varied,
-            "n_cases": len(cases),
-            "cases": [{"case_id": c.case_id, "key": c.key, "params": c.params,
-                       "overrides": c.overrides} for c in cases],
-        }))
-        return self.finished(cases)
 
     def finished(self, cases) -> dict[str, dict]:
         """``{case_id: row}`` of the cases whose row is written with their current key."""

@@ -37,7 +37,13 @@ def test_bad_study_is_a_clear_error(tmp_path, capsys):
     assert "did you mean 'mass'" in err and not (tmp_path / "o").exists()
 
 
-def test_resume_needs_a_study_and_out_must_hold_this_study(tmp_path, capsys):
+def test_resume_needs_a_study_and_out_must_hold_this_study(tmp_path, capsys, monkeypatch):
+    import multiarm_pin.study.execution as execution
+
+    def no_cluster(workers):
+        raise AssertionError("a cluster was started for a study that cannot run")
+
+    monkeypatch.setattr(execution, "local_cluster", no_cluster)
     study = tiny_grasp_study(tmp_path)
     assert main(["sweep", str(study), "--out", str(tmp_path / "o"), "--resume"]) == 2
     assert "no study to resume" in capsys.readouterr().err
