@@ -58,7 +58,7 @@ def _rows_written(out) -> int:
     return len(list((out / "cases").glob("*/row.json"))) if (out / "cases").is_dir() else 0
 
 
-def test_sigint_then_resume_runs_no_finished_case_again(tmp_path):
+def test_sigint_then_resume_runs_no_finished_case_again(tmp_path, warm_kernels):
     study = tiny_simulation_study(tmp_path, masses=(2.0, 3.0, 4.0, 5.0), samples=2)
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "multiarm_pin.cli", "sweep", str(study), "--out", str(out),

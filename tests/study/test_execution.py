@@ -23,7 +23,7 @@ TIMING = ("wall_time",)  # measured, not computed: differs between two runs of a
 
 
 @pytest.fixture(scope="module")
-def client():
+def client(warm_kernels):
     from distributed import Client
 
     cluster = local_cluster(2)
