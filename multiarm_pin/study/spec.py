@@ -278,7 +278,11 @@ def _case_key(base_hash: str, mode: str, metrics, overrides: dict) -> str:
 
 
 def _scalar(v):
-    a = np.asarray(v, dtype=float)
+    """A table cell for a parameter value: a float, a string, or JSON text of a vector."""
+    try:
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        return v if isinstance(v, str) else json.dumps(v, sort_keys=True)
     return float(a) if a.ndim == 0 else json.dumps(a.tolist())
 
 

@@ -129,3 +129,15 @@ def test_invalid_base_file_is_a_study_error(tmp_path):
                                "parameters": [{"path": "object.mass", "grid": [1]}]})
     with pytest.raises(StudyError, match="invalid base file"):
         load_study(p)
+
+
+def test_grids_of_names_and_vectors_are_table_cells(tmp_path):
+    p = write_study(tmp_path, {
+        "base": str(SCENARIOS / "two_ur5_box.yaml"),
+        "parameters": [{"path": "simulation.solver", "grid": ["object_first", "dense_kkt"]},
+                       {"path": "arms[0].base.position", "grid": [[0, 0.5, 0], [0, 0.6, 0]]}]})
+    cases = load_study(p).cases()
+    assert [c.params["simulation.solver"] for c in cases] == ["object_first"] * 2 + \
+        ["dense_kkt"] * 2
+    assert cases[1].params["arms[0].base.position"] == "[0.0, 0.6, 0.0]"
+    assert cases[1].overrides["arms[0].base.position"] == [0, 0.6, 0]
