@@ -17,7 +17,7 @@ Figures (ratios within this run): throughput ``2 vs 1 workers = t(dask1) / t(das
 
 Usage::
 
-    .venv/bin/python benchmarks/studies.py --out benchmarks/results        # ~2-4 min
+    .venv/bin/python benchmarks/studies.py --out benchmarks/results        # ~3-5 min
     .venv/bin/python benchmarks/studies.py --cases 4 --duration 0.1 --out /tmp/b   # smoke
 """
 
@@ -104,8 +104,9 @@ def timed_dask(study: Study, workers: int, folder: Path, duration: float) -> dic
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", type=int, default=12, help="cases in the study (default 12)")
-    ap.add_argument("--duration", type=float, default=0.4,
-                    help="simulated seconds per case (default 0.4: ~1 s of work per case)")
+    ap.add_argument("--duration", type=float, default=0.1,
+                    help="simulated seconds per case (default 0.1: with building the arms "
+                         "and the inverse kinematics, ~1-2 s of work per case)")
     ap.add_argument("--out", default="benchmarks/results", help="output folder")
     args = ap.parse_args(argv)
     out = Path(args.out)
