@@ -13,6 +13,7 @@ For a state ``(q, v)`` :meth:`Arm.terms` computes, once, everything the dynamics
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -22,10 +23,12 @@ import pinocchio as pin
 from multiarm_pin.exceptions import (
     FrameNotFoundError,
     InputError,
+    JointNotFoundError,
     RobotNotFoundError,
     SingularityError,
     URDFError,
 )
+from multiarm_pin.robots import ROBOTS
 from multiarm_pin.spatial import as_array
 
 TOOL_FRAME_NAME = "multiarm_tool"
@@ -35,25 +38,73 @@ LAMBDA_CONDITION_LIMIT = 1e10
 """Largest condition number of ``Λ⁻¹`` for which the operational-space inertia ``Λ`` exists."""
 
 ROBOT_DEFAULTS: dict[str, dict] = {
-    "ur3": {"tool_frame": "tool0"},
-    "ur5": {"tool_frame": "tool0"},
-    "ur10": {"tool_frame": "tool0"},
-    "ur5_limited": {"tool_frame": "tool0"},
-    "ur10_limited": {"tool_frame": "tool0"},
-    "panda": {
-        "tool_frame": "panda_hand_tcp",
-        "locked_joints": ("panda_finger_joint1", "panda_finger_joint2"),
-    },
-    "panda_collision": {
-        "tool_frame": "panda_hand_tcp",
-        "locked_joints": ("panda_finger_joint1", "panda_finger_joint2"),
-    },
-    "kinova": {"tool_frame": None},
-    "xarm7": {"tool_frame": None},
-    "z1": {"tool_frame": None},
+    e.name: {"tool_frame": e.tool_frame, "locked_joints": e.locked_joints}
+    for e in ROBOTS.values()
 }
-"""Fixed-base arms of ``example_robot_data`` known to work, with their default tool frame and
-the joints locked at their neutral value (grippers)."""
+"""Fixed-base arms of ``example_robot_data`` (:data:`multiarm_pin.robots.ROBOTS`) with their
+default tool frame and the joints locked at their neutral value (grippers)."""
+
+
+def frame_id(model: pin.Model, name: str, source: str = "") -> int:
+    """Id of the frame called ``name``; when several share it, the body frame (then any).
+
+    Some URDFs give a link and its parent joint the same name (Unitree Z1's
+    ``gripperStator``), which ``model.getFrameId(name)`` refuses.
+
+    Raises:
+        FrameNotFoundError: no frame has that name (lists the frames).
+    """
+    ids = [i for i, f in enumerate(model.frames) if f.name == name]
+    if not ids:
+        raise FrameNotFoundError(name, [f.name for f in model.frames], source)
+    for kind in (pin.FrameType.OP_FRAME, pin.FrameType.BODY):
+        for i in ids:
+            if model.frames[i].type == kind:
+                return i
+    return ids[0]
+
+
+@functools.cache
+def _load_example_robot(robot: str) -> tuple[pin.Model, pin.GeometryModel]:
+    """``example_robot_data.load(robot)``'s model and visual model, loaded once per process.
+
+    Loading parses the URDF and reads every mesh (seconds for some robots); callers never
+    modify the cached objects (reducing and appending them makes copies).
+    """
+    import example_robot_data as erd
+
+    wrapper = erd.load(robot)
+    return wrapper.model, wrapper.visual_model
+
+
+def _unique_frame_names(model: pin.Model) -> pin.Model:
+    """A copy of ``model`` whose frames have unique names (``pin.appendModel`` needs them).
+
+    A frame sharing its name with a body frame is renamed ``<name>_<type>`` (Unitree Z1's
+    fixed joint ``gripperStator`` becomes ``gripperStator_fixed_joint``); the body keeps it.
+    """
+    names = [f.name for f in model.frames]
+    if len(set(names)) == len(names):
+        return model
+    model = model.copy()
+    for i, n in enumerate(names):
+        if names.count(n) > 1 and i != frame_id(model, n):
+            fr = model.frames[i]
+            fr.name = f"{n}_{str(fr.type).split('.')[-1].lower()}"
+            model.frames[i] = fr
+    return model
+
+
+def _lock(model: pin.Model, visual, joints, source: str):
+    """Lock ``joints`` at their neutral value; returns ``(model, visual)``."""
+    missing = [j for j in joints if not model.existJointName(j)]
+    if missing:
+        raise JointNotFoundError(missing, list(model.names)[1:], source)
+    ids = [model.getJointId(j) for j in joints]
+    q_ref = pin.neutral(model)
+    if visual is not None:
+        return pin.buildReducedModel(model, visual, ids, q_ref)
+    return pin.buildReducedModel(model, ids, q_ref), None
 
 
 def available_robots() -> list[str]:
@@ -189,6 +240,7 @@ class Arm:
             raise FrameNotFoundError(tool_frame, names, source or name)
         if model.njoints > 1 and model.joints[1].shortname() == "JointModelFreeFlyer":
             raise InputError(f"{source or name}: a free-floating robot is not an arm")
+        model = _unique_frame_names(model)
         world = pin.Model()
         world.gravity = model.gravity
         if visual_model is not None:
@@ -197,11 +249,12 @@ class Arm:
             )
         else:
             placed, placed_visual = pin.appendModel(world, model, 0, base), None
-        parent = placed.frames[placed.getFrameId(tool_frame)]
+        parent_id = frame_id(placed, tool_frame, source or name)
+        parent = placed.frames[parent_id]
         frame = pin.Frame(
             TOOL_FRAME_NAME,
             parent.parentJoint,
-            placed.getFrameId(tool_frame),
+            parent_id,
             parent.placement * offset,
             pin.FrameType.OP_FRAME,
         )
@@ -226,32 +279,39 @@ class Arm:
         name: str | None = None,
         base_placement: pin.SE3 | None = None,
         tool_offset: pin.SE3 | None = None,
+        locked_joints: tuple[str, ...] = (),
         load_visuals: bool = True,
     ) -> Arm:
         """Load an arm from ``example_robot_data`` (``ur5``, ``ur10``, ``panda``, ...).
 
-        The Panda's finger joints are locked (``pin.buildReducedModel``) at their neutral value.
+        The registry (:data:`multiarm_pin.robots.ROBOTS`) gives the default tool frame (the
+        flange or the hand) and the gripper joints locked at their neutral value
+        (``pin.buildReducedModel``); ``locked_joints`` locks more.
+
+        Args:
+            robot: registered name (:func:`available_robots`).
+            tool_frame: frame of the tool (default: the registry's).
+            name: the arm's name (default: ``robot``).
+            base_placement: world placement of the robot's root.
+            tool_offset: tool placement relative to ``tool_frame``.
+            locked_joints: extra joints to lock at their neutral value.
+            load_visuals: also load the visual geometry (meshes) for the replay.
 
         Raises:
             RobotNotFoundError: unknown name (the message lists :func:`available_robots`).
             FrameNotFoundError: ``tool_frame`` missing (the message lists the frames).
+            JointNotFoundError: a locked joint is not a joint of the robot (lists them).
         """
-        if robot not in ROBOT_DEFAULTS:
+        if robot not in ROBOTS:
             raise RobotNotFoundError(robot, available_robots())
-        import example_robot_data as erd
-
-        defaults = ROBOT_DEFAULTS[robot]
-        wrapper = erd.load(robot)
-        model, visual = wrapper.model, wrapper.visual_model
-        locked = defaults.get("locked_joints", ())
+        entry = ROBOTS[robot]
+        model, visual = _load_example_robot(robot)
+        locked = tuple(dict.fromkeys((*entry.locked_joints, *locked_joints)))
         if locked:
-            ids = [model.getJointId(j) for j in locked]
-            q_ref = pin.neutral(model)
-            model, visual = pin.buildReducedModel(model, visual, ids, q_ref)
-        frame = tool_frame or defaults.get("tool_frame") or model.frames[-1].name
+            model, visual = _lock(model, visual, locked, f"example_robot_data:{robot}")
         return cls.from_model(
             model,
-            frame,
+            tool_frame or entry.tool_frame,
             name=name or robot,
             base_placement=base_placement,
             tool_offset=tool_offset,
@@ -307,16 +367,7 @@ class Arm:
             except Exception:  # meshes missing: the arm still simulates, without visuals
                 visual = None
         if locked_joints:
-            missing = [j for j in locked_joints if not model.existJointName(j)]
-            if missing:
-                raise InputError(
-                    f"{path}: locked joints {missing} not found; joints: {list(model.names)[1:]}"
-                )
-            ids = [model.getJointId(j) for j in locked_joints]
-            if visual is not None:
-                model, visual = pin.buildReducedModel(model, visual, ids, pin.neutral(model))
-            else:
-                model = pin.buildReducedModel(model, ids, pin.neutral(model))
+            model, visual = _lock(model, visual, locked_joints, str(path))
         return cls.from_model(
             model,
             tool_frame,
@@ -367,10 +418,9 @@ class Arm:
     def frame_placement(self, q, frame: str) -> pin.SE3:
         """World placement of any frame of the arm at configuration ``q`` (nq,)."""
         q, _ = self.check_state(q)
-        if not self.model.existFrame(frame):
-            raise FrameNotFoundError(frame, self.frame_names, self.source or self.name)
+        fid = frame_id(self.model, frame, self.source or self.name)
         pin.framesForwardKinematics(self.model, self.data, q)
-        return pin.SE3(self.data.oMf[self.model.getFrameId(frame)])
+        return pin.SE3(self.data.oMf[fid])
 
     def terms(self, q, v=None) -> ArmTerms:
         """All dynamic terms at ``(q, v)``, each computed once by Pinocchio.

@@ -62,11 +62,22 @@ def _info(args: argparse.Namespace) -> int:
     return 0
 
 
+def _version() -> str:
+    """The installed package version (the source tree's when not installed)."""
+    from multiarm_pin import __version__
+
+    return __version__
+
+
 def _build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="multiarm-pin",
         description="Multi-arm manipulation of large objects: grasp analysis, dynamics, replay.",
+        epilog="exit codes: 0 done, 1 run failed (partial results kept), 2 bad input, "
+               "130 interrupted (partial results kept)",
     )
+    parser.add_argument("--version", action="version",
+                        version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     from multiarm_pin.grasp import cli as grasp_cli
@@ -92,6 +103,8 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="results/demo", help="output folder (default results/demo)")
     p.add_argument("--duration", type=float, default=None, help="override the duration [s]")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace a results folder of another scenario file")
     p.set_defaults(func=_demo)
 
     p = sub.add_parser("info", help="print key quantities of two arms and an object")
@@ -108,12 +121,17 @@ def _demo(args: argparse.Namespace) -> int:
         solver=None,
         duration=args.duration,
         quiet=args.quiet,
+        overwrite=args.overwrite,
     )
     return runner.run_command(ns)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``multiarm-pin``; returns the exit code."""
+    """Entry point of ``multiarm-pin``; returns the exit code.
+
+    0 done; 1 a run failed after its simulation started; 2 bad input (the message names the
+    file, the key path and what was expected); 130 interrupted (Ctrl-C).
+    """
     parser = _build_parser()
     args = parser.parse_args(argv)
     try:
@@ -121,6 +139,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except MultiArmError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

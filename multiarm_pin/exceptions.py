@@ -114,6 +114,64 @@ class ScenarioError(MultiArmError, ValueError):
         super().__init__(f"{self.file}: {key}: {message}" if key else f"{self.file}: {message}")
 
 
+class OutputError(MultiArmError, OSError):
+    """The results folder cannot be used (a file, another run's results, not writable...)."""
+
+
+class RunFailedError(MultiArmError):
+    """A run failed after its simulation had started; what it simulated was written.
+
+    Attributes:
+        t_end: the last simulated time [s] kept in the partial results.
+        out_dir: the results folder holding the partial run (None if nothing was written).
+        reason: the message of the error that stopped the simulation.
+    """
+
+    def __init__(self, message: str, t_end: float | None, out_dir=None, reason: str = ""):
+        self.t_end = t_end
+        self.out_dir = out_dir
+        self.reason = reason or message
+        super().__init__(message)
+
+
+class RunInterrupted(KeyboardInterrupt):  # noqa: N818 (a KeyboardInterrupt, not an error)
+    """A run was interrupted (Ctrl-C or SIGTERM); what it simulated was written.
+
+    Attributes:
+        t_end: the last simulated time [s] kept (None if the simulation had not started).
+        out_dir: the results folder holding the partial run (None if nothing was written).
+        signal_name: ``"SIGINT"`` or ``"SIGTERM"``.
+    """
+
+    def __init__(self, message: str, t_end: float | None = None, out_dir=None,
+                 signal_name: str = "SIGINT"):
+        self.t_end = t_end
+        self.out_dir = out_dir
+        self.signal_name = signal_name
+        super().__init__(message)
+
+
+class JointNotFoundError(MultiArmError, KeyError):
+    """Joint names (e.g. ``locked_joints``) that a model does not have.
+
+    Attributes:
+        joints: the missing names.
+        available: the model's joint names.
+        source: where the model came from.
+    """
+
+    def __init__(self, joints: Sequence[str], available: Sequence[str], source: str = ""):
+        self.joints = list(joints)
+        self.available = list(available)
+        self.source = source
+        where = f" in {source}" if source else ""
+        super().__init__(f"joints {self.joints} not found{where}; joints: "
+                         f"{', '.join(self.available)}")
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
 class StudyError(ScenarioError):
     """A study file (``multiarm-pin sweep``), or the way it is run, is invalid.
 

@@ -30,8 +30,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from multiarm_pin.arm import frame_id
 from multiarm_pin.exceptions import FrameNotFoundError, InputError, MultiArmError
-from multiarm_pin.spatial import as_array
+from multiarm_pin.spatial import as_array, skew
 
 IK_TOLERANCE = 1e-10
 """Default largest primary residual norm accepted as converged [m or rad]."""
@@ -80,37 +81,78 @@ class PoseTarget:
 
 @dataclass(frozen=True)
 class PointTarget:
-    """A frame's origin at a world point.
+    """A point fixed to a frame (its origin by default) at a world point.
 
     Attributes:
         frame: frame name in the model.
         point: (3,) target position in the world [m].
         primary: must be met (True) or is a preference (False).
+        offset: (3,) the point in the frame's local axes [m] (None: the origin).
     """
 
     frame: str
     point: np.ndarray
     primary: bool = True
+    offset: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class AxisTarget:
+    """A direction fixed to a frame along a world direction (2 constraints).
+
+    Residual ``R_f(q) a_local - a_world`` (3,); its Jacobian ``-[R_f a_local]_× J_ω``.
+
+    Attributes:
+        frame: frame name in the model.
+        axis_local: (3,) unit direction in the frame's axes.
+        axis_world: (3,) unit direction in the world.
+        primary: must be met (True) or is a preference (False).
+    """
+
+    frame: str
+    axis_local: np.ndarray
+    axis_world: np.ndarray
+    primary: bool = True
+
+
+@dataclass(frozen=True)
+class PostureTarget:
+    """A preference for configurations near ``q_ref``: residual ``weight · (q ⊖ q_ref)`` (nv,).
+
+    Always secondary; it picks, among the configurations meeting the primary targets, one
+    near the seed (a continuous family for a spherical joint, a branch for a weld).
+
+    Attributes:
+        q_ref: (nq,) preferred configuration.
+        weight: scale relative to the other secondary targets.
+    """
+
+    q_ref: np.ndarray
+    weight: float = 0.1
+    primary: bool = False
 
 
 @dataclass(frozen=True)
 class PlaneTarget:
-    """A frame's origin on the plane ``normal · x = offset`` (world).
+    """A point fixed to a frame (its origin by default) on the plane ``normal · x = offset``.
 
     Attributes:
         frame: frame name in the model.
         normal: (3,) unit normal in world axes.
         offset: plane offset ``d`` [m].
         primary: must be met (True) or is a preference (False).
+        point: (3,) the point in the frame's local axes [m] (None: the origin).
     """
 
     frame: str
     normal: np.ndarray
     offset: float
     primary: bool = True
+    point: np.ndarray | None = None
 
 
-Target = PoseTarget | PointTarget | PlaneTarget
+Target = PoseTarget | PointTarget | PlaneTarget | AxisTarget | PostureTarget
+_TARGET_TYPES = (PoseTarget, PointTarget, PlaneTarget, AxisTarget, PostureTarget)
 
 
 @dataclass(frozen=True)
@@ -134,6 +176,18 @@ class IKResult:
     at_limit: np.ndarray
 
 
+def _local_point(point, label: str) -> np.ndarray:
+    return np.zeros(3) if point is None else as_array(point, (3,), f"{label} local point")
+
+
+def _unit(v, label: str) -> np.ndarray:
+    v = as_array(v, (3,), label)
+    n = float(np.linalg.norm(v))
+    if n < 1e-12:
+        raise InputError(f"{label}: direction is zero")
+    return v / n
+
+
 class _Problem:
     """Targets resolved to frame ids, with residual/Jacobian evaluation."""
 
@@ -143,26 +197,35 @@ class _Problem:
         names = [f.name for f in model.frames]
         self.items = []
         for k, tgt in enumerate(targets):
-            if not isinstance(tgt, PoseTarget | PointTarget | PlaneTarget):
+            if not isinstance(tgt, _TARGET_TYPES):
                 raise InputError(
-                    f"IK target {k}: expected PoseTarget, PointTarget or PlaneTarget, "
-                    f"got {type(tgt).__name__}"
+                    f"IK target {k}: expected one of "
+                    f"{', '.join(t.__name__ for t in _TARGET_TYPES)}, got {type(tgt).__name__}"
                 )
+            if isinstance(tgt, PostureTarget):
+                q_ref = as_array(tgt.q_ref, (model.nq,), f"IK target {k} (posture) q_ref")
+                self.items.append((tgt, -1, (q_ref, float(tgt.weight))))
+                continue
             if not model.existFrame(tgt.frame):
                 raise FrameNotFoundError(tgt.frame, names, model.name)
-            fid = model.getFrameId(tgt.frame)
+            fid = frame_id(model, tgt.frame)
+            label = f"IK target {k} ({tgt.frame})"
             if isinstance(tgt, PoseTarget):
                 if not isinstance(tgt.placement, pin.SE3):
                     raise InputError(f"IK target {k}: placement must be a pin.SE3")
                 data = tgt.placement.copy()
             elif isinstance(tgt, PointTarget):
-                data = as_array(tgt.point, (3,), f"IK target {k} ({tgt.frame}) point")
+                data = (as_array(tgt.point, (3,), f"{label} point"),
+                        _local_point(tgt.offset, label))
+            elif isinstance(tgt, AxisTarget):
+                data = (_unit(tgt.axis_local, f"{label} axis_local"),
+                        _unit(tgt.axis_world, f"{label} axis_world"))
             else:
-                n = as_array(tgt.normal, (3,), f"IK target {k} ({tgt.frame}) normal")
+                n = as_array(tgt.normal, (3,), f"{label} normal")
                 norm = np.linalg.norm(n)
                 if norm < 1e-12:
-                    raise InputError(f"IK target {k} ({tgt.frame}): plane normal is zero")
-                data = (n / norm, float(tgt.offset) / norm)
+                    raise InputError(f"{label}: plane normal is zero")
+                data = (n / norm, float(tgt.offset) / norm, _local_point(tgt.point, label))
             self.items.append((tgt, fid, data))
         # joint-limit clipping only on one-coordinate joints (revolute/prismatic)
         lo = np.full(model.nq, -np.inf)
@@ -174,6 +237,11 @@ class _Problem:
         lo[~np.isfinite(lo) | (lo < -1e10)] = -np.inf
         hi[~np.isfinite(hi) | (hi > 1e10)] = np.inf
         self.lower, self.upper = lo, hi
+        # one-coordinate revolute joints: q and q ± 2π place every frame the same
+        self.revolute = [j.idx_q for j in model.joints[1:] if j.nq == 1
+                         and (j.shortname().startswith("JointModelR")
+                              and not j.shortname().startswith("JointModelRUB")
+                              or j.shortname() == "JointModelRevoluteUnaligned")]
 
     def evaluate(self, q: np.ndarray, primary_only: bool, w2: float):
         """Stacked weighted residual, Jacobian, and the primary/secondary residual norms."""
@@ -185,6 +253,13 @@ class _Problem:
         for tgt, fid, tdata in self.items:
             if primary_only and not tgt.primary:
                 continue
+            if isinstance(tgt, PostureTarget):
+                q_ref, weight = tdata
+                e = weight * pin.difference(model, q_ref, q)
+                J = weight * pin.dDifference(model, q_ref, q, pin.ArgumentPosition.ARG1)
+                es.append(w2 * e)
+                Js.append(w2 * J)
+                continue
             oMf = data.oMf[fid]
             if isinstance(tgt, PoseTarget):
                 dM = tdata.actInv(oMf)
@@ -193,16 +268,23 @@ class _Problem:
                     model, data, fid, pin.ReferenceFrame.LOCAL
                 )
             else:
-                Jl = pin.getFrameJacobian(
-                    model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-                )[:3]
-                if isinstance(tgt, PointTarget):
-                    e = oMf.translation - tdata
-                    J = Jl
+                J6 = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+                if isinstance(tgt, AxisTarget):
+                    a = oMf.rotation @ tdata[0]
+                    e = a - tdata[1]
+                    J = -skew(a) @ J6[3:]
                 else:
-                    n, d = tdata
-                    e = np.array([n @ oMf.translation - d])
-                    J = n[None, :] @ Jl
+                    local = tdata[-1]
+                    r = oMf.rotation @ local
+                    p = oMf.translation + r
+                    Jp = J6[:3] - skew(r) @ J6[3:]
+                    if isinstance(tgt, PointTarget):
+                        e = p - tdata[0]
+                        J = Jp
+                    else:
+                        n, d = tdata[0], tdata[1]
+                        e = np.array([n @ p - d])
+                        J = n[None, :] @ Jp
             if tgt.primary:
                 p2 += float(e @ e)
                 w = 1.0
@@ -264,17 +346,23 @@ def solve_ik(
 
     Args:
         model: the Pinocchio model (its frames' world placements are the targets' frame).
-        targets: :class:`PoseTarget` / :class:`PointTarget` / :class:`PlaneTarget` list.
+        targets: :class:`PoseTarget`, :class:`PointTarget`, :class:`PlaneTarget`,
+            :class:`AxisTarget`, :class:`PostureTarget` (a preference for the seed's
+            neighbourhood).
         q_seed: (nq,) starting configuration (default: the neutral one clipped to limits).
         tol: largest primary residual norm accepted [m, rad].
         max_iter: iterations per phase.
-        restarts: extra attempts from the seed perturbed (uniformly, ±0.5 rad, seeded) when
-            the first one fails; the best is kept.
-        seed: random seed of the perturbations.
+        restarts: when the seed fails, the seed moved by ±0.5 rad along each joint in turn
+            is tried (2 nv attempts; of the successes the one nearest the seed is kept: a
+            symmetric set, so mirror-symmetric seeds give mirror-symmetric results), then, if
+            none succeeded, up to ``restarts`` random perturbations (uniform ±0.5 rad).
+        seed: random seed of the random perturbations.
         what: label for the error message (e.g. ``"arms[1] (left): tool placement"``).
 
     Returns:
-        :class:`IKResult`; ``q`` respects the joint position limits.
+        :class:`IKResult`; ``q`` respects the joint position limits, and each revolute
+        coordinate is the one of its whole-turn equivalents (``± 2π``) within the limits
+        nearest to the seed.
 
     Raises:
         InputError: bad seed or targets; FrameNotFoundError: unknown frame.
@@ -290,25 +378,48 @@ def solve_ik(
         q0 = as_array(q_seed, (model.nq,), f"{what}: q_seed (nq={model.nq})")
     q0 = np.clip(q0, problem.lower, problem.upper)
     has_secondary = any(not t.primary for t, _, _ in problem.items)
-    rng = np.random.default_rng(seed)
-    best = None
     total_it = 0
-    attempts = 0
-    for attempt in range(restarts + 1):
-        attempts = attempt
-        if attempt == 0:
-            q = q0.copy()
-        else:
-            q = problem.step(q0, rng.uniform(-0.5, 0.5, model.nv))
+
+    def attempt(q: np.ndarray) -> tuple[np.ndarray, float]:
+        nonlocal total_it
         if has_secondary:
             q, _, _, it = _lm(problem, q, False, SECONDARY_WEIGHT, max_iter, tol)
             total_it += it
         q, pn, _, it = _lm(problem, q, True, 0.0, max_iter, tol)
         total_it += it
-        if best is None or pn < best[1]:
+        return _nearest_turn(problem, q, q0), pn
+
+    def distance(q: np.ndarray) -> float:
+        return float(np.linalg.norm(pin.difference(model, q0, q)))
+
+    q, pn = attempt(q0.copy())
+    best, attempts = (q, pn), 0
+    if pn >= tol:
+        # the seed moved by ±0.5 rad along each joint in turn: a set that a mirror symmetry
+        # (joint signs flipped) maps onto itself, so symmetric seeds keep symmetric results;
+        # of the successes, the one nearest the seed wins
+        found = []
+        for k in range(2 * model.nv):
+            dq = np.zeros(model.nv)
+            dq[k // 2] = 0.5 if k % 2 == 0 else -0.5
+            q, pn = attempt(problem.step(q0, dq))
+            attempts += 1
+            if pn < tol:
+                found.append((distance(q), k, q, pn))
+            elif pn < best[1]:
+                best = (q, pn)
+        if found:
+            _, _, q, pn = min(found, key=lambda f: (round(f[0], 9), f[1]))
             best = (q, pn)
-        if pn < tol:
-            break
+        else:
+            rng = np.random.default_rng(seed)
+            for _ in range(restarts):
+                q, pn = attempt(problem.step(q0, rng.uniform(-0.5, 0.5, model.nv)))
+                attempts += 1
+                if pn < best[1]:
+                    best = (q, pn)
+                if pn < tol:
+                    break
     q, pn = best
     if pn >= tol:
         raise UnreachableError(what, pn, q, _describe(problem, q))
@@ -316,6 +427,22 @@ def solve_ik(
     at_limit = (np.abs(q - problem.lower) < 1e-9) | (np.abs(q - problem.upper) < 1e-9)
     return IKResult(q=q, residual=pn, secondary_residual=sn, iterations=total_it,
                     restarts=attempts, at_limit=at_limit)
+
+
+def _nearest_turn(problem: _Problem, q: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
+    """``q`` with each revolute coordinate turned by whole turns (2π) nearest to ``q_ref``.
+
+    Only within the joint's limits; every frame keeps its placement.
+    """
+    q = q.copy()
+    for c in problem.revolute:
+        k = np.round((q_ref[c] - q[c]) / (2 * np.pi))
+        for cand in (q[c] + 2 * np.pi * k, q[c] + 2 * np.pi * (k - np.sign(k))):
+            if problem.lower[c] <= cand <= problem.upper[c]:
+                if abs(cand - q_ref[c]) < abs(q[c] - q_ref[c]):
+                    q[c] = cand
+                break
+    return q
 
 
 def _describe(problem: _Problem, q: np.ndarray) -> str:
@@ -331,12 +458,15 @@ def _describe(problem: _Problem, q: np.ndarray) -> str:
             dp = np.linalg.norm(oMf.translation - tdata.translation)
             parts.append(f"{tgt.frame}: position error {dp:.3g} m, orientation error "
                          f"{np.linalg.norm(err[3:]):.3g} rad")
-        elif isinstance(tgt, PointTarget):
-            parts.append(f"{tgt.frame}: {np.linalg.norm(oMf.translation - tdata):.3g} m from its "
-                         "point")
+        elif isinstance(tgt, AxisTarget):
+            c = float(np.clip((oMf.rotation @ tdata[0]) @ tdata[1], -1.0, 1.0))
+            parts.append(f"{tgt.frame}: axis {np.arccos(c):.3g} rad from its direction")
         else:
-            n, d = tdata
-            parts.append(f"{tgt.frame}: {n @ oMf.translation - d:+.3g} m from its plane")
+            p = oMf.act(tdata[-1])
+            if isinstance(tgt, PointTarget):
+                parts.append(f"{tgt.frame}: {np.linalg.norm(p - tdata[0]):.3g} m from its point")
+            else:
+                parts.append(f"{tgt.frame}: {tdata[0] @ p - tdata[1]:+.3g} m from its plane")
     return "; ".join(parts)
 
 
@@ -375,10 +505,12 @@ def ik_frame_points(arm, frames: Sequence[str], points, q_seed=None, **kwargs) -
 
 __all__ = [
     "IK_TOLERANCE",
+    "AxisTarget",
     "IKResult",
     "PlaneTarget",
     "PointTarget",
     "PoseTarget",
+    "PostureTarget",
     "Target",
     "UnreachableError",
     "ik_frame_points",

@@ -10,7 +10,11 @@
   (T, K, 3) [N] (force on the object, world axes) of the K contacts of all arms in order;
   ``kinetic_energy``, ``potential_energy`` (T,) [J]; ``momentum`` (T, 6).
 - ``summary.json``: scenario name, solver, steps, wall time, max constraint violation,
-  min contact force, warnings (contact separations, solver switches), per-arm details.
+  min contact force, warnings (contact separations, solver switches), ``input_warnings``
+  (legal but suspicious input values, also printed on stderr before the run), per-arm
+  details (tool frame and offset, q0 and where it came from), ``status`` (``complete``,
+  ``failed`` or ``interrupted``), ``error`` (the message, or null) and ``t_end`` (the last
+  simulated time [s]).
 - ``object_pose.png``, ``contact_forces.png``, ``constraint_violation.png``.
 - ``replay.html``: a self-contained Meshcat page replaying the run offline.
 - ``scenario.yaml``: the scenario (URDF paths absolute), so that ``multiarm-pin replay DIR``
@@ -20,8 +24,11 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import signal
 import sys
+import threading
 import time
 import urllib.request
 from dataclasses import dataclass, field
@@ -31,7 +38,15 @@ import numpy as np
 import pinocchio as pin
 import yaml
 
-from multiarm_pin.exceptions import InputError, MultiArmError, ScenarioError
+from multiarm_pin.exceptions import (
+    InputError,
+    MultiArmError,
+    OutputError,
+    RunFailedError,
+    RunInterrupted,
+    ScenarioError,
+)
+from multiarm_pin.results_io import ResultsWriter, prepare_output, safe_component
 from multiarm_pin.scenario import (
     BuiltScenario,
     Scenario,
@@ -40,6 +55,7 @@ from multiarm_pin.scenario import (
     build_scenario,
     load_scenario,
 )
+from multiarm_pin.scenario_checks import input_warnings
 
 REPLAY_FPS = 30
 """Frames per second of the replay page."""
@@ -191,6 +207,10 @@ def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> di
         arms.append({
             "name": arm.name,
             "source": arm.source,
+            "tool_frame": arm.tool_frame,
+            "tool_offset": {"position": [float(x) for x in arm.tool_offset.translation],
+                            "quaternion": [float(x) for x in
+                                           pin.Quaternion(arm.tool_offset.rotation).coeffs()]},
             "nq": arm.nq,
             "joint": spec.joint.type,
             "constraints": int(system.constraint_set.N[i]),
@@ -246,12 +266,21 @@ def replay_parts(arms, obj, trajectory: dict):
     """
     from multiarm_pin.replay import ReplayArm, ReplayContacts, ReplayObject
 
+    def finite(a, limit=1e12):  # a failed run may end on huge or NaN values: drawable
+        return np.clip(np.nan_to_num(np.asarray(a, float), nan=0.0, posinf=limit,
+                                     neginf=-limit), -limit, limit)
+
     rarms = [ReplayArm(a.name, a.model, a.visual_model, pin.SE3.Identity(),
-                       trajectory[f"q_{a.name}"]) for a in arms]
-    robj = ReplayObject(obj.shape, trajectory["object_position"], trajectory["object_quaternion"])
+                       finite(trajectory[f"q_{a.name}"], 1e3)) for a in arms]
+    quat = np.array(trajectory["object_quaternion"], float)
+    bad = ~np.all(np.isfinite(quat), axis=1) | (np.linalg.norm(np.nan_to_num(quat), axis=1)
+                                                 < 1e-9)
+    quat[bad] = [0.0, 0.0, 0.0, 1.0]
+    robj = ReplayObject(obj.shape, finite(trajectory["object_position"], 1e6), quat)
     rc = None
     if trajectory["contact_points"].shape[1] > 0:
-        rc = ReplayContacts(trajectory["contact_points"], trajectory["contact_forces"])
+        rc = ReplayContacts(finite(trajectory["contact_points"], 1e6),
+                            finite(trajectory["contact_forces"]))
     return rarms, robj, rc
 
 
@@ -262,27 +291,67 @@ def _scenario_copy(scenario: Scenario, duration: float, solver: str) -> str:
     return head + yaml.safe_dump(data, sort_keys=False, default_flow_style=None)
 
 
+class _Terminated(KeyboardInterrupt):  # noqa: N818 (an interrupt, not an error)
+    """Raised in the main thread by SIGTERM during a run (handled like Ctrl-C)."""
+
+    signal_name = "SIGTERM"
+
+
+@contextlib.contextmanager
+def _sigterm_interrupts():
+    """SIGTERM raises :class:`_Terminated` inside the block (main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise _Terminated("terminated by SIGTERM")
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
+
+
+def _say(message: str, quiet: bool) -> None:
+    if not quiet:
+        print(message, file=sys.stderr, flush=True)
+
+
 def run_scenario(scenario, out=None, solver: str | None = None, duration: float | None = None,
-                 quiet: bool = True, html: bool = True, plots: bool = True) -> RunOutput:
-    """Simulate a scenario and write its results.
+                 quiet: bool = True, html: bool = True, plots: bool = True,
+                 overwrite: bool = False) -> RunOutput:
+    """Simulate a scenario and write its results, atomically (:mod:`multiarm_pin.results_io`).
+
+    The output folder is checked before anything is simulated. If the simulation fails
+    (a :class:`~multiarm_pin.exceptions.MultiArmError` once it has started) or is interrupted
+    (Ctrl-C / SIGINT, SIGTERM), the samples simulated so far are written with
+    ``summary.json`` ``"status"`` ``"failed"`` or ``"interrupted"``, ``"error"`` and
+    ``"t_end"``, and :class:`~multiarm_pin.exceptions.RunFailedError` or
+    :class:`~multiarm_pin.exceptions.RunInterrupted` is raised (``out_dir`` says where).
 
     Args:
         scenario: a path to a YAML file, or a :class:`Scenario`.
-        out: results folder (created; default ``results/<scenario name>``).
+        out: results folder (default ``results/<scenario name>``, the name made into one safe
+            path component).
         solver: overrides ``simulation.solver``.
-        duration: overrides ``simulation.duration`` [s].
-        quiet: no progress bar.
+        duration: overrides ``simulation.duration`` [s] (not shorter than ``simulation.dt``).
+        quiet: no progress bar and no messages on stderr (warnings are still printed).
         html: write ``replay.html`` (starts a temporary Meshcat server, a few seconds).
         plots: write the PNG plots.
+        overwrite: replace a folder holding the results of another scenario file.
 
     Returns:
-        :class:`RunOutput`.
+        :class:`RunOutput` of a complete run.
 
     Raises:
-        ScenarioError: invalid scenario or overrides.
-        DynamicsError: the simulation failed.
+        ScenarioError: invalid scenario or overrides (before anything is simulated).
+        OutputError: unusable output folder (before anything is simulated).
+        RunFailedError: the simulation failed after it started (partial results written).
+        RunInterrupted: Ctrl-C or SIGTERM (partial results written when there were any).
     """
-    from multiarm_pin.simulation import simulate
+    from multiarm_pin.simulation import default_record_limit, partial_result, record_bytes
 
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     sim = sc.simulation
@@ -293,69 +362,216 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
             raise ScenarioError(sc.file, "--solver", f"unknown solver {solver!r}"
                                 f"{did_you_mean(solver, SOLVER_NAMES)}; expected one of "
                                 f"{', '.join(SOLVER_NAMES)}")
-    if duration is not None and not (np.isfinite(duration) and duration > 0):
-        raise ScenarioError(sc.file, "--duration", f"expected a positive duration [s], got "
-                            f"{duration}")
+    if duration is not None:
+        if not (np.isfinite(duration) and duration > 0):
+            raise ScenarioError(sc.file, "--duration", f"expected a positive duration [s], got "
+                                f"{duration}")
+        if duration < sim.dt:
+            raise ScenarioError(sc.file, "--duration", f"{duration:g} s is shorter than the "
+                                f"time step simulation.dt = {sim.dt:g} s")
     solver = solver or sim.solver
     T = float(duration) if duration is not None else sim.duration
-    dt = min(sim.dt, T)
-    built = build_scenario(sc, load_visuals=html)
-    controller = make_controller(built)
-    out_dir = Path(out) if out is not None else Path("results") / sc.name
-    out_dir.mkdir(parents=True, exist_ok=True)
-    bar = None if quiet else ProgressBar(f"{sc.name}", T)
-    t0 = time.perf_counter()
-    try:
-        result = simulate(built.system, built.initial_state, controller, T, dt,
-                          integrator=sim.integrator, solver=solver, baumgarte=sim.baumgarte,
-                          progress=bar)
-    finally:
-        if bar is not None:
-            bar.close()
-    wall = time.perf_counter() - t0
+    dt = sim.dt
+    target = prepare_output(out if out is not None else Path("results") / safe_component(sc.name),
+                            sc.file, overwrite)
+    with ResultsWriter(target, sc.file) as writer, _sigterm_interrupts():
+        built = build_scenario(sc, load_visuals=html)
+        controller = make_controller(built)
+        n_samples = int(np.floor(T / dt + 1e-9)) + 1
+        need, limit = record_bytes(built.system, n_samples), default_record_limit()
+        if need > limit:
+            key = "--duration" if duration is not None else "simulation.duration"
+            raise ScenarioError(sc.file, key, f"{T:g} s at dt = {dt:g} s is {n_samples} samples "
+                                f"needing ~{need / 2**30:.3g} GiB of memory (limit "
+                                f"{limit / 2**30:.3g} GiB, half the machine's memory); shorten "
+                                "the duration or lengthen simulation.dt")
+        input_warns = input_warnings(built, T)
+        for w in input_warns:
+            print(f"warning: {w}", file=sys.stderr, flush=True)
+        bar = None if quiet else ProgressBar(f"{safe_component(sc.name)}", T)
+        t0 = time.perf_counter()
+        status, error, internal = "complete", None, None
+        try:
+            result = simulate_built(built, controller, T, dt, solver, bar)
+        except KeyboardInterrupt as exc:
+            result, status = partial_result(exc), "interrupted"
+            error = f"interrupted by {getattr(exc, 'signal_name', 'SIGINT')}"
+            signal_name = getattr(exc, "signal_name", "SIGINT")
+            if result is None or len(result.t) == 0:
+                raise RunInterrupted(f"{sc.file}: {error} before the first sample; nothing "
+                                     "written", None, None, signal_name) from None
+        except MultiArmError as exc:
+            result = partial_result(exc)
+            if result is None:  # refused before integrating: an input error
+                raise ScenarioError(sc.file, "", str(exc)) from exc
+            status = "failed"
+            error = f"{sc.file}: simulation failed: {exc}"
+            if len(result.t) == 0:  # the set-up cannot even start: an input error
+                key = "controller" if "controller" in str(exc) else ""
+                raise ScenarioError(sc.file, key, f"the simulation cannot start: {exc}") from exc
+        except Exception as exc:  # a bug: keep what was simulated, then let it surface
+            result, internal = partial_result(exc), exc
+            if result is None or len(result.t) == 0:
+                raise
+            status = "failed"
+            error = f"{sc.file}: internal error (a bug): {type(exc).__name__}: {exc}"
+        finally:
+            if bar is not None:
+                bar.close()
+        wall = time.perf_counter() - t0
+        t_end = float(result.t[-1])
+        try:
+            _say(f"writing results to {target}", quiet)
+            files, traj, summary = _write_results(writer.path, built, result, solver, wall,
+                                                  T, sc, html, plots, status, error,
+                                                  input_warns)
+            writer.publish()
+        except KeyboardInterrupt as exc:
+            name = getattr(exc, "signal_name", "SIGINT")
+            if writer.published:  # the signal was held back during the swap: all written
+                raise RunInterrupted(f"interrupted by {name} just after the results were "
+                                     f"written to {target} (status {status})", t_end, target,
+                                     name) from None
+            raise RunInterrupted(f"interrupted by {name} while writing the results; {target} "
+                                 "left as it was", t_end, None, name) from None
+        except OSError as exc:
+            raise OutputError(f"--out {target}: cannot write the results: "
+                              f"{exc.strerror or exc}") from exc
+    files = {k: target / p.name for k, p in files.items()}
+    if internal is not None:
+        _say(f"partial results (status failed, t_end = {t_end:.6g} s) in {target}", False)
+        raise internal
+    if status == "interrupted":
+        raise RunInterrupted(f"{sc.file}: {error} at t = {t_end:.6g} s of {T:g} s; partial "
+                             f"results in {target}", t_end, target, signal_name)
+    if status == "failed":
+        raise RunFailedError(f"{error}; partial results (t = 0 .. {t_end:.6g} s) in {target}",
+                             t_end, target, error)
+    return RunOutput(target, built, result, traj, summary, files)
+
+
+def simulate_built(built: BuiltScenario, controller, duration: float, dt: float, solver: str,
+                   progress=None):
+    """Simulate a built scenario with its simulation settings (integrator, Baumgarte).
+
+    Args:
+        built: the built scenario.
+        controller: its controller (:func:`make_controller`) or None.
+        duration: simulated time [s].
+        dt: time step [s].
+        solver: forward-dynamics solver name.
+        progress: optional ``callable(fraction)``.
+
+    Returns:
+        The :class:`~multiarm_pin.simulation.SimulationResult`.
+    """
+    from multiarm_pin.simulation import simulate
+
+    sim = built.scenario.simulation
+    with np.errstate(over="ignore", invalid="ignore"):  # NaN/inf are caught and reported
+        return simulate(built.system, built.initial_state, controller, duration, dt,
+                        integrator=sim.integrator, solver=solver, baumgarte=sim.baumgarte,
+                        progress=progress)
+
+
+def _write_results(folder: Path, built: BuiltScenario, result, solver: str, wall: float,
+                   T: float, sc: Scenario, html: bool, plots: bool, status: str,
+                   error: str | None, input_warns: list[str]) -> tuple[dict, dict, dict]:
+    """Write every result file into ``folder``; returns (files by role, arrays, summary)."""
     traj = trajectory_arrays(built, result)
     files = {}
-    files["trajectory"] = out_dir / "trajectory.npz"
+    files["trajectory"] = folder / "trajectory.npz"
     np.savez_compressed(files["trajectory"], **traj)
     summary = summarize(built, result, solver, wall)
-    files["scenario"] = out_dir / "scenario.yaml"
+    summary["input_warnings"] = list(input_warns)
+    summary["requested"]["duration"] = T
+    summary.update(status=status, error=error, t_end=float(result.t[-1]))
+    files["scenario"] = folder / "scenario.yaml"
     files["scenario"].write_text(_scenario_copy(sc, T, solver), encoding="utf-8")
     if plots:
         from multiarm_pin.plots import write_plots
 
-        for p in write_plots(out_dir, traj, [a.name for a in built.arms], sc.name):
+        for p in write_plots(folder, traj, [a.name for a in built.arms], sc.name):
             files[p.stem] = p
     if html:
         from multiarm_pin.replay import write_replay_html
 
         rarms, robj, rc = replay_parts(built.arms, built.obj, traj)
-        files["replay"] = write_replay_html(out_dir / "replay.html", rarms, robj, traj["t"],
+        files["replay"] = write_replay_html(folder / "replay.html", rarms, robj, traj["t"],
                                             rc, fps=REPLAY_FPS)
-    files["summary"] = out_dir / "summary.json"
+    files["summary"] = folder / "summary.json"
     summary["files"] = {k: p.name for k, p in files.items()}
     files["summary"].write_text(json.dumps(summary, indent=2), encoding="utf-8")
-    return RunOutput(out_dir, built, result, traj, summary, files)
+    return files, traj, summary
 
 
 # ----------------------------------------------------------------------------- replay
+REQUIRED_ARRAYS = ("t", "object_position", "object_quaternion", "contact_points",
+                   "contact_forces")
+"""Arrays of ``trajectory.npz`` that the replay needs (besides each arm's ``q_A``)."""
+
+
 def load_run(run_dir) -> tuple[Scenario, dict, dict]:
     """Read a results folder: its scenario copy, trajectory arrays and summary.
 
+    A partial run (``summary.json`` ``"status"`` ``"failed"`` or ``"interrupted"``) loads
+    like a complete one; its arrays end at ``"t_end"``.
+
     Raises:
-        InputError: the folder or one of its files is missing.
+        InputError: the folder or one of its files is missing, empty, truncated or not what
+            ``multiarm-pin run`` writes (names the file and what was expected).
     """
+    import zipfile
+
     d = Path(run_dir)
     missing = [f for f in ("scenario.yaml", "trajectory.npz") if not (d / f).is_file()]
     if not d.is_dir() or missing:
         raise InputError(f"{d}: not a results folder of 'multiarm-pin run' (missing "
                          f"{', '.join(missing) or 'folder'})")
     sc = load_scenario(d / "scenario.yaml")
-    with np.load(d / "trajectory.npz") as z:
-        traj = {k: z[k] for k in z.files}
+    f = d / "trajectory.npz"
+    try:
+        with np.load(f, allow_pickle=False) as z:
+            traj = {k: z[k] for k in z.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:
+        size = f.stat().st_size
+        raise InputError(f"{f}: not a readable trajectory ({size} bytes; empty or truncated, "
+                         f"e.g. by an interrupted write): {type(exc).__name__}: {exc}; expected "
+                         "the numpy .npz archive written by 'multiarm-pin run'") from None
+    needed = [*REQUIRED_ARRAYS, *(f"q_{a.name}" for a in sc.arms)]
+    absent = [k for k in needed if k not in traj]
+    if absent:
+        raise InputError(f"{f}: missing arrays {absent}; expected those written by "
+                         "'multiarm-pin run'")
+    T = len(traj["t"])
+    if T == 0:
+        raise InputError(f"{f}: holds no samples (t is empty)")
+    bad = [k for k in needed if len(traj[k]) != T]
+    if bad:
+        raise InputError(f"{f}: arrays {bad} do not have {T} samples like 't'")
     summary = {}
-    if (d / "summary.json").is_file():
-        summary = json.loads((d / "summary.json").read_text(encoding="utf-8"))
+    sf = d / "summary.json"
+    if sf.is_file():
+        try:
+            summary = json.loads(sf.read_text(encoding="utf-8"))
+        except (UnicodeDecodeError, ValueError) as exc:
+            raise InputError(f"{sf}: not valid JSON ({exc})") from None
+        if not isinstance(summary, dict):
+            raise InputError(f"{sf}: expected a JSON object")
     return sc, traj, summary
+
+
+def run_status(summary: dict) -> str:
+    """One line describing a run's status from its summary (``complete`` or partial)."""
+    status = summary.get("status", "complete")
+    if status == "complete":
+        return "complete run"
+    t_end = summary.get("t_end")
+    requested = (summary.get("requested") or {}).get("duration")
+    when = f" at t = {t_end:.6g} s" if isinstance(t_end, int | float) else ""
+    of = f" of {requested:g} s" if isinstance(requested, int | float) else ""
+    why = f": {summary['error']}" if summary.get("error") else ""
+    return f"partial run ({status}{when}{of}){why}"
 
 
 def serve_run(run_dir, fps: float = REPLAY_FPS, open_browser: bool = False):
@@ -395,19 +611,47 @@ def configure_run_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--no-html", dest="html", action="store_false",
                    help="skip the replay page (faster)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace a results folder of another scenario file")
 
 
 def run_command(args: argparse.Namespace) -> int:
-    """``multiarm-pin run``: simulate, write results, print where they are."""
+    """``multiarm-pin run``: simulate, write results, print where they are.
+
+    Returns:
+        0 for a complete run, 1 for a run that failed after its simulation started, 130 for
+        an interrupted run (Ctrl-C, SIGTERM); partial results are written in both cases.
+    """
     html = getattr(args, "html", True)
-    res = run_scenario(args.scenario, args.out, args.solver, args.duration,
-                       quiet=bool(args.quiet), html=html)
+    try:
+        res = run_scenario(args.scenario, args.out, args.solver, args.duration,
+                           quiet=bool(args.quiet), html=html,
+                           overwrite=bool(getattr(args, "overwrite", False)))
+    except RunFailedError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        if exc.out_dir is not None:
+            print(f"partial results (status failed, t_end = {exc.t_end:.6g} s): {exc.out_dir}; "
+                  f"replay them with: multiarm-pin replay {exc.out_dir}", file=sys.stderr)
+        return 1
+    except RunInterrupted as exc:
+        print(f"interrupted: {exc}", file=sys.stderr)
+        if exc.out_dir is not None:
+            status = "interrupted"
+            with contextlib.suppress(OSError, ValueError):
+                status = json.loads((Path(exc.out_dir) / "summary.json").read_text(
+                    encoding="utf-8")).get("status", status)
+            what = "partial results" if status != "complete" else "results"
+            print(f"{what} (status {status}, t_end = {exc.t_end:.6g} s): {exc.out_dir}; "
+                  f"replay them with: multiarm-pin replay {exc.out_dir}", file=sys.stderr)
+        return 130
     s = res.summary
     out = res.out_dir.resolve()
     print(f"scenario {s['scenario']}: {s['steps']} steps of {s['dt']:g} s "
           f"({s['integrator']}, solver {s['solver']}) in {s['wall_time']:.2f} s wall time")
+    forces = ("none" if s["min_contact_force"] is None else
+              f"{s['min_contact_force']:.4g} .. {s['max_contact_force']:.4g} N")
     print(f"  max constraint violation {s['max_constraint_violation']:.3g} m, contact forces "
-          f"{s['min_contact_force']:.4g} .. {s['max_contact_force']:.4g} N")
+          f"{forces}")
     for w in s["warnings"][:10]:
         print(f"  warning: {w}")
     if len(s["warnings"]) > 10:
@@ -436,9 +680,14 @@ def replay_command(args: argparse.Namespace) -> int:
     """``multiarm-pin replay DIR``: serve the run and print its URL until Ctrl-C."""
     from multiarm_pin.replay import close_visualizer
 
+    summary = load_run(args.dir)[2]
+    if summary.get("status", "complete") != "complete":
+        print(f"note: {Path(args.dir).resolve()} holds a {run_status(summary)}; replaying what "
+              "was simulated", flush=True)
     url, vis = serve_run(args.dir, fps=args.fps, open_browser=bool(getattr(args, "open", False)))
     try:
-        print(f"replay of {Path(args.dir).resolve()} served at {url}", flush=True)
+        print(f"replay of {Path(args.dir).resolve()} ({run_status(summary).split(':')[0]}) "
+              f"served at {url}", flush=True)
         if not getattr(args, "block", True):
             status = http_status(url)
             print(f"server answered HTTP {status}; stopping (--no-block)")
@@ -463,11 +712,13 @@ __all__ = [
     "http_status",
     "load_run",
     "make_controller",
+    "run_status",
     "replay_command",
     "replay_parts",
     "run_command",
     "run_scenario",
     "serve_run",
+    "simulate_built",
     "summarize",
     "trajectory_arrays",
 ]

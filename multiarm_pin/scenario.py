@@ -28,11 +28,15 @@ Joint types: ``weld``, ``revolute``, ``prismatic``, ``cylindrical``, ``universal
 (spherical fingertips on named faces: ``tip_radius`` and ``contacts: [{tip: frame, face:
 +x, point: [..]}, ...]``). Without ``placement_in_object`` a joint is built where the tool is
 at ``q0``. Without ``q0`` the arm is placed by inverse kinematics (:mod:`multiarm_pin.ik`)
-from ``q_seed``: its tool at the joint's placement, or each fingertip touching its face, as
-near to the given point as the gripper allows.
+from ``q_seed``, meeting only what the joint constrains (the centre of a spherical joint;
+centre and axis of a revolute one; axis and line of a cylindrical one; the full placement
+of weld, prismatic and universal joints; each fingertip touching its face, as near to the
+given point as the gripper allows), near the seed.
 
-Every error is a :class:`~multiarm_pin.exceptions.ScenarioError` naming the file, the key
-path (``arms[1].joint.type``) and what was expected.
+Files are read strictly (:mod:`multiarm_pin.yaml_strict`: UTF-8, no duplicate keys). Every
+error is a :class:`~multiarm_pin.exceptions.ScenarioError` naming the file, the key path
+(``arms[1].joint.type``) and what was expected; ``q0`` outside the joint limits is one
+(:mod:`multiarm_pin.scenario_checks`).
 """
 
 from __future__ import annotations
@@ -44,11 +48,11 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-import yaml
 
 from multiarm_pin.dynamics import SOLVERS
 from multiarm_pin.exceptions import (
     FrameNotFoundError,
+    JointNotFoundError,
     MultiArmError,
     RobotNotFoundError,
     ScenarioError,
@@ -350,17 +354,14 @@ def load_scenario(path) -> Scenario:
         The :class:`Scenario` (no robot loaded yet; see :func:`build_scenario`).
 
     Raises:
-        ScenarioError: unreadable file, YAML syntax error, or invalid content (names the key
-            path and what was expected).
+        ScenarioError: unreadable or non-UTF-8 file, YAML syntax error, a duplicate key
+            (naming both lines), or invalid content (names the key path and what was
+            expected).
     """
+    from multiarm_pin.yaml_strict import load_yaml_file
+
     path = Path(path)
-    if not path.is_file():
-        raise ScenarioError(str(path), "", "file not found")
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        raise ScenarioError(str(path), "", f"YAML syntax error: {exc}") from exc
-    return parse_scenario(data, str(path))
+    return parse_scenario(load_yaml_file(path), str(path))
 
 
 def parse_scenario(data, file: str = "<scenario>") -> Scenario:
@@ -618,6 +619,7 @@ def build_arm(scenario: Scenario, spec: ArmSpec, load_visuals: bool = True):
         if spec.robot is not None:
             return Arm.from_robot_name(spec.robot, spec.tool_frame, name=spec.name,
                                        base_placement=spec.base, tool_offset=spec.tool_offset,
+                                       locked_joints=spec.locked_joints,
                                        load_visuals=load_visuals)
         return Arm.from_urdf(spec.urdf, spec.tool_frame, name=spec.name,
                              base_placement=spec.base, tool_offset=spec.tool_offset,
@@ -637,6 +639,8 @@ def build_arm(scenario: Scenario, spec: ArmSpec, load_visuals: bool = True):
         ) from exc
     except URDFError as exc:
         raise ScenarioError(scenario.file, f"{key}.urdf", str(exc)) from exc
+    except JointNotFoundError as exc:
+        raise ScenarioError(scenario.file, f"{key}.locked_joints", str(exc)) from exc
     except MultiArmError as exc:
         raise ScenarioError(scenario.file, key, str(exc)) from exc
 
@@ -717,22 +721,55 @@ def _contact_targets(scenario, spec: ArmSpec, poly, oMo: pin.SE3):
     return targets
 
 
-def _solve_arm_ik(scenario, spec: ArmSpec, arm, poly, oMo):
-    from multiarm_pin.ik import PoseTarget, UnreachableError, solve_ik
+def _joint_targets(spec: ArmSpec, tool: str, oMo: pin.SE3) -> tuple[list, str]:
+    """IK targets of a placed joint: only what the joint constrains.
 
+    The joint frame ``J_t`` on the tool must meet ``J_o`` on the object: its origin alone for
+    a spherical joint; origin and z axis for a revolute one; z axis and the origin on the z
+    line for a cylindrical one; the full placement for weld, prismatic and universal.
+
+    Returns:
+        ``(targets, description)``.
+    """
+    from multiarm_pin.ik import AxisTarget, PlaneTarget, PointTarget, PoseTarget
+
+    J_t = spec.joint.placement_in_tool or pin.SE3.Identity()
+    oMj = oMo * spec.joint.placement_in_object
+    kind = spec.joint.type
+    o, z = J_t.translation, J_t.rotation[:, 2]
+    if kind == "spherical":
+        return [PointTarget(tool, oMj.translation, offset=o)], "joint centre at its point"
+    if kind == "revolute":
+        return ([PointTarget(tool, oMj.translation, offset=o),
+                 AxisTarget(tool, z, oMj.rotation[:, 2])], "joint centre and axis")
+    if kind == "cylindrical":
+        R, p = oMj.rotation, oMj.translation
+        return ([AxisTarget(tool, z, R[:, 2]),
+                 PlaneTarget(tool, R[:, 0], float(R[:, 0] @ p), point=o),
+                 PlaneTarget(tool, R[:, 1], float(R[:, 1] @ p), point=o)],
+                "joint axis on its line")
+    return [PoseTarget(tool, _placed_target(spec, oMo))], "tool at joint.placement_in_object"
+
+
+def _solve_arm_ik(scenario, spec: ArmSpec, arm, poly, oMo):
+    from multiarm_pin.ik import PostureTarget, UnreachableError, solve_ik
+
+    seed = spec.q_seed
+    if seed is not None and len(seed) != arm.nq:
+        raise ScenarioError(scenario.file, f"arms[{spec.index}].q_seed",
+                            f"expected {arm.nq} numbers (nq of {arm.source}), got {len(seed)}")
     if spec.joint.type == "contacts":
         targets = _contact_targets(scenario, spec, poly, oMo)
         what = f"arm {spec.name!r}: fingertips on faces"
         key = f"arms[{spec.index}].joint.contacts"
     else:
         tool = arm.model.frames[arm.tool_frame_id].name
-        targets = [PoseTarget(tool, _placed_target(spec, oMo))]
-        what = f"arm {spec.name!r}: tool at joint.placement_in_object"
+        targets, goal = _joint_targets(spec, tool, oMo)
+        what = f"arm {spec.name!r} ({spec.joint.type} joint): {goal}"
         key = f"arms[{spec.index}].joint.placement_in_object"
-    seed = spec.q_seed
-    if seed is not None and len(seed) != arm.nq:
-        raise ScenarioError(scenario.file, f"arms[{spec.index}].q_seed",
-                            f"expected {arm.nq} numbers (nq of {arm.source}), got {len(seed)}")
+        # among the configurations meeting the joint, prefer one near the seed (fingertips
+        # have their points as preferences instead: those fix the gripper)
+        targets.append(PostureTarget(seed if seed is not None else arm.neutral()))
     try:
         return solve_ik(arm.model, targets, seed, what=what)
     except UnreachableError as exc:
@@ -797,6 +834,7 @@ def build_scenario(scenario: Scenario, load_visuals: bool = False) -> BuiltScena
             (key ``arms[i].q0``, with the gap).
     """
     from multiarm_pin.kinematics import BodyKinematics
+    from multiarm_pin.scenario_checks import check_within_limits
     from multiarm_pin.system import MultiArmSystem
 
     obj = build_object(scenario)
@@ -812,6 +850,7 @@ def build_scenario(scenario: Scenario, load_visuals: bool = False) -> BuiltScena
                 raise ScenarioError(scenario.file, f"{key}.q0",
                                     f"expected {arm.nq} numbers (nq of {arm.source}), got "
                                     f"{len(spec.q0)}")
+            check_within_limits(scenario.file, f"{key}.q0", arm, spec.q0)
             q, ik = spec.q0.copy(), None
         else:
             ik = _solve_arm_ik(scenario, spec, arm, obj.shape, oMo)

@@ -32,7 +32,7 @@ import pinocchio as pin
 
 from multiarm_pin.dynamics import SOLVERS, Solution
 from multiarm_pin.dynamics import solve as solve_dynamics
-from multiarm_pin.exceptions import DynamicsError, InputError
+from multiarm_pin.exceptions import DynamicsError, InputError, MultiArmError
 from multiarm_pin.rigid_object import ObjectState
 from multiarm_pin.spatial import integrate_quaternion, quaternion_derivative
 from multiarm_pin.system import Evaluation, MultiArmSystem, SystemState
@@ -127,13 +127,25 @@ class _Stepper:
         self.model = system.arm_set.model
 
     def evaluate(self, t: float, state: SystemState):
+        """Blocks, controller and forward dynamics at ``(t, state)``; errors carry the time."""
+        try:
+            return self._evaluate(t, state)
+        except MultiArmError as exc:  # same type, message prefixed with the time
+            if exc.args and isinstance(exc.args[0], str) and not exc.args[0].startswith("t = "):
+                exc.args = (f"t = {t:.6g} s: {exc.args[0]}", *exc.args[1:])
+            raise
+
+    def _evaluate(self, t: float, state: SystemState):
         s = self.system
         ev = s.blocks(state, None, self.baumgarte)
         if self.controller is None:
             tau = np.zeros(s.nv)
             blocks = ev.blocks
         else:
-            tau = np.asarray(self.controller(t, state, ev), dtype=float)
+            try:
+                tau = np.asarray(self.controller(t, state, ev), dtype=float)
+            except MultiArmError as exc:  # NaN or no solution at this state: with the time
+                raise DynamicsError(f"t = {t:.6g} s: controller: {exc}") from exc
             if tau.shape != (s.nv,):
                 raise InputError(
                     f"controller returned torques of shape {tau.shape}, expected ({s.nv},)"
@@ -181,6 +193,7 @@ def simulate(
     velocity_tol: float = 1e-6,
     rtol: float = 1e-9,
     atol: float = 1e-11,
+    max_record_bytes: int | None = None,
 ) -> SimulationResult:
     """Simulate the closed-loop system from ``initial_state`` for ``duration`` seconds.
 
@@ -201,16 +214,25 @@ def simulate(
         velocity_tol: gap-rate tolerance [m/s] of that check.
         rtol: relative tolerance of ``rk45``.
         atol: absolute tolerance of ``rk45``.
+        max_record_bytes: largest memory [bytes] the record may take
+            (:func:`record_bytes`); default :func:`default_record_limit`.
 
     Returns:
         :class:`SimulationResult`.
 
+    Any exception raised once the integration has started (a :class:`DynamicsError`, a
+    ``KeyboardInterrupt``...) carries the samples completed so far: read them with
+    :func:`partial_result`.
+
     Raises:
-        InputError: unknown integrator or solver (lists the known ones), bad ``dt``/duration.
+        InputError: unknown integrator or solver (lists the known ones), bad ``dt``/duration,
+            or a run whose record would not fit in memory (before allocating it).
         ConstraintError: an initial state that violates the joints.
         DynamicsError: NaN in the state, or no solution of the dynamics (with the time).
     """
     t_start = time.perf_counter()
+    if max_record_bytes is None:
+        max_record_bytes = default_record_limit()
     if integrator not in INTEGRATORS:
         raise InputError(
             f"unknown integrator {integrator!r}; known integrators: {', '.join(INTEGRATORS)}"
@@ -237,6 +259,13 @@ def simulate(
         )
     stepper = _Stepper(system, controller, solver, baumgarte)
     n_steps = int(np.floor(duration / dt + 1e-9))
+    need = record_bytes(system, n_steps + 1)
+    if need > max_record_bytes:
+        raise InputError(
+            f"duration: {duration:g} s at dt = {dt:g} s is {n_steps + 1} samples, whose record "
+            f"needs ~{_human_bytes(need)} of memory (limit {_human_bytes(max_record_bytes)}); "
+            "shorten the duration or lengthen dt"
+        )
     times = np.arange(n_steps + 1) * dt
     rec = _Recorder(system, len(times), solver)
 
@@ -248,6 +277,66 @@ def simulate(
                         ObjectState(np.array(initial_state.obj.position, float),
                                     _normalised(initial_state.obj.quaternion),
                                     np.array(initial_state.obj.twist, float)))
+    try:
+        _integrate(stepper, rec, state, times, integrator, rtol, atol, report)
+    except BaseException as exc:  # keep what was simulated, for the caller to save
+        exc.partial_result = rec.result(integrator, dt, baumgarte,
+                                         time.perf_counter() - t_start, rec.count)
+        raise
+    report(1.0)
+    return rec.result(integrator, dt, baumgarte, time.perf_counter() - t_start)
+
+
+def partial_result(exc: BaseException) -> SimulationResult | None:
+    """The record, up to the last completed step, that :func:`simulate` attached to ``exc``.
+
+    Args:
+        exc: an exception raised by :func:`simulate` (any, including ``KeyboardInterrupt``)
+            once the integration had started.
+
+    Returns:
+        A :class:`SimulationResult` of the samples completed before the exception (possibly
+        with 0 samples), or None if the exception came before the integration started.
+    """
+    return getattr(exc, "partial_result", None)
+
+
+def record_bytes(system: MultiArmSystem, n_samples: int) -> int:
+    """Memory [bytes] of the record of ``n_samples`` samples (all arrays of the result).
+
+    Args:
+        system: the system (its nq, nv, arms and N_max set the per-sample size).
+        n_samples: T.
+    """
+    nm = system.n_arms * system.N_max
+    per_sample = 1 + system.nq + 4 * system.nv + 3 + 4 + 6 + 6 + 3 * nm + 6 * nm + 2 + 6 + 1
+    return int(8 * (per_sample + 2) * max(int(n_samples), 0))  # + time grid, solver names
+
+
+def _human_bytes(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if n < 1024 or unit == "PiB":
+            return f"{n:.3g} {unit}"
+        n /= 1024
+    return f"{n:.3g} EiB"
+
+
+def default_record_limit() -> int:
+    """Default largest record [bytes]: half of the machine's physical memory."""
+    try:
+        import os
+
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2)
+    except (ValueError, OSError, AttributeError):
+        return 4 * 1024**3
+
+
+def _integrate(stepper: _Stepper, rec: _Recorder, state: SystemState, times: np.ndarray,
+               integrator: str, rtol: float, atol: float, report) -> None:
+    """Run the integrator over the time grid, recording every sample."""
+    system = stepper.system
+    n_steps = len(times) - 1
+    dt = float(times[1] - times[0]) if n_steps > 0 else 0.0
     if integrator == "rk45":
         _run_rk45(stepper, rec, state, times, rtol, atol, report)
     else:
@@ -278,8 +367,6 @@ def simulate(
                 )
             if k % every == 0:
                 report((k + 1) / n_steps)
-    report(1.0)
-    return rec.result(integrator, dt, baumgarte, time.perf_counter() - t_start)
 
 
 def _normalised(q) -> np.ndarray:
@@ -289,7 +376,7 @@ def _normalised(q) -> np.ndarray:
 
 def _run_rk45(stepper: _Stepper, rec: _Recorder, state: SystemState, times: np.ndarray,
               rtol: float, atol: float, report) -> None:
-    from scipy.integrate import solve_ivp
+    from scipy.integrate import RK45
 
     system = stepper.system
     nq, nv = system.nq, system.nv
@@ -309,14 +396,21 @@ def _run_rk45(stepper: _Stepper, rec: _Recorder, state: SystemState, times: np.n
 
     o = state.obj
     y0 = np.concatenate([state.q, state.v, o.position, o.quaternion, o.twist])
-    out = solve_ivp(fun, (0.0, duration), y0, method="RK45", t_eval=times, rtol=rtol,
-                    atol=atol)
-    if out.status != 0 or out.y.shape[1] != len(times):
-        raise DynamicsError(f"rk45 integration failed at t = {out.t[-1]:.6g} s: {out.message}")
-    for k, t in enumerate(times):
-        s = unpack(out.y[:, k])
-        sol, ev, tau = stepper.evaluate(t, s)
-        rec.record(k, t, s, sol, ev, tau)
+    # solve_ivp(method="RK45", t_eval=times) step by step, recording each grid time as soon
+    # as a step passes it (same values; an error or interrupt keeps the samples so far)
+    ode = RK45(fun, 0.0, y0, duration, rtol=rtol, atol=atol)
+    k = 0
+    while k < len(times):
+        if times[k] <= ode.t:
+            y = y0 if k == 0 else ode.dense_output()(times[k])
+            s = unpack(y)
+            sol, ev, tau = stepper.evaluate(times[k], s)
+            rec.record(k, times[k], s, sol, ev, tau)
+            k += 1
+            continue
+        message = ode.step()
+        if ode.status == "failed":
+            raise DynamicsError(f"rk45 integration failed at t = {ode.t:.6g} s: {message}")
 
 
 class _Recorder:
@@ -348,6 +442,7 @@ class _Recorder:
         self.switches: list[float] = []
         self._negative = np.zeros((n, m), dtype=bool)
         self._singular = False
+        self.count = 0
 
     def record(self, k: int, t: float, state: SystemState, sol: Solution, ev: Evaluation,
                tau: np.ndarray) -> None:
@@ -385,22 +480,34 @@ class _Recorder:
         if singular and not self._singular:
             self.switches.append(float(t))
         self._singular = singular
+        self.count = k + 1
 
-    def result(self, integrator, dt, baumgarte, wall) -> SimulationResult:
+    def result(self, integrator, dt, baumgarte, wall, n: int | None = None) -> SimulationResult:
+        """The record as a :class:`SimulationResult`, its first ``n`` samples (all: None)."""
+        n = len(self.t) if n is None else int(n)
         warnings = list(self.warnings)
         if self.n_warnings > len(warnings):
             warnings.append(f"... {self.n_warnings - len(warnings)} more separation warnings")
         return SimulationResult(
-            t=self.t, q=self.q, v=self.v, object_position=self.p, object_quaternion=self.quat,
-            object_twist=self.twist, tau=self.tau, mu=self.mu, phi=self.phi,
-            phi_dot=self.phi_dot, contact_points=self.points, normals=self.normals,
-            object_acceleration=self.a_o, qdd=self.qdd, kinetic_energy=self.ke,
-            potential_energy=self.pe, momentum=self.momentum,
-            constraint_violation=self.violation, solver=self.solver,
+            t=self.t[:n], q=self.q[:n], v=self.v[:n], object_position=self.p[:n],
+            object_quaternion=self.quat[:n], object_twist=self.twist[:n], tau=self.tau[:n],
+            mu=self.mu[:n], phi=self.phi[:n], phi_dot=self.phi_dot[:n],
+            contact_points=self.points[:n], normals=self.normals[:n],
+            object_acceleration=self.a_o[:n], qdd=self.qdd[:n], kinetic_energy=self.ke[:n],
+            potential_energy=self.pe[:n], momentum=self.momentum[:n],
+            constraint_violation=self.violation[:n], solver=self.solver[:n],
             unilateral=np.array(self.system.unilateral), integrator=integrator, dt=dt,
             baumgarte=None if baumgarte is None else tuple(float(x) for x in baumgarte),
             warnings=warnings, solver_switches=list(self.switches), wall_time=wall,
         )
 
 
-__all__ = ["INTEGRATORS", "Controller", "SimulationResult", "simulate"]
+__all__ = [
+    "INTEGRATORS",
+    "Controller",
+    "SimulationResult",
+    "default_record_limit",
+    "partial_result",
+    "record_bytes",
+    "simulate",
+]

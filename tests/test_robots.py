@@ -381,3 +381,85 @@ def test_4f_gravity_torque_stretched_out_matches_statics(model_4f, urdf_4f):
         assert tau_g[index] == pytest.approx(-moment, rel=1e-6), joint
     assert tau_g[0] == pytest.approx(0.0, abs=1e-9)  # vertical axis
     assert np.all(np.abs(tau_g) < model_4f.effortLimit)
+
+
+# ----------------------------------------------------------------------------- registry
+# multiarm_pin.robots: every robot that available_robots() lists is walked.
+def _registry():
+    from multiarm_pin.arm import available_robots
+
+    return available_robots()
+
+
+def _mid_configuration(arm):
+    """A configuration inside the limits, off the zero pose (no aligned-axes singularity)."""
+    from multiarm_pin.scenario_checks import one_dof_limits
+
+    lo, hi, _ = one_dof_limits(arm.model)
+    q = pin.integrate(arm.model, arm.neutral(), 0.3 * np.ones(arm.nv))
+    bounded = np.isfinite(lo) & np.isfinite(hi)
+    q[bounded] = (lo[bounded] + hi[bounded]) / 2 + 0.2 * (hi[bounded] - lo[bounded]) / 2
+    return q
+
+
+@pytest.mark.parametrize("robot", _registry())
+def test_registry_robot_loads_with_its_hand_or_flange_and_runs_a_weld(robot, tmp_path):
+    import multiarm_pin.robots as robots
+    from multiarm_pin.arm import Arm
+    from multiarm_pin.runner import run_scenario
+    from multiarm_pin.scenario import parse_scenario
+
+    entry = robots.ROBOTS[robot]
+    arm = Arm.from_robot_name(robot, load_visuals=False)
+    assert arm.tool_frame == entry.tool_frame and entry.tool_kind in ("flange", "hand")
+    assert f"``{entry.tool_frame}``" in robots.__doc__  # documented in the registry's table
+    assert "finger" not in entry.tool_frame and "tip" not in entry.tool_frame
+    # at the end effector: attached to the last joint left after locking the gripper, with
+    # no joint below it (a fingertip would sit below a finger joint or beside the hand)
+    tool = arm.model.frames[arm.tool_frame_id]
+    assert tool.parentJoint == arm.model.njoints - 1
+    assert arm.model.nv == {"panda": 7, "panda_collision": 7, "xarm7": 7}.get(robot, 6)
+    q0 = _mid_configuration(arm)
+    p = arm.tool_placement(q0).translation
+    data = {
+        "name": f"weld_{robot}",
+        "object": {"shape": {"type": "box", "size": [0.2, 0.2, 0.2]}, "mass": 1.0,
+                   "pose": {"position": [float(x) for x in p + [0.0, 0.0, 0.1]]}},
+        "arms": [{"name": "a", "robot": robot, "q0": [float(x) for x in q0],
+                  "joint": {"type": "weld"}}],
+        "controller": {"type": "gravity_compensation"},
+        "simulation": {"duration": 0.006, "dt": 0.002},
+    }
+    sc = parse_scenario(data, str(tmp_path / "s.yaml"))
+    res = run_scenario(sc, tmp_path / "out", html=False, plots=False)
+    s = res.summary
+    assert s["status"] == "complete" and s["finite"] and s["steps"] == 3
+    assert s["arms"][0]["tool_frame"] == entry.tool_frame
+    assert s["max_constraint_violation"] < 1e-6
+
+
+@pytest.mark.parametrize("robot", _registry())
+def test_locked_joints_work_for_every_robot(robot, tmp_path):
+    from multiarm_pin.arm import Arm
+    from multiarm_pin.exceptions import ScenarioError
+    from multiarm_pin.scenario import build_arm, parse_scenario
+
+    full = Arm.from_robot_name(robot, load_visuals=False)
+    first = full.model.names[1]
+    locked = Arm.from_robot_name(robot, locked_joints=(first,), load_visuals=False)
+    assert locked.nv == full.nv - 1 and not locked.model.existJointName(first)
+    assert locked.tool_frame == full.tool_frame
+
+    def spec(joints):
+        data = {"object": {"shape": {"type": "box", "size": [0.2, 0.2, 0.2]}, "mass": 1.0},
+                "arms": [{"robot": robot, "q0": [0.0], "locked_joints": joints,
+                          "joint": {"type": "weld"}}]}
+        sc = parse_scenario(data, str(tmp_path / "s.yaml"))
+        return sc, sc.arms[0]
+
+    sc, a = spec([first])
+    assert build_arm(sc, a, load_visuals=False).nv == full.nv - 1  # used, not ignored
+    sc, a = spec(["no_such_joint"])
+    with pytest.raises(ScenarioError, match=r"arms\[0\].locked_joints: joints \['no_such_joint'\]"
+                       r" not found"):
+        build_arm(sc, a, load_visuals=False)

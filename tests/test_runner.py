@@ -2,12 +2,14 @@
 
 import io
 import json
+import os
 import shutil
 import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
+from run_helpers import Q0_UR5, one_arm_scenario, write
 
 from multiarm_pin import cli
 from multiarm_pin.exceptions import InputError, ScenarioError
@@ -186,3 +188,287 @@ def test_replay_page_renders_in_headless_chromium(run_dir, tmp_path):
     assert differ > 0.03, f"only {differ:.1%} of the pixels differ from an empty scene"
     red = lambda im: int(np.sum((im[..., 0] > im[..., 1] + 40) & (im[..., 0] > im[..., 2] + 15)))  # noqa: E731
     assert red(img) - red(empty) > 3000  # the red box is in view
+
+
+# ----------------------------------------------------------------------------- issue 13
+# Nothing lost, nothing mixed: results folders, partial runs, clear errors.
+def _summary(folder: Path) -> dict:
+    return json.loads((folder / "summary.json").read_text())
+
+
+def test_out_holding_the_input_file_is_refused(tmp_path, monkeypatch, capsys):
+    sc = write(tmp_path / "scenario.yaml", "# my comments\n" + one_arm_scenario())
+    before = sc.read_bytes()
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["run", "scenario.yaml", "--out", ".", "--quiet", "--no-html"]) == 2
+    assert "holds the scenario file" in capsys.readouterr().err
+    assert sc.read_bytes() == before and sorted(os.listdir(tmp_path)) == ["scenario.yaml"]
+
+
+def test_out_of_another_run_is_refused_then_replaced_whole(tmp_path, capsys):
+    a = write(tmp_path / "a.yaml", one_arm_scenario("same_name"))
+    b = write(tmp_path / "b.yaml", one_arm_scenario("same_name", mass=3.0))
+    out = tmp_path / "out"
+    fast = {"duration": 0.004, "html": False, "plots": False}
+    run_scenario(a, out, **fast)
+    old = _summary(out)
+    # a replay page of an earlier run with html (written by hand: any stale file will do)
+    (out / "replay.html").write_text("stale")
+    # rerunning the same scenario file replaces its own results, whole
+    run_scenario(a, out, **fast)
+    assert not (out / "replay.html").exists()  # no stale file of the previous run
+    (out / "replay.html").write_text("stale")
+    capsys.readouterr()
+    assert cli.main(["run", str(b), "--out", str(out), "--quiet", "--no-html"]) == 2
+    err = capsys.readouterr().err
+    assert "holds the results of another run" in err and "--overwrite" in err
+    assert _summary(out)["scenario_file"] == old["scenario_file"]
+    assert (out / "replay.html").read_text() == "stale"  # refused: untouched
+    assert cli.main(["run", str(b), "--out", str(out), "--quiet", "--no-html", "--duration",
+                     "0.004", "--overwrite"]) == 0
+    s = _summary(out)
+    assert s["scenario_file"] == str(b) and s["status"] == "complete"
+    assert not (out / "replay.html").exists()  # replaced whole: the old page is gone
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.yaml", "b.yaml", "out"]
+
+
+def test_default_folder_is_a_safe_name_and_copies_do_not_mix(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    write(tmp_path / "esc.yaml", one_arm_scenario("../../escape"))
+    assert cli.main(["run", "esc.yaml", "--quiet", "--no-html"]) == 0
+    assert (tmp_path / "results" / "escape" / "summary.json").is_file()
+    assert sorted(os.listdir(tmp_path)) == ["esc.yaml", "results"]
+    # a copy-edited scenario with the same name does not overwrite the first one's results
+    write(tmp_path / "esc2.yaml", one_arm_scenario("../../escape", mass=5.0))
+    capsys.readouterr()
+    assert cli.main(["run", "esc2.yaml", "--quiet", "--no-html"]) == 2
+    assert "another run" in capsys.readouterr().err
+    assert _summary(tmp_path / "results" / "escape")["scenario_file"].endswith("esc.yaml")
+
+
+def test_output_checked_before_simulating(tmp_path, monkeypatch, capsys):
+    import multiarm_pin.runner as runner
+
+    def never(*args, **kwargs):
+        raise AssertionError("the scenario was built before the output was checked")
+
+    monkeypatch.setattr(runner, "build_scenario", never)
+    sc = write(tmp_path / "s.yaml", one_arm_scenario())
+    write(tmp_path / "file", "not a folder")
+    assert cli.main(["run", str(sc), "--out", str(tmp_path / "file"), "--quiet"]) == 2
+    assert "is an existing file" in capsys.readouterr().err
+    assert cli.main(["run", str(sc), "--out", str(tmp_path / "file" / "x"), "--quiet"]) == 2
+    assert "cannot create" in capsys.readouterr().err
+
+
+def test_complete_run_status_and_tool_frames(tmp_path):
+    sc = write(tmp_path / "s.yaml", one_arm_scenario(duration=0.01))
+    res = run_scenario(sc, tmp_path / "out", html=False, plots=False)
+    s = _summary(res.out_dir)
+    assert s["status"] == "complete" and s["error"] is None
+    assert s["t_end"] == pytest.approx(0.01, abs=1e-12)
+    assert s["arms"][0]["tool_frame"] == "tool0"
+    assert s["arms"][0]["tool_offset"]["quaternion"] == [0.0, 0.0, 0.0, 1.0]
+
+
+def _nan_after(t_fail: float):
+    """A make_controller replacement: gravity compensation, then NaN torques from t_fail."""
+    import multiarm_pin.runner as runner
+
+    real = runner.make_controller
+
+    def make(built):
+        inner = real(built)
+
+        def controller(t, state, ev):
+            tau = inner(t, state, ev)
+            return tau * np.nan if t >= t_fail else tau
+
+        return controller
+
+    return make
+
+
+def test_mid_run_failure_keeps_the_partial_trajectory(tmp_path, monkeypatch, capsys):
+    import multiarm_pin.runner as runner
+
+    monkeypatch.setattr(runner, "make_controller", _nan_after(0.0105))
+    sc = write(tmp_path / "s.yaml", one_arm_scenario(duration=0.04))
+    out = tmp_path / "out"
+    assert cli.main(["run", str(sc), "--out", str(out), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    assert str(sc) in err and "t = 0.011 s" in err and "NaN" in err  # file and time
+    assert "partial results" in err and str(out) in err
+    s = _summary(out)
+    assert s["status"] == "failed" and "t = 0.011 s" in s["error"]
+    # samples 0..0.010 were completed; the step from 0.010 to 0.012 failed at its stage 0.011
+    assert s["t_end"] == pytest.approx(0.010, abs=1e-12)
+    sc_copy, traj, summary = load_run(out)
+    assert len(traj["t"]) == 6 and traj["t"][-1] == pytest.approx(0.010)
+    assert np.all(np.isfinite(traj["q_a"]))
+    assert (out / "replay.html").is_file()
+    assert cli.main(["replay", str(out), "--no-block", "--fps", "10"]) == 0
+    text = capsys.readouterr().out
+    assert "partial run (failed at t = 0.01 s of 0.04 s)" in text and "HTTP 200" in text
+
+
+def test_failure_before_the_first_sample_is_an_input_error(tmp_path):
+    monkeypatch_free = write(tmp_path / "s.yaml", one_arm_scenario(
+        joint="{type: spherical}", controller="{type: object_pd, kp: 10, kd: 5}"))
+    with pytest.raises(ScenarioError, match=r"controller: the simulation cannot start: t = 0 s"
+                       r".*rank 3 < 6"):
+        run_scenario(monkeypatch_free, tmp_path / "out", html=False, plots=False)
+    assert not (tmp_path / "out").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.yaml"]  # no temporary folder
+
+
+def test_huge_mass_fails_with_time_and_a_warning(tmp_path, capsys):
+    sc = write(tmp_path / "s.yaml", one_arm_scenario(
+        mass="1e300", controller="{type: object_pd, kp: 10, kd: 5}"))
+    out = tmp_path / "out"
+    assert cli.main(["run", str(sc), "--out", str(out), "--quiet", "--no-html"]) == 1
+    err = capsys.readouterr().err
+    assert "object.mass: 1e+300 kg is more than" in err
+    assert "simulation failed: t = " in err and "NaN" in err and "Traceback" not in err
+    s = _summary(out)
+    assert s["status"] == "failed" and any("object.mass" in w for w in s["input_warnings"])
+
+
+@pytest.mark.parametrize("content", [b"", b"PK\x03\x04truncated", b"not a zip at all"])
+def test_replay_rejects_an_empty_or_truncated_trajectory(tmp_path, capsys, content):
+    sc = write(tmp_path / "s.yaml", one_arm_scenario(duration=0.004))
+    out = tmp_path / "out"
+    run_scenario(sc, out, html=False, plots=False)
+    (out / "trajectory.npz").write_bytes(content)
+    with pytest.raises(InputError, match="trajectory.npz: not a readable trajectory"):
+        load_run(out)
+    assert cli.main(["replay", str(out), "--no-block"]) == 2
+    err = capsys.readouterr().err
+    assert "empty or truncated" in err and "Traceback" not in err
+
+
+def test_replay_rejects_a_trajectory_cut_in_the_middle(tmp_path):
+    sc = write(tmp_path / "s.yaml", one_arm_scenario(duration=0.004))
+    out = tmp_path / "out"
+    run_scenario(sc, out, html=False, plots=False)
+    data = (out / "trajectory.npz").read_bytes()
+    (out / "trajectory.npz").write_bytes(data[: len(data) // 2])
+    with pytest.raises(InputError, match="not a readable trajectory"):
+        load_run(out)
+
+
+def test_duration_overrides_and_memory_guard(tmp_path):
+    sc = write(tmp_path / "s.yaml", one_arm_scenario(dt=0.002))
+    with pytest.raises(ScenarioError, match=r"--duration: 0.001 s is shorter than the time step "
+                       r"simulation.dt = 0.002 s"):
+        run_scenario(sc, tmp_path / "o", duration=0.001, html=False)
+    with pytest.raises(ScenarioError, match=r"--duration: 1e\+13 s .* GiB of memory"):
+        run_scenario(sc, tmp_path / "o", duration=1e13, html=False)
+    long = write(tmp_path / "long.yaml", one_arm_scenario(duration="1e12"))
+    with pytest.raises(ScenarioError, match=r"simulation.duration: 1e\+12 s .* GiB of memory"):
+        run_scenario(long, tmp_path / "o", html=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["long.yaml", "s.yaml"]
+
+
+def test_late_waypoints_warn_on_stderr_and_in_summary(tmp_path, capsys):
+    ctrl = ("{type: object_pd, kp: 10, kd: 5, waypoints: [{t: 0.005, position: [0.5, 0, 0.3]},"
+            " {t: 5.0, position: [0.5, 0, 0.31]}, {t: 6.0, position: [0.5, 0, 0.3]}]}")
+    sc = write(tmp_path / "s.yaml", one_arm_scenario(controller=ctrl, duration=0.01,
+                                                     joint="{type: weld}"))
+    # one arm welded: object_pd needs W_o of rank 6, which a weld gives
+    assert cli.main(["run", str(sc), "--out", str(tmp_path / "o"), "--quiet",
+                     "--no-html"]) == 0
+    err = capsys.readouterr().err
+    assert "controller.waypoints[1].t: t = 5 s is after the end of the run (0.01 s) " \
+           "(and 1 later ones)" in err
+    assert any("waypoints[1]" in w for w in _summary(tmp_path / "o")["input_warnings"])
+
+
+def test_bad_files_give_messages_not_tracebacks(tmp_path, capsys):
+    bad = tmp_path / "latin1.yaml"
+    bad.write_bytes(one_arm_scenario("caf\xe9").encode("latin-1"))
+    assert cli.main(["run", str(bad), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"{bad}: not a UTF-8 text file: byte 9 (line 1) is 0xe9" in err
+    dup = write(tmp_path / "dup.yaml", one_arm_scenario().replace(
+        "  mass: 2.0\n", "  mass: 4\n  mass: 400\n"))
+    assert cli.main(["run", str(dup), "--out", str(tmp_path / "o")]) == 2
+    assert "object.mass: duplicate key 'mass' on line 5 (first on line 4)" in \
+        capsys.readouterr().err
+
+
+def test_q0_outside_the_joint_limits_is_an_error(tmp_path):
+    q0 = list(Q0_UR5)
+    q0[2] = 3.5  # the UR5 elbow (example-robot-data) is limited to ±π
+    sc = write(tmp_path / "s.yaml", one_arm_scenario(q0=q0))
+    with pytest.raises(ScenarioError, match=r"arms\[0\].q0\[2\]: 3.5 is outside the position "
+                       r"limits \[-3.14159, 3.14159\] of joint 'elbow_joint'"):
+        run_scenario(sc, tmp_path / "o", html=False)
+
+
+def test_version(capsys):
+    from multiarm_pin import __version__
+
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out.strip() == f"multiarm-pin {__version__}"
+
+
+def test_interrupt_while_writing_leaves_old_results_or_reports_new_ones(tmp_path, monkeypatch):
+    import multiarm_pin.runner as runner
+    from multiarm_pin.exceptions import RunInterrupted
+
+    sc = write(tmp_path / "s.yaml", one_arm_scenario())
+    out = tmp_path / "out"
+    fast = {"duration": 0.004, "html": False, "plots": False}
+    run_scenario(sc, out, **fast)
+    old = (out / "summary.json").read_bytes()
+    real_write, real_publish = runner._write_results, runner.ResultsWriter.publish
+
+    def write_then_interrupt(*args, **kwargs):
+        real_write(*args, **kwargs)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runner, "_write_results", write_then_interrupt)
+    with pytest.raises(RunInterrupted, match="left as it was") as info:
+        run_scenario(sc, out, **fast)
+    assert info.value.out_dir is None and (out / "summary.json").read_bytes() == old
+
+    def publish_then_interrupt(self):
+        real_publish(self)
+        raise KeyboardInterrupt  # a signal held back during the swap arrives here
+
+    monkeypatch.setattr(runner, "_write_results", real_write)
+    monkeypatch.setattr(runner.ResultsWriter, "publish", publish_then_interrupt)
+    with pytest.raises(RunInterrupted, match="just after the results were written") as info:
+        run_scenario(sc, out, duration=0.006, html=False, plots=False)
+    assert info.value.out_dir == out.resolve()
+    s = _summary(out)
+    assert s["status"] == "complete" and s["t_end"] == pytest.approx(0.006)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "s.yaml"]
+
+
+def test_a_bug_mid_run_keeps_the_partial_results_and_surfaces(tmp_path, monkeypatch):
+    import multiarm_pin.runner as runner
+
+    real = runner.make_controller
+
+    def make(built):
+        inner = real(built)
+
+        def controller(t, state, ev):
+            if t >= 0.005:
+                raise ZeroDivisionError("a bug in a controller")
+            return inner(t, state, ev)
+
+        return controller
+
+    monkeypatch.setattr(runner, "make_controller", make)
+    sc = write(tmp_path / "s.yaml", one_arm_scenario(duration=0.02))
+    with pytest.raises(ZeroDivisionError, match="a bug"):
+        run_scenario(sc, tmp_path / "out", html=False, plots=False)
+    s = _summary(tmp_path / "out")
+    assert s["status"] == "failed" and "internal error (a bug): ZeroDivisionError" in s["error"]
+    assert s["t_end"] == pytest.approx(0.004)

@@ -225,3 +225,47 @@ def test_fingertips_on_faces_by_ik(tmp_path):
                                             "point": [0.05, 0.0, 0.2]}
     err = error_of(tmp_path, d, build=True)
     assert err.key == "arms[0].joint.contacts[0].point" and "not on face" in str(err)
+
+
+# ----------------------------------------------------------------------------- issue 13
+def _three_joint_ur5(joint_type, position):
+    d = copy.deepcopy(BASE)
+    d["arms"] = [{"name": "short", "robot": "ur5", "base": {"position": [0.0, 0.55, 0.0]},
+                  "locked_joints": ["wrist_1_joint", "wrist_2_joint", "wrist_3_joint"],
+                  "q_seed": [0.0, -1.0, 1.2],
+                  "joint": {"type": joint_type,
+                            "placement_in_object": {"position": position, "rpy": [1.0, 0, 0]}}}]
+    return d
+
+
+def test_spherical_joint_places_a_three_joint_arm(tmp_path):
+    """The issue's case: a 3-joint arm asked for a full 6-D pose was "out of reach"."""
+    from multiarm_pin.arm import Arm
+
+    arm = Arm.from_robot_name("ur5", locked_joints=("wrist_1_joint", "wrist_2_joint",
+                                                    "wrist_3_joint"), load_visuals=False,
+                              base_placement=pin.SE3(np.eye(3), np.array([0.0, 0.55, 0.0])))
+    # a point the 3-joint arm reaches, in the object frame (object at [0.5, 0, 0.35])
+    p_world = arm.tool_placement(np.array([-0.4, -0.9, 1.1])).translation
+    p_obj = (p_world - [0.5, 0.0, 0.35]).tolist()
+    built = build_scenario(load_scenario(write(tmp_path, _three_joint_ur5("spherical", p_obj))))
+    assert built.arms[0].nv == 3
+    q = built.q0[0]
+    assert np.linalg.norm(built.arms[0].tool_placement(q).translation - p_world) < 1e-9
+    # the same point as a weld (position + rpy) is out of reach for 3 joints
+    err = error_of(tmp_path, _three_joint_ur5("weld", p_obj), build=True)
+    assert err.key == "arms[0].joint.placement_in_object" and "out of reach" in str(err)
+
+
+def test_weld_inside_the_object_is_a_warning(tmp_path):
+    from multiarm_pin.scenario_checks import input_warnings
+
+    d = copy.deepcopy(BASE)
+    d["arms"][0]["joint"]["placement_in_object"]["position"] = [0.0, 0.15, 0.0]  # 5 cm in
+    built = build_scenario(load_scenario(write(tmp_path, d)))
+    warns = input_warnings(built, 0.1)
+    assert len(warns) == 1
+    assert "arms[0].joint.placement_in_object: the joint frame is 0.05 m inside the object" \
+        in warns[0]
+    ok = build_scenario(load_scenario(write(tmp_path, copy.deepcopy(BASE), "ok.yaml")))
+    assert input_warnings(ok, 0.1) == []  # on the surface: no warning

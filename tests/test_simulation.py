@@ -128,3 +128,97 @@ def test_bad_input(moving):
         simulate(system, state, lambda t, s, e: np.zeros(2), 0.1, 0.01)
     with pytest.raises(DynamicsError, match="NaN"):
         simulate(system, state, lambda t, s, e: np.full(system.nv, np.nan), 0.1, 0.01)
+
+
+# ----------------------------------------------------------------------------- issue 13
+# Partial records on errors and interrupts; the stepwise rk45; the memory guard.
+def _failing_after(monkeypatch, calls: int, exc: BaseException):
+    """Make the forward-dynamics solve raise ``exc`` from its ``calls``-th call on."""
+    import multiarm_pin.simulation as simulation
+
+    real = simulation.solve_dynamics
+    count = [0]
+
+    def solve(blocks, solver):
+        count[0] += 1
+        if count[0] >= calls:
+            raise exc
+        return real(blocks, solver)
+
+    monkeypatch.setattr(simulation, "solve_dynamics", solve)
+
+
+@pytest.mark.parametrize("integrator, calls", [("rk4", 23), ("semi_implicit", 6),
+                                               ("rk45", 23)])
+def test_singular_mid_run_keeps_the_samples_and_names_the_time(moving, monkeypatch,
+                                                               integrator, calls):
+    from multiarm_pin.exceptions import SingularityError
+    from multiarm_pin.simulation import partial_result
+
+    system, state = moving
+    full = simulate(system, state, None, 0.1, 0.01, integrator)
+    _failing_after(monkeypatch, calls, SingularityError("S_1", float("inf")))
+    with pytest.raises(SingularityError, match=r"^t = [0-9.]+ s: S_1 is singular") as info:
+        simulate(system, state, None, 0.1, 0.01, integrator)
+    part = partial_result(info.value)
+    T = len(part.t)
+    assert 1 <= T < len(full.t)
+    t_fail = float(str(info.value).split()[2])
+    assert part.t[-1] <= t_fail  # the samples kept were completed before the failure
+    for name in ("q", "v", "object_position", "mu", "constraint_violation"):
+        got, ref = getattr(part, name), getattr(full, name)
+        assert got.shape == (T, *ref.shape[1:])
+        np.testing.assert_array_equal(got, ref[:T])  # the same samples as the full run
+
+
+def test_interrupt_keeps_the_samples(moving, monkeypatch):
+    from multiarm_pin.simulation import partial_result
+
+    system, state = moving
+    _failing_after(monkeypatch, 9, KeyboardInterrupt())
+    with pytest.raises(KeyboardInterrupt) as info:
+        simulate(system, state, None, 0.1, 0.01, "rk4")
+    part = partial_result(info.value)
+    # rk4 solves 4 times a step (the sample's own evaluation, then 3 stages): solves 1-8 make
+    # samples 0 and 1 and the step to 0.02; the 9th, sample 2's evaluation, is interrupted
+    np.testing.assert_allclose(part.t, [0.0, 0.01])
+
+
+def test_rk45_record_equals_scipy_solve_ivp(moving):
+    """The stepwise rk45 gives solve_ivp(t_eval=grid)'s values (independent driver)."""
+    from scipy.integrate import solve_ivp
+
+    from multiarm_pin.simulation import _Stepper
+
+    system, state = moving
+    r = simulate(system, state, None, 0.05, 0.01, "rk45")
+    st = _Stepper(system, None, "auto", None)
+    nq, nv = system.nq, system.nv
+
+    def fun(t, y):
+        o = y[nq + nv + 3:nq + nv + 7]
+        s = SystemState(y[:nq], y[nq:nq + nv],
+                        ObjectState(y[nq + nv:nq + nv + 3], o / np.linalg.norm(o),
+                                    y[nq + nv + 7:]))
+        return st.derivative(s, st.evaluate(t, s)[0])
+
+    o = state.obj
+    y0 = np.concatenate([state.q, state.v, o.position, o.quaternion, o.twist])
+    ref = solve_ivp(fun, (0.0, 0.05), y0, method="RK45", t_eval=r.t, rtol=1e-9, atol=1e-11)
+    np.testing.assert_allclose(r.q, ref.y[:nq].T, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(r.object_position, ref.y[nq + nv:nq + nv + 3].T, atol=1e-12)
+
+
+def test_memory_guard_refuses_before_allocating(moving):
+    from multiarm_pin.simulation import record_bytes
+
+    system, state = moving
+    # the estimate is the record's real size: compare with a short run's arrays
+    r = simulate(system, state, None, 0.05, 0.01, "rk4")
+    arrays = [v for v in vars(r).values() if isinstance(v, np.ndarray) and len(v) == len(r.t)]
+    real = sum(a.nbytes for a in arrays)
+    assert real <= record_bytes(system, len(r.t)) <= 1.2 * real
+    with pytest.raises(InputError, match=r"duration: 1e\+12 s .* samples, whose record needs"):
+        simulate(system, state, None, 1e12, 0.001, "rk4")
+    with pytest.raises(InputError, match="limit 1 KiB"):
+        simulate(system, state, None, 0.05, 0.01, "rk4", max_record_bytes=1024)

@@ -28,6 +28,13 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-picture", action="store_true", help="do not draw the picture")
 
 
+def picture_formats() -> list[str]:
+    """File extensions (without the dot) that matplotlib can save a picture as, sorted."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    return sorted(FigureCanvasBase.get_supported_filetypes())
+
+
 def run(args: argparse.Namespace) -> int:
     """Analyse ``args.file`` and print the report.
 
@@ -35,6 +42,16 @@ def run(args: argparse.Namespace) -> int:
         0 on success; 2 when the file or the grasp is invalid (message on stderr naming the
         file and the key).
     """
+    picture = None
+    if not getattr(args, "no_picture", False) and args.picture:
+        picture = Path(args.picture)
+        formats = picture_formats()
+        fmt = picture.suffix.lstrip(".").lower()
+        if fmt not in formats:
+            print(f"error: --picture {picture}: unsupported picture format "
+                  f"{fmt or '(no extension)'!r}; expected a file name ending in one of "
+                  f"{', '.join('.' + f for f in formats)}", file=sys.stderr)
+            return 2
     try:
         gf = load_grasp_file(args.file)
         rep, region = analyse(gf)
@@ -45,13 +62,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {args.file}: {exc}", file=sys.stderr)
         return 2
     if not getattr(args, "no_picture", False):
-        path = (
-            Path(args.picture) if args.picture else gf.path.with_name(f"{gf.path.stem}_grasp.png")
-        )
+        path = picture or gf.path.with_name(f"{gf.path.stem}_grasp.png")
         try:
             draw_grasp(gf.grasp, region, path, title=gf.path.name)
             rep["picture"] = str(path)
-        except OSError as exc:
+        except (OSError, ValueError) as exc:
             print(f"error: cannot write the picture {path}: {exc}", file=sys.stderr)
             return 2
     if args.json:

@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from multiarm_pin.exceptions import GraspError, InputError, MultiArmError, ScenarioError
 from multiarm_pin.grasp.contacts import Grasp, contact_from_point_normal, contact_on_face
@@ -34,6 +33,7 @@ from multiarm_pin.grasp.seventh_contact import (
 )
 from multiarm_pin.grasp.stability import closure_bound, independence_bound, linearised_margins
 from multiarm_pin.polyhedron import box, from_vertices
+from multiarm_pin.yaml_strict import load_yaml_file
 
 
 @dataclass(frozen=True)
@@ -57,17 +57,12 @@ def load_grasp_file(path: str | Path) -> GraspFile:
     """Read and validate a grasp YAML file.
 
     Raises:
-        ScenarioError: unreadable file, invalid YAML, or an invalid key (the error names the
+        ScenarioError: unreadable or non-UTF-8 file, invalid YAML, a duplicate key, or an
+            invalid key (the error names the
             file and the key path, e.g. ``contacts[2].point``).
     """
     path = Path(path)
-    f = str(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise ScenarioError(f, "", f"cannot read the file: {exc.strerror or exc}") from exc
-    except yaml.YAMLError as exc:
-        raise ScenarioError(f, "", f"invalid YAML: {exc}") from exc
+    data = load_yaml_file(path)  # not found, not UTF-8, syntax, duplicate keys
     return grasp_from_data(data, path)
 
 

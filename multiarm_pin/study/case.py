@@ -85,23 +85,27 @@ def run_case(task: CaseTask) -> dict:
 
 
 def _simulation_case(task: CaseTask) -> tuple[dict, dict]:
-    from multiarm_pin.runner import make_controller, summarize
+    """Build and simulate the overridden scenario as ``multiarm-pin run`` does, no files."""
+    from multiarm_pin.exceptions import ScenarioError
+    from multiarm_pin.runner import input_warnings, make_controller, simulate_built, summarize
     from multiarm_pin.scenario import build_scenario, parse_scenario
-    from multiarm_pin.simulation import simulate
     from multiarm_pin.study.metrics import simulation_metrics
     from multiarm_pin.study.spec import apply_overrides
 
     data = apply_overrides(task.base_data, task.overrides)
     sc = parse_scenario(data, task.base_file)
     sim = sc.simulation
+    if sim.duration < sim.dt:
+        raise ScenarioError(sc.file, "simulation.duration", f"{sim.duration:g} s is shorter "
+                            f"than the time step simulation.dt = {sim.dt:g} s")
     built = build_scenario(sc, load_visuals=False)
     controller = make_controller(built)
+    warnings = input_warnings(built, sim.duration)
     t0 = time.perf_counter()
-    result = simulate(built.system, built.initial_state, controller, sim.duration,
-                      min(sim.dt, sim.duration), integrator=sim.integrator, solver=sim.solver,
-                      baumgarte=sim.baumgarte)
+    result = simulate_built(built, controller, sim.duration, sim.dt, sim.solver)
     wall = time.perf_counter() - t0
     summary = summarize(built, result, sim.solver, wall)
+    summary["input_warnings"] = list(warnings)
     values = simulation_metrics(built, result, controller, summary)
     return values, {"run": summary, "metrics": values}
 

@@ -41,7 +41,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from multiarm_pin.exceptions import MultiArmError, StudyError
 from multiarm_pin.scenario import did_you_mean
@@ -319,14 +318,14 @@ def load_study(path) -> StudySpec:
 
 
 def _load_yaml(path: Path, f: str):
+    """Strict YAML (:mod:`multiarm_pin.yaml_strict`: duplicate keys, encodings, 1e12 floats)."""
+    from multiarm_pin.exceptions import ScenarioError
+    from multiarm_pin.yaml_strict import load_yaml_file
+
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise StudyError(f, "", f"cannot read the file: {exc}") from exc
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise StudyError(f, "", f"YAML syntax error: {exc}") from exc
+        return load_yaml_file(path)
+    except ScenarioError as exc:
+        raise StudyError(exc.file, exc.key, exc.message) from None
 
 
 def parse_study(data, file: str = "<study>") -> StudySpec:
@@ -351,7 +350,10 @@ def parse_study(data, file: str = "<study>") -> StudySpec:
     if not base_file.is_file():
         raise StudyError(f, "base", f"base file {str(base_file)!r} not found")
     base_bytes = base_file.read_bytes()
-    base_data = _load_yaml(base_file, str(base_file))
+    try:
+        base_data = _load_yaml(base_file, str(base_file))
+    except StudyError as exc:
+        raise StudyError(f, "base", f"invalid base file: {exc}") from None
     if not isinstance(base_data, Mapping):
         raise StudyError(f, "base", f"{base_file}: expected a scenario or grasp mapping")
     base_kind = "grasp" if "contacts" in base_data and "arms" not in base_data else "scenario"

@@ -19,10 +19,9 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from pathlib import Path
 
+from multiarm_pin import results_io
 from multiarm_pin.exceptions import StudyError
 
 TABLE_NAME = "results.parquet"
@@ -30,19 +29,13 @@ TABLE_NAME = "results.parquet"
 
 
 def write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file and a rename (never half a file)."""
+    """Write ``text`` (UTF-8) atomically, creating the folder.
+
+    Through :func:`multiarm_pin.results_io.write_atomic`: a temporary file renamed into
+    place, so a reader never sees half a file.
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    results_io.write_atomic(path, text.encode("utf-8"))
 
 
 def _json_default(x):
@@ -170,18 +163,13 @@ class ResultsFolder:
 
     def write_table(self, rows) -> Path:
         """Write ``results.parquet`` (atomically) from rows sorted by case index."""
-        table = rows_to_table(rows)
+        import pyarrow as pa
         import pyarrow.parquet as pq
 
-        fd, tmp = tempfile.mkstemp(prefix=f".{TABLE_NAME}.", dir=self.path)
-        os.close(fd)
-        try:
-            pq.write_table(table, tmp)
-            os.replace(tmp, self.table_path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
+        buf = pa.BufferOutputStream()
+        pq.write_table(rows_to_table(rows), buf)
+        self.path.mkdir(parents=True, exist_ok=True)
+        results_io.write_atomic(self.table_path, buf.getvalue().to_pybytes())
         return self.table_path
 
 

@@ -121,3 +121,20 @@ def test_module_runs_as_a_program(tmp_path):
         capture_output=True, text=True, cwd=ROOT, timeout=120,
     )  # fmt: skip
     assert bad.returncode == 2 and "missing.yaml" in bad.stderr
+
+
+def test_bad_picture_format_and_bad_encodings_are_messages(tmp_path, capsys):
+    """Issue 13: these were tracebacks (matplotlib's ValueError, UnicodeDecodeError)."""
+    pic = tmp_path / "p.txt"
+    assert run(_args(GRASPS / "box_form_closure.yaml", "--picture", pic)) == 2
+    err = capsys.readouterr().err
+    assert "--picture" in err and "unsupported picture format 'txt'" in err and ".png" in err
+    assert not pic.exists()
+    bad = tmp_path / "latin1.yaml"
+    bad.write_bytes("name: caf\xe9\n".encode("latin-1") + BOX.encode())
+    assert run(_args(bad, "--no-picture")) == 2
+    assert f"{bad}: not a UTF-8 text file: byte 9 (line 1) is 0xe9" in capsys.readouterr().err
+    dup = tmp_path / "dup.yaml"
+    dup.write_text(BOX + "object: {shape: {type: box, size: [1, 1, 1]}}\n")
+    assert run(_args(dup, "--no-picture")) == 2
+    assert "duplicate key 'object' on line 2 (first on line 1)" in capsys.readouterr().err

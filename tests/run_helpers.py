@@ -1,0 +1,103 @@
+"""Shared helpers of the run/CLI tests: small scenario files and a CLI subprocess."""
+
+from __future__ import annotations
+
+import os
+import queue
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+
+Q0_UR5 = [0.0, -1.2, 1.6, -0.4, 1.57, 0.0]
+"""A UR5 configuration well inside its limits, away from singularities [rad]."""
+
+
+def one_arm_scenario(name: str = "one_ur5", duration: float = 0.02, dt: float = 0.002,
+                     mass: float = 2.0, controller: str = "{type: gravity_compensation}",
+                     joint: str = "{type: weld}", q0=None, extra: str = "") -> str:
+    """YAML text of a cheap scenario: one UR5 welded (at its q0, no IK) to a small box."""
+    q0 = Q0_UR5 if q0 is None else q0
+    return f"""name: {name}
+object:
+  shape: {{type: box, size: [0.4, 0.3, 0.2]}}
+  mass: {mass}
+  pose: {{position: [0.5, 0.0, 0.3]}}
+arms:
+  - name: a
+    robot: ur5
+    q0: {list(q0)}
+    joint: {joint}
+controller: {controller}
+simulation: {{duration: {duration}, dt: {dt}}}
+{extra}"""
+
+
+def write(path: Path, text: str) -> Path:
+    """Write ``text`` to ``path`` (UTF-8) and return the path."""
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def cli_command(*args: str) -> list[str]:
+    """The ``multiarm-pin`` command line (the console script of this interpreter's venv).
+
+    Falls back to ``python -m multiarm_pin.cli`` when the script is not installed.
+    """
+    script = Path(sys.executable).parent / "multiarm-pin"
+    head = [str(script)] if script.is_file() else [sys.executable, "-m", "multiarm_pin.cli"]
+    return [*head, *map(str, args)]
+
+
+def run_cli(*args: str, cwd=None, timeout: float = 300) -> subprocess.CompletedProcess:
+    """Run ``multiarm-pin ARGS`` to completion; returns the process (text stdout/stderr)."""
+    return subprocess.run(cli_command(*args), cwd=cwd, capture_output=True, text=True,
+                          timeout=timeout, env=_env())
+
+
+def _env() -> dict:
+    env = dict(os.environ)
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+class CliProcess:
+    """``multiarm-pin ARGS`` running in the background, its stderr read line by line."""
+
+    def __init__(self, *args: str, cwd=None):
+        self.proc = subprocess.Popen(cli_command(*args), cwd=cwd, stdout=subprocess.PIPE,
+                                     stderr=subprocess.PIPE, text=True, env=_env())
+        self.lines: queue.Queue = queue.Queue()
+        self.stderr: list[str] = []
+        self.thread = threading.Thread(target=self._read, daemon=True)
+        self.thread.start()
+
+    def _read(self) -> None:
+        for line in self.proc.stderr:
+            self.stderr.append(line)
+            self.lines.put(line)
+        self.lines.put(None)
+
+    def wait_for(self, marker: str, timeout: float = 240) -> bool:
+        """Wait until a stderr line contains ``marker``; False if the process ended first."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            try:
+                line = self.lines.get(timeout=1.0)
+            except queue.Empty:
+                continue
+            if line is None:
+                return False
+            if marker in line:
+                return True
+        raise TimeoutError(f"no line with {marker!r} within {timeout} s: {''.join(self.stderr)}")
+
+    def finish(self, timeout: float = 240) -> tuple[int, str, str]:
+        """Wait for the end; returns ``(exit code, stdout, stderr)``."""
+        out = self.proc.stdout.read()
+        code = self.proc.wait(timeout=timeout)
+        self.thread.join(timeout=10)
+        return code, out, "".join(self.stderr)

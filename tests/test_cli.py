@@ -1,0 +1,82 @@
+"""The ``multiarm-pin`` command as a user runs it: a real subprocess, signals, exit codes.
+
+Signal tests wait for a progress line (or the "writing results" line) on stderr before
+sending the signal, so they hold on a loaded machine; timeouts are generous and no verdict
+depends on timing.
+"""
+
+import json
+import signal
+
+import numpy as np
+import pytest
+from run_helpers import CliProcess, one_arm_scenario, run_cli, write
+
+LONG = 5.0  # [s] simulated by the runs that get interrupted (2500 steps; never reached)
+
+
+def _summary(folder):
+    return json.loads((folder / "summary.json").read_text())
+
+
+@pytest.mark.parametrize("signum, name", [(signal.SIGINT, "SIGINT"),
+                                          (signal.SIGTERM, "SIGTERM")])
+def test_signal_mid_simulation_keeps_a_complete_partial_folder(tmp_path, signum, name):
+    sc = write(tmp_path / "s.yaml", one_arm_scenario(duration=LONG))
+    out = tmp_path / "out"
+    run = CliProcess("run", sc, "--out", out, "--no-html")
+    assert run.wait_for("elapsed"), "the run ended before its first progress line"
+    run.proc.send_signal(signum)
+    code, stdout, stderr = run.finish()
+    assert code == 130, stderr
+    assert "Traceback" not in stderr
+    assert f"interrupted by {name}" in stderr and "partial results" in stderr
+    s = _summary(out)
+    assert s["status"] == "interrupted" and s["error"] == f"interrupted by {name}"
+    assert 0 < s["t_end"] < LONG
+    with np.load(out / "trajectory.npz") as z:
+        t = z["t"]
+        assert len(t) == s["samples"] == round(s["t_end"] / 0.002) + 1
+        assert t[-1] == pytest.approx(s["t_end"]) and np.all(np.isfinite(z["q_a"]))
+    for f in s["files"].values():
+        assert (out / f).is_file(), f
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "s.yaml"]  # no temp folder
+    if signum == signal.SIGINT:  # replay accepts it and says so (once is enough)
+        p = run_cli("replay", out, "--no-block", "--fps", "10")
+        assert p.returncode == 0, p.stderr
+        assert "partial run (interrupted at t = " in p.stdout and "HTTP 200" in p.stdout
+
+
+def test_sigint_while_writing_keeps_old_or_new_results_whole(tmp_path):
+    sc = write(tmp_path / "s.yaml", one_arm_scenario(duration=0.004))
+    out = tmp_path / "out"
+    first = run_cli("run", sc, "--out", out, "--no-html", "--quiet")
+    assert first.returncode == 0, first.stderr
+    old = (out / "summary.json").read_bytes()
+    old_files = sorted(p.name for p in out.iterdir())
+    # the replay page makes the write phase last seconds: the signal lands inside it
+    run = CliProcess("run", sc, "--out", out, "--duration", "0.02")
+    assert run.wait_for("writing results to")
+    run.proc.send_signal(signal.SIGINT)
+    code, stdout, stderr = run.finish()
+    assert "Traceback" not in stderr
+    assert code in (0, 130)
+    new = _summary(out)
+    if (out / "summary.json").read_bytes() == old:  # interrupted: the old run, untouched
+        assert code == 130 and "left as it was" in stderr
+        assert sorted(p.name for p in out.iterdir()) == old_files
+    else:  # finished before the signal: the new run, complete
+        assert new["status"] == "complete" and new["requested"]["duration"] == 0.02
+        for f in new["files"].values():
+            assert (out / f).is_file(), f
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "s.yaml"]
+
+
+def test_exit_codes_and_no_tracebacks(tmp_path):
+    sc = write(tmp_path / "s.yaml", one_arm_scenario())
+    (tmp_path / "f").write_text("x")
+    for args in (["run", sc, "--out", tmp_path / "f"],           # --out is a file
+                 ["replay", tmp_path]):                          # not a results folder
+        p = run_cli(*args)
+        assert p.returncode == 2, (args, p.stderr)
+        assert p.stderr.startswith("error: ") and "Traceback" not in p.stderr, p.stderr
