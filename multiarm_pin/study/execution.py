@@ -11,6 +11,7 @@ worker that dies on another worker.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import sys
 import time
@@ -170,11 +171,11 @@ class Study:
                 client = own_client = Client(own_cluster)
         try:
             return self._drive(_DaskRunner(client), out, resume, progress, on_case)
-        finally:
-            if own_client is not None:
-                own_client.close()
-            if own_cluster is not None:
-                own_cluster.close()
+        finally:  # a failure to close must not replace the study's own outcome (Ctrl-C)
+            for closer in (own_client, own_cluster):
+                if closer is not None:
+                    with contextlib.suppress(Exception):
+                        closer.close()
 
     def _nothing_to_run(self, out) -> bool:
         folder = ResultsFolder(out)

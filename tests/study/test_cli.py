@@ -76,15 +76,15 @@ def test_sigint_then_resume_runs_no_finished_case_again(tmp_path, warm_kernels):
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 130, stderr
-    assert "interrupted:" in stderr and "--resume" in stderr
+    assert "interrupted:" in stderr and "--resume" in stderr, stderr
     assert "Traceback" not in stderr, stderr
     first = rows_by_case(read_table(out))
-    assert 1 <= len(first) < 8  # stopped mid-study; every finished row is in the table
+    assert 1 <= len(first) < 8, stderr  # stopped mid-study; every finished row in the table
     code = subprocess.run(cmd + ["--resume", "--quiet"], capture_output=True, text=True,
                           cwd=REPO, timeout=600)
     assert code.returncode == 0, code.stderr
     rows = rows_by_case(read_table(out))
-    assert len(rows) == 8 and all(r["status"] == "ok" for r in rows.values())
+    assert len(rows) == 8 and all(r["status"] == "ok" for r in rows.values()), code.stderr
     for cid, row in first.items():  # finished before the interrupt: not run again
         assert rows[cid]["run_token"] == row["run_token"]
     assert (out / "report.md").is_file()
