@@ -39,7 +39,7 @@ import pinocchio as pin
 
 from multiarm_pin.dynamics.force_distribution import distribute_forces
 from multiarm_pin.dynamics.inverse_dynamics import InverseDynamicsResult, inverse_dynamics
-from multiarm_pin.exceptions import InputError
+from multiarm_pin.exceptions import DynamicsError, InputError
 from multiarm_pin.spatial import as_array, cross
 from multiarm_pin.system import Evaluation, MultiArmSystem, SystemState
 from multiarm_pin.trajectories import MinimumJerkTrajectory, pose_error
@@ -243,6 +243,9 @@ class ObjectPD(Controller):
         hold_points_in_object: (n, m_max, 3) their places in the object frame [m].
         last_point_acceleration: (n, m_max, 3) the desired point accelerations ``a_ik`` of
             the last call, world axes [m/s²] (meaningless on padding).
+        margin_kept: False when the last call could not keep every unilateral contact
+            pushing with ``margin`` (then it planned the least-norm forces, and the contacts
+            that would have to pull separate in the simulation).
     """
 
     name = "object_pd"
@@ -275,6 +278,7 @@ class ObjectPD(Controller):
         self.hold_points_in_object: np.ndarray | None = None
         self.last: InverseDynamicsResult | None = None
         self.last_point_acceleration: np.ndarray | None = None
+        self.margin_kept = True
 
     def desired_acceleration(self, t: float, state: SystemState) -> np.ndarray:
         """(6,) ``a_d = a_ref + K_d (v_ref - v_o) + K_p e`` [m/s², rad/s²], world at the COM."""
@@ -352,7 +356,15 @@ class ObjectPD(Controller):
         if self.hold_mask is None:
             self._init_hold(state, evaluation)
         a_d = self.desired_acceleration(t, state)
-        fd = distribute_forces(b, b.M_o @ a_d - b.h_o, s.unilateral, self.margin)
+        try:
+            fd = distribute_forces(b, b.M_o @ a_d - b.h_o, s.unilateral, self.margin)
+            self.margin_kept = True
+        except DynamicsError:
+            # The grasp cannot keep every unilateral contact pushing with the margin for this
+            # load: plan the least-norm forces; a contact that would have to pull then
+            # separates in the simulation (complementarity), it is not held by a pull.
+            fd = distribute_forces(b, b.M_o @ a_d - b.h_o, np.zeros_like(s.unilateral), 0.0)
+            self.margin_kept = False
         e, u, d, r = self._hold_terms(state, evaluation)
         n, m = self.hold_mask.shape
         zero = np.zeros((n * m, 3))

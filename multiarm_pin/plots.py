@@ -93,14 +93,27 @@ def plot_object_pose(path, t, position, quaternion, title: str = "") -> Path:
     return _save(fig, path)
 
 
-def plot_contact_forces(path, t, mu: Mapping[str, np.ndarray], title: str = "") -> Path:
-    """Contact multipliers (forces, positive = pushing) of each arm against time.
+EVENT_STYLE = {"separation": ("tab:red", "--"), "touchdown": ("tab:green", ":")}
+"""Colour and line style of the vertical lines marking contact events."""
+
+
+def _mark_events(ax, events) -> None:
+    for te, kind in {(float(te), str(kind)) for te, kind in events}:
+        color, style = EVENT_STYLE.get(kind, ("k", "-."))
+        ax.axvline(te, color=color, ls=style, lw=0.8, alpha=0.7)
+
+
+def plot_contact_forces(path, t, mu: Mapping[str, np.ndarray], title: str = "",
+                        events=()) -> Path:
+    """Contact multipliers (forces, positive = pushing) of each arm or support against time.
 
     Args:
         path: PNG file.
         t: (T,) times [s].
-        mu: arm name -> (T, N_A) multipliers [N].
+        mu: arm or support name -> (T, N_A) multipliers [N].
         title: figure title.
+        events: ``[(t, kind), ...]`` contact events (``separation`` red dashed,
+            ``touchdown`` green dotted vertical lines).
     """
     t = _times(t)
     if not mu:
@@ -112,6 +125,7 @@ def plot_contact_forces(path, t, mu: Mapping[str, np.ndarray], title: str = "") 
         for k in range(m.shape[1]):
             ax.plot(t, m[:, k], lw=1.0, label=f"{k}")
         ax.axhline(0.0, color="k", lw=0.6)
+        _mark_events(ax, events)
         ax.set_ylabel(f"{name}: μ [N]")
         ax.grid(alpha=0.3)
         if 0 < m.shape[1] <= 8:
@@ -119,6 +133,42 @@ def plot_contact_forces(path, t, mu: Mapping[str, np.ndarray], title: str = "") 
                       title_fontsize=7)
     axes[-1, 0].set_xlabel("time [s]")
     axes[0, 0].set_title(title or "contact forces (positive = pushing)")
+    return _save(fig, path)
+
+
+def plot_contact_states(path, t, active, labels, events=(), title: str = "") -> Path:
+    """Each contact's state against time: a bar where it touches, a gap where it is separated.
+
+    Args:
+        path: PNG file.
+        t: (T,) times [s].
+        active: (T, K) bool, True where contact k touches (active set, or bilateral).
+        labels: (K,) contact names (``arm:contact`` or ``support[j]``).
+        events: ``[(t, kind, k), ...]`` events with the contact index, drawn as markers
+            (red x: separation, green o: touchdown).
+        title: figure title.
+    """
+    t = _times(t)
+    act = np.asarray(active, dtype=bool)
+    if act.ndim != 2 or act.shape[0] != len(t) or act.shape[1] != len(labels):
+        raise InputError(f"plot_contact_states: active must be (T, K) = ({len(t)}, "
+                         f"{len(labels)}), got {act.shape}")
+    K = act.shape[1]
+    fig, ax = plt.subplots(figsize=(7, 1.6 + 0.28 * max(K, 1)))
+    for k in range(K):
+        y = np.where(act[:, k], k, np.nan)
+        ax.plot(t, y, lw=5, solid_capstyle="butt", color="tab:blue")
+    for te, kind, k in events:
+        color = EVENT_STYLE.get(str(kind), ("k", "-"))[0]
+        ax.plot([te], [k], "x" if kind == "separation" else "o", color=color, ms=6,
+                mfc="none")
+    ax.set_yticks(range(K))
+    ax.set_yticklabels([str(x) for x in labels], fontsize=7)
+    ax.set_ylim(-0.7, K - 0.3)
+    ax.set_xlim(t[0], t[-1] if t[-1] > t[0] else t[0] + 1.0)
+    ax.set_xlabel("time [s]")
+    ax.grid(alpha=0.3, axis="x")
+    ax.set_title(title or "contacts: touching (bar), separated (gap); x separation, o touchdown")
     return _save(fig, path)
 
 
@@ -142,30 +192,46 @@ def plot_constraint_violation(path, t, violation, title: str = "") -> Path:
     return _save(fig, path)
 
 
-def write_plots(out_dir, trajectory: Mapping[str, np.ndarray], arm_names, title: str = ""
-                ) -> list[Path]:
+def write_plots(out_dir, trajectory: Mapping[str, np.ndarray], arm_names, title: str = "",
+                support_names=()) -> list[Path]:
     """All standard plots of a run from its ``trajectory.npz`` arrays.
 
     Args:
         out_dir: existing folder.
         trajectory: mapping with ``t``, ``object_position``, ``object_quaternion``,
-            ``constraint_violation`` and ``mu_<arm>`` for each arm.
+            ``constraint_violation`` and ``mu_<name>`` for each arm and support; optionally
+            ``contact_active``, ``contact_labels``, ``event_t``, ``event_kind``,
+            ``event_contact`` (contact events).
         arm_names: the arms' names.
         title: scenario name, prefixed to the titles.
+        support_names: the supports' names.
 
     Returns:
         The PNG files written: ``object_pose.png``, ``contact_forces.png``,
-        ``constraint_violation.png``.
+        ``constraint_violation.png``, and ``contact_states.png`` when the run has contact
+        events or supports.
     """
     out = Path(out_dir)
     pre = f"{title}: " if title else ""
     t = trajectory["t"]
-    return [
+    names = [*arm_names, *support_names]
+    ev_t = np.asarray(trajectory.get("event_t", np.zeros(0)), dtype=float)
+    ev_kind = np.asarray(trajectory.get("event_kind", np.zeros(0, dtype=str)))
+    ev_k = np.asarray(trajectory.get("event_contact", np.zeros(0, dtype=int)))
+    events = list(zip(ev_t.tolist(), ev_kind.tolist(), strict=True))
+    extra = []
+    if "contact_active" in trajectory and (len(ev_t) or len(support_names)):
+        extra.append(plot_contact_states(
+            out / "contact_states.png", t, trajectory["contact_active"],
+            trajectory["contact_labels"],
+            list(zip(ev_t.tolist(), ev_kind.tolist(), ev_k.tolist(), strict=True)),
+            pre + "contacts touching (bars); x separation, o touchdown"))
+    return extra + [
         plot_object_pose(out / "object_pose.png", t, trajectory["object_position"],
                          trajectory["object_quaternion"], pre + "object pose"),
         plot_contact_forces(out / "contact_forces.png", t,
-                            {a: trajectory[f"mu_{a}"] for a in arm_names},
-                            pre + "contact forces (positive = pushing)"),
+                            {a: trajectory[f"mu_{a}"] for a in names},
+                            pre + "contact forces (positive = pushing)", events),
         plot_constraint_violation(out / "constraint_violation.png", t,
                                   trajectory["constraint_violation"],
                                   pre + "constraint violation"),
@@ -173,7 +239,9 @@ def write_plots(out_dir, trajectory: Mapping[str, np.ndarray], arm_names, title:
 
 
 __all__ = [
+    "EVENT_STYLE",
     "plot_constraint_violation",
+    "plot_contact_states",
     "plot_contact_forces",
     "plot_object_pose",
     "rotation_vectors",

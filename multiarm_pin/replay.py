@@ -9,7 +9,11 @@ The scene has three parts, all animated on one Meshcat timeline:
   by its COM position and quaternion ``[x, y, z, w]``;
 - ``contacts/point_<k>`` and ``contacts/force_<k>``: a small sphere at each contact point
   and a tapered rod for the force on the object, whose tip touches the contact point and
-  whose length is ``force_scale * |f|``.
+  whose length is ``force_scale * |f|``. When the contacts' states are given
+  (``ReplayContacts.touching``), a touching contact's sphere is yellow and a separated
+  one's is grey (``contacts/free_<k>``; the other sphere is scaled to nothing);
+- ``supports/<name>``: a thin slab on each support plane (``ReplayContacts.supports``),
+  its top face on the plane, under the support's contact points.
 
 Samples are subsampled to ``fps`` frames per second (nearest sample in time, no
 interpolation), so a page's size grows with the duration, not with the integrator step.
@@ -44,6 +48,12 @@ CONTACT_COLOR = 0xFFD60A
 """Colour of contact-point spheres: yellow."""
 FORCE_COLOR = 0x2DC653
 """Colour of force arrows: green."""
+SEPARATED_COLOR = 0x8D99AE
+"""Colour of the sphere of a separated (not touching) contact: grey."""
+SUPPORT_COLOR = 0x6C584C
+"""Colour of support slabs: brown."""
+SUPPORT_THICKNESS = 0.01
+"""Thickness [m] of the slab drawn under a support plane."""
 CONTACT_RADIUS = 0.012
 """Radius [m] of the contact-point spheres."""
 FORCE_RADIUS = 0.01
@@ -139,20 +149,61 @@ class ReplayObject:
 
 
 @dataclass
+class ReplaySupport:
+    """A support plane drawn as a square slab whose top face lies on the plane.
+
+    Attributes:
+        name: scene node name (``supports/<name>``).
+        center: (3,) centre of the slab's top face, on the plane, world [m].
+        normal: (3,) unit normal out of the support, world axes.
+        half_size: half the side of the square [m].
+    """
+
+    name: str
+    center: np.ndarray
+    normal: np.ndarray
+    half_size: float
+
+    def __post_init__(self):
+        self.center = as_array(self.center, (3,), f"ReplaySupport {self.name!r}.center")
+        n = as_array(self.normal, (3,), f"ReplaySupport {self.name!r}.normal")
+        if np.linalg.norm(n) < 1e-9:
+            raise InputError(f"ReplaySupport {self.name!r}.normal: zero length")
+        self.normal = n / np.linalg.norm(n)
+        if not (math.isfinite(self.half_size) and self.half_size > 0):
+            raise InputError(f"ReplaySupport {self.name!r}.half_size: expected a positive "
+                             f"length [m], got {self.half_size!r}")
+
+
+@dataclass
 class ReplayContacts:
     """Contact points and forces over time (K contacts, fixed count).
 
     Attributes:
         points: (T, K, 3) contact points in the world [m].
         forces: (T, K, 3) force applied *on the object* at each point, world axes [N].
+        touching: (T, K) bool, True where contact k touches (None: always touching).
+        supports: support planes to draw (:class:`ReplaySupport`).
     """
 
     points: np.ndarray
     forces: np.ndarray
+    touching: np.ndarray | None = None
+    supports: Sequence[ReplaySupport] = ()
 
     def __post_init__(self):
         self.points = as_array(self.points, (None, None, 3), "ReplayContacts.points (T, K, 3)")
         self.forces = as_array(self.forces, self.points.shape, "ReplayContacts.forces (T, K, 3)")
+        if self.touching is not None:
+            tch = np.asarray(self.touching)
+            if tch.shape != self.points.shape[:2] or tch.dtype != bool:
+                raise InputError(f"ReplayContacts.touching: expected a bool array of shape "
+                                 f"{self.points.shape[:2]}, got {tch.dtype} {tch.shape}")
+            self.touching = tch
+        for sp in self.supports:
+            if not isinstance(sp, ReplaySupport):
+                raise InputError(f"ReplayContacts.supports: expected ReplaySupport items, got "
+                                 f"{type(sp).__name__}")
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -220,6 +271,10 @@ def _check_inputs(arms, obj, contacts, t, fps) -> np.ndarray:
             raise InputError(f"contacts: points have {len(contacts.points)} rows, "
                              f"t has {len(t)} samples")
     return t
+
+
+_Y_TO_Z = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+"""Rotation taking local z to local y (so ``_rotation_y_to(n) @ _Y_TO_Z`` maps z to n)."""
 
 
 def _pose(R: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -464,9 +519,19 @@ def build_animation(
         if force_scale is None:
             fmax = float(np.max(np.linalg.norm(contacts.forces, axis=2), initial=0.0))
             force_scale = AUTO_FORCE_LENGTH / fmax if fmax > 0 else 1.0
+        for sp in contacts.supports:
+            R = _rotation_y_to(sp.normal) @ _Y_TO_Z  # slab's local z along the normal
+            vis[f"supports/{sp.name}"].set_object(
+                mg.Box([2 * sp.half_size, 2 * sp.half_size, SUPPORT_THICKNESS]),
+                mg.MeshLambertMaterial(color=SUPPORT_COLOR))
+            vis[f"supports/{sp.name}"].set_transform(
+                _pose(R, sp.center - 0.5 * SUPPORT_THICKNESS * sp.normal))
         for k in range(n_contacts):
             vis[f"contacts/point_{k}"].set_object(
                 mg.Sphere(CONTACT_RADIUS), mg.MeshLambertMaterial(color=CONTACT_COLOR))
+            if contacts.touching is not None:
+                vis[f"contacts/free_{k}"].set_object(
+                    mg.Sphere(CONTACT_RADIUS), mg.MeshLambertMaterial(color=SEPARATED_COLOR))
             # Unit-length rod along local y from -1 to 0, pointed (radius 0) at 0.
             rod = vis[f"contacts/force_{k}/rod"]
             rod.set_object(mg.Cylinder(1.0, radiusTop=0.0, radiusBottom=FORCE_RADIUS),
@@ -491,6 +556,13 @@ def build_animation(
             at["object"].set_transform(_pose(R, obj.position[i]))
         for k in range(n_contacts):
             at[f"contacts/point_{k}"].set_transform(_pose(np.eye(3), contacts.points[i, k]))
+            if contacts.touching is not None:
+                on = bool(contacts.touching[i, k])
+                at[f"contacts/free_{k}"].set_transform(_pose(np.eye(3), contacts.points[i, k]))
+                at[f"contacts/point_{k}"].set_property(
+                    "scale", "vector3", [1.0] * 3 if on else [_MIN_SCALE] * 3)
+                at[f"contacts/free_{k}"].set_property(
+                    "scale", "vector3", [_MIN_SCALE] * 3 if on else [1.0] * 3)
             T, length = contact_pose(i, k)
             at[f"contacts/force_{k}"].set_transform(T)
             at[f"contacts/force_{k}"].set_property("scale", "vector3", [1.0, length, 1.0])
@@ -505,7 +577,13 @@ def build_animation(
             _pose(quaternion_to_rotation(obj.quaternion[i0]), obj.position[i0]))
     for k in range(n_contacts):
         T, length = contact_pose(i0, k)
-        vis[f"contacts/point_{k}"].set_transform(_pose(np.eye(3), contacts.points[i0, k]))
+        P = _pose(np.eye(3), contacts.points[i0, k])
+        hidden = _scaled(P, np.full(3, _MIN_SCALE))
+        if contacts.touching is not None:
+            on = bool(contacts.touching[i0, k])
+            vis[f"contacts/free_{k}"].set_transform(hidden if on else P)
+            P = P if on else hidden
+        vis[f"contacts/point_{k}"].set_transform(P)
         vis[f"contacts/force_{k}"].set_transform(_scaled(T, np.array([1.0, length, 1.0])))
 
     _frame_camera(vis, _scene_points(drawers, obj, contacts, i0))

@@ -6,15 +6,22 @@
   ``[x, y, z, w]``), ``object_twist`` (T, 6, ``[ẋ; ω]`` world axes), for each arm A
   ``q_A`` (T, nq), ``v_A`` (T, nv), ``tau_A`` (T, nv), ``mu_A`` (T, N_A) (contact multipliers
   [N], positive = pushing), ``phi_A`` (T, N_A) (gaps [m]); ``constraint_violation`` (T,)
-  = max |φ| over all contacts [m]; ``contact_points`` (T, K, 3) [m] and ``contact_forces``
-  (T, K, 3) [N] (force on the object, world axes) of the K contacts of all arms in order;
+  = max |φ| over held contacts and the penetration of separated ones [m];
+  ``contact_points`` (T, K, 3) [m] and ``contact_forces`` (T, K, 3) [N] (force on the
+  object, world axes) of the K contacts of all arms in order, then of the supports;
+  ``contact_labels`` (K,) and ``contact_active`` (T, K) (touching: in the active set, or
+  bilateral); for each support S ``mu_S``, ``phi_S`` (T, P_S); ``support_names`` (S,) and
+  ``support_planes`` (S, 6) (plane point and normal, world); ``external_wrench`` (T, 6);
+  the contact events ``event_t`` (E,) [s], ``event_contact`` (E,) (index in K) and
+  ``event_kind`` (E,) (``separation`` / ``touchdown``);
   ``kinetic_energy``, ``potential_energy`` (T,) [J]; ``momentum`` (T, 6).
 - ``summary.json``: scenario name, solver, steps, wall time, max constraint violation,
   min contact force, warnings (contact separations, solver switches), ``input_warnings``
   (legal but suspicious input values, also printed on stderr before the run), per-arm
   details (tool frame and offset, q0 and where it came from), ``status`` (``complete``,
   ``failed`` or ``interrupted``), ``error`` (the message, or null) and ``t_end`` (the last
-  simulated time [s]).
+  simulated time [s]);
+  ``events`` (every separation and touchdown: time, contact, arm or support).
 - ``object_pose.png``, ``contact_forces.png``, ``constraint_violation.png``.
 - ``replay.html``: a self-contained Meshcat page replaying the run offline.
 - ``scenario.yaml``: the scenario (URDF paths absolute), so that ``multiarm-pin replay DIR``
@@ -146,6 +153,12 @@ def make_controller(built: BuiltScenario):
         ScenarioError: unknown or bad controller parameters (key ``controller``).
     """
     spec = built.scenario.controller
+    if not built.system.n_arms:
+        if spec.type != "none":
+            raise ScenarioError(built.scenario.file, "controller.type",
+                                f"the scenario has no arms, so no controller {spec.type!r}; "
+                                "expected 'none' (or no controller key)")
+        return None
     try:
         from multiarm_pin.controllers import make_controller as factory
     except ImportError:
@@ -187,19 +200,42 @@ def trajectory_arrays(built: BuiltScenario, result) -> dict[str, np.ndarray]:
         out[f"phi_{arm.name}"] = result.phi[:, i, :N]
         points.append(result.contact_points[:, i, :N])
         forces.append(result.mu[:, i, :N, None] * result.normals[:, i, :N])
+    n, sup = system.n_arms, system.supports
+    for k, spt in enumerate(sup.supports):
+        rows = np.flatnonzero(sup.support_index == k)
+        out[f"mu_{spt.name}"] = result.mu[:, n, rows]
+        out[f"phi_{spt.name}"] = result.phi[:, n, rows]
+    if sup.n_rows:
+        K = sup.n_rows
+        points.append(result.contact_points[:, n, :K])
+        forces.append(result.mu[:, n, :K, None] * result.normals[:, n, :K])
     out["contact_points"] = np.concatenate(points, axis=1)
     out["contact_forces"] = np.concatenate(forces, axis=1)
+    mask = system.contact_mask
+    held = result.active | (mask & ~system.contact_unilateral)[None]
+    out["contact_active"] = held[:, mask]
+    out["contact_labels"] = np.array([lab for _, _, lab in system.contact_labels], dtype=str)
+    out["external_wrench"] = result.external_wrench
+    out["support_names"] = np.array([sp.name for sp in sup.supports], dtype=str)
+    out["support_planes"] = np.array([np.concatenate([sp.point, sp.normal])
+                                      for sp in sup.supports]).reshape(-1, 6)
+    flat = -np.ones(mask.shape, dtype=int)
+    flat[mask] = np.arange(int(mask.sum()))
+    out["event_t"] = np.array([e.t for e in result.events], dtype=float)
+    out["event_contact"] = np.array([flat[e.block, e.row] for e in result.events], dtype=int)
+    out["event_kind"] = np.array([e.kind for e in result.events], dtype=str)
     return {k: np.ascontiguousarray(v) for k, v in out.items()}
 
 
 def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> dict:
     """The ``summary.json`` content: run settings, physical checks and warnings."""
     system = built.system
-    mask = np.asarray(system.constraint_set.mask)
-    uni = np.asarray(system.unilateral)
+    mask = np.asarray(system.contact_mask)
     mu = result.mu
     real = mu[:, mask]
-    uni_mu = mu[:, uni]
+    n = system.n_arms
+    uni_mu = mu[:, :n, :system.N_max][:, np.asarray(system.unilateral)]  # the arms' rows
+    sup_mu = mu[:, n, :system.supports.n_rows] if system.supports.n_rows else mu[:, :0, 0]
     e = result.kinetic_energy + result.potential_energy
     arms = []
     for i, (arm, spec) in enumerate(zip(built.arms, built.scenario.arms, strict=True)):
@@ -219,6 +255,8 @@ def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> di
             "ik_residual": None if ik is None else float(ik.residual),
             "min_contact_force": float(mu[:, i, mask[i]].min()),
             "max_contact_force": float(mu[:, i, mask[i]].max()),
+            "separations": sum(1 for e in result.events
+                               if e.block == i and e.kind == "separation"),
         })
     warnings = list(result.warnings)
     if uni_mu.size and uni_mu.min() < 0:
@@ -246,6 +284,7 @@ def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> di
         "min_contact_force": float(real.min()) if real.size else None,
         "max_contact_force": float(real.max()) if real.size else None,
         "min_unilateral_contact_force": float(uni_mu.min()) if uni_mu.size else None,
+        "max_support_force": float(sup_mu.max()) if sup_mu.size else None,
         "energy_change": float(e[-1] - e[0]),
         "object_displacement": float(np.linalg.norm(result.object_position[-1]
                                                     - result.object_position[0])),
@@ -253,6 +292,12 @@ def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> di
                            (result.q, result.v, result.mu, result.object_position,
                             result.object_twist))),
         "arms": arms,
+        "supports": [{"name": sp.name, "point": sp.point.tolist(), "normal": sp.normal.tolist(),
+                      "points": int(len(sp.points)), "restitution": sp.restitution}
+                     for sp in system.supports.supports],
+        "external_wrench": [{"from": a, "to": b, "wrench": w.tolist()}
+                            for a, b, w in built.scenario.object.external_wrench],
+        "events": [e.as_dict() for e in result.events],
         "warnings": warnings,
         "requested": {"duration": sim.duration, "dt": sim.dt},
     }
@@ -264,7 +309,7 @@ def replay_parts(arms, obj, trajectory: dict):
     Returns:
         ``(replay_arms, replay_object, replay_contacts)``.
     """
-    from multiarm_pin.replay import ReplayArm, ReplayContacts, ReplayObject
+    from multiarm_pin.replay import ReplayArm, ReplayContacts, ReplayObject, ReplaySupport
 
     def finite(a, limit=1e12):  # a failed run may end on huge or NaN values: drawable
         return np.clip(np.nan_to_num(np.asarray(a, float), nan=0.0, posinf=limit,
@@ -279,8 +324,22 @@ def replay_parts(arms, obj, trajectory: dict):
     robj = ReplayObject(obj.shape, finite(trajectory["object_position"], 1e6), quat)
     rc = None
     if trajectory["contact_points"].shape[1] > 0:
+        labels = [str(x) for x in trajectory.get("contact_labels", [])]
+        supports = []
+        for name, plane in zip(trajectory.get("support_names", []),
+                               trajectory.get("support_planes", np.zeros((0, 6))), strict=True):
+            rows = [k for k, lab in enumerate(labels) if lab.startswith(f"{name}[")]
+            a, n = plane[:3], plane[3:]
+            pts = trajectory["contact_points"][0, rows]
+            pts = pts - ((pts - a) @ n)[:, None] * n  # projected onto the plane
+            c = pts.mean(axis=0)
+            half = float(np.max(np.linalg.norm(pts - c, axis=1), initial=0.0)) + 0.1
+            supports.append(ReplaySupport(str(name), c, n, half))
+        touching = trajectory.get("contact_active")
         rc = ReplayContacts(finite(trajectory["contact_points"], 1e6),
-                            finite(trajectory["contact_forces"]))
+                            finite(trajectory["contact_forces"]),
+                            None if touching is None else np.asarray(touching, dtype=bool),
+                            supports)
     return rarms, robj, rc
 
 
@@ -471,7 +530,8 @@ def simulate_built(built: BuiltScenario, controller, duration: float, dt: float,
     with np.errstate(over="ignore", invalid="ignore"):  # NaN/inf are caught and reported
         return simulate(built.system, built.initial_state, controller, duration, dt,
                         integrator=sim.integrator, solver=solver, baumgarte=sim.baumgarte,
-                        progress=progress)
+                        progress=progress,
+                        external_wrench=built.scenario.object.external_wrench or None)
 
 
 def _write_results(folder: Path, built: BuiltScenario, result, solver: str, wall: float,
@@ -491,7 +551,8 @@ def _write_results(folder: Path, built: BuiltScenario, result, solver: str, wall
     if plots:
         from multiarm_pin.plots import write_plots
 
-        for p in write_plots(folder, traj, [a.name for a in built.arms], sc.name):
+        for p in write_plots(folder, traj, [a.name for a in built.arms], sc.name,
+                             [sp.name for sp in built.system.supports.supports]):
             files[p.stem] = p
     if html:
         from multiarm_pin.replay import write_replay_html
@@ -652,6 +713,10 @@ def run_command(args: argparse.Namespace) -> int:
               f"{s['min_contact_force']:.4g} .. {s['max_contact_force']:.4g} N")
     print(f"  max constraint violation {s['max_constraint_violation']:.3g} m, contact forces "
           f"{forces}")
+    if s.get("events"):
+        e0 = s["events"][0]
+        print(f"  {len(s['events'])} contact events (separations, touchdowns); first: "
+              f"{e0['kind']} of {e0['label']} at t = {e0['t']:.4g} s")
     for w in s["warnings"][:10]:
         print(f"  warning: {w}")
     if len(s["warnings"]) > 10:

@@ -21,6 +21,16 @@ object, the controller and the simulation settings (format in the README and iss
     controller: {type: none}
     simulation: {duration: 2.0, integrator: rk4, dt: 0.001, solver: auto,
                  baumgarte: {alpha: 5.0, beta: 5.0}}
+    supports:                                # optional: fixed planes the object may rest on
+      - name: table
+        plane: {point: [0, 0, 0], normal: [0, 0, 1]}   # world; normal out of the support
+        points: vertices                     # or a list of object-frame points [m]
+        restitution: 0.0                     # 0 <= e <= 1
+
+The object may carry ``external_wrench: [{from: s, to: s, wrench: [fx, fy, fz, mx, my,
+mz]}]`` (at the COM, world axes [N, N m], over each interval). A joint may say ``unilateral:
+true/false`` to override its contacts' default (fingertip ``contacts`` push only; the
+mechanical joints are bilateral). ``arms`` may be empty when there are supports.
 
 Joint types: ``weld``, ``revolute``, ``prismatic``, ``cylindrical``, ``universal``,
 ``spherical`` (parameters ``size``, ``tip_radius``, ``points_on``, and optionally
@@ -89,6 +99,8 @@ class ObjectSpec:
         position: (3,) initial COM position in the world [m].
         quaternion: (4,) initial orientation ``[x, y, z, w]``.
         twist: (6,) initial ``[ẋ; ω]`` in world axes [m/s, rad/s].
+        external_wrench: ``((from, to, wrench (6,)), ...)``: a wrench ``[f; m]`` at the COM
+            in world axes [N, N m] for ``from <= t < to`` [s].
     """
 
     shape_type: str
@@ -99,11 +111,31 @@ class ObjectSpec:
     position: np.ndarray
     quaternion: np.ndarray
     twist: np.ndarray
+    external_wrench: tuple = ()
 
     @property
     def placement(self) -> pin.SE3:
         """Initial world placement of the object (COM) frame."""
         return pin.SE3(pin.Quaternion(self.quaternion).toRotationMatrix(), self.position)
+
+
+@dataclass(frozen=True)
+class SupportSpec:
+    """A support as read from a scenario.
+
+    Attributes:
+        name: unique name. point: (3,) a point of the plane, world [m]. normal: (3,) unit
+        normal out of the support, world axes. points: ``"vertices"`` or (P, 3) points in
+        the object frame [m]. restitution: Newton's coefficient, 0..1. index: position in
+        the file's ``supports`` list.
+    """
+
+    name: str
+    point: np.ndarray
+    normal: np.ndarray
+    points: str | np.ndarray
+    restitution: float
+    index: int
 
 
 @dataclass(frozen=True)
@@ -218,6 +250,7 @@ class Scenario:
     controller: ControllerSpec
     simulation: SimulationSpec
     data: dict
+    supports: tuple[SupportSpec, ...] = ()
 
 
 # ----------------------------------------------------------------------------- validation
@@ -335,12 +368,13 @@ def _shape_text(shape) -> str:
     return f"({inner},)" if len(shape) == 1 else f"({inner})"
 
 
-_TOP_KEYS = ("name", "description", "gravity", "object", "arms", "controller", "simulation")
-_OBJECT_KEYS = ("shape", "mass", "inertia", "pose", "twist")
+_TOP_KEYS = ("name", "description", "gravity", "object", "arms", "controller", "simulation",
+             "supports")
+_OBJECT_KEYS = ("shape", "mass", "inertia", "pose", "twist", "external_wrench")
 _ARM_KEYS = ("name", "robot", "urdf", "tool_frame", "tool_offset", "base", "locked_joints",
              "q0", "q_seed", "v0", "joint")
 _JOINT_KEYS = ("type", "size", "tip_radius", "points_on", "placement_in_object",
-               "placement_in_tool", "contacts")
+               "placement_in_tool", "contacts", "unilateral")
 _SIM_KEYS = ("duration", "integrator", "dt", "solver", "baumgarte")
 
 
@@ -381,9 +415,11 @@ def parse_scenario(data, file: str = "<scenario>") -> Scenario:
     gravity = (root.get("gravity").array((3,), "m/s^2") if "gravity" in d
                else np.array([0.0, 0.0, -9.81]))
     obj = _parse_object(root.get("object"))
+    supports = _parse_supports(root.get("supports")) if "supports" in d else ()
     arms_r = root.get("arms")
-    if not isinstance(arms_r.value, list) or not arms_r.value:
-        raise arms_r.error(f"expected a non-empty list of arms, got {_describe(arms_r.value)}")
+    if not isinstance(arms_r.value, list) or (not arms_r.value and not supports):
+        raise arms_r.error(f"expected a non-empty list of arms (or an empty list with "
+                           f"supports), got {_describe(arms_r.value)}")
     base_dir = Path(file).resolve().parent
     arms = tuple(_parse_arm(arms_r.child(i, a), i, base_dir) for i, a in enumerate(arms_r.value))
     names = [a.name for a in arms]
@@ -399,7 +435,47 @@ def parse_scenario(data, file: str = "<scenario>") -> Scenario:
     for a, spec in zip(clean["arms"], arms, strict=True):
         if spec.urdf is not None:
             a["urdf"] = spec.urdf
-    return Scenario(name, file, description, gravity, obj, arms, controller, sim, clean)
+    return Scenario(name, file, description, gravity, obj, arms, controller, sim, clean,
+                    supports)
+
+
+def _parse_supports(r: _Reader) -> tuple[SupportSpec, ...]:
+    if not isinstance(r.value, list):
+        raise r.error(f"expected a list of supports {{name, plane, points, restitution}}, got "
+                      f"{_describe(r.value)}")
+    out, names = [], []
+    for k, item in enumerate(r.value):
+        c = r.child(k, item)
+        d = c.mapping(("name", "plane", "points", "restitution"), required=("plane", "points"))
+        name = c.get("name").string() if "name" in d else f"support{k}"
+        if name in names:
+            raise c.get("name").error(f"duplicate support name {name!r}; names must be unique")
+        names.append(name)
+        pr = c.get("plane")
+        pr.mapping(("point", "normal"), required=("point", "normal"))
+        point = pr.get("point").array((3,), "world point [m]")
+        normal = pr.get("normal").array((3,), "world direction out of the support")
+        if np.linalg.norm(normal) < 1e-9:
+            raise pr.get("normal").error(f"the normal has zero length ({normal.tolist()}); "
+                                         "expected a direction pointing out of the support")
+        ptr = c.get("points")
+        if isinstance(ptr.value, str):
+            if ptr.value != "vertices":
+                raise ptr.error(f"expected 'vertices' or a list of [x, y, z] points in the "
+                                f"object frame [m], got {ptr.value!r}")
+            points = "vertices"
+        else:
+            points = ptr.array((None, 3), "points in the object frame [m]")
+            if len(points) == 0:
+                raise ptr.error("expected at least one [x, y, z] point (object frame [m])")
+        e = 0.0
+        if "restitution" in d:
+            er = c.get("restitution")
+            e = er.number(nonnegative=True)
+            if e > 1.0:
+                raise er.error(f"expected a coefficient of restitution in [0, 1], got {e}")
+        out.append(SupportSpec(name, point, normal / np.linalg.norm(normal), points, e, k))
+    return tuple(out)
 
 
 def _parse_object(r: _Reader) -> ObjectSpec:
@@ -427,7 +503,22 @@ def _parse_object(r: _Reader) -> ObjectSpec:
         position = M.translation.copy()
         quaternion = pin.Quaternion(M.rotation).coeffs().copy()
     twist = r.get("twist").array((6,), "[v; w] world axes") if "twist" in d else np.zeros(6)
-    return ObjectSpec(kind, size, vertices, mass, inertia, position, quaternion, twist)
+    wrenches = []
+    if "external_wrench" in d:
+        wr = r.get("external_wrench")
+        if not isinstance(wr.value, list):
+            raise wr.error(f"expected a list of {{from, to, wrench}}, got {_describe(wr.value)}")
+        for k, item in enumerate(wr.value):
+            c = wr.child(k, item)
+            c.mapping(("from", "to", "wrench"), required=("from", "to", "wrench"))
+            a = c.get("from").number(nonnegative=True)
+            b = c.get("to").number(nonnegative=True)
+            if b <= a:
+                raise c.get("to").error(f"expected to > from = {a} [s], got {b}")
+            w = c.get("wrench").array((6,), "[fx, fy, fz, mx, my, mz] at the COM, world [N, N m]")
+            wrenches.append((a, b, w))
+    return ObjectSpec(kind, size, vertices, mass, inertia, position, quaternion, twist,
+                      tuple(wrenches))
 
 
 def _parse_arm(r: _Reader, index: int, base_dir: Path) -> ArmSpec:
@@ -475,6 +566,11 @@ def _parse_joint(r: _Reader) -> JointSpec:
     d = r.mapping(_JOINT_KEYS, required=("type",))
     kind = r.get("type").string(JOINT_TYPE_NAMES)
     params = {}
+    if "unilateral" in d:
+        if not isinstance(d["unilateral"], bool):
+            raise r.get("unilateral").error(f"expected true or false, got "
+                                            f"{_describe(d['unilateral'])}")
+        params["unilateral"] = d["unilateral"]
     for key in ("size", "tip_radius"):
         if key in d:
             params[key] = r.get(key).number(positive=(key == "size"), nonnegative=True)
@@ -803,7 +899,8 @@ def _build_joint(scenario, spec: ArmSpec, arm, obj, q, oMo):
                         f"fingertip {c.tip!r} touches the plane of face {c.face!r} at "
                         f"{np.round(point, 4).tolist()} (object frame), outside the face")
                 contacts.append((f, point))
-            return fingertips_on_faces(obj.shape, contacts, r, tips, M, name=label, tol=1e-5)
+            return fingertips_on_faces(obj.shape, contacts, r, tips, M, name=label, tol=1e-5,
+                                       unilateral=j.params.get("unilateral", True))
         if j.placement_in_object is not None:
             return make_joint(j.type, joint_in_object=j.placement_in_object,
                               joint_in_tool=j.placement_in_tool, name=label, **j.params)
@@ -881,20 +978,54 @@ def build_scenario(scenario: Scenario, load_visuals: bool = False) -> BuiltScena
         q0s.append(q)
         iks.append(ik)
         joints.append(joint)
+    supports = _build_supports(scenario, obj)
     try:
-        system = MultiArmSystem(arms, obj, joints, scenario.gravity)
+        system = MultiArmSystem(arms, obj, joints, scenario.gravity, supports)
         v = np.concatenate([a.v0 if a.v0 is not None else np.zeros(arm.nv)
-                            for a, arm in zip(scenario.arms, arms, strict=True)])
-        state = system.state(np.concatenate(q0s), v, scenario.object.position,
+                            for a, arm in zip(scenario.arms, arms, strict=True)] + [np.zeros(0)])
+        state = system.state(np.concatenate(q0s + [np.zeros(0)]), v, scenario.object.position,
                              scenario.object.quaternion, scenario.object.twist)
         if np.any(v != 0) or np.any(scenario.object.twist != 0):
             state = system.project_velocities(state)
+        _check_support_gaps(scenario, system, state)
         system.check_initial_state(state)
     except ScenarioError:
         raise
     except MultiArmError as exc:
         raise ScenarioError(scenario.file, "arms", f"inconsistent initial state: {exc}") from exc
     return BuiltScenario(scenario, arms, obj, joints, system, state, q0s, iks)
+
+
+def _build_supports(scenario: Scenario, obj) -> list:
+    """The :class:`~multiarm_pin.constraints.Support` of each ``supports[k]``."""
+    from multiarm_pin.constraints import Support
+
+    out = []
+    for sp in scenario.supports:
+        pts = obj.shape.vertices if isinstance(sp.points, str) else sp.points
+        try:
+            out.append(Support(sp.name, sp.point, sp.normal, pts, sp.restitution))
+        except MultiArmError as exc:
+            raise ScenarioError(scenario.file, f"supports[{sp.index}]", str(exc)) from exc
+    return out
+
+
+def _check_support_gaps(scenario: Scenario, system, state) -> None:
+    """Raise if the object starts penetrating a support (key ``supports[k].points``)."""
+    if not system.supports.n_rows:
+        return
+    phi = system.support_terms(state).phi
+    for sp_index, sp in enumerate(scenario.supports):
+        rows = np.flatnonzero(system.supports.support_index == sp_index)
+        j = int(rows[np.argmin(phi[rows])])
+        if phi[j] < -INITIAL_GAP_TOLERANCE:
+            raise ScenarioError(
+                scenario.file, f"supports[{sp.index}].points",
+                f"the object starts penetrating support {sp.name!r}: point "
+                f"{int(system.supports.point_index[j])} is {-phi[j]:.6g} m below the plane "
+                f"(tolerance {INITIAL_GAP_TOLERANCE:g} m, "
+                f"{int((phi[rows] < -INITIAL_GAP_TOLERANCE).sum())} point(s) below); move "
+                "object.pose or the plane")
 
 
 __all__ = [
@@ -911,6 +1042,7 @@ __all__ = [
     "ObjectSpec",
     "Scenario",
     "SimulationSpec",
+    "SupportSpec",
     "build_arm",
     "build_object",
     "build_scenario",

@@ -19,6 +19,15 @@ Integrators (``integrator=``):
   with the new velocities (``pin.integrate``, :func:`~multiarm_pin.spatial.integrate_quaternion`).
 
 Everything is sampled every ``dt`` into a :class:`SimulationResult`.
+
+Unilateral contacts (fingertips, supports): when the system has any, every evaluation solves
+the mixed complementarity problem on the *active set* of rows
+(:func:`multiarm_pin.dynamics.unilateral.solve_unilateral`, the rows of
+:meth:`MultiArmSystem.contact_blocks`), and separations and touchdowns (with impacts) are
+handled between steps, event-driven, as :mod:`multiarm_pin.contact_events` describes; every
+event is in :attr:`SimulationResult.events`. ``rk45`` (adaptive, not event-aware) is only for
+systems without unilateral rows. Systems without unilateral rows use the bilateral solvers as
+before.
 """
 
 from __future__ import annotations
@@ -30,12 +39,15 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from multiarm_pin import contact_events as ce
+from multiarm_pin.contact_events import ContactEvent
+from multiarm_pin.disturbances import WrenchSchedule
 from multiarm_pin.dynamics import SOLVERS, Solution
 from multiarm_pin.dynamics import solve as solve_dynamics
 from multiarm_pin.exceptions import DynamicsError, InputError, MultiArmError
 from multiarm_pin.rigid_object import ObjectState
 from multiarm_pin.spatial import integrate_quaternion, quaternion_derivative
-from multiarm_pin.system import Evaluation, MultiArmSystem, SystemState
+from multiarm_pin.system import ContactRows, Evaluation, MultiArmSystem, SystemState
 
 INTEGRATORS = ("rk4", "rk45", "semi_implicit")
 """Names accepted by :func:`simulate`."""
@@ -49,7 +61,11 @@ Controller = Callable[[float, SystemState, Evaluation], np.ndarray]
 
 @dataclass
 class SimulationResult:
-    """Record of a run, sampled every ``dt`` (T samples, n arms, N_max constraints per arm).
+    """Record of a run, sampled every ``dt`` (T samples, B contact blocks, R rows per block).
+
+    ``B = n_blocks`` and ``R = rows_max`` of :class:`MultiArmSystem`: the n arms' rows, then
+    (when the system has supports) one block of every support row; without supports
+    ``B, R = n, N_max``.
 
     Attributes:
         t: (T,) times [s].
@@ -57,15 +73,17 @@ class SimulationResult:
         object_position: (T, 3) [m]; object_quaternion: (T, 4) ``[x, y, z, w]``;
         object_twist: (T, 6) ``[ẋ; ω]`` world axes.
         tau: (T, nv) joint torques applied [N m].
-        mu: (T, n, N_max) contact multipliers [N] (positive = pushing; 0 on padding).
-        phi: (T, n, N_max) gaps [m]; phi_dot: (T, n, N_max) gap rates [m/s].
-        contact_points: (T, n, N_max, 3) world contact points [m];
-        normals: (T, n, N_max, 3) world push directions.
+        mu: (T, B, R) contact multipliers [N] (positive = pushing; 0 on padding and on
+            separated rows).
+        phi: (T, B, R) gaps [m]; phi_dot: (T, B, R) gap rates [m/s].
+        contact_points: (T, B, R, 3) world contact points [m];
+        normals: (T, B, R, 3) world push directions.
         object_acceleration: (T, 6) ``[ẍ; ω̇]``; qdd: (T, nv) joint accelerations.
         kinetic_energy: (T,) [J]; potential_energy: (T,) [J] (gravity, zero at z = 0).
         momentum: (T, 6) total ``[linear; angular]`` momentum of arms and object about the
             world origin [kg m/s, kg m²/s].
-        constraint_violation: (T,) ``max |φ|`` over real contacts [m].
+        constraint_violation: (T,) ``max |φ|`` over bilateral and active rows, and the
+            largest penetration ``-φ`` of separated rows [m].
         solver: (T,) name of the solver used at each sample.
         warnings: contact separations (unilateral contact with ``μ < 0``) with time and
             arm/contact index, at each onset.
@@ -73,7 +91,11 @@ class SimulationResult:
             variant (onsets).
         wall_time: seconds spent in :func:`simulate`.
         integrator, dt, baumgarte: the settings used.
-        unilateral: (n, N_max) bool mask of unilateral contacts.
+        unilateral: (B, R) bool mask of unilateral rows.
+        active: (T, B, R) bool, rows in the active set (touching) at each sample.
+        external_wrench: (T, 6) ``[f; m]`` applied at the COM, world axes [N, N m].
+        events: every separation and touchdown (:class:`ContactEvent`), in time order.
+        contact_labels: ``(block, row, label)`` of every real row.
     """
 
     t: np.ndarray
@@ -102,6 +124,10 @@ class SimulationResult:
     warnings: list[str] = field(default_factory=list)
     solver_switches: list[float] = field(default_factory=list)
     wall_time: float = 0.0
+    active: np.ndarray | None = None
+    external_wrench: np.ndarray | None = None
+    events: list[ContactEvent] = field(default_factory=list)
+    contact_labels: list = field(default_factory=list)
 
     @property
     def total_energy(self) -> np.ndarray:
@@ -117,26 +143,38 @@ class SimulationResult:
 
 
 class _Stepper:
-    """Evaluates the closed-loop dynamics and records samples."""
+    """Evaluates the closed-loop dynamics on the active set and handles contact events."""
 
-    def __init__(self, system: MultiArmSystem, controller, solver: str, baumgarte):
+    def __init__(self, system: MultiArmSystem, controller, solver: str, baumgarte,
+                 wrench: WrenchSchedule | None = None):
         self.system = system
         self.controller = controller
         self.solver = solver
         self.baumgarte = baumgarte
-        self.model = system.arm_set.model
+        self.wrench = wrench if wrench else None
+        self.model = None if system.arm_set is None else system.arm_set.model
+        self.unilateral = bool(system.contact_unilateral.any())
+        self.active = system.contact_mask.copy()
+        self.events: list[ContactEvent] = []
 
     def evaluate(self, t: float, state: SystemState):
-        """Blocks, controller and forward dynamics at ``(t, state)``; errors carry the time."""
+        """``(solution, evaluation, tau, rows)`` at ``(t, state)`` with the current active set.
+
+        Errors carry the time (same type, message prefixed with ``t = ... s``).
+        """
         try:
             return self._evaluate(t, state)
-        except MultiArmError as exc:  # same type, message prefixed with the time
+        except MultiArmError as exc:
             if exc.args and isinstance(exc.args[0], str) and not exc.args[0].startswith("t = "):
                 exc.args = (f"t = {t:.6g} s: {exc.args[0]}", *exc.args[1:])
             raise
 
     def _evaluate(self, t: float, state: SystemState):
         s = self.system
+        w = None if self.wrench is None else self.wrench(t)
+        if not s.n_arms:
+            full, rows = s.contact_blocks(state, None, None, self.baumgarte, w)
+            return self._solve(t, full), None, np.zeros(0), rows
         ev = s.blocks(state, None, self.baumgarte)
         if self.controller is None:
             tau = np.zeros(s.nv)
@@ -153,11 +191,18 @@ class _Stepper:
             if not np.all(np.isfinite(tau)):
                 raise DynamicsError(f"t = {t:.6g} s: controller returned NaN or infinite torques")
             blocks = ev.blocks.with_torques(s.pad(tau))
+        full, rows = s.contact_blocks(state, blocks, ev.constraints, self.baumgarte, w)
+        return self._solve(t, full), ev, tau, rows
+
+    def _solve(self, t: float, blocks):
         try:
-            sol = solve_dynamics(blocks, self.solver)
+            if self.unilateral:
+                from multiarm_pin.dynamics.unilateral import solve_unilateral
+
+                return solve_unilateral(blocks, self.system.contact_unilateral, self.active)
+            return solve_dynamics(blocks, self.solver)
         except DynamicsError as exc:
             raise DynamicsError(f"t = {t:.6g} s: {exc}") from exc
-        return sol, ev, tau
 
     def derivative(self, state: SystemState, sol: Solution) -> np.ndarray:
         """Tangent ``[q̇ (nv); v̇ (nv); ṗ (3); q̇uat (4); ȧ (6)]``."""
@@ -167,7 +212,7 @@ class _Stepper:
 
     def advance(self, state: SystemState, d: np.ndarray, h: float) -> SystemState:
         nv = self.system.nv
-        q = pin.integrate(self.model, state.q, h * d[:nv])
+        q = state.q if self.model is None else pin.integrate(self.model, state.q, h * d[:nv])
         v = state.v + h * d[nv:2 * nv]
         o = state.obj
         p = o.position + h * d[2 * nv:2 * nv + 3]
@@ -175,6 +220,208 @@ class _Stepper:
         quat = quat / np.linalg.norm(quat)
         tw = o.twist + h * d[2 * nv + 7:]
         return SystemState(q, v, ObjectState(p, quat, tw))
+
+    def step(self, integrator: str, t: float, state: SystemState, sol: Solution,
+             h: float) -> SystemState:
+        """One step of size ``h`` [s] from ``(t, state)`` whose solution is ``sol``."""
+        if integrator == "rk4":
+            d1 = self.derivative(state, sol)
+            s2 = self.advance(state, d1, 0.5 * h)
+            d2 = self.derivative(s2, self.evaluate(t + 0.5 * h, s2)[0])
+            s3 = self.advance(state, d2, 0.5 * h)
+            d3 = self.derivative(s3, self.evaluate(t + 0.5 * h, s3)[0])
+            s4 = self.advance(state, d3, h)
+            d4 = self.derivative(s4, self.evaluate(t + h, s4)[0])
+            return self.advance(state, (d1 + 2.0 * d2 + 2.0 * d3 + d4) / 6.0, h)
+        system = self.system  # semi-implicit Euler
+        v = state.v + h * system.unpad(sol.qdd)
+        tw = state.obj.twist + h * sol.a_o
+        o = state.obj
+        q = state.q if self.model is None else pin.integrate(self.model, state.q, h * v)
+        return SystemState(q, v, ObjectState(o.position + h * tw[:3],
+                                             integrate_quaternion(o.quaternion, tw[3:], h), tw))
+
+    # ------------------------------------------------------------------ events
+    def _event(self, t: float, kind: str, b: int, r: int, **kw) -> None:
+        s = self.system
+        label = next(lab for bb, rr, lab in s.contact_labels if bb == b and rr == r)
+        body = s.arms[b].name if b < s.n_arms else s.supports.supports[
+            int(s.supports.support_index[r])].name
+        self.events.append(ContactEvent(float(t), kind, int(b), int(r), label, body, **kw))
+
+    def init_active(self, rows: ContactRows, tol: float) -> None:
+        """Active at t = 0: bilateral rows, and unilateral rows whose gap is within ``tol``."""
+        s = self.system
+        self.active = s.contact_mask & (~s.contact_unilateral | (rows.phi <= tol))
+
+    def separations(self, t: float, sol, rows: ContactRows, keep=None) -> bool:
+        """Drop active unilateral rows that the solution lets go; True if any was dropped.
+
+        ``keep``: (B, R) bool rows not to drop now (those that just touched down: they stay
+        active until the next sample, where the check runs again).
+        """
+        if not self.unilateral:
+            return False
+        s = self.system
+        leave = self.active & s.contact_unilateral & (
+            ((sol.mu <= 0.0) & (sol.phi_dd > ce.SEPARATION_ACCELERATION))
+            | (rows.phi > ce.SEPARATION_GAP) | (rows.phi_dot > ce.SEPARATION_SPEED))
+        if keep is not None:
+            leave &= ~keep
+        for b, r in zip(*np.nonzero(leave), strict=True):
+            self._event(t, "separation", b, r, phi_dot=float(rows.phi_dot[b, r]),
+                        phi_dot_after=float(rows.phi_dot[b, r]))
+        self.active = self.active & ~leave
+        return bool(leave.any())
+
+    def _watch(self) -> np.ndarray:
+        s = self.system
+        return s.contact_mask & s.contact_unilateral & ~self.active
+
+    def gaps(self, state: SystemState) -> np.ndarray:
+        """(B, R) gaps [m] of every row at a state."""
+        s = self.system
+        out = np.zeros((s.n_blocks, s.rows_max))
+        if s.n_arms:
+            out[:s.n_arms, :s.N_max] = s.blocks(state).constraints.phi
+        if s.supports.n_rows:
+            out[s.n_arms, :s.supports.n_rows] = s.support_terms(state).phi
+        return out
+
+    def advance_with_events(self, integrator: str, t: float, state: SystemState, sol,
+                            h: float) -> SystemState:
+        """The state at ``t + h``: steps, touchdowns located and impacts applied on the way."""
+        if not self.unilateral:
+            return self.step(integrator, t, state, sol, h)
+        tol = ce.GAP_TOLERANCE
+        t_end = t + h
+        for _ in range(ce.MAX_EVENTS_PER_STEP):
+            h = t_end - t
+            new = self.step(integrator, t, state, sol, h)
+            watch = self._watch()
+            if not watch.any():
+                return new
+            # a row far below the band at the step's start is not watched: its tip went
+            # round an edge, behind the (infinite) plane of its face, and touches nothing
+            watch &= self.gaps(state) >= -ce.LOST_GAP
+            if not watch.any():
+                return new
+            g_hi = float(self.gaps(new)[watch].min())
+            if g_hi >= -tol:
+                return new
+            theta, s_e = self._locate(integrator, t, state, sol, h, watch, g_hi)
+            t = t + theta * h
+            state, joined = self._impact(t, s_e, watch)
+            sol, _, _, rows = self.evaluate(t, state)
+            if self.separations(t, sol, rows, keep=joined):
+                sol = self.evaluate(t, state)[0]
+            if t_end - t <= ce.TIME_TOLERANCE:
+                return state
+        raise DynamicsError(f"t = {t:.6g} s: more than {ce.MAX_EVENTS_PER_STEP} contact events "
+                            "in one step")
+
+    def _locate(self, integrator, t, state, sol, h, watch, g_hi):
+        """``θ`` of the step where the smallest watched gap first reaches ``[-tol, 0]``.
+
+        A bracket ``[lo, hi]`` with the gap above the band at ``lo`` and below it at ``hi``
+        is refined by the Illinois method. When the step starts inside the band (a row
+        that just rebounded, or one touching), ``θ = 0`` if some such row approaches;
+        otherwise ``lo`` is searched by halving ``θ`` (the row rises, then comes back).
+        """
+        tol = ce.GAP_TOLERANCE
+        target = -0.5 * tol
+        lo, hi = 0.0, 1.0
+        _, rows0 = self._blocks_at(t, state)
+        f_lo, f_hi = float(rows0.phi[watch].min()) - target, g_hi - target
+        if f_lo <= 0.5 * tol:  # a watched row starts within (or below) the band
+            if np.any(watch & (rows0.phi <= 0.0) & (rows0.phi_dot < -ce.REBOUND_SPEED)):
+                return 0.0, state
+            theta = 1.0
+            while True:
+                theta *= 0.5
+                if theta * h < ce.TIME_TOLERANCE:
+                    return 0.0, state
+                f = float(self.gaps(self.step(integrator, t, state, sol, theta * h))[watch]
+                          .min()) - target
+                if f > 0.5 * tol:
+                    lo, f_lo = theta, f
+                    break
+                hi, f_hi = theta, f
+        side = 0
+        theta, s_e = hi, None
+        for _ in range(200):
+            theta = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+            if not (lo < theta < hi):
+                theta = 0.5 * (lo + hi)
+            s_e = self.step(integrator, t, state, sol, theta * h)
+            f = float(self.gaps(s_e)[watch].min()) - target
+            if abs(f) <= 0.5 * tol or (hi - lo) * h < ce.TIME_TOLERANCE:
+                return theta, s_e
+            if f > 0:
+                lo, f_lo = theta, f
+                if side == 1:
+                    f_hi *= 0.5
+                side = 1
+            else:
+                hi, f_hi = theta, f
+                if side == -1:
+                    f_lo *= 0.5
+                side = -1
+        return theta, s_e
+
+    def _impact(self, t: float, state: SystemState, watch: np.ndarray
+                ) -> tuple[SystemState, np.ndarray]:
+        """Apply the impact law at a touchdown, update the active set.
+
+        Returns:
+            The state after the impact and the (B, R) mask of rows that joined the active set.
+        """
+        from multiarm_pin.dynamics.unilateral import solve_impact
+
+        s = self.system
+        full, rows = self._blocks_at(t, state)
+        touching = watch & (rows.phi <= ce.GAP_TOLERANCE)
+        candidates = self.active | touching
+        e = np.where(np.abs(rows.phi_dot) < ce.RESTING_SPEED, 0.0, s.contact_restitution)
+        uni = s.contact_unilateral
+        try:
+            imp = solve_impact(full, uni, candidates, rows.phi_dot, e)
+            for _ in range(3):  # capture rows that would leave slower than RESTING_SPEED
+                slow = (candidates & uni & (imp.phi_dot_plus > ce.REBOUND_SPEED)
+                        & (imp.phi_dot_plus <= ce.RESTING_SPEED))
+                if not slow.any():
+                    break
+                uni = uni & ~slow  # held at φ̇⁺ = 0 by this impact (as bilateral rows)
+                imp = solve_impact(full, uni, candidates, rows.phi_dot, e)
+        except DynamicsError as exc:
+            raise DynamicsError(f"t = {t:.6g} s: impact: {exc}") from exc
+        o = state.obj
+        new = SystemState(state.q, state.v + s.unpad(imp.dqd),
+                          ObjectState(o.position, o.quaternion, o.twist + imp.dv_o))
+        leave = candidates & s.contact_unilateral & (imp.phi_dot_plus > ce.REBOUND_SPEED)
+        for b, r in zip(*np.nonzero(touching), strict=True):
+            self._event(t, "touchdown", b, r, phi_dot=float(rows.phi_dot[b, r]),
+                        phi_dot_after=float(imp.phi_dot_plus[b, r]),
+                        impulse=float(imp.P[b, r]), rebound=bool(leave[b, r]))
+        for b, r in zip(*np.nonzero(self.active & leave), strict=True):
+            self._event(t, "separation", b, r, phi_dot=float(rows.phi_dot[b, r]),
+                        phi_dot_after=float(imp.phi_dot_plus[b, r]),
+                        impulse=float(imp.P[b, r]))
+        joined = touching & ~leave
+        self.active = candidates & ~leave
+        return new, joined
+
+    def _blocks_at(self, t: float, state: SystemState):
+        """``(blocks, rows)`` of every contact row at a state, without torques.
+
+        The impact law uses only ``M``, ``W``, ``W_o`` and ``M_o``: no controller call.
+        """
+        s = self.system
+        w = None if self.wrench is None else self.wrench(t)
+        if not s.n_arms:
+            return s.contact_blocks(state, None, None, self.baumgarte, w)
+        ev = s.blocks(state, None, self.baumgarte)
+        return s.contact_blocks(state, ev.blocks, ev.constraints, self.baumgarte, w)
 
 
 def simulate(
@@ -194,6 +441,7 @@ def simulate(
     rtol: float = 1e-9,
     atol: float = 1e-11,
     max_record_bytes: int | None = None,
+    external_wrench: WrenchSchedule | None = None,
 ) -> SimulationResult:
     """Simulate the closed-loop system from ``initial_state`` for ``duration`` seconds.
 
@@ -216,6 +464,8 @@ def simulate(
         atol: absolute tolerance of ``rk45``.
         max_record_bytes: largest memory [bytes] the record may take
             (:func:`record_bytes`); default :func:`default_record_limit`.
+        external_wrench: wrench on the object's COM over time intervals
+            (:class:`~multiarm_pin.disturbances.WrenchSchedule`), or None.
 
     Returns:
         :class:`SimulationResult`.
@@ -257,7 +507,14 @@ def simulate(
             f"integrator 'rk45' needs nq == nv (q̇ = v), got nq = {system.nq}, nv = {system.nv} "
             "(an arm has continuous or multi-DOF joints); use 'rk4' or 'semi_implicit'"
         )
-    stepper = _Stepper(system, controller, solver, baumgarte)
+    if external_wrench is not None and not isinstance(external_wrench, WrenchSchedule):
+        external_wrench = WrenchSchedule(external_wrench)
+    stepper = _Stepper(system, controller, solver, baumgarte, external_wrench)
+    if integrator == "rk45" and stepper.unilateral:
+        raise InputError(
+            "integrator 'rk45' is not event-aware and the system has unilateral contacts "
+            "(fingertips or supports); use 'rk4' or 'semi_implicit'"
+        )
     n_steps = int(np.floor(duration / dt + 1e-9))
     need = record_bytes(system, n_steps + 1)
     if need > max_record_bytes:
@@ -277,14 +534,16 @@ def simulate(
                         ObjectState(np.array(initial_state.obj.position, float),
                                     _normalised(initial_state.obj.quaternion),
                                     np.array(initial_state.obj.twist, float)))
+    if stepper.unilateral:
+        stepper.init_active(stepper._blocks_at(0.0, state)[1], initial_tol)
     try:
         _integrate(stepper, rec, state, times, integrator, rtol, atol, report)
     except BaseException as exc:  # keep what was simulated, for the caller to save
         exc.partial_result = rec.result(integrator, dt, baumgarte,
-                                         time.perf_counter() - t_start, rec.count)
+                                         time.perf_counter() - t_start, stepper, rec.count)
         raise
     report(1.0)
-    return rec.result(integrator, dt, baumgarte, time.perf_counter() - t_start)
+    return rec.result(integrator, dt, baumgarte, time.perf_counter() - t_start, stepper)
 
 
 def partial_result(exc: BaseException) -> SimulationResult | None:
@@ -305,11 +564,12 @@ def record_bytes(system: MultiArmSystem, n_samples: int) -> int:
     """Memory [bytes] of the record of ``n_samples`` samples (all arrays of the result).
 
     Args:
-        system: the system (its nq, nv, arms and N_max set the per-sample size).
+        system: the system (its nq, nv, contact blocks and rows set the per-sample size).
         n_samples: T.
     """
-    nm = system.n_arms * system.N_max
-    per_sample = 1 + system.nq + 4 * system.nv + 3 + 4 + 6 + 6 + 3 * nm + 6 * nm + 2 + 6 + 1
+    nm = system.n_blocks * system.rows_max  # arms and the supports' block
+    per_sample = (1 + system.nq + 4 * system.nv + 3 + 4 + 6 + 6 + 3 * nm + 6 * nm + 2 + 6 + 1
+                  + 6 + nm / 8)  # + external wrench (6 floats) and active set (1 byte a row)
     return int(8 * (per_sample + 2) * max(int(n_samples), 0))  # + time grid, solver names
 
 
@@ -334,7 +594,6 @@ def default_record_limit() -> int:
 def _integrate(stepper: _Stepper, rec: _Recorder, state: SystemState, times: np.ndarray,
                integrator: str, rtol: float, atol: float, report) -> None:
     """Run the integrator over the time grid, recording every sample."""
-    system = stepper.system
     n_steps = len(times) - 1
     dt = float(times[1] - times[0]) if n_steps > 0 else 0.0
     if integrator == "rk45":
@@ -343,28 +602,13 @@ def _integrate(stepper: _Stepper, rec: _Recorder, state: SystemState, times: np.
         every = max(1, n_steps // 100)
         for k in range(n_steps + 1):
             t = times[k]
-            sol, ev, tau = stepper.evaluate(t, state)
-            rec.record(k, t, state, sol, ev, tau)
+            sol, ev, tau, rows = stepper.evaluate(t, state)
+            if stepper.separations(t, sol, rows):
+                sol, ev, tau, rows = stepper.evaluate(t, state)
+            rec.record(k, t, state, sol, ev, tau, rows, stepper)
             if k == n_steps:
                 break
-            if integrator == "rk4":
-                d1 = stepper.derivative(state, sol)
-                s2 = stepper.advance(state, d1, 0.5 * dt)
-                d2 = stepper.derivative(s2, stepper.evaluate(t + 0.5 * dt, s2)[0])
-                s3 = stepper.advance(state, d2, 0.5 * dt)
-                d3 = stepper.derivative(s3, stepper.evaluate(t + 0.5 * dt, s3)[0])
-                s4 = stepper.advance(state, d3, dt)
-                d4 = stepper.derivative(s4, stepper.evaluate(t + dt, s4)[0])
-                state = stepper.advance(state, (d1 + 2.0 * d2 + 2.0 * d3 + d4) / 6.0, dt)
-            else:  # semi-implicit Euler
-                v = state.v + dt * system.unpad(sol.qdd)
-                tw = state.obj.twist + dt * sol.a_o
-                o = state.obj
-                state = SystemState(
-                    pin.integrate(stepper.model, state.q, dt * v), v,
-                    ObjectState(o.position + dt * tw[:3],
-                                integrate_quaternion(o.quaternion, tw[3:], dt), tw),
-                )
+            state = stepper.advance_with_events(integrator, t, state, sol, dt)
             if k % every == 0:
                 report((k + 1) / n_steps)
 
@@ -404,8 +648,8 @@ def _run_rk45(stepper: _Stepper, rec: _Recorder, state: SystemState, times: np.n
         if times[k] <= ode.t:
             y = y0 if k == 0 else ode.dense_output()(times[k])
             s = unpack(y)
-            sol, ev, tau = stepper.evaluate(times[k], s)
-            rec.record(k, times[k], s, sol, ev, tau)
+            sol, ev, tau, rows = stepper.evaluate(times[k], s)
+            rec.record(k, times[k], s, sol, ev, tau, rows, stepper)
             k += 1
             continue
         message = ode.step()
@@ -415,7 +659,7 @@ def _run_rk45(stepper: _Stepper, rec: _Recorder, state: SystemState, times: np.n
 
 class _Recorder:
     def __init__(self, system: MultiArmSystem, T: int, solver: str):
-        n, m = system.n_arms, system.N_max
+        n, m = system.n_blocks, system.rows_max
         self.system = system
         self.requested = solver
         self.t = np.zeros(T)
@@ -436,6 +680,8 @@ class _Recorder:
         self.pe = np.zeros(T)
         self.momentum = np.zeros((T, 6))
         self.violation = np.zeros(T)
+        self.active = np.zeros((T, n, m), dtype=bool)
+        self.wrench = np.zeros((T, 6))
         self.solver = np.empty(T, dtype=object)
         self.warnings: list[str] = []
         self.n_warnings = 0
@@ -445,9 +691,8 @@ class _Recorder:
         self.count = 0
 
     def record(self, k: int, t: float, state: SystemState, sol: Solution, ev: Evaluation,
-               tau: np.ndarray) -> None:
+               tau: np.ndarray, ct: ContactRows, stepper: _Stepper) -> None:
         s = self.system
-        ct = ev.constraints
         self.t[k] = t
         self.q[k] = state.q
         self.v[k] = state.v
@@ -465,9 +710,15 @@ class _Recorder:
         self.ke[k] = s.kinetic_energy(state)
         self.pe[k] = s.potential_energy(state)
         self.momentum[k] = s.momentum(state)
-        self.violation[k] = float(np.max(np.abs(ct.phi[ct.mask]))) if ct.mask.any() else 0.0
+        held = stepper.active | (s.contact_mask & ~s.contact_unilateral)
+        free = s.contact_mask & ~held
+        viol = np.concatenate([np.abs(ct.phi[held]), np.maximum(-ct.phi[free], 0.0), [0.0]])
+        self.violation[k] = float(viol.max())
+        self.active[k] = stepper.active
+        if stepper.wrench is not None:
+            self.wrench[k] = stepper.wrench(t)
         self.solver[k] = sol.solver
-        negative = s.unilateral & (sol.mu < 0.0)
+        negative = s.contact_unilateral & (sol.mu < 0.0)
         for i, j in zip(*np.nonzero(negative & ~self._negative), strict=True):
             self.n_warnings += 1
             if len(self.warnings) < MAX_WARNINGS:
@@ -482,10 +733,16 @@ class _Recorder:
         self._singular = singular
         self.count = k + 1
 
-    def result(self, integrator, dt, baumgarte, wall, n: int | None = None) -> SimulationResult:
+    def result(self, integrator, dt, baumgarte, wall, stepper: _Stepper,
+               n: int | None = None) -> SimulationResult:
         """The record as a :class:`SimulationResult`, its first ``n`` samples (all: None)."""
         n = len(self.t) if n is None else int(n)
-        warnings = list(self.warnings)
+        s = self.system
+        warnings = [  # a grasp contact letting go is worth a warning (a support's is not)
+            f"t = {e.t:.6g} s: arm {e.block} ({e.body}) contact {e.row}: separates (multiplier "
+            f"μ = 0 N; holding it would need a pulling force)"
+            for e in stepper.events if e.kind == "separation" and e.block < s.n_arms
+        ][:MAX_WARNINGS] + list(self.warnings)
         if self.n_warnings > len(warnings):
             warnings.append(f"... {self.n_warnings - len(warnings)} more separation warnings")
         return SimulationResult(
@@ -496,14 +753,18 @@ class _Recorder:
             object_acceleration=self.a_o[:n], qdd=self.qdd[:n], kinetic_energy=self.ke[:n],
             potential_energy=self.pe[:n], momentum=self.momentum[:n],
             constraint_violation=self.violation[:n], solver=self.solver[:n],
-            unilateral=np.array(self.system.unilateral), integrator=integrator, dt=dt,
+            unilateral=np.array(self.system.contact_unilateral), integrator=integrator, dt=dt,
             baumgarte=None if baumgarte is None else tuple(float(x) for x in baumgarte),
             warnings=warnings, solver_switches=list(self.switches), wall_time=wall,
+            active=self.active[:n], external_wrench=self.wrench[:n],
+            events=[e for e in stepper.events if n == len(self.t) or e.t <= self.t[max(n - 1, 0)]],
+            contact_labels=list(self.system.contact_labels),
         )
 
 
 __all__ = [
     "INTEGRATORS",
+    "ContactEvent",
     "Controller",
     "SimulationResult",
     "default_record_limit",

@@ -26,6 +26,7 @@ twist ``[ẋ; ω]`` in world axes).
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -44,6 +45,7 @@ from multiarm_pin.constraints import (
     fingertips_from_placements,
     make_joint_from_placements,
 )
+from multiarm_pin.constraints.supports import Support, SupportSet
 from multiarm_pin.dynamics import Solution, SystemBlocks, solve
 from multiarm_pin.dynamics.object_first import (
     DEFAULT_RCOND_TOL,
@@ -54,12 +56,6 @@ from multiarm_pin.exceptions import ConstraintError, DynamicsError, InputError
 from multiarm_pin.kinematics import BodyKinematics
 from multiarm_pin.rigid_object import ObjectState, RigidObject
 from multiarm_pin.spatial import as_array, as_unit_quaternion, cross
-
-UNILATERAL_JOINT_KINDS = frozenset({"fingertips"})
-"""Joint kinds whose contacts are unilateral (a frictionless fingertip can only push).
-
-The joint library has no per-contact flag; fingertip grasps (``Joint.kind == "fingertips"``)
-are the unilateral ones, every other joint (weld, revolute, ...) is bilateral."""
 
 _COMPILED_SOLVERS = frozenset({"auto", "object_first"})
 """Solvers that :meth:`MultiArmSystem.forward_dynamics` runs fused with the blocks."""
@@ -81,6 +77,25 @@ class SystemState:
     q: np.ndarray
     v: np.ndarray
     obj: ObjectState
+
+
+@dataclass(frozen=True)
+class ContactRows:
+    """Every contact row of the system at one state: the arms' rows, then the supports'.
+
+    Shapes ``(B, R)`` with ``B = n_blocks`` (the n arms, plus one zero-dof block holding every
+    support row when the system has supports) and ``R = rows_max``; padding is zero.
+
+    Attributes:
+        phi: (B, R) gaps [m]; phi_dot: (B, R) gap rates [m/s].
+        contact_points: (B, R, 3) world contact points [m].
+        normals: (B, R, 3) world directions in which each row pushes the object.
+    """
+
+    phi: np.ndarray
+    phi_dot: np.ndarray
+    contact_points: np.ndarray
+    normals: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -182,18 +197,29 @@ class MultiArmSystem:
         joints: one :class:`Joint` per arm.
         gravity: (3,) gravity acceleration in the world [m/s²]; set on the combined
             Pinocchio model too.
+        supports: fixed planes the object may rest on (:class:`Support`, unilateral rows);
+            with supports, ``arms`` may be empty (an object on supports alone).
 
     Attributes:
         n_arms, nq, nv: numbers of arms, configuration variables and joint velocities.
         arm_set: the combined Pinocchio model of the arms (:class:`ArmSet`).
         constraint_set: the joints, vectorised (:class:`ConstraintSet`).
         obj: the object; joints: the joints; gravity: (3,) [m/s²].
-        unilateral: (n, N_max) bool, True on constraint rows that are unilateral
-            (fingertip contacts), False on bilateral rows and padding.
+        unilateral: (n, N_max) bool, True on the arms' constraint rows whose contact is
+            unilateral (:attr:`Contact.unilateral`), False on bilateral rows and padding.
+        supports: the :class:`SupportSet` (K rows).
+        n_blocks: n, plus 1 when there are supports (their zero-dof block, after the arms).
+        rows_max: padded rows per block of :meth:`contact_blocks` (``max(N_max, K)``).
+        contact_mask, contact_unilateral: (n_blocks, rows_max) bool, real rows and unilateral
+            rows of :meth:`contact_blocks` (the arms' rows, then the supports').
+        contact_restitution: (n_blocks, rows_max) Newton's coefficient of each row (0 on the
+            arms' rows and padding).
+        contact_labels: one ``(block, row, label)`` per real row: ``"<arm>:<contact>"`` or
+            ``"<support>[j]"``.
     """
 
     def __init__(self, arms: list[Arm], obj: RigidObject, joints: list[Joint],
-                 gravity=(0.0, 0.0, -9.81)):
+                 gravity=(0.0, 0.0, -9.81), supports: Sequence[Support] = ()):
         if not isinstance(obj, RigidObject):
             raise InputError(f"obj: expected a RigidObject, got {type(obj).__name__}")
         if len(arms) != len(joints):
@@ -202,6 +228,13 @@ class MultiArmSystem:
                 "joint per arm"
             )
         self.gravity = as_array(gravity, (3,), "gravity [m/s^2]")
+        self.supports = SupportSet(supports)
+        if not arms:
+            if not self.supports.n_rows:
+                raise InputError("MultiArmSystem: no arms and no supports; expected at least "
+                                 "one of them")
+            self._init_without_arms(obj)
+            return
         self.arm_set = ArmSet(list(arms))
         for model in {id(m): m for m in [self.arm_set.model]
                       + [g.model for g in self.arm_set.groups]}.values():
@@ -216,10 +249,53 @@ class MultiArmSystem:
         self._nv_arm = self.arm_set.nv_arm.copy()
         self._N = self.constraint_set.N.copy()
         self.N_max = self.constraint_set.N_max
-        kinds = np.array([j.kind in UNILATERAL_JOINT_KINDS for j in self.joints])
-        self.unilateral = self.constraint_set.mask & kinds[:, None]
-        self.unilateral.setflags(write=False)
+        self.unilateral = self.constraint_set.unilateral  # per contact (Contact.unilateral)
         self._init_kernel_tables()
+        self._init_contact_rows()
+
+    def _init_without_arms(self, obj: RigidObject) -> None:
+        """An object on supports alone: no arms, no joints, one zero-dof support block."""
+        self.arm_set = None
+        self.constraint_set = None
+        self.obj = obj
+        self.joints, self.arms = [], []
+        self.n_arms = self.nq = self.nv = 0
+        self._nv_arm = np.zeros(0, dtype=int)
+        self._N = np.zeros(0, dtype=int)
+        self.N_max = 0
+        self.unilateral = np.zeros((0, 0), dtype=bool)
+        self.unilateral.setflags(write=False)
+        self._init_contact_rows()
+
+    def _init_contact_rows(self) -> None:
+        """Row tables of :meth:`contact_blocks` (arms' rows, then the supports' block)."""
+        n, K = self.n_arms, self.supports.n_rows
+        self.n_blocks = n + (1 if K else 0)
+        self.rows_max = max(self.N_max, K)
+        B, R = self.n_blocks, self.rows_max
+        mask = np.zeros((B, R), dtype=bool)
+        uni = np.zeros((B, R), dtype=bool)
+        rest = np.zeros((B, R))
+        labels = []
+        for i in range(n):
+            Ni = int(self._N[i])
+            mask[i, :Ni] = True
+            uni[i, :Ni] = self.unilateral[i, :Ni]
+            names = [c.name for c in self.joints[i].active_contacts]
+            labels += [(i, k, f"{self.arms[i].name}:{names[k]}") for k in range(Ni)]
+        if K:
+            mask[n, :K] = True
+            uni[n, :K] = True
+            rest[n, :K] = self.supports.restitution
+            labels += [(n, k, lab) for k, lab in enumerate(self.supports.labels)]
+        for a in (mask, uni, rest):
+            a.setflags(write=False)
+        self.contact_mask, self.contact_unilateral = mask, uni
+        self.contact_restitution = rest
+        self.contact_labels = labels
+        self._nv_blocks = np.concatenate([self._nv_arm, [0] * (B - n)]).astype(int)
+        self._N_blocks = np.concatenate([self._N, [K] * (B - n)]).astype(int)
+        self._nv_max_blocks = max(int(self._nv_arm.max()) if n else 0, 1)
 
     def _init_kernel_tables(self) -> None:
         """Constant inputs of the compiled hot path (:mod:`multiarm_pin.kernels`)."""
@@ -359,6 +435,9 @@ class MultiArmSystem:
                 contact and value (use :meth:`project_velocities` to fix velocities).
         """
         self.check_state(state)
+        self.check_supports(state, tol)
+        if not self.n_arms:
+            return
         tools = self.arm_set.tool_kinematics(state.q, state.v)
         objk = state.obj.kinematics()
         self.constraint_set.check_initial(tools, objk, tol=tol)
@@ -384,6 +463,8 @@ class MultiArmSystem:
             (Σ N_i, nv + 6): row block i is ``[0 .. W_iᵀ .. 0, W_o,iᵀ]`` (``W_iᵀ`` on arm i's
             velocity slice, ``W_o,iᵀ = G_object,i`` on the object twist ``[ẋ; ω]``).
         """
+        if not self.n_arms:
+            return np.zeros((0, 6))
         ev = self.blocks(state)
         b = ev.blocks
         A = np.zeros((b.n_constraints, self.nv + 6))
@@ -413,11 +494,15 @@ class MultiArmSystem:
     # ------------------------------------------------------------------ the hot path
     def pad(self, x: np.ndarray) -> np.ndarray:
         """Combined joint vector (nv,) -> stacked, zero-padded (n, nv_max)."""
+        if not self.n_arms:
+            return np.zeros((0, 1))
         return self.arm_set.pad_v(x)
 
     def unpad(self, x: np.ndarray) -> np.ndarray:
-        """Stacked (n, nv_max) -> combined (nv,)."""
-        return self.arm_set.unpad_v(x)
+        """Stacked (n, nv_max) -> combined (nv,) (blocks beyond the arms are ignored)."""
+        if not self.n_arms:
+            return np.zeros(0)
+        return self.arm_set.unpad_v(np.asarray(x)[:self.n_arms])
 
     def blocks(self, state: SystemState, tau: np.ndarray | None = None,
                baumgarte: tuple[float, float] | None = None, *,
@@ -439,7 +524,13 @@ class MultiArmSystem:
 
         Returns:
             :class:`Evaluation` (blocks, arm terms, constraint terms).
+
+        Raises:
+            InputError: the system has no arms (use :meth:`contact_blocks`).
         """
+        if not self.n_arms:
+            raise InputError("MultiArmSystem.blocks: the system has no arms; its only rows are "
+                             "the supports' (use contact_blocks)")
         if reference:
             return self._blocks_reference(state, tau, baumgarte)
         return self._compiled(state, tau, baumgarte, False)[0]
@@ -597,9 +688,115 @@ class MultiArmSystem:
         ev = self.blocks(state, tau, baumgarte)
         return solve(ev.blocks, solver), ev
 
+    # ------------------------------------------------------------------ contacts
+    def support_terms(self, state: SystemState):
+        """The support rows at a state (:class:`~multiarm_pin.constraints.SupportTerms`)."""
+        o = state.obj
+        return self.supports.evaluate(o.position, o.rotation, o.twist)
+
+    def contact_blocks(self, state: SystemState, blocks: SystemBlocks | None = None,
+                       constraints: ConstraintTerms | None = None,
+                       baumgarte: tuple[float, float] | None = None,
+                       external_wrench=None) -> tuple[SystemBlocks, ContactRows]:
+        """The blocks of every contact row: the arms' blocks, then one zero-dof support block.
+
+        The support block (``nv = 0``: identity padding of ``M``, ``W = 0``) holds the K
+        support rows: ``W_o = G_objectᵀ`` (``[n; r × n]``), ``c = -κ`` (and, with Baumgarte,
+        ``- 2α φ̇ - β² φ``). Without supports the arms' blocks are returned as they are.
+
+        Args:
+            state: the state.
+            blocks: the arms' blocks at this state (with torques), from :meth:`blocks`;
+                None when the system has no arms.
+            constraints: the arms' constraint rows of the same evaluation (None: no arms).
+            baumgarte: ``(α, β)`` [1/s] of the support rows (the arms' are in ``blocks``).
+            external_wrench: (6,) ``[f; m]`` at the COM in world axes [N, N m] added to
+                ``h_o``, or None.
+
+        Returns:
+            ``(blocks, rows)``: :class:`SystemBlocks` with ``n_blocks`` blocks padded to
+            ``rows_max`` rows, and their :class:`ContactRows`.
+        """
+        n, K = self.n_arms, self.supports.n_rows
+        B, R = self.n_blocks, self.rows_max
+        o = state.obj
+        if n:
+            M_o, h_o = blocks.M_o, blocks.h_o
+        else:
+            M_o = self.obj.mass_matrix(o.rotation)
+            h_o = self.obj.bias_wrench(o.rotation, o.twist, self.gravity)
+        if external_wrench is not None:
+            h_o = h_o + np.asarray(external_wrench, dtype=float)
+        if not K:
+            if external_wrench is not None:
+                blocks = _replace_h_o(blocks, h_o)
+            ct = constraints
+            return blocks, ContactRows(ct.phi, ct.phi_dot, ct.contact_points, ct.normals)
+        st = self.support_terms(state)
+        c_s = -st.kappa
+        if baumgarte is not None:
+            a, b = _baumgarte(baumgarte)
+            c_s = c_s - 2.0 * a * st.phi_dot - b * b * st.phi
+        k = blocks.nv_max if n else self._nv_max_blocks
+        m = self.N_max
+        M = np.zeros((B, k, k))
+        M[n] = np.eye(k)
+        h = np.zeros((B, k))
+        W = np.zeros((B, k, R))
+        W_o = np.zeros((B, 6, R))
+        c = np.zeros((B, R))
+        phi = np.zeros((B, R))
+        phi_dot = np.zeros((B, R))
+        pts = np.zeros((B, R, 3))
+        nrm = np.zeros((B, R, 3))
+        if n:
+            M[:n] = blocks.M
+            h[:n] = blocks.h
+            W[:n, :, :m] = blocks.W
+            W_o[:n, :, :m] = blocks.W_o
+            c[:n, :m] = blocks.c
+            phi[:n, :m] = constraints.phi
+            phi_dot[:n, :m] = constraints.phi_dot
+            pts[:n, :m] = constraints.contact_points
+            nrm[:n, :m] = constraints.normals
+        W_o[n, :, :K] = st.G_object.T
+        c[n, :K] = c_s
+        phi[n, :K] = st.phi
+        phi_dot[n, :K] = st.phi_dot
+        pts[n, :K] = st.contact_points
+        nrm[n, :K] = st.normals
+        full = SystemBlocks(M, h, W, W_o, c, np.array(M_o, dtype=float),
+                            np.array(h_o, dtype=float), self._nv_blocks.copy(),
+                            self._N_blocks.copy())
+        return full, ContactRows(phi, phi_dot, pts, nrm)
+
+    def check_supports(self, state: SystemState, tol: float = 1e-6) -> None:
+        """Raise if the object penetrates a support by more than ``tol`` [m].
+
+        Raises:
+            ConstraintError: names the support, the point and its gap.
+        """
+        if not self.supports.n_rows:
+            return
+        st = self.support_terms(state)
+        k = int(np.argmin(st.phi))
+        if st.phi[k] < -tol:
+            raise ConstraintError(
+                f"the object starts penetrating support {self.supports.labels[k]!r}: gap "
+                f"{st.phi[k]:.6g} m (tolerance {tol:g} m, "
+                f"{int((st.phi < -tol).sum())} point(s) below the plane)"
+            )
+
     # ------------------------------------------------------------------ physics
+    @property
+    def _groups(self) -> list:
+        """The arm groups of the Pinocchio pass (none without arms)."""
+        return [] if self.arm_set is None else self.arm_set.groups
+
     def gravity_torques(self, q: np.ndarray) -> np.ndarray:
         """(nv,) joint torques that hold the arms (alone) against gravity [N m]."""
+        if not self.n_arms:
+            return np.zeros(0)
         return self.arm_set.gravity_combined(q)
 
     def kinetic_energy(self, state: SystemState) -> float:
@@ -609,13 +806,13 @@ class MultiArmSystem:
         systems never need the ``Data`` of one model of all arms.
         """
         e = sum(float(pin.computeKineticEnergy(g.model, g.data, state.q[g.q], state.v[g.v]))
-                for g in self.arm_set.groups)
+                for g in self._groups)
         return e + self.obj.kinetic_energy(state.obj)
 
     def potential_energy(self, state: SystemState) -> float:
         """Gravitational potential energy ``-Σ m g·c`` of arms and object [J] (zero at z = 0)."""
         e = sum(float(pin.computePotentialEnergy(g.model, g.data, state.q[g.q]))
-                for g in self.arm_set.groups)
+                for g in self._groups)
         return e - self.obj.mass * float(self.gravity @ state.obj.position)
 
     def momentum(self, state: SystemState) -> np.ndarray:
@@ -627,7 +824,7 @@ class MultiArmSystem:
         lin = self.obj.mass * state.obj.twist[:3]
         ho = self.obj.momentum(state.obj)
         ang = ho[3:] + cross(state.obj.position, ho[:3])
-        for g in self.arm_set.groups:
+        for g in self._groups:
             hg = pin.computeCentroidalMomentum(g.model, g.data, state.q[g.q], state.v[g.v])
             lin = lin + hg.linear
             ang = ang + hg.angular + cross(g.data.com[0], hg.linear)
@@ -722,6 +919,13 @@ def _trusted(cls, **fields):
     return obj
 
 
+def _replace_h_o(blocks: SystemBlocks, h_o: np.ndarray) -> SystemBlocks:
+    """A shallow copy of ``blocks`` with another ``h_o`` (no re-validation)."""
+    out = copy.copy(blocks)
+    out.__dict__["h_o"] = h_o  # shadows the lazy view of the compiled path, like with_torques
+    return out
+
+
 def _single_body(position, rotation, twist) -> BodyKinematics:
     return BodyKinematics(position[None], rotation[None], twist[None])
 
@@ -737,7 +941,6 @@ def _baumgarte(value) -> tuple[float, float]:
 
 
 __all__ = [
-    "UNILATERAL_JOINT_KINDS",
     "Evaluation",
     "MultiArmSystem",
     "SystemState",

@@ -21,3 +21,4 @@ def panda() -> Arm:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
+

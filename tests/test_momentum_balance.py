@@ -40,7 +40,11 @@ from multiarm_pin.spatial import quaternion_derivative, quaternion_to_rotation
 
 ZERO_G = (0.0, 0.0, 0.0)
 TILTED_G = (0.5, -1.0, -9.7)  # not along an axis: a mixed-up axis or sign shows
-FINGERTIPS = {"type": "fingertips", "contacts": FINGERTIP_CONTACTS, "radius": 0.01}
+# Held as bilateral rows (issue 12 made fingertips unilateral by default): with τ = 0 these
+# fingertips pull, and the balance is checked here on a constrained motion without events
+# (unilateral separation is tested in tests/test_contact_events.py and the scenario tests).
+FINGERTIPS = {"type": "fingertips", "contacts": FINGERTIP_CONTACTS, "radius": 0.01,
+              "unilateral": False}
 DT = 1e-3  # rk4 step and sampling period [s]
 DURATION = 0.1  # [s]
 SAMPLES = (20, 50, 80)  # where the rate is checked (central differences up to ±8 samples)

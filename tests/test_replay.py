@@ -479,3 +479,51 @@ def test_rotation_to_quaternion_roundtrip_used_by_tests():
     # guards the helper the tests above rely on to read Meshcat's [x, y, z, w] tracks
     R = pin.rpy.rpyToMatrix(0.3, -0.2, 1.1)
     np.testing.assert_allclose(quaternion_to_rotation(rotation_to_quaternion(R)), R, atol=1e-12)
+
+
+# ------------------------------------------------------------------ contact states, supports
+def test_contact_state_switches_spheres_and_supports_are_drawn():
+    """A contact that separates: its yellow sphere shrinks to nothing and a grey one appears.
+
+    Two contacts over 1 s at 10 fps; contact 1 touches for t < 0.5 s only. The scale tracks
+    of ``contacts/point_1`` and ``contacts/free_1`` are 1 / ~0 before and ~0 / 1 after;
+    contact 0 stays touching. A support slab's top face lies on its plane: its centre is
+    half a thickness below the given centre along the normal, its z axis along the normal.
+    """
+    from multiarm_pin.replay import SUPPORT_THICKNESS, ReplaySupport
+
+    t = np.linspace(0.0, 1.0, 11)
+    points = np.zeros((11, 2, 3))
+    points[:, 1] = [0.1, 0.0, 0.0]
+    touching = np.ones((11, 2), dtype=bool)
+    touching[t >= 0.5, 1] = False
+    n = np.array([0.0, 0.6, 0.8])
+    contacts = ReplayContacts(points, np.zeros_like(points), touching,
+                              [ReplaySupport("table", [0.2, 0.0, 0.0], n, 0.3)])
+    window = RecordingWindow()
+    vis = Visualizer(window=window)
+    anim = build_animation(vis, [], None, contacts, t, fps=10)
+    _, on = _track(anim, "contacts/point_1", "scale")
+    _, off = _track(anim, "contacts/free_1", "scale")
+    on, off = np.reshape(on, (-1, 3))[:, 0], np.reshape(off, (-1, 3))[:, 0]
+    np.testing.assert_array_equal(on > 0.5, t < 0.5)
+    np.testing.assert_array_equal(off > 0.5, t >= 0.5)
+    _, on0 = _track(anim, "contacts/point_0", "scale")
+    assert np.all(np.asarray(on0) == 1.0)
+    slab = [c for c in window.commands if "supports/table" in str(c)]
+    assert slab, "the support slab is sent to the viewer"
+    T = _slab_pose(window)
+    np.testing.assert_allclose(T[:3, 3], [0.2, 0.0, 0.0] - 0.5 * SUPPORT_THICKNESS * n,
+                               atol=1e-12)
+    np.testing.assert_allclose(T[:3, 2], n, atol=1e-12)
+    with pytest.raises(InputError, match="touching"):
+        ReplayContacts(points, np.zeros_like(points), touching[:, :1])
+
+
+def _slab_pose(window) -> np.ndarray:
+    """The 4 x 4 transform last set on ``supports/table`` (column-major in the command)."""
+    for c in reversed(window.commands):
+        if isinstance(c, dict) and c.get("path", "").endswith("supports/table") \
+                and c.get("type") == "set_transform":
+            return np.array(c["matrix"]).reshape(4, 4).T
+    raise AssertionError("no set_transform on supports/table")

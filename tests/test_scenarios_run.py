@@ -29,15 +29,17 @@ def test_scenario_runs_and_is_physical(path, tmp_path):
     assert s["steps"] == round(DURATION / sc.simulation.dt)
     assert s["max_constraint_violation"] < 1e-6
     # Newton-Euler of the object from the recorded forces (independent of the solver):
-    # m a = m g + sum of contact forces; I_w w_dot + w x I_w w = sum of moments about the COM
+    # m a = m g + sum of contact forces (+ the external force, if any); I_w w_dot + w x I_w w =
+    # sum of moments about the COM (+ the external moment, applied at the COM)
     m = built.obj.mass
     tr = res.trajectory
     f = tr["contact_forces"]
     p = tr["contact_points"]
-    lin = m * r.object_acceleration[:, :3] - (f.sum(axis=1) + m * sc.gravity)
+    ext = tr["external_wrench"]
+    lin = m * r.object_acceleration[:, :3] - (f.sum(axis=1) + m * sc.gravity + ext[:, :3])
     scale = np.abs(f).max() + m * 9.81
     assert np.abs(lin).max() < 1e-6 * scale
-    moments = np.cross(p - tr["object_position"][:, None, :], f).sum(axis=1)
+    moments = np.cross(p - tr["object_position"][:, None, :], f).sum(axis=1) + ext[:, 3:]
     for k in (0, len(r.t) // 2, len(r.t) - 1):
         Rk = quaternion_to_rotation(r.object_quaternion[k])
         Iw = Rk @ built.obj.inertia @ Rk.T

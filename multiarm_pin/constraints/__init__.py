@@ -26,6 +26,7 @@ from multiarm_pin.constraints.library import (
     weld,
     weld_from_placements,
 )
+from multiarm_pin.constraints.supports import Support, SupportSet, SupportTerms
 from multiarm_pin.constraints.surfaces import Cylinder, Plane, Sphere, Surface, make_surface
 
 __all__ = [
@@ -41,6 +42,9 @@ __all__ = [
     "JointTerms",
     "Plane",
     "Sphere",
+    "Support",
+    "SupportSet",
+    "SupportTerms",
     "Surface",
     "as_placement",
     "corner_gripper",

@@ -62,6 +62,8 @@ class ConstraintSet:
         n_arms: number of arms n.
         N: (n,) independent constraints per arm; ``N_max`` their maximum.
         mask: (n, N_max) True on real (non-padded) constraint slots.
+        unilateral: (n, N_max) True on rows of unilateral contacts (:attr:`Contact.unilateral`
+            of each joint's kept contacts), False on bilateral rows and padding.
 
     Raises:
         ConstraintError: an empty list or something that is not a Joint.
@@ -84,6 +86,11 @@ class ConstraintSet:
         mask = np.arange(self.N_max)[None, :] < self.N[:, None]
         mask.setflags(write=False)
         self.mask = mask
+        unilateral = np.zeros((n, self.N_max), dtype=bool)
+        for i, joint in enumerate(self.joints):
+            unilateral[i, :joint.n_constraints] = joint.unilateral
+        unilateral.setflags(write=False)
+        self.unilateral = unilateral
 
         ordered = [
             (i, k, c)

@@ -17,6 +17,11 @@ signed distance (positive on the free side) and ``r`` the tip radius, the gap is
 The direction in which the contact pushes the object is ``n = -ν`` when the surface is on
 the object (a fingertip on a face: the face's inward normal) and ``n = ν`` when the tip is on
 the object (a gripper surface's outward normal), as docs/ARCHITECTURE.md fixes.
+
+Unilaterality belongs to the contact (:attr:`Contact.unilateral`): a unilateral contact can
+only push (``μ >= 0``, it may separate, ``φ > 0``); a bilateral one holds ``φ = 0`` with a
+multiplier of either sign. The joint library makes fingertips on faces unilateral and the
+contacts that model mechanical joints (weld, revolute, ...) bilateral, unless told otherwise.
 """
 
 from __future__ import annotations
@@ -42,6 +47,8 @@ class Contact:
         radius: tip radius [m] (0 for a sharp point).
         point_on: ``"tool"`` (tip on the tool, surface on the object) or ``"object"``.
         name: label used in messages.
+        unilateral: True if the contact can only push (a frictionless tip pressing on a
+            surface; it may separate); False for a bilateral row (``φ = 0`` held either way).
     """
 
     point: np.ndarray
@@ -49,6 +56,7 @@ class Contact:
     radius: float = 0.0
     point_on: str = "tool"
     name: str = ""
+    unilateral: bool = False
 
     def __post_init__(self):
         object.__setattr__(self, "point", _array(self.point, (3,), f"contact {self.name} point"))
@@ -62,6 +70,12 @@ class Contact:
                 f"contact {self.name!r}: tip radius must be >= 0 [m], got {self.radius!r}"
             )
         object.__setattr__(self, "radius", r)
+        if not isinstance(self.unilateral, bool | np.bool_):
+            raise ConstraintError(
+                f"contact {self.name!r}: unilateral must be True or False, got "
+                f"{self.unilateral!r}"
+            )
+        object.__setattr__(self, "unilateral", bool(self.unilateral))
         if getattr(self.surface, "kind", None) not in ("plane", "sphere", "cylinder"):
             raise ConstraintError(
                 f"contact {self.name!r}: surface must be a Plane, Sphere or Cylinder, "

@@ -28,6 +28,7 @@ Matrices (``N = n_constraints``, columns in the order of :attr:`Joint.kept`):
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -138,6 +139,8 @@ class Joint:
         alpha_rows: rows of ``T`` to make the identity (indices 0..5 or names from
             ``TWIST_NAMES``); chosen automatically (translations first) when None.
         gap_tolerance: largest gap [m] accepted at the reference placement.
+        unilateral: if given, overrides every contact's :attr:`Contact.unilateral` (a
+            scenario's per-joint ``unilateral: true/false``); None keeps the contacts' own.
 
     Raises:
         ConstraintError: no contacts, a contact not touching its surface at the reference,
@@ -153,6 +156,7 @@ class Joint:
         expected_dof: int | None = None,
         alpha_rows: Sequence[int | str] | None = None,
         gap_tolerance: float = REFERENCE_GAP_TOLERANCE,
+        unilateral: bool | None = None,
     ):
         self.kind = kind
         self.name = name or kind
@@ -164,6 +168,14 @@ class Joint:
                 raise ConstraintError(
                     f"joint {self.name!r}: contact {k} is a {type(c).__name__}, expected Contact"
                 )
+        if unilateral is not None:
+            if not isinstance(unilateral, bool | np.bool_):
+                raise ConstraintError(
+                    f"joint {self.name!r}: unilateral must be True, False or None, got "
+                    f"{unilateral!r}"
+                )
+            self.contacts = tuple(dataclasses.replace(c, unilateral=bool(unilateral))
+                                  for c in self.contacts)
         if not isinstance(tool_in_object, pin.SE3):
             raise ConstraintError(
                 f"joint {self.name!r}: tool_in_object must be a pin.SE3, "
@@ -210,6 +222,11 @@ class Joint:
     def active_contacts(self) -> tuple[Contact, ...]:
         """The kept (independent) contacts, in the order of the constraint rows."""
         return self._active
+
+    @property
+    def unilateral(self) -> np.ndarray:
+        """(N,) bool: which constraint rows (kept contacts, in row order) are unilateral."""
+        return np.array([c.unilateral for c in self._active], dtype=bool)
 
     @property
     def alpha_names(self) -> tuple[str, ...]:

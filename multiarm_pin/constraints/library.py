@@ -92,6 +92,7 @@ def _contact(
     J_in_object: pin.SE3,
     tip_radius: float,
     points_on: str,
+    unilateral: bool = False,
 ) -> Contact:
     """A contact touching ``surface_J`` at ``point_J`` (both in J), tip on ``points_on``."""
     _, normal, _ = surface_J.local(point_J)
@@ -103,6 +104,7 @@ def _contact(
         radius=tip_radius,
         point_on=points_on,
         name=name,
+        unilateral=unilateral,
     )
 
 
@@ -116,6 +118,7 @@ def _build(
     expected_dof: int,
     name: str,
     alpha_rows=None,
+    unilateral: bool | None = None,
 ) -> Joint:
     if points_on not in POINT_ON:
         raise ConstraintError(f"{kind}: points_on must be one of {POINT_ON}, got {points_on!r}")
@@ -137,6 +140,7 @@ def _build(
         name=name or kind,
         expected_dof=expected_dof,
         alpha_rows=alpha_rows,
+        unilateral=unilateral,
     )
 
 
@@ -156,8 +160,13 @@ def _plane_at(p, n) -> tuple[np.ndarray, Plane]:
 
 
 def weld(joint_in_object, joint_in_tool=None, size: float = DEFAULT_SIZE, tip_radius: float = 0.0,
-         points_on: str = "tool", name: str = "") -> Joint:
-    """A rigid grasp: 6 independent point-on-plane contacts (3-2-1), 0 DOF."""
+         points_on: str = "tool", name: str = "",
+         unilateral: bool | None = None) -> Joint:
+    """A rigid grasp: 6 independent point-on-plane contacts (3-2-1), 0 DOF.
+
+    Like every mechanical joint of this library (revolute, prismatic, ...), its contacts are
+    bilateral unless ``unilateral=True`` (then each can only push and may separate).
+    """
     L = _size(size)
     h = np.sqrt(3.0) / 2
     spec = [
@@ -168,11 +177,12 @@ def weld(joint_in_object, joint_in_tool=None, size: float = DEFAULT_SIZE, tip_ra
         _plane_at([-L, 0, 0], _EY),
         _plane_at([0, L, 0], _EX),
     ]
-    return _build("weld", spec, joint_in_object, joint_in_tool, tip_radius, points_on, 0, name)
+    return _build("weld", spec, joint_in_object, joint_in_tool, tip_radius, points_on, 0, name,
+                  unilateral=unilateral)
 
 
 def weld_from_placements(tool_placement, object_placement, size: float = DEFAULT_SIZE,
-                         name: str = "") -> Joint:
+                         name: str = "", unilateral: bool | None = None) -> Joint:
     """A weld that holds the tool where it is at t = 0.
 
     Args:
@@ -180,8 +190,10 @@ def weld_from_placements(tool_placement, object_placement, size: float = DEFAULT
         object_placement: the object's (COM frame) world placement ``oMobject`` at t = 0.
         size: characteristic length [m] of the contact pattern.
         name: label.
+        unilateral: overrides the contacts' flag (bilateral when None).
     """
-    return weld(relative_placement(tool_placement, object_placement), None, size, name=name)
+    return weld(relative_placement(tool_placement, object_placement), None, size, name=name,
+                unilateral=unilateral)
 
 
 def _cylinder_spec(L: float, end: bool):
@@ -198,23 +210,26 @@ def _cylinder_spec(L: float, end: bool):
 
 
 def revolute(joint_in_object, joint_in_tool=None, size: float = DEFAULT_SIZE,
-             tip_radius: float = 0.0, points_on: str = "tool", name: str = "") -> Joint:
+             tip_radius: float = 0.0, points_on: str = "tool", name: str = "",
+             unilateral: bool | None = None) -> Joint:
     """Rotation about J's z axis: 4 contacts on a cylinder (radius ``size``) + 1 end, 1 DOF."""
     L = _size(size)
     return _build("revolute", _cylinder_spec(L, True), joint_in_object, joint_in_tool,
-                  tip_radius, points_on, 1, name)
+                  tip_radius, points_on, 1, name, unilateral=unilateral)
 
 
 def cylindrical(joint_in_object, joint_in_tool=None, size: float = DEFAULT_SIZE,
-                tip_radius: float = 0.0, points_on: str = "tool", name: str = "") -> Joint:
+                tip_radius: float = 0.0, points_on: str = "tool", name: str = "",
+                unilateral: bool | None = None) -> Joint:
     """Rotation about and translation along J's z axis: 4 contacts on a cylinder, 2 DOF."""
     L = _size(size)
     return _build("cylindrical", _cylinder_spec(L, False), joint_in_object, joint_in_tool,
-                  tip_radius, points_on, 2, name)
+                  tip_radius, points_on, 2, name, unilateral=unilateral)
 
 
 def prismatic(joint_in_object, joint_in_tool=None, size: float = DEFAULT_SIZE,
-              tip_radius: float = 0.0, points_on: str = "tool", name: str = "") -> Joint:
+              tip_radius: float = 0.0, points_on: str = "tool", name: str = "",
+              unilateral: bool | None = None) -> Joint:
     """Translation along J's z axis: planes x = 0 and y = 0, 3 contacts each, 1 DOF.
 
     The six contacts have rank 5: the last one is dropped as redundant.
@@ -229,7 +244,7 @@ def prismatic(joint_in_object, joint_in_tool=None, size: float = DEFAULT_SIZE,
         _plane_at([L, 0, 0], _EY),
     ]
     return _build("prismatic", spec, joint_in_object, joint_in_tool, tip_radius, points_on, 1,
-                  name)
+                  name, unilateral=unilateral)
 
 
 def _sphere_spec(L: float):
@@ -238,25 +253,28 @@ def _sphere_spec(L: float):
 
 
 def spherical(joint_in_object, joint_in_tool=None, size: float = DEFAULT_SIZE,
-              tip_radius: float = 0.0, points_on: str = "tool", name: str = "") -> Joint:
+              tip_radius: float = 0.0, points_on: str = "tool", name: str = "",
+              unilateral: bool | None = None) -> Joint:
     """Rotation about J's origin: 3 contacts on a ball of radius ``size``, 3 DOF."""
     L = _size(size)
     return _build("spherical", _sphere_spec(L), joint_in_object, joint_in_tool, tip_radius,
-                  points_on, 3, name)
+                  points_on, 3, name, unilateral=unilateral)
 
 
 def universal(joint_in_object, joint_in_tool=None, size: float = DEFAULT_SIZE,
-              tip_radius: float = 0.0, points_on: str = "tool", name: str = "") -> Joint:
+              tip_radius: float = 0.0, points_on: str = "tool", name: str = "",
+              unilateral: bool | None = None) -> Joint:
     """Rotations about J's x and y axes: 3 contacts on a ball + 1 on the plane y = 0, 2 DOF."""
     L = _size(size)
     # the plane contact's tip centre sits on the x axis, so both rotations keep it closed
     spec = _sphere_spec(L) + [_plane_at([2 * L, -float(tip_radius), 0], _EY)]
     return _build("universal", spec, joint_in_object, joint_in_tool, tip_radius, points_on, 2,
-                  name)
+                  name, unilateral=unilateral)
 
 
 def corner_gripper(joint_in_object, joint_in_tool=None, points=None, size: float = DEFAULT_SIZE,
-                   tip_radius: float = 0.0, name: str = "", alpha_rows=None) -> Joint:
+                   tip_radius: float = 0.0, name: str = "", alpha_rows=None,
+                   unilateral: bool = True) -> Joint:
     """Example 3.1: a gripper holding a box corner with 4 contacts, 2 DOF.
 
     Args:
@@ -271,6 +289,8 @@ def corner_gripper(joint_in_object, joint_in_tool=None, points=None, size: float
         name: label.
         alpha_rows: motion coordinates (e.g. ``["vx", "vy"]`` as in Example 3.1); chosen
             automatically when None.
+        unilateral: the four fingertips press on the corner's faces, so they only push
+            (True, the default); False holds them as bilateral rows.
 
     Raises:
         ConstraintError: a point off its face or outside the box, contacts giving fewer than
@@ -295,7 +315,7 @@ def corner_gripper(joint_in_object, joint_in_tool=None, points=None, size: float
             )
     spec = [_plane_at(p, np.eye(3)[f]) for p, f in zip(pts, faces, strict=True)]
     return _build("corner_gripper", spec, joint_in_object, joint_in_tool, tip_radius, "tool", 2,
-                  name, alpha_rows)
+                  name, alpha_rows, unilateral)
 
 
 def fingertips_on_faces(
@@ -306,6 +326,7 @@ def fingertips_on_faces(
     tool_in_object=None,
     name: str = "",
     tol: float = 1e-6,
+    unilateral: bool = True,
 ) -> Joint:
     """Spherical fingertips of one arm's tool touching faces of a polyhedral object.
 
@@ -319,6 +340,8 @@ def fingertips_on_faces(
             tips (least squares rigid fit) when None.
         name: label.
         tol: largest mismatch [m] between the tips and the contact points.
+        unilateral: fingertips on faces only push (True, the default); False holds them as
+            bilateral rows.
 
     Raises:
         ConstraintError: a point off its face, a count mismatch, or tips that no rigid
@@ -338,7 +361,8 @@ def fingertips_on_faces(
     else:
         M = as_placement(tool_in_object, "tool_in_object")
     contact_list = [
-        Contact(point=t, surface=pl, radius=float(radius), point_on="tool", name=f"tip[{k}]")
+        Contact(point=t, surface=pl, radius=float(radius), point_on="tool", name=f"tip[{k}]",
+                unilateral=bool(unilateral))
         for k, (t, pl) in enumerate(zip(tips, planes, strict=True))
     ]
     try:
@@ -349,7 +373,8 @@ def fingertips_on_faces(
 
 
 def fingertips_from_placements(polyhedron: Polyhedron, contacts, radius: float, tool_placement,
-                               object_placement, name: str = "", tol: float = 1e-6) -> Joint:
+                               object_placement, name: str = "", tol: float = 1e-6,
+                               unilateral: bool = True) -> Joint:
     """Fingertips placed where they are at t = 0 (tips computed from the initial placements).
 
     Args:
@@ -360,11 +385,12 @@ def fingertips_from_placements(polyhedron: Polyhedron, contacts, radius: float, 
         object_placement: object (COM frame) world placement at t = 0.
         name: label.
         tol: tolerance [m] for points on faces.
+        unilateral: as in :func:`fingertips_on_faces`.
     """
     M = relative_placement(tool_placement, object_placement)
     centres, _ = _face_contacts(polyhedron, contacts, radius, tol)
     tips = np.array([M.actInv(c) for c in centres])
-    return fingertips_on_faces(polyhedron, contacts, radius, tips, M, name, tol)
+    return fingertips_on_faces(polyhedron, contacts, radius, tips, M, name, tol, unilateral)
 
 
 def _face_contacts(polyhedron, contacts, radius, tol):
@@ -409,18 +435,23 @@ def _rigid_fit(tips_in_tool: np.ndarray, centres_in_object: np.ndarray) -> pin.S
 
 
 def custom(contacts: Sequence[Mapping], joint_in_object, joint_in_tool=None,
-           expected_dof: int | None = None, name: str = "", alpha_rows=None) -> Joint:
+           expected_dof: int | None = None, name: str = "", alpha_rows=None,
+           unilateral: bool = False) -> Joint:
     """A joint from explicit contacts defined in the joint frame J.
 
     Args:
         contacts: mappings with ``point`` (3,) on the surface in J [m], ``surface`` (a mapping
             with ``type`` plane/sphere/cylinder and its parameters in J), and optionally
-            ``tip_radius`` [m] and ``points_on`` (``"tool"``/``"object"``).
+            ``tip_radius`` [m], ``points_on`` (``"tool"``/``"object"``) and ``unilateral``
+            (bool, default: the joint's ``unilateral``).
         joint_in_object: placement of J in the object frame.
         joint_in_tool: placement of J in the tool frame (identity when None).
         expected_dof: if given, the DOF the contacts must leave.
         name: label.
         alpha_rows: motion coordinates (names of ``TWIST_NAMES``); automatic when None.
+        unilateral: default of the contacts' own ``unilateral`` flag: False (bilateral rows,
+            a mechanical joint, like the rest of the library); True for contacts that only
+            push (fingertips).
     """
     J_o = as_placement(joint_in_object, "custom joint_in_object")
     J_t = pin.SE3.Identity() if joint_in_tool is None else as_placement(
@@ -438,7 +469,8 @@ def custom(contacts: Sequence[Mapping], joint_in_object, joint_in_tool=None,
             ) from exc
         built.append(
             _contact(point, make_surface(kind, **surf), f"contact[{k}]", J_t, J_o,
-                     float(c.get("tip_radius", 0.0)), c.get("points_on", "tool"))
+                     float(c.get("tip_radius", 0.0)), c.get("points_on", "tool"),
+                     c.get("unilateral", unilateral))
         )
     return Joint(built, J_o * J_t.inverse(), kind="custom", name=name or "custom",
                  expected_dof=expected_dof, alpha_rows=alpha_rows)

@@ -1,0 +1,115 @@
+"""Scenario keys of issue 12: supports, external wrenches, per-joint unilateral, no arms."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+import yaml
+
+from multiarm_pin.exceptions import ScenarioError
+from multiarm_pin.runner import run_scenario
+from multiarm_pin.scenario import build_scenario, load_scenario
+
+BOX = {
+    "name": "box",
+    "object": {"shape": {"type": "box", "size": [0.4, 0.3, 0.2]}, "mass": 2.0,
+               "pose": {"position": [0.0, 0.0, 0.1]}},
+    "arms": [],
+    "supports": [{"name": "table", "plane": {"point": [0, 0, 0], "normal": [0, 0, 1]},
+                  "points": "vertices", "restitution": 0.0}],
+    "simulation": {"duration": 0.02, "dt": 0.01},
+}
+
+
+def _with(path: str, value):
+    data = copy.deepcopy(BOX)
+    keys = path.split(".")
+    node = data
+    for k in keys[:-1]:
+        node = node[int(k)] if k.isdigit() else node[k]
+    last = keys[-1]
+    node[int(last) if last.isdigit() else last] = value
+    return data
+
+
+def _error(tmp_path, data, build=False) -> ScenarioError:
+    p = tmp_path / "s.yaml"
+    p.write_text(yaml.safe_dump(data), encoding="utf-8")
+    with pytest.raises(ScenarioError) as info:
+        sc = load_scenario(p)
+        if build:
+            build_scenario(sc)
+    assert info.value.file == str(p) and str(p) in str(info.value)
+    return info.value
+
+
+@pytest.mark.parametrize(("path", "value", "key", "text"), [
+    ("supports.0.plane.normal", [0, 0, 0], "supports[0].plane.normal", "zero length"),
+    ("supports.0.restitution", 1.2, "supports[0].restitution", "in [0, 1]"),
+    ("supports.0.restitution", -0.5, "supports[0].restitution", ">= 0"),
+    ("supports.0.points", [[0, 0]], "supports[0].points", "(n, 3)"),
+    ("supports.0.points", [[0, 0, 0, 1]], "supports[0].points", "(n, 3)"),
+    ("supports.0.points", "corners", "supports[0].points", "'vertices'"),
+    ("object.external_wrench", [{"from": 0.2, "to": 0.1, "wrench": [0] * 6}],
+     "object.external_wrench[0].to", "to > from"),
+    ("object.external_wrench", [{"from": 0, "to": 1, "wrench": [1, 2, 3]}],
+     "object.external_wrench[0].wrench", "(6,)"),
+])
+def test_bad_support_and_wrench_keys(tmp_path, path, value, key, text):
+    err = _error(tmp_path, _with(path, value))
+    assert err.key == key and text in str(err)
+
+
+def test_object_penetrating_a_support_names_it(tmp_path):
+    err = _error(tmp_path, _with("object.pose.position", [0.0, 0.0, 0.09]), build=True)
+    assert err.key == "supports[0].points"
+    assert "penetrating support 'table'" in str(err) and "0.01 m below" in str(err)
+
+
+def test_no_arms_and_no_supports_is_refused(tmp_path):
+    err = _error(tmp_path, _with("supports", []))
+    assert err.key == "arms" and "non-empty list of arms" in str(err)
+
+
+def test_controller_without_arms_is_refused(tmp_path):
+    p = tmp_path / "s.yaml"
+    p.write_text(yaml.safe_dump(_with("controller", {"type": "gravity_compensation"})),
+                 encoding="utf-8")
+    with pytest.raises(ScenarioError, match="no arms, so no controller") as info:
+        run_scenario(p, tmp_path / "out", html=False, plots=False)
+    assert info.value.key == "controller.type"
+
+
+def test_box_resting_on_vertices_runs_without_arms(tmp_path):
+    """Eight vertex rows, four touching: at rest, they carry m g, the summary lists them."""
+    p = tmp_path / "s.yaml"
+    p.write_text(yaml.safe_dump(BOX), encoding="utf-8")
+    res = run_scenario(p, tmp_path / "out", html=False, plots=True)
+    s = res.summary
+    assert s["events"] == [] and s["supports"][0]["points"] == 8
+    np.testing.assert_allclose(res.trajectory["mu_table"].sum(axis=1), 2.0 * 9.81, rtol=1e-10)
+    np.testing.assert_allclose(res.trajectory["contact_forces"][:, :, 2].sum(axis=1),
+                               2.0 * 9.81, rtol=1e-10)
+    assert (tmp_path / "out" / "contact_states.png").is_file()
+
+
+def test_joint_unilateral_override(tmp_path):
+    """A weld is bilateral by default; ``unilateral: true`` makes its six rows unilateral."""
+    from multiarm_pin.scenario import parse_scenario
+
+    arm = {"name": "a", "robot": "ur5", "q0": [0.0, -1.2, 1.6, -0.4, 1.57, 0.0],
+           "joint": {"type": "weld"}}
+    data = {"object": {"shape": {"type": "box", "size": [0.4, 0.3, 0.2]}, "mass": 1.0,
+                       "pose": {"position": [0.5, 0.1, 0.4]}},
+            "arms": [arm]}
+    built = build_scenario(parse_scenario(copy.deepcopy(data), "x.yaml"))
+    assert built.system.unilateral.sum() == 0
+    data["arms"][0]["joint"]["unilateral"] = True
+    built = build_scenario(parse_scenario(copy.deepcopy(data), "x.yaml"))
+    assert built.system.unilateral.sum() == 6
+    data["arms"][0]["joint"]["unilateral"] = "yes"
+    with pytest.raises(ScenarioError, match="expected true or false") as info:
+        parse_scenario(data, "x.yaml")
+    assert info.value.key == "arms[0].joint.unilateral"

@@ -1,0 +1,124 @@
+"""Unilateral contacts at the scenario level: a grasp keeps or loses contact, a pick-up.
+
+Both use the scenarios' own files, shortened (a few hundred steps) so that they stay fast.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from multiarm_pin.runner import run_scenario
+from multiarm_pin.scenario import parse_scenario
+
+SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+
+
+def _scenario(name: str, **changes):
+    """The scenario file ``name`` with top-level sections updated (dict merge)."""
+    path = SCENARIOS / f"{name}.yaml"
+    data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    for key, value in changes.items():
+        if isinstance(value, dict) and isinstance(data.get(key), dict):
+            data[key] = {**data[key], **value}
+        else:
+            data[key] = value
+    return parse_scenario(copy.deepcopy(data), str(path))
+
+
+@pytest.mark.parametrize("margin", [5.0, 0.0])
+def test_grasp_keeps_contact_with_its_margin_and_separates_without(margin, tmp_path):
+    """Same run twice: the two-gripper grasp held still, pushed down by 4 N from t = 0.02 s.
+
+    object_pd plans forces for the object's weight only (it does not know the push). With
+    ``margin = 5`` every fingertip keeps at least 5 N planned; a 4 N push (a tenth of the
+    weight) takes at most a few newtons off any of them, so the grasp stays closed over the
+    whole run: no event, every fingertip active, the smallest force above 4 N (measured
+    4.18 N: a 4 N margin to zero). With ``margin = 0`` the least-norm distribution leaves the
+    top fingertip nearest the +x+y+z corner (four_finger:tip[2], planned force 0 to
+    round-off) with nothing, and the downward push opens it at once: a separation event
+    at the push's onset, the row inactive afterwards, its force zero.
+    """
+    sc = _scenario("two_gripper_form_closure",
+                   object={"external_wrench": [{"from": 0.02, "to": 1.0,
+                                                "wrench": [0, 0, -4.0, 0, 0, 0]}]},
+                   controller={"type": "object_pd", "margin": margin},
+                   simulation={"duration": 0.1, "dt": 0.002, "integrator": "rk4",
+                               "solver": "object_first"})
+    res = run_scenario(sc, tmp_path, html=False, plots=False)
+    r = res.result
+    uni = r.unilateral
+    np.testing.assert_allclose(r.external_wrench[r.t >= 0.02, 2], -4.0)
+    if margin > 0:
+        assert r.events == []
+        assert r.active[:, uni].all()
+        assert r.mu[:, uni].min() > 4.0
+    else:
+        first = r.events[0]
+        assert (first.kind, first.label) == ("separation", "four_finger:tip[2]")
+        assert abs(first.t - 0.02) < 1e-12
+        assert not r.active[r.t > 0.02, 0, 2].any()
+        assert np.all(r.mu[r.t > 0.02, 0, 2] == 0.0)
+        assert res.summary["arms"][0]["separations"] >= 1
+
+
+def test_pick_from_table_records_lift_off_and_touchdown(tmp_path):
+    """pick_from_table with its schedule compressed: lift off at once, touch down at the end.
+
+    The stand's four rows start active (the box rests on them); object_pd first holds the
+    box (the arms take its weight: stand forces fall to 0), then lifts it 5 mm
+    (t = 0.02..0.12 s): the rows let go (``μ = 0``, ``φ̈ > 0``), a separation event each.
+    Lowering it to 0.5 mm above, then slowly (0.2 s) to 0.1 mm below its start height brings
+    the stand back: touchdown events of the stand's rows, closing slower than the last
+    segment's peak speed ``1.875 · 0.6 mm / 0.2 s ≈ 5.6 mm/s`` (minimum jerk). Every event
+    is in the result, in ``summary.json`` and in ``trajectory.npz``.
+    """
+    wp = [{"t": 0.02, "position": [0.0, 0.0, 0.9]}, {"t": 0.12, "position": [0.0, 0.0, 0.905]},
+          {"t": 0.25, "position": [0.0, 0.0, 0.9005]}, {"t": 0.45, "position": [0.0, 0.0, 0.8999]}]
+    sc = _scenario("pick_from_table", controller={"waypoints": wp},
+                   simulation={"duration": 0.5, "dt": 0.002, "integrator": "rk4",
+                               "solver": "object_first"})
+    res = run_scenario(sc, tmp_path, html=False, plots=True)
+    r = res.result
+    table = [e for e in r.events if e.body == "table"]
+    lift = [e for e in table if e.kind == "separation"]
+    down = [e for e in table if e.kind == "touchdown"]
+    assert sorted({e.row for e in lift}) == [0, 1, 2, 3]
+    assert all(0.02 <= e.t <= 0.12 for e in lift[:4])
+    assert down and all(e.t > 0.12 for e in down)
+    assert all(-0.0057 < e.phi_dot < 0 for e in down)
+    summary = json.loads((tmp_path / "summary.json").read_text(encoding="utf-8"))
+    assert [(e["t"], e["kind"], e["label"]) for e in summary["events"]] == \
+        [(e.t, e.kind, e.label) for e in r.events]
+    z = np.load(tmp_path / "trajectory.npz")
+    labels = list(z["contact_labels"])
+    assert [labels[k] for k in z["event_contact"]] == [e.label for e in r.events]
+    assert (tmp_path / "contact_states.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_grasp_failure_shows_which_contact_goes_first(tmp_path):
+    """grasp_failure up to just after its push starts (t = 0.15 s, 60 N down at the COM).
+
+    With margin 5 N every fingertip pushes before the push (min force >= 5 N). The push
+    exceeds what the top fingertips' preload can take: the one nearest the corner,
+    four_finger:tip[2], lets go first, at the push's onset (the first sample where the
+    wrench acts), and is recorded as the run's first event, in summary.json too.
+    """
+    sc = _scenario("grasp_failure", simulation={"duration": 0.17, "dt": 0.002,
+                                                "integrator": "rk4", "solver": "object_first"})
+    res = run_scenario(sc, tmp_path, html=False, plots=False)
+    r = res.result
+    uni = r.unilateral
+    before = r.t < 0.15 - 1e-12
+    assert r.mu[before][:, uni].min() >= 5.0 - 1e-6
+    first = r.events[0]
+    assert (first.kind, first.label, first.body) == ("separation", "four_finger:tip[2]",
+                                                     "four_finger")
+    assert abs(first.t - 0.15) < 1e-12
+    assert res.summary["events"][0]["label"] == "four_finger:tip[2]"
+    assert res.summary["warnings"][0].startswith("t = 0.15 s: arm 0 (four_finger) contact 2")
