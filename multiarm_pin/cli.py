@@ -4,6 +4,7 @@ Subcommands:
     ``run SCENARIO.yaml``   simulate a scenario, write results, plots and a replay page
     ``replay DIR``          serve the replay of a finished run from a Meshcat server
     ``grasp FILE.yaml``     grasp analysis report (form closure, margin, seventh contact)
+    ``sweep STUDY.yaml``    a study (sweep / Monte Carlo) of a scenario or grasp, on Dask
     ``demo``                run the default scenario (the README's main command)
     ``info``                load arms and an object and print their key quantities
 """
@@ -93,6 +94,11 @@ def _build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("replay", help="serve the replay of a finished run")
     runner.configure_replay_parser(p)
     p.set_defaults(func=runner.replay_command)
+    from multiarm_pin.study import cli as study_cli
+
+    p = sub.add_parser("sweep", help="run a study (sweep / Monte Carlo) on Dask")
+    study_cli.configure_parser(p)
+    p.set_defaults(func=study_cli.run)
     p = sub.add_parser("demo", help=f"run the default scenario ({DEFAULT_SCENARIO.name})")
     p.add_argument("--out", default="results/demo", help="output folder (default results/demo)")
     p.add_argument("--duration", type=float, default=None, help="override the duration [s]")

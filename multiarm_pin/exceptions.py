@@ -170,3 +170,12 @@ class JointNotFoundError(MultiArmError, KeyError):
 
     def __str__(self) -> str:
         return str(self.args[0])
+
+
+class StudyError(ScenarioError):
+    """A study file (``multiarm-pin sweep``), or the way it is run, is invalid.
+
+    Attributes:
+        file: the study file (or the results folder).
+        key: the key path, e.g. ``"parameters[1].normal.sigma"``, or the option.
+    """

@@ -9,6 +9,13 @@ PACKAGES = [
     "multiarm_pin.constraints",
     "multiarm_pin.dynamics",
     "multiarm_pin.grasp",
+    "multiarm_pin.study",
+    "multiarm_pin.study.spec",
+    "multiarm_pin.study.metrics",
+    "multiarm_pin.study.case",
+    "multiarm_pin.study.execution",
+    "multiarm_pin.study.store",
+    "multiarm_pin.study.report",
 ]
 
 

@@ -62,8 +62,18 @@ def load_grasp_file(path: str | Path) -> GraspFile:
             file and the key path, e.g. ``contacts[2].point``).
     """
     path = Path(path)
-    f = str(path)
     data = load_yaml_file(path)  # not found, not UTF-8, syntax, duplicate keys
+    return grasp_from_data(data, path)
+
+
+def grasp_from_data(data, path: str | Path) -> GraspFile:
+    """Validate a parsed grasp mapping (as read by :func:`load_grasp_file` from ``path``).
+
+    Raises:
+        ScenarioError: an invalid key (names ``path`` and the key path).
+    """
+    path = Path(path)
+    f = str(path)
     if not isinstance(data, dict):
         raise ScenarioError(f, "", "expected a mapping with keys object, contacts")
     unknown = set(data) - {"object", "contacts", "seventh_contact_face", "length_scale", "name",

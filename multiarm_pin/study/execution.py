@@ -1,0 +1,279 @@
+"""Running a study: each case a Dask task, on a local cluster or the user's scheduler.
+
+:class:`Study` is the Python API (``Study.from_file(path).run(client=None)`` returns the
+table) and what ``multiarm-pin sweep`` drives. Without a client it starts a
+``distributed.LocalCluster`` of ``workers`` processes (one thread each) on this machine;
+with ``scheduler="tcp://host:8786"`` it connects to an existing cluster (for instance one
+started by ``dask-jobqueue`` on SLURM/PBS). Rows and summaries are written by the driver as
+cases finish (:class:`~multiarm_pin.study.store.ResultsFolder`); Dask reruns the tasks of a
+worker that dies on another worker.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import sys
+import time
+import uuid
+from collections.abc import Callable
+from pathlib import Path
+
+from multiarm_pin.exceptions import StudyError
+from multiarm_pin.study.case import CaseTask, run_case
+from multiarm_pin.study.spec import Case, StudySpec, load_study
+from multiarm_pin.study.store import ResultsFolder, rows_to_table
+
+TABLE_FLUSH_INTERVAL = 2.0
+"""Seconds between rewrites of ``results.parquet`` while a study runs (rows are written
+per case in any case)."""
+SCHEDULER_TIMEOUT = 10.0
+"""Seconds to wait for a user's scheduler before giving up."""
+
+
+class CaseProgress:
+    """A one-line progress bar over cases (stderr by default).
+
+    On a terminal it redraws in place; on a log file it writes a line per tenth of the cases.
+    """
+
+    def __init__(self, label: str, total: int, done: int = 0, stream=None, width: int = 30):
+        self.label, self.total, self.width = label, max(int(total), 0), width
+        self.done, self.failed, self.skipped = done, 0, done
+        self.stream = sys.stderr if stream is None else stream
+        isatty = getattr(self.stream, "isatty", None)
+        self.interactive = bool(isatty()) if callable(isatty) else False
+        self.start = time.perf_counter()
+        self._next_tenth = 0.0
+        self.shown = False
+
+    def update(self, failed: bool = False) -> None:
+        """One more case finished (``failed``: with an error)."""
+        self.done += 1
+        self.failed += int(bool(failed))
+        self.draw()
+
+    def draw(self) -> None:
+        """Draw the bar (every call on a terminal, every tenth otherwise)."""
+        f = self.done / self.total if self.total else 1.0
+        if not self.interactive:
+            if f < self._next_tenth and self.done < self.total:
+                return
+            self._next_tenth = (int(f * 10 + 1e-9) + 1) / 10
+        elapsed = time.perf_counter() - self.start
+        ran = self.done - self.skipped
+        left = (self.total - self.done) * elapsed / ran if ran else float("nan")
+        n = int(round(f * self.width))
+        start, end = ("\r", "") if self.interactive else ("", "\n")
+        self.stream.write(f"{start}{self.label} [{'#' * n}{'-' * (self.width - n)}] "
+                          f"{self.done}/{self.total} cases ({self.failed} failed), "
+                          f"{elapsed:.1f} s elapsed, ~{left:.0f} s left {end}")
+        self.stream.flush()
+        self.shown = True
+
+    def close(self) -> None:
+        """End the line on a terminal."""
+        if self.shown and self.interactive:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def connect(scheduler: str, timeout: float = SCHEDULER_TIMEOUT):
+    """A ``distributed.Client`` on the user's scheduler.
+
+    Raises:
+        StudyError: the scheduler cannot be reached within ``timeout`` seconds.
+    """
+    from distributed import Client
+
+    try:
+        return Client(scheduler, timeout=timeout)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise StudyError("--scheduler", "", f"cannot reach the Dask scheduler at "
+                         f"{scheduler!r} within {timeout:g} s: {exc}") from None
+
+
+def local_cluster(workers: int):
+    """A ``distributed.LocalCluster`` of ``workers`` processes with one thread each.
+
+    Raises:
+        StudyError: ``workers`` is not a positive integer.
+    """
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise StudyError("--workers", "", f"expected a positive number of workers, got "
+                         f"{workers!r}")
+    from distributed import LocalCluster
+
+    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                        dashboard_address=None, silence_logs=logging.ERROR)
+
+
+class Study:
+    """A study: its spec, its cases, and how to run them.
+
+    Args:
+        spec: a :class:`~multiarm_pin.study.spec.StudySpec` or a study file path.
+    """
+
+    def __init__(self, spec: StudySpec | str | Path):
+        self.spec = spec if isinstance(spec, StudySpec) else load_study(spec)
+        self.cases: list[Case] = self.spec.cases()
+
+    @classmethod
+    def from_file(cls, path) -> Study:
+        """Load a study file (raises :class:`~multiarm_pin.exceptions.StudyError`)."""
+        return cls(load_study(path))
+
+    def task(self, case: Case) -> CaseTask:
+        """The worker's input for one case."""
+        s = self.spec
+        return CaseTask(case.case_id, case.key, case.index, case.params, s.mode, s.base_file,
+                        s.base_data, case.overrides, s.metrics)
+
+    # ------------------------------------------------------------------ running
+    def run(self, client=None, out=None, workers: int = 2, scheduler: str | None = None,
+            resume: bool = False, progress: bool = False,
+            on_case: Callable[[dict], None] | None = None):
+        """Run every unfinished case as a Dask task; return the table.
+
+        Args:
+            client: a ``distributed.Client`` to use (not closed here); None: connect to
+                ``scheduler`` if given, else start a ``LocalCluster`` of ``workers``
+                processes (closed at the end).
+            out: results folder (rows, summaries and ``results.parquet`` written as cases
+                finish; finished cases in it are skipped); None: nothing written.
+            workers: worker processes of the local cluster.
+            scheduler: address of an existing scheduler (``tcp://host:8786``).
+            resume: the folder must already hold this study (``--resume``).
+            progress: draw a progress bar on stderr.
+            on_case: called with each new row as it is written (driver side).
+
+        Returns:
+            A ``pyarrow.Table``: one row per case (finished before or now), sorted by case.
+
+        Raises:
+            StudyError: unreachable scheduler (nothing written), bad ``workers``, an output
+                folder holding another study.
+            KeyboardInterrupt: after writing every finished row and the table.
+        """
+        if out is not None:  # a folder that cannot take the study: before any cluster
+            ResultsFolder(out).check(self.spec, resume)
+        if client is None and out is not None and self._nothing_to_run(out):
+            return self._drive(_LoopRunner(), out, resume, progress, on_case)  # no cluster
+        own_cluster = own_client = None
+        if client is None:
+            if scheduler is not None:
+                client = own_client = connect(scheduler)
+            else:
+                own_cluster = local_cluster(workers)
+                from distributed import Client
+
+                client = own_client = Client(own_cluster)
+        try:
+            return self._drive(_DaskRunner(client), out, resume, progress, on_case)
+        finally:  # a failure to close must not replace the study's own outcome (Ctrl-C)
+            for closer in (own_client, own_cluster):
+                if closer is not None:
+                    with contextlib.suppress(Exception):
+                        closer.close()
+
+    def _nothing_to_run(self, out) -> bool:
+        folder = ResultsFolder(out)
+        return (folder.path / "study.json").is_file() and \
+            len(folder.finished(self.cases)) == len(self.cases)
+
+    def run_loop(self, out=None, resume: bool = False, progress: bool = False,
+                 on_case: Callable[[dict], None] | None = None):
+        """Run the unfinished cases one after the other in this process (no Dask).
+
+        Same arguments and result as :meth:`run` (the reference the Dask run is checked
+        against, and the benchmark's plain loop).
+        """
+        return self._drive(_LoopRunner(), out, resume, progress, on_case)
+
+    def _drive(self, runner, out, resume: bool, progress: bool, on_case):
+        folder = ResultsFolder(out) if out is not None else None
+        done = folder.prepare(self.spec, self.cases, resume) if folder is not None else {}
+        rows = dict(done)
+        todo = [c for c in self.cases if c.case_id not in done]
+        bar = CaseProgress(f"sweep {self.spec.name}", len(self.cases), len(done)) \
+            if progress else None
+        if bar is not None:
+            bar.draw()
+        last_flush = time.perf_counter()
+        try:
+            for result in runner.results([self.task(c) for c in todo]):
+                row = result["row"]
+                if folder is not None:
+                    folder.write_case(row, result.get("summary"))
+                rows[row["case_id"]] = row
+                if bar is not None:
+                    bar.update(failed=row["status"] != "ok")
+                if on_case is not None:
+                    on_case(row)
+                if folder is not None and \
+                        time.perf_counter() - last_flush > TABLE_FLUSH_INTERVAL:
+                    folder.write_table(rows.values())
+                    last_flush = time.perf_counter()
+        finally:
+            runner.stop()
+            if bar is not None:
+                bar.close()
+            if folder is not None and rows:
+                folder.write_table(rows.values())
+        return rows_to_table(rows.values())
+
+
+class _LoopRunner:
+    def results(self, tasks):
+        for t in tasks:
+            yield run_case(t)
+
+    def stop(self) -> None:
+        pass
+
+
+class _DaskRunner:
+    def __init__(self, client):
+        self.client = client
+        self.futures = []
+
+    def results(self, tasks):
+        from distributed import as_completed
+
+        run = uuid.uuid4().hex[:8]
+        by_key = {}
+        for t in tasks:
+            fut = self.client.submit(run_case, t, key=f"case-{t.case_id}-{t.key}-{run}",
+                                     pure=False)
+            by_key[fut.key] = t
+            self.futures.append(fut)
+        for fut in as_completed(self.futures):
+            task = by_key[fut.key]
+            try:
+                result = fut.result()
+            except Exception as exc:  # noqa: BLE001 - KilledWorker, a lost connection...
+                result = {"row": _lost_row(task, exc), "summary": None}
+            fut.release()
+            yield result
+
+    def stop(self) -> None:
+        pending = [f for f in self.futures if not f.done()]
+        if pending:
+            self.client.cancel(pending)
+        self.futures = []
+
+
+def _lost_row(task: CaseTask, exc: BaseException) -> dict:
+    """The row of a case whose task failed in Dask itself (its workers kept dying)."""
+    import math
+
+    row = {"case_id": task.case_id, "key": task.key, "index": task.index, **task.params}
+    for m in task.metrics:
+        row[m] = math.nan
+    row.update(status="lost", error=f"{type(exc).__name__}: {exc}", case_wall_time=math.nan,
+               worker="", run_token="")
+    return row
+
+
+__all__ = ["CaseProgress", "Study", "connect", "local_cluster"]
