@@ -53,7 +53,12 @@ from multiarm_pin.exceptions import (
     RunInterrupted,
     ScenarioError,
 )
-from multiarm_pin.results_io import ResultsWriter, prepare_output, safe_component
+from multiarm_pin.results_io import (
+    ResultsWriter,
+    deferred_signals,
+    prepare_output,
+    safe_component,
+)
 from multiarm_pin.scenario import (
     BuiltScenario,
     Scenario,
@@ -541,7 +546,10 @@ def _write_results(folder: Path, built: BuiltScenario, result, solver: str, wall
     traj = trajectory_arrays(built, result)
     files = {}
     files["trajectory"] = folder / "trajectory.npz"
-    np.savez_compressed(files["trajectory"], **traj)
+    # a signal inside savez would leave its ZipFile half-closed, whose destructor then prints
+    # a traceback at exit: deliver it right after (the temporary folder is dropped whole)
+    with deferred_signals():
+        np.savez_compressed(files["trajectory"], **traj)
     summary = summarize(built, result, solver, wall)
     summary["input_warnings"] = list(input_warns)
     summary["requested"]["duration"] = T
