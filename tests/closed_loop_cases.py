@@ -10,23 +10,13 @@ from functools import cache
 
 import numpy as np
 import pinocchio as pin
+from system_builders import BOX_SIZE, JOINT_KINDS, Q_NOMINAL, joint_spec
 
 from multiarm_pin.arm import Arm
-from multiarm_pin.constraints import JOINT_DOF
 from multiarm_pin.controllers import ObjectPD
 from multiarm_pin.rigid_object import ObjectState, RigidObject
 from multiarm_pin.system import MultiArmSystem, SystemState
 from multiarm_pin.trajectories import MinimumJerkTrajectory
-
-Q_NOMINAL = {
-    "ur5": np.array([0.0, -1.2, 1.5, -1.9, -1.57, 0.0]),
-    "panda": np.array([0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]),
-}
-BOX_SIZE = (0.4, 0.3, 0.2)
-FINGERTIPS = {"type": "fingertips", "radius": 0.01,
-              "contacts": [("+x", [0.2, 0.05, 0.03]), ("-x", [-0.2, -0.1, 0.0]),
-                           ("+z", [0.1, 0.1, 0.1])]}
-JOINT_KINDS = sorted(JOINT_DOF) + ["fingertips"]
 
 
 @cache
@@ -36,15 +26,6 @@ def arm(robot: str, i: int, n: int) -> Arm:
     base = pin.SE3(pin.rpy.rpyToMatrix(0, 0, angle + np.pi),
                    np.array([0.9 * np.cos(angle), 0.9 * np.sin(angle), 0.0]))
     return Arm.from_robot_name(robot, name=f"{robot}{i}", base_placement=base)
-
-
-def joint_spec(kind: str):
-    """A joint spec of the library (or fingertips) of size 8 cm."""
-    if kind == "fingertips":
-        return FINGERTIPS
-    if kind == "corner_gripper":
-        return {"type": kind, "size": 0.08}
-    return {"type": kind, "size": 0.08, "tip_radius": 0.01}
 
 
 def random_case(seed: int, n_arms: int, kinds=None):

@@ -4,7 +4,7 @@ dynamics, impossible grasps, object trajectory tracking."""
 import numpy as np
 import pinocchio as pin
 import pytest
-from test_system import build_system, moving_state
+from system_builders import build_system, moving_state
 
 from multiarm_pin.controllers import CONTROLLERS, make_controller
 from multiarm_pin.exceptions import DynamicsError, InputError

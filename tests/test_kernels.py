@@ -17,7 +17,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from dynamics.synthetic import random_system
-from test_system import JOINT_KINDS, build_system, joint_spec, moving_state
+from system_builders import JOINT_KINDS, build_system, joint_spec, moving_state
 
 from multiarm_pin import kernels
 from multiarm_pin.constraints import custom
@@ -238,7 +238,7 @@ def test_compiled_step_equals_numpy_solvers(seed, n_arms):
 
 def welded_ur5s(elbow: float):
     """Two UR5s welded to a box, arm 1 with its elbow at ``elbow`` rad (0: straight)."""
-    from test_system import make_arm
+    from system_builders import make_arm
 
     from multiarm_pin.rigid_object import RigidObject
     from multiarm_pin.system import MultiArmSystem

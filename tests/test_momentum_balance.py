@@ -32,7 +32,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from scipy.integrate import solve_ivp
-from test_system import FINGERTIP_CONTACTS, build_system, make_arm, moving_state
+from system_builders import FINGERTIP_CONTACTS, build_system, make_arm, moving_state
 
 from multiarm_pin.rigid_object import ObjectState, RigidObject
 from multiarm_pin.simulation import simulate

@@ -13,7 +13,7 @@ arms + object is NOT conserved: the bases push on the arms):
 
 import numpy as np
 import pytest
-from test_system import build_system, moving_state
+from system_builders import build_system, moving_state
 
 from multiarm_pin.controllers import make_controller
 from multiarm_pin.dynamics.force_distribution import distribute_forces

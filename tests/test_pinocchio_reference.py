@@ -4,7 +4,7 @@ system built as ONE Pinocchio model (free-flyer object first, then the arms, CON
 import numpy as np
 import pinocchio as pin
 import pytest
-from test_system import build_system, moving_state
+from system_builders import build_system, moving_state
 
 
 def pinocchio_closed_chain(system):

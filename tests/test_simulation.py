@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from test_system import build_system, moving_state, one_dof_arm
+from system_builders import build_system, moving_state, one_dof_arm
 
 from multiarm_pin.exceptions import ConstraintError, DynamicsError, InputError
 from multiarm_pin.rigid_object import ObjectState, RigidObject

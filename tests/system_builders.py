@@ -1,0 +1,100 @@
+"""Real multi-arm systems for the system-level tests (a helper module, not a test file).
+
+UR5 and Panda arms (Panda fingers locked) from example-robot-data on a circle around a box,
+joints of every library type plus fingertips, held where the tools are at t = 0.
+"""
+
+from __future__ import annotations
+
+from functools import cache
+
+import numpy as np
+import pinocchio as pin
+
+from multiarm_pin.arm import ROBOT_DEFAULTS, Arm
+from multiarm_pin.constraints import JOINT_DOF
+from multiarm_pin.rigid_object import ObjectState, RigidObject
+from multiarm_pin.system import MultiArmSystem, SystemState
+
+Q_NOMINAL = {
+    "ur5": np.array([0.0, -1.2, 1.5, -1.9, -1.57, 0.0]),
+    "panda": np.array([0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]),
+}
+BOX_SIZE = (0.4, 0.3, 0.2)
+FINGERTIP_CONTACTS = [("+x", [0.2, 0.05, 0.03]), ("-x", [-0.2, -0.1, 0.0]), ("+z", [0.1, 0.1, 0.1])]
+JOINT_KINDS = sorted(JOINT_DOF) + ["fingertips"]
+
+
+@cache
+def robot_model(robot: str) -> tuple[pin.Model, str]:
+    """The example-robot-data model (Panda fingers locked) and its tool frame, loaded once."""
+    import example_robot_data as erd
+
+    model = erd.load(robot).model
+    defaults = ROBOT_DEFAULTS[robot]
+    locked = [model.getJointId(j) for j in defaults.get("locked_joints", ())]
+    if locked:
+        model = pin.buildReducedModel(model, locked, pin.neutral(model))
+    return model, defaults["tool_frame"]
+
+
+@cache
+def make_arm(robot: str, name: str, angle: float, radius: float = 0.9) -> Arm:
+    """An arm on a circle of ``radius`` around the origin, facing it."""
+    base = pin.SE3(pin.rpy.rpyToMatrix(0, 0, angle + np.pi),
+                   np.array([radius * np.cos(angle), radius * np.sin(angle), 0.0]))
+    model, tool = robot_model(robot)
+    return Arm.from_model(model, tool, name=name, base_placement=base, source=robot)
+
+
+def joint_spec(kind: str):
+    """A joint spec of the library (or fingertips) of size 8 cm."""
+    if kind == "fingertips":
+        return {"type": "fingertips", "contacts": FINGERTIP_CONTACTS, "radius": 0.01}
+    if kind == "corner_gripper":
+        return {"type": kind, "size": 0.08}
+    return {"type": kind, "size": 0.08, "tip_radius": 0.01}
+
+
+def build_system(robots, kinds, rng=None, gravity=(0.0, 0.0, -9.81), mass=5.0, spread=0.2,
+                 object_position=(0.0, 0.0, 0.3), object_quaternion=(0, 0, 0, 1)):
+    """Arms around the object, joints holding each tool where it is at t = 0 (at rest)."""
+    n = len(robots)
+    arms = [make_arm(r, f"{r}{i}", 2 * np.pi * i / n) for i, r in enumerate(robots)]
+    q0 = [Q_NOMINAL[r] + (spread * rng.normal(size=len(Q_NOMINAL[r])) if rng is not None else 0)
+          for r in robots]
+    obj = RigidObject.box(BOX_SIZE, mass)
+    specs = [joint_spec(k) if isinstance(k, str) else k for k in kinds]
+    return MultiArmSystem.from_initial_state(arms, obj, specs, q0, object_position,
+                                             object_quaternion, gravity)
+
+
+def random_quaternion(rng):
+    """A uniformly random unit quaternion [x, y, z, w]."""
+    q = rng.normal(size=4)
+    return q / np.linalg.norm(q)
+
+
+def moving_state(system, state, rng, speed=1.0):
+    """``state`` with random velocities projected onto the constraints."""
+    o = state.obj
+    s = SystemState(state.q, speed * rng.normal(size=system.nv),
+                    ObjectState(o.position, o.quaternion, speed * rng.normal(size=6)))
+    return system.project_velocities(s)
+
+
+def random_mixed_system(rng, n_arms, gravity=(0.0, 0.0, -9.81)):
+    """UR5s and Pandas alternating, random joint types, a random object orientation."""
+    robots = [("ur5", "panda")[i % 2] for i in range(n_arms)]
+    kinds = [JOINT_KINDS[k] for k in rng.integers(len(JOINT_KINDS), size=n_arms)]
+    return build_system(robots, kinds, rng, gravity, object_quaternion=random_quaternion(rng))
+
+
+def one_dof_arm(name: str, angle: float) -> Arm:
+    """A UR5 with all joints but the shoulder pan locked: one joint for six constraints."""
+    model, tool = robot_model("ur5")
+    lock = [model.getJointId(j) for j in model.names[2:]]
+    reduced = pin.buildReducedModel(model, lock, Q_NOMINAL["ur5"])
+    base = pin.SE3(pin.rpy.rpyToMatrix(0, 0, angle + np.pi),
+                   np.array([0.9 * np.cos(angle), 0.9 * np.sin(angle), 0.0]))
+    return Arm.from_model(reduced, tool, name=name, base_placement=base)
