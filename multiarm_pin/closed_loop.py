@@ -78,19 +78,8 @@ def closed_loop_evaluation(system: MultiArmSystem, controller: Callable | None, 
                 return solve_dynamics(with_tau, solver), ev, tau
             except DynamicsError as exc:
                 raise DynamicsError(f"t = {t:.6g} s: {exc}") from exc
-    if controller is None:
-        tau = np.zeros(system.nv)
-    else:
-        try:
-            tau = np.asarray(call(t, state, ev), dtype=float)
-        except MultiArmError as exc:  # NaN or no solution at this state: with the time
-            raise DynamicsError(f"t = {t:.6g} s: controller: {exc}") from exc
-        if tau.shape != (system.nv,):
-            raise InputError(
-                f"controller returned torques of shape {tau.shape}, expected ({system.nv},)"
-            )
-        if not np.all(np.isfinite(tau)):
-            raise DynamicsError(f"t = {t:.6g} s: controller returned NaN or infinite torques")
+    tau = np.zeros(system.nv) if controller is None else controller_torques(
+        call, t, state, ev, system.nv)
     tau_p = system.pad(tau)
     blocks = ev.blocks
     buf = None if reference else blocks.__dict__.get("_buf")
@@ -112,4 +101,33 @@ def closed_loop_evaluation(system: MultiArmSystem, controller: Callable | None, 
     return sol, ev, tau
 
 
-__all__ = ["FUSED_SOLVERS", "closed_loop_evaluation"]
+def controller_torques(controller, t: float, state, evaluation, nv: int) -> np.ndarray:
+    """The controller's torques at ``(t, state)``, checked.
+
+    Args:
+        controller: ``controller(t, state, evaluation) -> tau (nv,)``.
+        t: time [s].
+        state: the state.
+        evaluation: its evaluation, as the controller sees it.
+        nv: the number of joints.
+
+    Returns:
+        ``tau`` (nv,) [N m or N].
+
+    Raises:
+        InputError: torques of the wrong shape.
+        DynamicsError: the controller failed (``"t = ... s: controller: ..."``) or returned
+            NaN or infinite torques.
+    """
+    try:
+        tau = np.asarray(controller(t, state, evaluation), dtype=float)
+    except MultiArmError as exc:  # NaN or no solution at this state: with the time
+        raise DynamicsError(f"t = {t:.6g} s: controller: {exc}") from exc
+    if tau.shape != (nv,):
+        raise InputError(f"controller returned torques of shape {tau.shape}, expected ({nv},)")
+    if not np.all(np.isfinite(tau)):
+        raise DynamicsError(f"t = {t:.6g} s: controller returned NaN or infinite torques")
+    return tau
+
+
+__all__ = ["FUSED_SOLVERS", "closed_loop_evaluation", "controller_torques"]

@@ -40,7 +40,7 @@ import numpy as np
 import pinocchio as pin
 
 from multiarm_pin import contact_events as ce
-from multiarm_pin.closed_loop import closed_loop_evaluation
+from multiarm_pin.closed_loop import closed_loop_evaluation, controller_torques
 from multiarm_pin.contact_events import ContactEvent
 from multiarm_pin.disturbances import WrenchSchedule
 from multiarm_pin.dynamics import SOLVERS, Solution
@@ -196,16 +196,7 @@ class _Stepper:
             tau = np.zeros(s.nv)
             blocks = ev.blocks
         else:
-            try:
-                tau = np.asarray(self.controller(t, state, ev), dtype=float)
-            except MultiArmError as exc:  # NaN or no solution at this state: with the time
-                raise DynamicsError(f"t = {t:.6g} s: controller: {exc}") from exc
-            if tau.shape != (s.nv,):
-                raise InputError(
-                    f"controller returned torques of shape {tau.shape}, expected ({s.nv},)"
-                )
-            if not np.all(np.isfinite(tau)):
-                raise DynamicsError(f"t = {t:.6g} s: controller returned NaN or infinite torques")
+            tau = controller_torques(self.controller, t, state, ev, s.nv)
             blocks = ev.blocks.with_torques(s.pad(tau))
         full, rows = s.contact_blocks(state, blocks, ev.constraints, self.baumgarte, w)
         return self._solve(t, full), ev, tau, rows
