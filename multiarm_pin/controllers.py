@@ -547,9 +547,10 @@ class ObjectPD(Controller):
             unilateral = np.zeros_like(s.unilateral)
             i, k = np.nonzero(index >= 0)
             unilateral[i, k] = s.unilateral[i, index[i, k]]
-            if grasp_rank(b) < 6:
+            rank = grasp_rank(b)
+            if rank < 6:
                 return self._hold_still(t, state, full, "the touching contacts cannot make "
-                                        f"every object wrench (rank {grasp_rank(b)} < 6)")
+                                        f"every object wrench (rank {rank} < 6)")
         try:
             fd = distribute_forces(b, b.M_o @ a_d - b.h_o, unilateral, self.margin)
             self.margin_kept = True
