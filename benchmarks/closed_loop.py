@@ -4,7 +4,7 @@
 For n = 2, 4, 8, 16, 32, 64 UR5s each welded to one large box (the systems of
 ``solver_vs_kkt.py``) and for every shipped scenario:
 
-- ``t_closed``: one closed-loop evaluation (:func:`multiarm_pin.closed_loop.closed_loop_evaluation`:
+- ``t_closed``: one closed-loop evaluation (``sim.closed_loop.closed_loop_evaluation``:
   blocks, compiled ``object_pd`` torques, forward dynamics on the shared buffer);
 - ``t_open``: the open-loop full step at the same states
   (``MultiArmSystem.forward_dynamics``, the torques given);
@@ -57,13 +57,13 @@ for _p in (str(ROOT), str(HERE)):
 
 from solver_vs_kkt import Timer, build_bench, build_peer, environment  # noqa: E402
 
-from multiarm_pin.closed_loop import closed_loop_evaluation  # noqa: E402
-from multiarm_pin.controllers import ObjectPD  # noqa: E402
+from multiarm_pin.app.runner import make_controller  # noqa: E402
+from multiarm_pin.app.scenario import build_scenario, load_scenario  # noqa: E402
 from multiarm_pin.exceptions import MultiArmError  # noqa: E402
-from multiarm_pin.runner import make_controller  # noqa: E402
-from multiarm_pin.scenario import build_scenario, load_scenario  # noqa: E402
-from multiarm_pin.simulation import partial_result, simulate  # noqa: E402
-from multiarm_pin.trajectories import MinimumJerkTrajectory  # noqa: E402
+from multiarm_pin.sim.closed_loop import closed_loop_evaluation  # noqa: E402
+from multiarm_pin.sim.controllers import ObjectPD  # noqa: E402
+from multiarm_pin.sim.simulation import partial_result, simulate  # noqa: E402
+from multiarm_pin.sim.trajectories import MinimumJerkTrajectory  # noqa: E402
 
 DEFAULT_ARMS = (2, 4, 8, 16, 32, 64)
 QUICK_ARMS = (2, 4)
@@ -203,7 +203,7 @@ def cold_start(duration: float) -> dict[str, float]:
     """Wall times of ``multiarm-pin run`` of the demo with an empty and a filled numba cache."""
     script = Path(sys.executable).parent / "multiarm-pin"
     cli = ([str(script)] if script.exists()
-           else [sys.executable, "-c", "import sys; from multiarm_pin.cli import main; "
+           else [sys.executable, "-c", "import sys; from multiarm_pin.app.cli import main; "
                  "sys.exit(main())"])
     out = {}
     with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as res:

@@ -67,15 +67,15 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # run from a checkout without installing
     sys.path.insert(0, str(ROOT))
 
-from multiarm_pin.arm import Arm  # noqa: E402
+from multiarm_pin.app.scenario import build_scenario, load_scenario  # noqa: E402
 from multiarm_pin.dynamics import (  # noqa: E402
     SystemBlocks,
     solve,
     solve_dense_kkt,
     solve_unilateral,
 )
-from multiarm_pin.rigid_object import RigidObject  # noqa: E402
-from multiarm_pin.scenario import build_scenario, load_scenario  # noqa: E402
+from multiarm_pin.model.arm import Arm  # noqa: E402
+from multiarm_pin.model.rigid_object import RigidObject  # noqa: E402
 from multiarm_pin.spatial import quaternion_to_rotation  # noqa: E402
 from multiarm_pin.system import MultiArmSystem, SystemState  # noqa: E402
 
@@ -350,7 +350,7 @@ def measure_case(bench: Bench, case: str, timer: Timer, peer: PinocchioPeer | No
 STAGES = (
     ("pinocchio", "Pinocchio: `computeJointJacobiansTimeVariation` + `crba` + "
                   "`nonLinearEffects` (groups of <= 16 arms) + tool placements"),
-    ("kernels", "compiled arm terms + constraint rows + assembly (`multiarm_pin.kernels`)"),
+    ("kernels", "compiled arm terms + constraint rows + assembly (`_compiled.kernels`)"),
     ("solve", "compiled object-first solve inside the step"),
     ("glue", "Python glue: input checks, state concatenation, result objects"),
 )

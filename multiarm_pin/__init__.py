@@ -2,15 +2,13 @@
 
 Three layers, after the thesis it implements: grasp analysis (:mod:`multiarm_pin.grasp`),
 the constraint layer (:mod:`multiarm_pin.constraints`) and the dynamics
-(:mod:`multiarm_pin.dynamics`, :mod:`multiarm_pin.system`, :mod:`multiarm_pin.simulation`),
-with arms loaded into Pinocchio (:mod:`multiarm_pin.arm`). Conventions (units, frames, signs):
+(:mod:`multiarm_pin.dynamics`, :mod:`multiarm_pin.system`, :mod:`multiarm_pin.sim.simulation`),
+with arms loaded into Pinocchio (:mod:`multiarm_pin.model.arm`). Conventions (units, frames, signs):
 ``docs/ARCHITECTURE.md``.
 """
 
-from multiarm_pin.arm import Arm, ArmTerms, available_robots, load_arm
-from multiarm_pin.arm_set import ArmSet, ArmSetTerms
+from multiarm_pin.app.scenario import build_scenario, load_scenario
 from multiarm_pin.constraints import ConstraintSet, Joint, make_joint, make_joint_from_placements
-from multiarm_pin.controllers import make_controller
 from multiarm_pin.dynamics import Solution, SystemBlocks, solve
 from multiarm_pin.exceptions import (
     ConstraintError,
@@ -24,11 +22,13 @@ from multiarm_pin.exceptions import (
     SingularityError,
     URDFError,
 )
-from multiarm_pin.kinematics import BodyKinematics
-from multiarm_pin.polyhedron import Polyhedron, box, from_vertices
-from multiarm_pin.rigid_object import ObjectState, RigidObject
-from multiarm_pin.scenario import build_scenario, load_scenario
-from multiarm_pin.simulation import SimulationResult, simulate
+from multiarm_pin.model.arm import Arm, ArmTerms, available_robots, load_arm
+from multiarm_pin.model.arm_set import ArmSet, ArmSetTerms
+from multiarm_pin.model.kinematics import BodyKinematics
+from multiarm_pin.model.polyhedron import Polyhedron, box, from_vertices
+from multiarm_pin.model.rigid_object import ObjectState, RigidObject
+from multiarm_pin.sim.controllers import make_controller
+from multiarm_pin.sim.simulation import SimulationResult, simulate
 from multiarm_pin.system import MultiArmSystem, SystemState
 
 __version__ = "0.1.0"

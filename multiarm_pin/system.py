@@ -1,10 +1,10 @@
 """Assembly: arms + object + joints + a state -> the coefficient blocks of the dynamics.
 
-:class:`MultiArmSystem` owns one :class:`~multiarm_pin.arm_set.ArmSet` (all arms as one
+:class:`MultiArmSystem` owns one :class:`~multiarm_pin.model.arm_set.ArmSet` (all arms as one
 combined Pinocchio model, with the system's gravity) and one
 :class:`~multiarm_pin.constraints.ConstraintSet`. For a :class:`SystemState` it computes, with
 one Pinocchio pass (per group of at most 16 arms) and one call of the compiled kernels of
-:mod:`multiarm_pin.kernels` (no Python loop over arms), the padded
+:mod:`multiarm_pin._compiled.kernels` (no Python loop over arms), the padded
 :class:`~multiarm_pin.dynamics.SystemBlocks` of ``docs/ARCHITECTURE.md``; the numpy
 implementation (one vectorised constraint evaluation and a few ``einsum`` calls) stays as the
 reference, ``blocks(..., reference=True)``. :meth:`MultiArmSystem.forward_dynamics` with
@@ -20,7 +20,7 @@ builds them from the arms' initial configurations and the object's initial pose.
 
 State layout: ``q`` (nq,) and ``v`` (nv,) are the arms' configurations and velocities
 concatenated in arm order (``system.arm_set.q_slices`` / ``v_slices``); the object has its
-own :class:`~multiarm_pin.rigid_object.ObjectState` (COM position, quaternion ``[x, y, z, w]``,
+own :class:`~.model.rigid_object.ObjectState` (COM position, quaternion ``[x, y, z, w]``,
 twist ``[ẋ; ω]`` in world axes).
 """
 
@@ -34,9 +34,7 @@ from functools import cached_property
 import numpy as np
 import pinocchio as pin
 
-from multiarm_pin import kernels
-from multiarm_pin.arm import Arm
-from multiarm_pin.arm_set import ArmSet, ArmSetTerms
+from multiarm_pin._compiled import kernels
 from multiarm_pin.constraints import (
     JOINT_DOF,
     ConstraintSet,
@@ -53,8 +51,10 @@ from multiarm_pin.dynamics.object_first import (
     solve_object_first_numpy,
 )
 from multiarm_pin.exceptions import ConstraintError, DynamicsError, InputError
-from multiarm_pin.kinematics import BodyKinematics
-from multiarm_pin.rigid_object import ObjectState, RigidObject
+from multiarm_pin.model.arm import Arm
+from multiarm_pin.model.arm_set import ArmSet, ArmSetTerms
+from multiarm_pin.model.kinematics import BodyKinematics
+from multiarm_pin.model.rigid_object import ObjectState, RigidObject
 from multiarm_pin.spatial import as_array, as_unit_quaternion, cross
 
 _COMPILED_SOLVERS = frozenset({"auto", "object_first"})
@@ -108,7 +108,7 @@ class Evaluation:
         constraints: the constraint rows (``φ``, ``φ̇``, ``G``, ``κ``, contact points ...).
         active: (n, N_max) bool, the arms' contact rows that touch (the active set of the
             event-driven simulation: bilateral rows and touching unilateral rows), or None
-            (every row touches). :func:`~multiarm_pin.simulation.simulate` sets it on the
+            (every row touches). :func:`~multiarm_pin.sim.simulation.simulate` sets it on the
             evaluation it hands to the controller, before the call
             (:meth:`with_active`); controllers that plan contact forces use it.
     """
@@ -316,7 +316,7 @@ class MultiArmSystem:
         self._nv_max_blocks = max(int(self._nv_arm.max()) if n else 0, 1)
 
     def _init_kernel_tables(self) -> None:
-        """Constant inputs of the compiled hot path (:mod:`multiarm_pin.kernels`)."""
+        """Constant inputs of the compiled hot path (:mod:`multiarm_pin._compiled.kernels`)."""
         aset, cs = self.arm_set, self.constraint_set
         n, k, m = self.n_arms, aset.nv_max, self.N_max
         self._k_arm_ints = np.concatenate(
@@ -527,7 +527,7 @@ class MultiArmSystem:
                reference: bool = False) -> Evaluation:
         """The coefficient blocks of the equations of motion at a state.
 
-        Computed by the compiled kernels of :mod:`multiarm_pin.kernels` after the three
+        Computed by the compiled kernels of :mod:`multiarm_pin._compiled.kernels` after the three
         Pinocchio calls of :meth:`ArmSet.pinocchio_pass`: every returned array is new (views
         of one buffer allocated per call), so an :class:`Evaluation` stays valid after later
         calls.
@@ -616,7 +616,7 @@ class MultiArmSystem:
             H: (n, 4, 4) tool placements.
             x: (13 + nq + 2 nv,) object state, ``q``, ``v``, ``τ`` concatenated.
             params: (18,) kernel parameters (object, Baumgarte, solver thresholds).
-            buf: the output buffer (:func:`multiarm_pin.kernels.buffer_layout`).
+            buf: the output buffer (:func:`multiarm_pin._compiled.kernels.buffer_layout`).
             step: also solve (object-first) into the buffer.
 
         Returns:
@@ -716,7 +716,7 @@ class MultiArmSystem:
         :func:`~multiarm_pin.dynamics.unilateral.solve_unilateral` on every contact row of
         :meth:`contact_blocks` (the arms' rows, then the supports' block): bilateral rows
         ``φ̈ = 0``, active unilateral rows ``0 <= μ ⟂ φ̈ >= 0``, inactive rows ``μ = 0``.
-        This is what one evaluation of :func:`~multiarm_pin.simulation.simulate` solves
+        This is what one evaluation of :func:`~multiarm_pin.sim.simulation.simulate` solves
         (without the controller); :meth:`forward_dynamics` covers the arms' rows only, all
         held as equalities.
 

@@ -12,11 +12,11 @@ import numpy as np
 import pinocchio as pin
 from system_builders import BOX_SIZE, JOINT_KINDS, Q_NOMINAL, joint_spec
 
-from multiarm_pin.arm import Arm
-from multiarm_pin.controllers import ObjectPD
-from multiarm_pin.rigid_object import ObjectState, RigidObject
+from multiarm_pin.model.arm import Arm
+from multiarm_pin.model.rigid_object import ObjectState, RigidObject
+from multiarm_pin.sim.controllers import ObjectPD
+from multiarm_pin.sim.trajectories import MinimumJerkTrajectory
 from multiarm_pin.system import MultiArmSystem, SystemState
-from multiarm_pin.trajectories import MinimumJerkTrajectory
 
 
 @cache

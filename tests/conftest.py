@@ -4,7 +4,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from multiarm_pin.arm import Arm
+from multiarm_pin.model.arm import Arm
 
 
 @pytest.fixture(scope="session")

@@ -45,10 +45,10 @@ def write(path: Path, text: str) -> Path:
 def cli_command(*args: str) -> list[str]:
     """The ``multiarm-pin`` command line (the console script of this interpreter's venv).
 
-    Falls back to ``python -m multiarm_pin.cli`` when the script is not installed.
+    Falls back to ``python -m multiarm_pin.app.cli`` when the script is not installed.
     """
     script = Path(sys.executable).parent / "multiarm-pin"
-    head = [str(script)] if script.is_file() else [sys.executable, "-m", "multiarm_pin.cli"]
+    head = [str(script)] if script.is_file() else [sys.executable, "-m", "multiarm_pin.app.cli"]
     return [*head, *map(str, args)]
 
 

@@ -11,9 +11,9 @@ from functools import cache
 import numpy as np
 import pinocchio as pin
 
-from multiarm_pin.arm import ROBOT_DEFAULTS, Arm
 from multiarm_pin.constraints import JOINT_DOF
-from multiarm_pin.rigid_object import ObjectState, RigidObject
+from multiarm_pin.model.arm import ROBOT_DEFAULTS, Arm
+from multiarm_pin.model.rigid_object import ObjectState, RigidObject
 from multiarm_pin.system import MultiArmSystem, SystemState
 
 Q_NOMINAL = {

@@ -3,7 +3,6 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from multiarm_pin.arm import Arm, available_robots, inverse_operational_space_inertia, load_arm
 from multiarm_pin.exceptions import (
     FrameNotFoundError,
     InputError,
@@ -11,6 +10,12 @@ from multiarm_pin.exceptions import (
     RobotNotFoundError,
     SingularityError,
     URDFError,
+)
+from multiarm_pin.model.arm import (
+    Arm,
+    available_robots,
+    inverse_operational_space_inertia,
+    load_arm,
 )
 
 UR5_SINGULAR_ELBOW = np.array([0.3, -1.0, 0.0, 0.4, 0.8, 0.2])  # elbow joint straight

@@ -1,8 +1,8 @@
 import numpy as np
 import pinocchio as pin
 
-from multiarm_pin.arm import Arm
-from multiarm_pin.arm_set import ArmSet
+from multiarm_pin.model.arm import Arm
+from multiarm_pin.model.arm_set import ArmSet
 
 
 def test_combined_model_matches_each_arm(ur5, panda, rng):

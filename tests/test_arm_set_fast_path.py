@@ -3,8 +3,8 @@
 import numpy as np
 import pinocchio as pin
 
-from multiarm_pin.arm import Arm
-from multiarm_pin.arm_set import _EPS, ArmSet
+from multiarm_pin.model.arm import Arm
+from multiarm_pin.model.arm_set import _EPS, ArmSet
 
 
 def _ur5s(n):

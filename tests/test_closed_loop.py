@@ -1,4 +1,4 @@
-"""Fused closed-loop evaluation (multiarm_pin.closed_loop, multiarm_pin.controller_kernels)
+"""Fused closed-loop evaluation (sim.closed_loop, _compiled.controller_kernels)
 against the reference numpy path: controller.reference, then ``blocks.with_torques``, then
 the numpy object-first solver, on reference blocks."""
 
@@ -11,15 +11,15 @@ import pinocchio as pin
 import pytest
 from closed_loop_cases import JOINT_KINDS, object_pd, random_case
 
-from multiarm_pin import controller_kernels
-from multiarm_pin.closed_loop import closed_loop_evaluation
+from multiarm_pin._compiled import controller_kernels
+from multiarm_pin.app.runner import make_controller
+from multiarm_pin.app.scenario import build_scenario, load_scenario
 from multiarm_pin.dynamics import InverseDynamicsResult
 from multiarm_pin.exceptions import DynamicsError
-from multiarm_pin.runner import make_controller
-from multiarm_pin.scenario import build_scenario, load_scenario
-from multiarm_pin.simulation import simulate
+from multiarm_pin.sim.closed_loop import closed_loop_evaluation
+from multiarm_pin.sim.simulation import simulate
+from multiarm_pin.sim.trajectories import MinimumJerkTrajectory
 from multiarm_pin.spatial import rotation_to_quaternion
-from multiarm_pin.trajectories import MinimumJerkTrajectory
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 

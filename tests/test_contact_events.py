@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from multiarm_pin.constraints import Support
-from multiarm_pin.disturbances import WrenchSchedule
 from multiarm_pin.exceptions import InputError
-from multiarm_pin.rigid_object import RigidObject
-from multiarm_pin.simulation import simulate
+from multiarm_pin.model.rigid_object import RigidObject
+from multiarm_pin.sim.disturbances import WrenchSchedule
+from multiarm_pin.sim.simulation import simulate
 from multiarm_pin.system import MultiArmSystem
 
 G = 9.81

@@ -6,10 +6,10 @@ import pinocchio as pin
 import pytest
 from system_builders import build_system, moving_state
 
-from multiarm_pin.controllers import CONTROLLERS, make_controller
 from multiarm_pin.exceptions import DynamicsError, InputError
-from multiarm_pin.simulation import simulate
-from multiarm_pin.trajectories import MinimumJerkTrajectory
+from multiarm_pin.sim.controllers import CONTROLLERS, make_controller
+from multiarm_pin.sim.simulation import simulate
+from multiarm_pin.sim.trajectories import MinimumJerkTrajectory
 
 
 @pytest.fixture(scope="module")
@@ -117,7 +117,7 @@ def test_tool_acceleration_from_object_matches_finite_differences():
     """Eq 3.6 (transport of the object's acceleration plus relative motion, with the
     ω×(ω×r), 2ω×ṗ_rel and ω×ω_rel terms) against second differences of a composed motion
     x_t = x_o + R_o p_rel(t), R_t = R_o R_rel(t)."""
-    from multiarm_pin.controllers import tool_acceleration_from_object
+    from multiarm_pin.sim.controllers import tool_acceleration_from_object
 
     rng = np.random.default_rng(5)
     c = rng.normal(size=(9, 3))
@@ -175,7 +175,7 @@ def test_tool_acceleration_from_object_matches_finite_differences():
 
 
 def test_tool_acceleration_from_object_rejects_bad_shapes():
-    from multiarm_pin.controllers import tool_acceleration_from_object
+    from multiarm_pin.sim.controllers import tool_acceleration_from_object
 
     with pytest.raises(InputError, match="offset"):
         tool_acceleration_from_object(np.zeros(3), np.zeros(6), np.zeros(6))
@@ -287,9 +287,9 @@ def test_fingertips_stay_put_on_the_moving_box(scenario, slid_before):
     drag it into a singularity, holding the tip leaves its other motions free."""
     from pathlib import Path
 
+    from multiarm_pin.app.runner import make_controller as scenario_controller
+    from multiarm_pin.app.scenario import build_scenario, load_scenario
     from multiarm_pin.grasp import form_closure, wrench_matrix
-    from multiarm_pin.runner import make_controller as scenario_controller
-    from multiarm_pin.scenario import build_scenario, load_scenario
     from multiarm_pin.spatial import quaternion_to_rotation
 
     path = Path(__file__).resolve().parents[1] / "scenarios" / f"{scenario}.yaml"

@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from multiarm_pin.arm import Arm
-from multiarm_pin.controllers import ObjectPD
 from multiarm_pin.dynamics.force_distribution import distribute_forces
 from multiarm_pin.exceptions import DynamicsError
-from multiarm_pin.rigid_object import RigidObject
-from multiarm_pin.simulation import simulate
+from multiarm_pin.model.arm import Arm
+from multiarm_pin.model.rigid_object import RigidObject
+from multiarm_pin.sim.controllers import ObjectPD
+from multiarm_pin.sim.simulation import simulate
 from multiarm_pin.system import MultiArmSystem
 
 
@@ -47,7 +47,7 @@ def _two_gripper():
 
     import yaml
 
-    from multiarm_pin.scenario import build_scenario, parse_scenario
+    from multiarm_pin.app.scenario import build_scenario, parse_scenario
 
     path = Path(__file__).resolve().parents[1] / "scenarios" / "two_gripper_form_closure.yaml"
     built = build_scenario(parse_scenario(yaml.safe_load(path.read_text()), str(path)))
@@ -65,9 +65,9 @@ def test_object_pd_plans_forces_on_the_touching_contacts_only():
     still span every wrench: their unit-column ``W_o`` has 6 singular values above 1e-3 of
     the largest, far above ``GRASP_RANK_TOLERANCE``.
     """
-    from multiarm_pin.controllers import grasp_rank
     from multiarm_pin.dynamics.blocks import restrict_rows
     from multiarm_pin.dynamics.unilateral import solve_unilateral
+    from multiarm_pin.sim.controllers import grasp_rank
 
     system, state = _two_gripper()
     active = system.contact_mask.copy()

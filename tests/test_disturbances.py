@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from multiarm_pin.disturbances import WrenchSchedule
 from multiarm_pin.exceptions import InputError
+from multiarm_pin.sim.disturbances import WrenchSchedule
 
 
 def test_intervals_are_half_open_and_add_up():

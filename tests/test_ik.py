@@ -4,9 +4,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from multiarm_pin.arm import Arm
 from multiarm_pin.exceptions import FrameNotFoundError, InputError, MultiArmError
-from multiarm_pin.ik import (
+from multiarm_pin.model.arm import Arm
+from multiarm_pin.model.ik import (
     PlaneTarget,
     PointTarget,
     PoseTarget,
@@ -120,7 +120,7 @@ def _fd_jacobian(problem, q, eps=1e-7):
 
 
 def test_offset_point_plane_and_axis_jacobians_match_finite_differences(ur5):
-    from multiarm_pin.ik import AxisTarget, _Problem
+    from multiarm_pin.model.ik import AxisTarget, _Problem
 
     tool = ur5.model.frames[ur5.tool_frame_id].name
     off = np.array([0.05, -0.02, 0.1])
@@ -141,7 +141,7 @@ def test_offset_point_plane_and_axis_jacobians_match_finite_differences(ur5):
 
 
 def test_revolute_and_spherical_targets_leave_the_free_rotation_at_the_seed(ur5):
-    from multiarm_pin.ik import AxisTarget, PostureTarget
+    from multiarm_pin.model.ik import AxisTarget, PostureTarget
 
     tool = ur5.model.frames[ur5.tool_frame_id].name
     q_seed = np.array([0.2, -1.0, 1.3, -0.6, 1.1, 0.3])
@@ -179,7 +179,7 @@ def test_three_joint_arm_reaches_a_point_but_not_a_pose():
 
 
 def test_revolute_coordinates_turned_to_the_seed_within_limits(ur5):
-    from multiarm_pin.ik import _nearest_turn, _Problem
+    from multiarm_pin.model.ik import _nearest_turn, _Problem
 
     problem = _Problem(ur5.model, [PointTarget("tool0", np.zeros(3))])
     assert problem.revolute == list(range(6))
@@ -223,7 +223,7 @@ def _mirror_signs(arm_left, arm_right, S):
 
 
 def test_mirror_symmetric_pair_gets_mirror_symmetric_branches():
-    from multiarm_pin.scenario import build_scenario, load_scenario
+    from multiarm_pin.app.scenario import build_scenario, load_scenario
 
     built = build_scenario(load_scenario("scenarios/mp6_pair_box.yaml"))
     left, right = built.arms

@@ -1,4 +1,4 @@
-"""Compiled hot path (multiarm_pin.kernels) against the numpy reference implementation.
+"""Compiled hot path (multiarm_pin._compiled.kernels) against the numpy reference implementation.
 
 The numpy path (``MultiArmSystem.blocks(..., reference=True)``: ``ArmSet.evaluate``,
 ``ConstraintSet.evaluate``, einsum assembly; solver ``object_first_numpy``) is itself tested
@@ -19,11 +19,11 @@ import pytest
 from dynamics.synthetic import random_system
 from system_builders import JOINT_KINDS, build_system, joint_spec, moving_state
 
-from multiarm_pin import kernels
+from multiarm_pin._compiled import kernels
 from multiarm_pin.constraints import custom
 from multiarm_pin.dynamics import DEFAULT_RCOND_TOL, SystemBlocks, reduce_arms, solve
 from multiarm_pin.exceptions import DynamicsError, InputError, SingularityError
-from multiarm_pin.rigid_object import ObjectState
+from multiarm_pin.model.rigid_object import ObjectState
 from multiarm_pin.system import SystemState
 
 TOL = 1e-12
@@ -180,7 +180,7 @@ def test_lazy_views_behave_like_the_dataclasses():
 
 def test_grouped_pinocchio_models_give_the_same_terms(monkeypatch):
     """Arms split over several combined Pinocchio models (as for > GROUP_SIZE arms)."""
-    import multiarm_pin.arm_set as arm_set_module
+    import multiarm_pin.model.arm_set as arm_set_module
 
     monkeypatch.setattr(arm_set_module, "GROUP_SIZE", 2)
     for seed, n_arms in ((21, 5), (22, 4)):
@@ -240,7 +240,7 @@ def welded_ur5s(elbow: float):
     """Two UR5s welded to a box, arm 1 with its elbow at ``elbow`` rad (0: straight)."""
     from system_builders import make_arm
 
-    from multiarm_pin.rigid_object import RigidObject
+    from multiarm_pin.model.rigid_object import RigidObject
     from multiarm_pin.system import MultiArmSystem
 
     arms = [make_arm("ur5", f"w{i}", np.pi * i) for i in range(2)]

@@ -34,8 +34,8 @@ import pytest
 from scipy.integrate import solve_ivp
 from system_builders import FINGERTIP_CONTACTS, build_system, make_arm, moving_state
 
-from multiarm_pin.rigid_object import ObjectState, RigidObject
-from multiarm_pin.simulation import simulate
+from multiarm_pin.model.rigid_object import ObjectState, RigidObject
+from multiarm_pin.sim.simulation import simulate
 from multiarm_pin.spatial import quaternion_derivative, quaternion_to_rotation
 
 ZERO_G = (0.0, 0.0, 0.0)

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 from system_builders import build_system, moving_state
 
-from multiarm_pin.controllers import make_controller
 from multiarm_pin.dynamics.force_distribution import distribute_forces
 from multiarm_pin.grasp.form_closure import form_closure
-from multiarm_pin.simulation import simulate
+from multiarm_pin.sim.controllers import make_controller
+from multiarm_pin.sim.simulation import simulate
 
 ZERO_G = (0.0, 0.0, 0.0)
 

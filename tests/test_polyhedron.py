@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from multiarm_pin.exceptions import InputError
-from multiarm_pin.polyhedron import box, from_vertices
+from multiarm_pin.model.polyhedron import box, from_vertices
 
 
 def test_box_faces_and_frames():

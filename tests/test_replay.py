@@ -17,9 +17,7 @@ import pinocchio as pin
 import pytest
 from meshcat import Visualizer
 
-from multiarm_pin.exceptions import InputError
-from multiarm_pin.polyhedron import box
-from multiarm_pin.replay import (
+from multiarm_pin.app.replay import (
     ReplayArm,
     ReplayContacts,
     ReplayObject,
@@ -31,6 +29,8 @@ from multiarm_pin.replay import (
     set_camera,
     write_replay_html,
 )
+from multiarm_pin.exceptions import InputError
+from multiarm_pin.model.polyhedron import box
 from multiarm_pin.spatial import quaternion_to_rotation, rotation_to_quaternion
 
 MP6 = Path(__file__).resolve().parents[1] / "robots" / "mp6" / "mp6.urdf"
@@ -490,7 +490,7 @@ def test_contact_state_switches_spheres_and_supports_are_drawn():
     contact 0 stays touching. A support slab's top face lies on its plane: its centre is
     half a thickness below the given centre along the normal, its z axis along the normal.
     """
-    from multiarm_pin.replay import SUPPORT_THICKNESS, ReplaySupport
+    from multiarm_pin.app.replay import SUPPORT_THICKNESS, ReplaySupport
 
     t = np.linspace(0.0, 1.0, 11)
     points = np.zeros((11, 2, 3))

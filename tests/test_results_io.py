@@ -6,8 +6,7 @@ import signal
 
 import pytest
 
-from multiarm_pin.exceptions import OutputError
-from multiarm_pin.results_io import (
+from multiarm_pin.app.results_io import (
     MARKER,
     ResultsWriter,
     deferred_signals,
@@ -16,6 +15,7 @@ from multiarm_pin.results_io import (
     safe_component,
     write_atomic,
 )
+from multiarm_pin.exceptions import OutputError
 
 
 @pytest.mark.parametrize("name, expected", [

@@ -3,7 +3,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from multiarm_pin.exceptions import InputError
-from multiarm_pin.rigid_object import ObjectState, RigidObject
+from multiarm_pin.model.rigid_object import ObjectState, RigidObject
 from multiarm_pin.spatial import quaternion_derivative, quaternion_to_rotation
 
 
@@ -16,7 +16,7 @@ def test_box_inertia_closed_form():
 
 
 def test_polyhedron_inertia_matches_box():
-    from multiarm_pin.polyhedron import box
+    from multiarm_pin.model.polyhedron import box
 
     verts = box([0.8, 0.4, 0.3]).vertices
     assert np.allclose(

@@ -384,16 +384,16 @@ def test_4f_gravity_torque_stretched_out_matches_statics(model_4f, urdf_4f):
 
 
 # ----------------------------------------------------------------------------- registry
-# multiarm_pin.robots: every robot that available_robots() lists is walked.
+# multiarm_pin.model.robots: every robot that available_robots() lists is walked.
 def _registry():
-    from multiarm_pin.arm import available_robots
+    from multiarm_pin.model.arm import available_robots
 
     return available_robots()
 
 
 def _mid_configuration(arm):
     """A configuration inside the limits, off the zero pose (no aligned-axes singularity)."""
-    from multiarm_pin.scenario_checks import one_dof_limits
+    from multiarm_pin.app.scenario_checks import one_dof_limits
 
     lo, hi, _ = one_dof_limits(arm.model)
     q = pin.integrate(arm.model, arm.neutral(), 0.3 * np.ones(arm.nv))
@@ -404,10 +404,10 @@ def _mid_configuration(arm):
 
 @pytest.mark.parametrize("robot", _registry())
 def test_registry_robot_loads_with_its_hand_or_flange_and_runs_a_weld(robot, tmp_path):
-    import multiarm_pin.robots as robots
-    from multiarm_pin.arm import Arm
-    from multiarm_pin.runner import run_scenario
-    from multiarm_pin.scenario import parse_scenario
+    import multiarm_pin.model.robots as robots
+    from multiarm_pin.app.runner import run_scenario
+    from multiarm_pin.app.scenario import parse_scenario
+    from multiarm_pin.model.arm import Arm
 
     entry = robots.ROBOTS[robot]
     arm = Arm.from_robot_name(robot, load_visuals=False)
@@ -440,9 +440,9 @@ def test_registry_robot_loads_with_its_hand_or_flange_and_runs_a_weld(robot, tmp
 
 @pytest.mark.parametrize("robot", _registry())
 def test_locked_joints_work_for_every_robot(robot, tmp_path):
-    from multiarm_pin.arm import Arm
+    from multiarm_pin.app.scenario import build_arm, parse_scenario
     from multiarm_pin.exceptions import ScenarioError
-    from multiarm_pin.scenario import build_arm, parse_scenario
+    from multiarm_pin.model.arm import Arm
 
     full = Arm.from_robot_name(robot, load_visuals=False)
     first = full.model.names[1]

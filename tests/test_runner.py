@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from run_helpers import Q0_UR5, one_arm_scenario, write
 
-from multiarm_pin import cli
+from multiarm_pin.app import cli
+from multiarm_pin.app.replay import close_visualizer, write_replay_html
+from multiarm_pin.app.runner import ProgressBar, http_status, load_run, run_scenario, serve_run
 from multiarm_pin.exceptions import InputError, ScenarioError
-from multiarm_pin.replay import close_visualizer, write_replay_html
-from multiarm_pin.runner import ProgressBar, http_status, load_run, run_scenario, serve_run
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT = REPO / "scenarios" / "two_ur5_box.yaml"
@@ -247,7 +247,7 @@ def test_default_folder_is_a_safe_name_and_copies_do_not_mix(tmp_path, monkeypat
 
 
 def test_output_checked_before_simulating(tmp_path, monkeypatch, capsys):
-    import multiarm_pin.runner as runner
+    import multiarm_pin.app.runner as runner
 
     def never(*args, **kwargs):
         raise AssertionError("the scenario was built before the output was checked")
@@ -273,7 +273,7 @@ def test_complete_run_status_and_tool_frames(tmp_path):
 
 def _nan_after(t_fail: float):
     """A make_controller replacement: gravity compensation, then NaN torques from t_fail."""
-    import multiarm_pin.runner as runner
+    import multiarm_pin.app.runner as runner
 
     real = runner.make_controller
 
@@ -290,7 +290,7 @@ def _nan_after(t_fail: float):
 
 
 def test_mid_run_failure_keeps_the_partial_trajectory(tmp_path, monkeypatch, capsys):
-    import multiarm_pin.runner as runner
+    import multiarm_pin.app.runner as runner
 
     monkeypatch.setattr(runner, "make_controller", _nan_after(0.0105))
     sc = write(tmp_path / "s.yaml", one_arm_scenario(duration=0.04))
@@ -417,7 +417,7 @@ def test_version(capsys):
 
 
 def test_interrupt_while_writing_leaves_old_results_or_reports_new_ones(tmp_path, monkeypatch):
-    import multiarm_pin.runner as runner
+    import multiarm_pin.app.runner as runner
     from multiarm_pin.exceptions import RunInterrupted
 
     sc = write(tmp_path / "s.yaml", one_arm_scenario())
@@ -451,7 +451,7 @@ def test_interrupt_while_writing_leaves_old_results_or_reports_new_ones(tmp_path
 
 
 def test_a_bug_mid_run_keeps_the_partial_results_and_surfaces(tmp_path, monkeypatch):
-    import multiarm_pin.runner as runner
+    import multiarm_pin.app.runner as runner
 
     real = runner.make_controller
 

@@ -8,8 +8,8 @@ import pinocchio as pin
 import pytest
 import yaml
 
+from multiarm_pin.app.scenario import build_scenario, did_you_mean, load_scenario, parse_scenario
 from multiarm_pin.exceptions import ScenarioError
-from multiarm_pin.scenario import build_scenario, did_you_mean, load_scenario, parse_scenario
 
 REPO = Path(__file__).resolve().parent.parent
 HALF_PI = float(np.pi / 2)
@@ -240,7 +240,7 @@ def _three_joint_ur5(joint_type, position):
 
 def test_spherical_joint_places_a_three_joint_arm(tmp_path):
     """The issue's case: a 3-joint arm asked for a full 6-D pose was "out of reach"."""
-    from multiarm_pin.arm import Arm
+    from multiarm_pin.model.arm import Arm
 
     arm = Arm.from_robot_name("ur5", locked_joints=("wrist_1_joint", "wrist_2_joint",
                                                     "wrist_3_joint"), load_visuals=False,
@@ -258,7 +258,7 @@ def test_spherical_joint_places_a_three_joint_arm(tmp_path):
 
 
 def test_weld_inside_the_object_is_a_warning(tmp_path):
-    from multiarm_pin.scenario_checks import input_warnings
+    from multiarm_pin.app.scenario_checks import input_warnings
 
     d = copy.deepcopy(BASE)
     d["arms"][0]["joint"]["placement_in_object"]["position"] = [0.0, 0.15, 0.0]  # 5 cm in

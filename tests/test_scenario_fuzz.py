@@ -19,9 +19,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from run_helpers import one_arm_scenario
 
+from multiarm_pin.app.runner import run_scenario
+from multiarm_pin.app.scenario import load_scenario
 from multiarm_pin.exceptions import MultiArmError
-from multiarm_pin.runner import run_scenario
-from multiarm_pin.scenario import load_scenario
 
 BASE = yaml.safe_load(one_arm_scenario(
     controller="{type: object_pd, kp: 10, kd: 5, waypoints: [{t: 0.002, position: "

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import yaml
 
+from multiarm_pin.app.runner import run_scenario
+from multiarm_pin.app.scenario import build_scenario, load_scenario
 from multiarm_pin.exceptions import ScenarioError
-from multiarm_pin.runner import run_scenario
-from multiarm_pin.scenario import build_scenario, load_scenario
 
 BOX = {
     "name": "box",
@@ -97,7 +97,7 @@ def test_box_resting_on_vertices_runs_without_arms(tmp_path):
 
 def test_joint_unilateral_override(tmp_path):
     """A weld is bilateral by default; ``unilateral: true`` makes its six rows unilateral."""
-    from multiarm_pin.scenario import parse_scenario
+    from multiarm_pin.app.scenario import parse_scenario
 
     arm = {"name": "a", "robot": "ur5", "q0": [0.0, -1.2, 1.6, -0.4, 1.57, 0.0],
            "joint": {"type": "weld"}}

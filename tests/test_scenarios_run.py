@@ -5,8 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from multiarm_pin.runner import run_scenario
-from multiarm_pin.scenario import load_scenario
+from multiarm_pin.app.runner import run_scenario
+from multiarm_pin.app.scenario import load_scenario
 from multiarm_pin.spatial import quaternion_to_rotation
 
 SCENARIOS = sorted((Path(__file__).resolve().parent.parent / "scenarios").glob("*.yaml"))
@@ -55,8 +55,8 @@ def test_scenario_runs_and_is_physical(path, tmp_path):
 
 
 def test_fingertip_grasp_is_form_closure():
+    from multiarm_pin.app.scenario import build_scenario
     from multiarm_pin.grasp import form_closure, wrench_matrix
-    from multiarm_pin.scenario import build_scenario
 
     path = next(p for p in SCENARIOS if p.stem == "fingertips_form_closure")
     built = build_scenario(load_scenario(path))

@@ -5,8 +5,8 @@ import pytest
 from system_builders import build_system, moving_state, one_dof_arm
 
 from multiarm_pin.exceptions import ConstraintError, DynamicsError, InputError
-from multiarm_pin.rigid_object import ObjectState, RigidObject
-from multiarm_pin.simulation import INTEGRATORS, simulate
+from multiarm_pin.model.rigid_object import ObjectState, RigidObject
+from multiarm_pin.sim.simulation import INTEGRATORS, simulate
 from multiarm_pin.system import MultiArmSystem, SystemState
 
 
@@ -136,9 +136,9 @@ def _failing_after(monkeypatch, calls: int, exc: BaseException):
     """Make the forward-dynamics solve raise ``exc`` from its ``calls``-th call on.
 
     The stepper solves once per closed-loop evaluation (fused with the blocks and the
-    controller, ``multiarm_pin.closed_loop``), so the evaluation is what fails here.
+    controller, ``multiarm_pin.sim.closed_loop``), so the evaluation is what fails here.
     """
-    import multiarm_pin.simulation as simulation
+    import multiarm_pin.sim.simulation as simulation
 
     real = simulation.closed_loop_evaluation
     count = [0]
@@ -157,7 +157,7 @@ def _failing_after(monkeypatch, calls: int, exc: BaseException):
 def test_singular_mid_run_keeps_the_samples_and_names_the_time(moving, monkeypatch,
                                                                integrator, calls):
     from multiarm_pin.exceptions import SingularityError
-    from multiarm_pin.simulation import partial_result
+    from multiarm_pin.sim.simulation import partial_result
 
     system, state = moving
     full = simulate(system, state, None, 0.1, 0.01, integrator)
@@ -176,7 +176,7 @@ def test_singular_mid_run_keeps_the_samples_and_names_the_time(moving, monkeypat
 
 
 def test_interrupt_keeps_the_samples(moving, monkeypatch):
-    from multiarm_pin.simulation import partial_result
+    from multiarm_pin.sim.simulation import partial_result
 
     system, state = moving
     _failing_after(monkeypatch, 9, KeyboardInterrupt())
@@ -192,7 +192,7 @@ def test_rk45_record_equals_scipy_solve_ivp(moving):
     """The stepwise rk45 gives solve_ivp(t_eval=grid)'s values (independent driver)."""
     from scipy.integrate import solve_ivp
 
-    from multiarm_pin.simulation import _Stepper
+    from multiarm_pin.sim.simulation import _Stepper
 
     system, state = moving
     r = simulate(system, state, None, 0.05, 0.01, "rk45")
@@ -214,7 +214,7 @@ def test_rk45_record_equals_scipy_solve_ivp(moving):
 
 
 def test_memory_guard_refuses_before_allocating(moving):
-    from multiarm_pin.simulation import record_bytes
+    from multiarm_pin.sim.simulation import record_bytes
 
     system, state = moving
     # the estimate is the record's real size: compare with a short run's arrays

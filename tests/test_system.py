@@ -13,9 +13,9 @@ from system_builders import (
     random_mixed_system,
 )
 
-from multiarm_pin.arm import Arm
 from multiarm_pin.exceptions import ConstraintError, DynamicsError, InputError
-from multiarm_pin.rigid_object import ObjectState, RigidObject
+from multiarm_pin.model.arm import Arm
+from multiarm_pin.model.rigid_object import ObjectState, RigidObject
 from multiarm_pin.system import MultiArmSystem, SystemState
 
 
@@ -45,7 +45,7 @@ def test_blocks_equal_per_arm_pinocchio_and_per_joint_references(rng, baumgarte)
                       arm.tool_offset)
         terms = ref_arm.terms(state.q[qs], state.v[vs])
         tool = terms.tool_placement
-        from multiarm_pin.kinematics import BodyKinematics
+        from multiarm_pin.model.kinematics import BodyKinematics
 
         jt = system.joints[i].evaluate(
             BodyKinematics.single(tool.translation, tool.rotation, terms.tool_twist),
@@ -260,8 +260,8 @@ def test_contact_dynamics_equals_solve_unilateral_on_contact_blocks():
 
     import yaml
 
+    from multiarm_pin.app.scenario import build_scenario, parse_scenario
     from multiarm_pin.dynamics.unilateral import solve_unilateral
-    from multiarm_pin.scenario import build_scenario, parse_scenario
 
     root = Path(__file__).resolve().parents[1] / "scenarios"
     path = root / "pick_from_table.yaml"
@@ -283,7 +283,7 @@ def test_contact_dynamics_equals_solve_unilateral_on_contact_blocks():
     assert sol.mu[0, 1] == 0.0 and sol.mu[system.n_arms, 2] == 0.0
     # no supports, every fingertip pushing (object_pd's torques plan >= 5 N on each): the
     # complementarity problem is the bilateral one
-    from multiarm_pin.controllers import ObjectPD
+    from multiarm_pin.sim.controllers import ObjectPD
 
     path = root / "two_gripper_form_closure.yaml"
     built = build_scenario(parse_scenario(yaml.safe_load(path.read_text()), str(path)))

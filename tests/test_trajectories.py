@@ -3,7 +3,7 @@ import pinocchio as pin
 import pytest
 
 from multiarm_pin.exceptions import InputError
-from multiarm_pin.trajectories import MinimumJerkTrajectory, minimum_jerk, pose_error
+from multiarm_pin.sim.trajectories import MinimumJerkTrajectory, minimum_jerk, pose_error
 
 
 def random_quaternion(rng):

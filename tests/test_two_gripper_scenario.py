@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from multiarm_pin.app.runner import run_scenario
+from multiarm_pin.app.scenario import build_scenario, load_scenario
 from multiarm_pin.grasp import form_closure, two_corner_box_grasp, wrench_matrix
-from multiarm_pin.runner import run_scenario
-from multiarm_pin.scenario import build_scenario, load_scenario
 from multiarm_pin.spatial import quaternion_to_rotation
 
 PATH = Path(__file__).resolve().parents[1] / "scenarios" / "two_gripper_form_closure.yaml"

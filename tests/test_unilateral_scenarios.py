@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import yaml
 
-from multiarm_pin.runner import run_scenario
-from multiarm_pin.scenario import parse_scenario
+from multiarm_pin.app.runner import run_scenario
+from multiarm_pin.app.scenario import parse_scenario
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from multiarm_pin.constraints.joint import Joint
 from multiarm_pin.exceptions import ConstraintError, InputError
-from multiarm_pin.kinematics import BodyKinematics
+from multiarm_pin.model.kinematics import BodyKinematics
 
 
 @dataclass(frozen=True)

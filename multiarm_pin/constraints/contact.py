@@ -32,7 +32,7 @@ import numpy as np
 
 from multiarm_pin.constraints.surfaces import Surface, _array
 from multiarm_pin.exceptions import ConstraintError
-from multiarm_pin.kinematics import BodyKinematics
+from multiarm_pin.model.kinematics import BodyKinematics
 
 POINT_ON = ("tool", "object")
 

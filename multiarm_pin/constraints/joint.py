@@ -37,7 +37,7 @@ import pinocchio as pin
 
 from multiarm_pin.constraints.contact import Contact, ContactState
 from multiarm_pin.exceptions import ConstraintError, InputError, SingularityError
-from multiarm_pin.kinematics import BodyKinematics
+from multiarm_pin.model.kinematics import BodyKinematics
 from multiarm_pin.spatial import as_array
 
 TWIST_NAMES = ("vx", "vy", "vz", "wx", "wy", "wz")

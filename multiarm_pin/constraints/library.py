@@ -33,7 +33,7 @@ from multiarm_pin.constraints.contact import POINT_ON, Contact
 from multiarm_pin.constraints.joint import Joint
 from multiarm_pin.constraints.surfaces import Cylinder, Plane, Sphere, Surface, make_surface
 from multiarm_pin.exceptions import ConstraintError, InputError
-from multiarm_pin.polyhedron import Polyhedron
+from multiarm_pin.model.polyhedron import Polyhedron
 from multiarm_pin.spatial import as_array, se3_from
 
 DEFAULT_SIZE = 0.05

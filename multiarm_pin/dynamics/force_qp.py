@@ -28,9 +28,9 @@ import math
 import numpy as np
 from numba import njit
 
+from multiarm_pin._compiled.kernels import cholesky, cholesky_solve, inverse_diagonal
 from multiarm_pin.dynamics.force_distribution import min_norm_forces
 from multiarm_pin.exceptions import InputError
-from multiarm_pin.kernels import cholesky, cholesky_solve, inverse_diagonal
 
 KKT_TOL = 1e-11
 """Relative tolerance of the compiled solve's KKT check (primal and dual feasibility), relative

@@ -8,7 +8,7 @@ every ``μ_i`` from the object equation::
     μ_i = S_i⁻¹ (r_i - W_o,iᵀ a_o),     q̈_i = M_i⁻¹ (h_i + W_i μ_i)
 
 :func:`solve_object_first` runs the compiled kernel
-:func:`multiarm_pin.kernels.object_first` (per-arm Cholesky factorisations of ``M_i`` and
+:func:`multiarm_pin._compiled.kernels.object_first` (per-arm Cholesky factorisations of ``M_i`` and
 ``S_i``, same conditioning criteria) and hands every doubtful case to
 :func:`solve_object_first_numpy`, the vectorised reference described next.
 
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lapack
 
-from multiarm_pin import kernels as _kernels
+from multiarm_pin._compiled import kernels as _kernels
 from multiarm_pin.dynamics.blocks import Solution, SystemBlocks
 from multiarm_pin.exceptions import DynamicsError, InputError, SingularityError
 
@@ -187,7 +187,7 @@ def solve_object_first(
 ) -> Solution:
     """Forward dynamics by eliminating the multipliers into the object (Eq 4.10-4.12), compiled.
 
-    The compiled kernel :func:`multiarm_pin.kernels.object_first` (per-arm Cholesky of
+    The compiled kernel :func:`multiarm_pin._compiled.kernels.object_first` (per-arm Cholesky of
     ``M_i`` and ``S_i``, the same conditioning criterion and thresholds). Whenever it reports
     a problem (a singular or badly conditioned ``S_i`` or reduced object matrix, a singular
     ``M_i``, NaN) the call is handed to :func:`solve_object_first_numpy`, which decides,

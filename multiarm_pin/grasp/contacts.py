@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from multiarm_pin.exceptions import GraspError, InputError
-from multiarm_pin.polyhedron import Polyhedron
+from multiarm_pin.model.polyhedron import Polyhedron
 from multiarm_pin.spatial import as_array
 
 ON_FACE_TOLERANCE = 1e-6

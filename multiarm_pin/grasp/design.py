@@ -22,7 +22,7 @@ import numpy as np
 from multiarm_pin.exceptions import GraspError
 from multiarm_pin.grasp.contacts import Grasp, contact_on_face
 from multiarm_pin.grasp.seventh_contact import ContactRegion, region_by_inverse
-from multiarm_pin.polyhedron import Polyhedron, box, from_vertices
+from multiarm_pin.model.polyhedron import Polyhedron, box, from_vertices
 from multiarm_pin.spatial import as_array
 
 

@@ -26,7 +26,7 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from multiarm_pin.exceptions import GraspError, SingularityError
-from multiarm_pin.polyhedron import Polyhedron, box
+from multiarm_pin.model.polyhedron import Polyhedron, box
 from multiarm_pin.spatial import as_array, skew
 
 

@@ -21,7 +21,7 @@ from multiarm_pin.exceptions import GraspError
 from multiarm_pin.grasp.contacts import Contact, Grasp
 from multiarm_pin.grasp.form_closure import ferrari_canny_epsilon
 from multiarm_pin.grasp.stability import closure_bound
-from multiarm_pin.polyhedron import Polyhedron
+from multiarm_pin.model.polyhedron import Polyhedron
 
 
 @dataclass(frozen=True)

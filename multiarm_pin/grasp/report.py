@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from multiarm_pin.app.yaml_strict import load_yaml_file
 from multiarm_pin.exceptions import GraspError, InputError, MultiArmError, ScenarioError
 from multiarm_pin.grasp.contacts import Grasp, contact_from_point_normal, contact_on_face
 from multiarm_pin.grasp.form_closure import MIN_CONTACTS, form_closure
@@ -32,8 +33,7 @@ from multiarm_pin.grasp.seventh_contact import (
     region_by_inverse,
 )
 from multiarm_pin.grasp.stability import closure_bound, independence_bound, linearised_margins
-from multiarm_pin.polyhedron import box, from_vertices
-from multiarm_pin.yaml_strict import load_yaml_file
+from multiarm_pin.model.polyhedron import box, from_vertices
 
 
 @dataclass(frozen=True)

@@ -32,7 +32,7 @@ from scipy.spatial import ConvexHull, QhullError
 from multiarm_pin.exceptions import GraspError
 from multiarm_pin.grasp.contacts import Grasp
 from multiarm_pin.grasp.independence import block_decomposition
-from multiarm_pin.polyhedron import Polyhedron
+from multiarm_pin.model.polyhedron import Polyhedron
 from multiarm_pin.spatial import skew
 
 AREA_TOLERANCE = 1e-12

@@ -86,9 +86,9 @@ def run_case(task: CaseTask) -> dict:
 
 def _simulation_case(task: CaseTask) -> tuple[dict, dict]:
     """Build and simulate the overridden scenario as ``multiarm-pin run`` does, no files."""
+    from multiarm_pin.app.runner import input_warnings, make_controller, simulate_built, summarize
+    from multiarm_pin.app.scenario import build_scenario, parse_scenario
     from multiarm_pin.exceptions import ScenarioError
-    from multiarm_pin.runner import input_warnings, make_controller, simulate_built, summarize
-    from multiarm_pin.scenario import build_scenario, parse_scenario
     from multiarm_pin.study.metrics import simulation_metrics
     from multiarm_pin.study.spec import apply_overrides
 
@@ -140,8 +140,8 @@ def grasp_of(data: dict, file: str):
 
         gf = grasp_from_data(data, file)
         return gf.grasp, gf.length_scale
+    from multiarm_pin.app.scenario import build_object, parse_scenario
     from multiarm_pin.grasp.contacts import Grasp, contact_on_face
-    from multiarm_pin.scenario import build_object, parse_scenario
 
     sc = parse_scenario(data, file)
     poly = build_object(sc).shape

@@ -45,10 +45,10 @@ def simulation_metrics(built, result, controller, summary: dict) -> dict[str, fl
     """Every simulation metric of one run (see the module docstring).
 
     Args:
-        built: the :class:`~multiarm_pin.scenario.BuiltScenario`.
-        result: its :class:`~multiarm_pin.simulation.SimulationResult`.
+        built: the :class:`~multiarm_pin.app.scenario.BuiltScenario`.
+        result: its :class:`~multiarm_pin.sim.simulation.SimulationResult`.
         controller: the controller used (its ``trajectory`` gives the reference), or None.
-        summary: the run's ``summary.json`` content (:func:`multiarm_pin.runner.summarize`).
+        summary: the run's ``summary.json`` content (:func:`multiarm_pin.app.runner.summarize`).
 
     Returns:
         ``{name: float}`` for every name in :data:`SIMULATION_METRICS`.
@@ -110,8 +110,8 @@ def tracking_errors(controller, result) -> tuple[float, float]:
     traj = getattr(controller, "trajectory", None)
     if traj is None:
         return float("nan"), float("nan")
+    from multiarm_pin.sim.trajectories import pose_error
     from multiarm_pin.spatial import quaternion_to_rotation
-    from multiarm_pin.trajectories import pose_error
 
     pos, rot = 0.0, 0.0
     for t, p, q in zip(result.t, result.object_position, result.object_quaternion,

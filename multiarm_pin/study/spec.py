@@ -42,8 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
+from multiarm_pin.app.scenario import did_you_mean
 from multiarm_pin.exceptions import MultiArmError, StudyError
-from multiarm_pin.scenario import did_you_mean
 
 MODES = ("simulate", "grasp")
 """What a case does: simulate the scenario, or analyse the grasp made by its contacts."""
@@ -318,9 +318,9 @@ def load_study(path) -> StudySpec:
 
 
 def _load_yaml(path: Path, f: str):
-    """Strict YAML (:mod:`multiarm_pin.yaml_strict`: duplicate keys, encodings, 1e12 floats)."""
+    """Strict YAML (:mod:`multiarm_pin.app.yaml_strict`: duplicate keys, encodings, 1e12 floats)."""
+    from multiarm_pin.app.yaml_strict import load_yaml_file
     from multiarm_pin.exceptions import ScenarioError
-    from multiarm_pin.yaml_strict import load_yaml_file
 
     try:
         return load_yaml_file(path)
@@ -423,7 +423,7 @@ def _validate_base(base_data, base_file: str, base_kind: str, f: str) -> None:
 
             grasp_from_data(base_data, base_file)
         else:
-            from multiarm_pin.scenario import parse_scenario
+            from multiarm_pin.app.scenario import parse_scenario
 
             parse_scenario(base_data, base_file)
     except MultiArmError as exc:
@@ -549,7 +549,7 @@ def _parse_perturbation(spec, key: str, base, base_kind: str, f: str) -> Paramet
 
 def _contact_points(base, base_kind: str, f: str, key: str):
     """``(point key path, point (3,), tangents (3, 2))`` of every contact of the base file."""
-    from multiarm_pin.polyhedron import box, from_vertices
+    from multiarm_pin.model.polyhedron import box, from_vertices
 
     shape = base["object"]["shape"]
     poly = box(shape["size"]) if shape["type"] == "box" else from_vertices(shape["vertices"])

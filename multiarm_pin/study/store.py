@@ -21,7 +21,7 @@ import json
 import math
 from pathlib import Path
 
-from multiarm_pin import results_io
+from multiarm_pin.app import results_io
 from multiarm_pin.exceptions import StudyError
 
 TABLE_NAME = "results.parquet"
@@ -31,7 +31,7 @@ TABLE_NAME = "results.parquet"
 def write_atomic(path: Path, text: str) -> None:
     """Write ``text`` (UTF-8) atomically, creating the folder.
 
-    Through :func:`multiarm_pin.results_io.write_atomic`: a temporary file renamed into
+    Through :func:`multiarm_pin.app.results_io.write_atomic`: a temporary file renamed into
     place, so a reader never sees half a file.
     """
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pinocchio as pin
 
 from multiarm_pin.constraints import JOINT_DOF, custom, fingertips_from_placements, make_joint
-from multiarm_pin.polyhedron import box
+from multiarm_pin.model.polyhedron import box
 
 from .trajectories import RigidTrajectory, random_rotation
 

@@ -6,8 +6,8 @@ import pytest
 
 from multiarm_pin.constraints import ConstraintSet, ConstraintTerms, make_joint_from_placements
 from multiarm_pin.exceptions import ConstraintError, InputError
-from multiarm_pin.kinematics import BodyKinematics
-from multiarm_pin.polyhedron import box
+from multiarm_pin.model.kinematics import BodyKinematics
+from multiarm_pin.model.polyhedron import box
 
 from .cases import KINDS, random_joint, trajectories
 from .trajectories import RigidTrajectory, stack

@@ -6,7 +6,7 @@ import pytest
 
 from multiarm_pin.constraints import TWIST_NAMES, Contact, Joint, Plane
 from multiarm_pin.exceptions import ConstraintError, InputError
-from multiarm_pin.kinematics import BodyKinematics
+from multiarm_pin.model.kinematics import BodyKinematics
 from multiarm_pin.spatial import wrench_transform
 
 from .cases import KINDS, random_joint, trajectories

@@ -15,8 +15,8 @@ from multiarm_pin.constraints import (
     weld_from_placements,
 )
 from multiarm_pin.exceptions import ConstraintError
-from multiarm_pin.kinematics import BodyKinematics
-from multiarm_pin.polyhedron import box
+from multiarm_pin.model.kinematics import BodyKinematics
+from multiarm_pin.model.polyhedron import box
 
 from .cases import random_placement
 

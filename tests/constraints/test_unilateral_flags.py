@@ -17,7 +17,7 @@ from multiarm_pin.constraints import (
     weld,
 )
 from multiarm_pin.exceptions import ConstraintError
-from multiarm_pin.polyhedron import box
+from multiarm_pin.model.polyhedron import box
 
 
 def _box():

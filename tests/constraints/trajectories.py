@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from multiarm_pin.kinematics import BodyKinematics
+from multiarm_pin.model.kinematics import BodyKinematics
 
 
 def random_rotation(rng: np.random.Generator) -> np.ndarray:

@@ -223,7 +223,7 @@ def two_gripper_table_states(n_states: int, seed: int) -> list[SystemBlocks]:
     """
     from pathlib import Path
 
-    from multiarm_pin.scenario import build_scenario, load_scenario
+    from multiarm_pin.app.scenario import build_scenario, load_scenario
     from multiarm_pin.spatial import quaternion_to_rotation
 
     path = Path(__file__).resolve().parents[2] / "scenarios" / "two_gripper_form_closure.yaml"

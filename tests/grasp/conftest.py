@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from multiarm_pin.grasp import Grasp, contact_on_face
-from multiarm_pin.polyhedron import box
+from multiarm_pin.model.polyhedron import box
 
 
 def corner_grasp(size, a, b, c, d, e, f, seventh=None) -> Grasp:

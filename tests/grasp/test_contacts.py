@@ -3,7 +3,7 @@ import pytest
 
 from multiarm_pin.exceptions import GraspError, InputError
 from multiarm_pin.grasp import contact_from_point_normal, contact_on_face, wrench_matrix
-from multiarm_pin.polyhedron import box, from_vertices
+from multiarm_pin.model.polyhedron import box, from_vertices
 from multiarm_pin.spatial import wrench_transform
 
 

@@ -7,7 +7,7 @@ from scipy.optimize import nnls
 from multiarm_pin.exceptions import GraspError
 from multiarm_pin.grasp import Grasp, contact_on_face, ferrari_canny_epsilon, form_closure
 from multiarm_pin.grasp.design import two_corner_box_grasp
-from multiarm_pin.polyhedron import box
+from multiarm_pin.model.polyhedron import box
 
 from .conftest import random_face_point
 

@@ -4,7 +4,7 @@ import pytest
 from multiarm_pin.exceptions import GraspError, SingularityError
 from multiarm_pin.grasp import Grasp, block_decomposition, check_independence, contact_on_face
 from multiarm_pin.grasp.independence import CONDITION_NAMES, necessary_conditions
-from multiarm_pin.polyhedron import box
+from multiarm_pin.model.polyhedron import box
 
 from .conftest import corner_grasp, random_corner_parameters, random_face_point
 

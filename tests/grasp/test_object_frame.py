@@ -9,7 +9,7 @@ from multiarm_pin.grasp.object_frame import (
     object_frame_lstsq,
     objfrm,
 )
-from multiarm_pin.polyhedron import box
+from multiarm_pin.model.polyhedron import box
 
 from .conftest import random_face_point
 

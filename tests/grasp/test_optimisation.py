@@ -6,7 +6,7 @@ from multiarm_pin.grasp import form_closure
 from multiarm_pin.grasp.design import two_corner_box_grasp
 from multiarm_pin.grasp.optimisation import GripperLayout, optimise_grasp
 from multiarm_pin.grasp.stability import closure_bound
-from multiarm_pin.polyhedron import box
+from multiarm_pin.model.polyhedron import box
 
 GRIPPERS = [GripperLayout(("+x", "+y", "+z", "+z"), reach=1.2),
             GripperLayout(("-x", "-y", "-z"), reach=1.2)]  # fmt: skip

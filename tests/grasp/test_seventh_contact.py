@@ -12,7 +12,7 @@ from multiarm_pin.grasp import (
 )
 from multiarm_pin.grasp.design import parallel_planes_object, two_corner_box_grasp
 from multiarm_pin.grasp.seventh_contact import polygon_area
-from multiarm_pin.polyhedron import box
+from multiarm_pin.model.polyhedron import box
 
 from .conftest import corner_grasp, random_corner_parameters, random_face_point
 

@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from multiarm_pin.cli import main
+from multiarm_pin.app.cli import main
 from multiarm_pin.study import read_table
 from tests.study.helpers import REPO, rows_by_case, tiny_grasp_study, tiny_simulation_study
 
@@ -61,7 +61,7 @@ def _rows_written(out) -> int:
 def test_sigint_then_resume_runs_no_finished_case_again(tmp_path, warm_kernels):
     study = tiny_simulation_study(tmp_path, masses=(2.0, 3.0, 4.0, 5.0), samples=2)
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "multiarm_pin.cli", "sweep", str(study), "--out", str(out),
+    cmd = [sys.executable, "-m", "multiarm_pin.app.cli", "sweep", str(study), "--out", str(out),
            "--workers", "1"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             cwd=REPO)

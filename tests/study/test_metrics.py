@@ -8,7 +8,8 @@ import yaml
 from multiarm_pin.grasp.contacts import Grasp, contact_on_face
 from multiarm_pin.grasp.form_closure import ferrari_canny_epsilon, lp_margin
 from multiarm_pin.grasp.report import analyse, load_grasp_file
-from multiarm_pin.polyhedron import box
+from multiarm_pin.model.polyhedron import box
+from multiarm_pin.sim.trajectories import MinimumJerkTrajectory
 from multiarm_pin.study.case import CaseTask, grasp_of, run_case
 from multiarm_pin.study.metrics import (
     count_separations,
@@ -16,7 +17,6 @@ from multiarm_pin.study.metrics import (
     torque_limit_ratio,
     tracking_errors,
 )
-from multiarm_pin.trajectories import MinimumJerkTrajectory
 from tests.study.helpers import SCENARIOS
 
 

@@ -6,7 +6,7 @@ import pytest
 import yaml
 
 from multiarm_pin.exceptions import MultiArmError, StudyError
-from multiarm_pin.polyhedron import box
+from multiarm_pin.model.polyhedron import box
 from multiarm_pin.study.spec import (
     apply_overrides,
     load_study,

@@ -11,7 +11,7 @@ without recomputing them. Build one by name with :func:`make_controller`:
 - ``joint_pd``: ``τ = g(q) + K_p (q_ref ⊖ q) - K_d v`` (``q_ref`` defaults to the
   configuration at the first call, i.e. ``q0``);
 - ``object_pd``: object-level computed torque. A desired object trajectory
-  (:class:`~multiarm_pin.trajectories.MinimumJerkTrajectory`; default: hold the pose of the
+  (:class:`~multiarm_pin.sim.trajectories.MinimumJerkTrajectory`; default: hold the pose of the
   first call) and PD on the object pose give a desired acceleration
   ``a_d = a_ref + K_d (v_ref - v_o) + K_p [p_ref - p; log(R_ref Rᵀ)]``. The internal forces
   come from :func:`multiarm_pin.dynamics.force_distribution.distribute_forces` (every
@@ -38,15 +38,15 @@ from typing import ClassVar
 import numpy as np
 import pinocchio as pin
 
-from multiarm_pin import controller_kernels
+from multiarm_pin._compiled import controller_kernels
 from multiarm_pin.dynamics.blocks import SystemBlocks, expand_rows, restrict_rows
 from multiarm_pin.dynamics.force_distribution import distribute_forces
 from multiarm_pin.dynamics.force_qp import WarmForceDistribution
 from multiarm_pin.dynamics.inverse_dynamics import InverseDynamicsResult, inverse_dynamics
 from multiarm_pin.exceptions import DynamicsError, InputError
+from multiarm_pin.sim.trajectories import MinimumJerkTrajectory, pose_error
 from multiarm_pin.spatial import as_array, cross
 from multiarm_pin.system import Evaluation, MultiArmSystem, SystemState
-from multiarm_pin.trajectories import MinimumJerkTrajectory, pose_error
 
 
 class Controller:
@@ -435,7 +435,8 @@ class ObjectPD(Controller):
         """(nv,) torques [N m].
 
         On an evaluation of the compiled path (:meth:`MultiArmSystem.blocks`) the torques come
-        from :func:`multiarm_pin.controller_kernels.object_pd_torques` (per-arm blocks, the
+        from :func:`~multiarm_pin._compiled.controller_kernels.object_pd_torques` (per-arm blocks,
+        the
         force QP warm-started from the previous call's active set); otherwise, or when the
         kernel reports a doubtful case, from :meth:`reference`. Both give the same torques
         (to round-off).
@@ -453,10 +454,10 @@ class ObjectPD(Controller):
                     ) -> tuple[np.ndarray, int] | None:
         """Torques by one compiled call and, if ``solve``, the forward dynamics they produce.
 
-        :func:`multiarm_pin.controller_kernels.object_pd_step` on the buffer of a compiled
+        :func:`multiarm_pin._compiled.controller_kernels.object_pd_step` on the buffer of a compiled
         evaluation; with ``solve`` the object-first solution of the blocks plus these torques
         is written into the buffer's solution segments (one shared evaluation, see
-        :func:`multiarm_pin.closed_loop.closed_loop_evaluation`).
+        :func:`multiarm_pin.sim.closed_loop.closed_loop_evaluation`).
 
         Args:
             t: time [s].
@@ -466,7 +467,7 @@ class ObjectPD(Controller):
 
         Returns:
             ``(tau (nv,) [N m], solve_status)`` (``solve_status`` of
-            :func:`multiarm_pin.kernels.object_first`, -1 if not solved), or None when the
+            :func:`multiarm_pin._compiled.kernels.object_first`, -1 if not solved), or None when the
             compiled path does not apply or reported a doubtful case (then call
             :meth:`reference`).
         """

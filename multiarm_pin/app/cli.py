@@ -20,7 +20,7 @@ import numpy as np
 
 from multiarm_pin.exceptions import MultiArmError
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
+REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_SCENARIO = REPO_ROOT / "scenarios" / "two_ur5_box.yaml"
 
 
@@ -28,8 +28,8 @@ def _info(args: argparse.Namespace) -> int:
     """Load two arms and an object and print their key quantities."""
     import pinocchio as pin
 
-    from multiarm_pin.arm import Arm
-    from multiarm_pin.rigid_object import ObjectState, RigidObject
+    from multiarm_pin.model.arm import Arm
+    from multiarm_pin.model.rigid_object import ObjectState, RigidObject
 
     np.set_printoptions(precision=4, suppress=True)
     arms = [
@@ -86,7 +86,7 @@ def _build_parser() -> argparse.ArgumentParser:
     grasp_cli.configure_parser(p)
     p.set_defaults(func=grasp_cli.run)
 
-    from multiarm_pin import runner
+    from multiarm_pin.app import runner
 
     p = sub.add_parser("run", help="simulate a scenario file")
     runner.configure_run_parser(p)
@@ -113,7 +113,7 @@ def _build_parser() -> argparse.ArgumentParser:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from multiarm_pin import runner
+    from multiarm_pin.app import runner
 
     ns = argparse.Namespace(
         scenario=str(DEFAULT_SCENARIO),

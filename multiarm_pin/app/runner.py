@@ -45,6 +45,21 @@ import numpy as np
 import pinocchio as pin
 import yaml
 
+from multiarm_pin.app.results_io import (
+    ResultsWriter,
+    deferred_signals,
+    prepare_output,
+    safe_component,
+)
+from multiarm_pin.app.scenario import (
+    BuiltScenario,
+    Scenario,
+    build_arm,
+    build_object,
+    build_scenario,
+    load_scenario,
+)
+from multiarm_pin.app.scenario_checks import input_warnings
 from multiarm_pin.exceptions import (
     InputError,
     MultiArmError,
@@ -53,21 +68,6 @@ from multiarm_pin.exceptions import (
     RunInterrupted,
     ScenarioError,
 )
-from multiarm_pin.results_io import (
-    ResultsWriter,
-    deferred_signals,
-    prepare_output,
-    safe_component,
-)
-from multiarm_pin.scenario import (
-    BuiltScenario,
-    Scenario,
-    build_arm,
-    build_object,
-    build_scenario,
-    load_scenario,
-)
-from multiarm_pin.scenario_checks import input_warnings
 
 REPLAY_FPS = 30
 """Frames per second of the replay page."""
@@ -134,7 +134,7 @@ class RunOutput:
     Attributes:
         out_dir: the results folder.
         built: the built scenario (system, initial state...).
-        result: the :class:`~multiarm_pin.simulation.SimulationResult`.
+        result: the :class:`~multiarm_pin.sim.simulation.SimulationResult`.
         trajectory: the arrays written to ``trajectory.npz``.
         summary: the content of ``summary.json``.
         files: every file written, by role (``trajectory``, ``summary``, ``replay``...).
@@ -149,7 +149,7 @@ class RunOutput:
 
 
 def make_controller(built: BuiltScenario):
-    """The scenario's controller, built by ``multiarm_pin.controllers.make_controller``.
+    """The scenario's controller, built by ``multiarm_pin.sim.controllers.make_controller``.
 
     Returns:
         A callable ``controller(t, state, evaluation) -> tau`` or None (``type: none``).
@@ -165,13 +165,13 @@ def make_controller(built: BuiltScenario):
                                 "expected 'none' (or no controller key)")
         return None
     try:
-        from multiarm_pin.controllers import make_controller as factory
+        from multiarm_pin.sim.controllers import make_controller as factory
     except ImportError:
         if spec.type == "none":
             return None
         raise ScenarioError(built.scenario.file, "controller.type",
-                            f"controller {spec.type!r} needs multiarm_pin.controllers, which is "
-                            "not available in this checkout") from None
+                            f"controller {spec.type!r} needs multiarm_pin.sim.controllers, which "
+                            "is not available in this checkout") from None
     try:
         return factory(spec.type, built.system, **spec.params)
     except TypeError as exc:  # unknown keyword
@@ -309,12 +309,12 @@ def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> di
 
 
 def replay_parts(arms, obj, trajectory: dict):
-    """Replay inputs (:mod:`multiarm_pin.replay`) from arms, object and trajectory arrays.
+    """Replay inputs (:mod:`multiarm_pin.app.replay`) from arms, object and trajectory arrays.
 
     Returns:
         ``(replay_arms, replay_object, replay_contacts)``.
     """
-    from multiarm_pin.replay import ReplayArm, ReplayContacts, ReplayObject, ReplaySupport
+    from multiarm_pin.app.replay import ReplayArm, ReplayContacts, ReplayObject, ReplaySupport
 
     def finite(a, limit=1e12):  # a failed run may end on huge or NaN values: drawable
         return np.clip(np.nan_to_num(np.asarray(a, float), nan=0.0, posinf=limit,
@@ -386,7 +386,7 @@ def _say(message: str, quiet: bool) -> None:
 def run_scenario(scenario, out=None, solver: str | None = None, duration: float | None = None,
                  quiet: bool = True, html: bool = True, plots: bool = True,
                  overwrite: bool = False) -> RunOutput:
-    """Simulate a scenario and write its results, atomically (:mod:`multiarm_pin.results_io`).
+    """Simulate a scenario and write its results, atomically (:mod:`multiarm_pin.app.results_io`).
 
     The output folder is checked before anything is simulated. If the simulation fails
     (a :class:`~multiarm_pin.exceptions.MultiArmError` once it has started) or is interrupted
@@ -415,12 +415,12 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
         RunFailedError: the simulation failed after it started (partial results written).
         RunInterrupted: Ctrl-C or SIGTERM (partial results written when there were any).
     """
-    from multiarm_pin.simulation import default_record_limit, partial_result, record_bytes
+    from multiarm_pin.sim.simulation import default_record_limit, partial_result, record_bytes
 
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     sim = sc.simulation
     if solver is not None:
-        from multiarm_pin.scenario import SOLVER_NAMES, did_you_mean
+        from multiarm_pin.app.scenario import SOLVER_NAMES, did_you_mean
 
         if solver not in SOLVER_NAMES:
             raise ScenarioError(sc.file, "--solver", f"unknown solver {solver!r}"
@@ -527,9 +527,9 @@ def simulate_built(built: BuiltScenario, controller, duration: float, dt: float,
         progress: optional ``callable(fraction)``.
 
     Returns:
-        The :class:`~multiarm_pin.simulation.SimulationResult`.
+        The :class:`~multiarm_pin.sim.simulation.SimulationResult`.
     """
-    from multiarm_pin.simulation import simulate
+    from multiarm_pin.sim.simulation import simulate
 
     sim = built.scenario.simulation
     with np.errstate(over="ignore", invalid="ignore"):  # NaN/inf are caught and reported
@@ -557,13 +557,13 @@ def _write_results(folder: Path, built: BuiltScenario, result, solver: str, wall
     files["scenario"] = folder / "scenario.yaml"
     files["scenario"].write_text(_scenario_copy(sc, T, solver), encoding="utf-8")
     if plots:
-        from multiarm_pin.plots import write_plots
+        from multiarm_pin.app.plots import write_plots
 
         for p in write_plots(folder, traj, [a.name for a in built.arms], sc.name,
                              [sp.name for sp in built.system.supports.supports]):
             files[p.stem] = p
     if html:
-        from multiarm_pin.replay import write_replay_html
+        from multiarm_pin.app.replay import write_replay_html
 
         rarms, robj, rc = replay_parts(built.arms, built.obj, traj)
         files["replay"] = write_replay_html(folder / "replay.html", rarms, robj, traj["t"],
@@ -652,9 +652,9 @@ def serve_run(run_dir, fps: float = REPLAY_FPS, open_browser: bool = False):
         open_browser: open the page in the default browser.
 
     Returns:
-        ``(url, vis)``; stop with :func:`multiarm_pin.replay.close_visualizer` ``(vis)``.
+        ``(url, vis)``; stop with :func:`multiarm_pin.app.replay.close_visualizer` ``(vis)``.
     """
-    from multiarm_pin.replay import serve_replay
+    from multiarm_pin.app.replay import serve_replay
 
     sc, traj, _ = load_run(run_dir)
     arms = [build_arm(sc, spec, load_visuals=True) for spec in sc.arms]
@@ -751,7 +751,7 @@ def configure_replay_parser(p: argparse.ArgumentParser) -> None:
 
 def replay_command(args: argparse.Namespace) -> int:
     """``multiarm-pin replay DIR``: serve the run and print its URL until Ctrl-C."""
-    from multiarm_pin.replay import close_visualizer
+    from multiarm_pin.app.replay import close_visualizer
 
     summary = load_run(args.dir)[2]
     if summary.get("status", "complete") != "complete":

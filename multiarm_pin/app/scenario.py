@@ -37,16 +37,16 @@ Joint types: ``weld``, ``revolute``, ``prismatic``, ``cylindrical``, ``universal
 ``placement_in_object`` / ``placement_in_tool`` of the joint frame), and ``contacts``
 (spherical fingertips on named faces: ``tip_radius`` and ``contacts: [{tip: frame, face:
 +x, point: [..]}, ...]``). Without ``placement_in_object`` a joint is built where the tool is
-at ``q0``. Without ``q0`` the arm is placed by inverse kinematics (:mod:`multiarm_pin.ik`)
+at ``q0``. Without ``q0`` the arm is placed by inverse kinematics (:mod:`multiarm_pin.model.ik`)
 from ``q_seed``, meeting only what the joint constrains (the centre of a spherical joint;
 centre and axis of a revolute one; axis and line of a cylindrical one; the full placement
 of weld, prismatic and universal joints; each fingertip touching its face, as near to the
 given point as the gripper allows), near the seed.
 
-Files are read strictly (:mod:`multiarm_pin.yaml_strict`: UTF-8, no duplicate keys). Every
+Files are read strictly (:mod:`multiarm_pin.app.yaml_strict`: UTF-8, no duplicate keys). Every
 error is a :class:`~multiarm_pin.exceptions.ScenarioError` naming the file, the key path
 (``arms[1].joint.type``) and what was expected; ``q0`` outside the joint limits is one
-(:mod:`multiarm_pin.scenario_checks`).
+(:mod:`multiarm_pin.app.scenario_checks`).
 """
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ SOLVER_NAMES = tuple(SOLVERS)  # auto | object_first | dense_kkt | singular | ob
 INITIAL_GAP_TOLERANCE = 1e-6
 """Largest gap [m] of any contact in the initial state."""
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
+REPO_ROOT = Path(__file__).resolve().parents[2]
 
 
 # ----------------------------------------------------------------------------- data
@@ -392,7 +392,7 @@ def load_scenario(path) -> Scenario:
             (naming both lines), or invalid content (names the key path and what was
             expected).
     """
-    from multiarm_pin.yaml_strict import load_yaml_file
+    from multiarm_pin.app.yaml_strict import load_yaml_file
 
     path = Path(path)
     return parse_scenario(load_yaml_file(path), str(path))
@@ -612,7 +612,7 @@ def _controller_keys(kind: str) -> tuple[str, ...]:
     """Keyword parameters accepted by the controller class of ``kind`` (besides system)."""
     import inspect
 
-    from multiarm_pin.controllers import CONTROLLERS
+    from multiarm_pin.sim.controllers import CONTROLLERS
 
     sig = inspect.signature(CONTROLLERS[kind].__init__)
     return tuple(p for p in sig.parameters if p not in ("self", "system"))
@@ -683,12 +683,12 @@ def _parse_simulation(r: _Reader) -> SimulationSpec:
 
 # ----------------------------------------------------------------------------- building
 def build_object(scenario: Scenario):
-    """The :class:`~multiarm_pin.rigid_object.RigidObject` of a scenario.
+    """The :class:`~multiarm_pin.model.rigid_object.RigidObject` of a scenario.
 
     Raises:
         ScenarioError: invalid shape/inertia (key ``object.*``).
     """
-    from multiarm_pin.rigid_object import RigidObject
+    from multiarm_pin.model.rigid_object import RigidObject
 
     o = scenario.object
     try:
@@ -702,13 +702,13 @@ def build_object(scenario: Scenario):
 
 
 def build_arm(scenario: Scenario, spec: ArmSpec, load_visuals: bool = True):
-    """Load one arm (:class:`~multiarm_pin.arm.Arm`) with its base placement and tool frame.
+    """Load one arm (:class:`~multiarm_pin.model.arm.Arm`) with its base placement and tool frame.
 
     Raises:
         ScenarioError: unknown robot (``arms[i].robot``, did-you-mean), missing tool frame
             (``arms[i].tool_frame``), bad URDF (``arms[i].urdf``) or locked joints.
     """
-    from multiarm_pin.arm import Arm, available_robots
+    from multiarm_pin.model.arm import Arm, available_robots
 
     key = f"arms[{spec.index}]"
     try:
@@ -753,7 +753,7 @@ class BuiltScenario:
         system: the :class:`~multiarm_pin.system.MultiArmSystem`.
         initial_state: the validated initial :class:`~multiarm_pin.system.SystemState`.
         q0: per-arm initial configurations (nq_i,), given or found by inverse kinematics.
-        ik: per-arm :class:`~multiarm_pin.ik.IKResult` (None where ``q0`` was given).
+        ik: per-arm :class:`~multiarm_pin.model.ik.IKResult` (None where ``q0`` was given).
     """
 
     scenario: Scenario
@@ -789,7 +789,7 @@ def _tips_in_tool(scenario, spec: ArmSpec, arm) -> np.ndarray:
 
 def _contact_targets(scenario, spec: ArmSpec, poly, oMo: pin.SE3):
     """IK targets for fingertips on faces: a plane per tip (primary), a point (preference)."""
-    from multiarm_pin.ik import PlaneTarget, PointTarget
+    from multiarm_pin.model.ik import PlaneTarget, PointTarget
 
     r = spec.joint.params.get("tip_radius", 0.0)
     targets = []
@@ -827,7 +827,7 @@ def _joint_targets(spec: ArmSpec, tool: str, oMo: pin.SE3) -> tuple[list, str]:
     Returns:
         ``(targets, description)``.
     """
-    from multiarm_pin.ik import AxisTarget, PlaneTarget, PointTarget, PoseTarget
+    from multiarm_pin.model.ik import AxisTarget, PlaneTarget, PointTarget, PoseTarget
 
     J_t = spec.joint.placement_in_tool or pin.SE3.Identity()
     oMj = oMo * spec.joint.placement_in_object
@@ -848,7 +848,7 @@ def _joint_targets(spec: ArmSpec, tool: str, oMo: pin.SE3) -> tuple[list, str]:
 
 
 def _solve_arm_ik(scenario, spec: ArmSpec, arm, poly, oMo):
-    from multiarm_pin.ik import PostureTarget, UnreachableError, solve_ik
+    from multiarm_pin.model.ik import PostureTarget, UnreachableError, solve_ik
 
     seed = spec.q_seed
     if seed is not None and len(seed) != arm.nq:
@@ -930,8 +930,8 @@ def build_scenario(scenario: Scenario, load_visuals: bool = False) -> BuiltScena
             placement (with the IK residual), or an initial state that violates a joint
             (key ``arms[i].q0``, with the gap).
     """
-    from multiarm_pin.kinematics import BodyKinematics
-    from multiarm_pin.scenario_checks import check_within_limits
+    from multiarm_pin.app.scenario_checks import check_within_limits
+    from multiarm_pin.model.kinematics import BodyKinematics
     from multiarm_pin.system import MultiArmSystem
 
     obj = build_object(scenario)

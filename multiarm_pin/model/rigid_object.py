@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from multiarm_pin.exceptions import InputError
-from multiarm_pin.kinematics import BodyKinematics
-from multiarm_pin.polyhedron import Polyhedron, box, from_vertices
+from multiarm_pin.model.kinematics import BodyKinematics
+from multiarm_pin.model.polyhedron import Polyhedron, box, from_vertices
 from multiarm_pin.spatial import as_array, as_unit_quaternion, quaternion_to_rotation
 
 

@@ -1,4 +1,4 @@
-"""Registry of the ``example_robot_data`` arms that :class:`~multiarm_pin.arm.Arm` loads by name.
+"""Registry of the ``example_robot_data`` arms that :class:`~.arm.Arm` loads by name.
 
 Each entry says which frame is the arm's tool (its end effector: the flange a tool is bolted
 to, or the hand of a built-in gripper; never a fingertip) and which joints are locked at

@@ -30,8 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from multiarm_pin.arm import frame_id
 from multiarm_pin.exceptions import FrameNotFoundError, InputError, MultiArmError
+from multiarm_pin.model.arm import frame_id
 from multiarm_pin.spatial import as_array, skew
 
 IK_TOLERANCE = 1e-10
@@ -474,7 +474,7 @@ def ik_tool_placement(arm, placement: pin.SE3, q_seed=None, **kwargs) -> IKResul
     """Configuration putting an arm's tool frame at a world placement.
 
     Args:
-        arm: a :class:`multiarm_pin.arm.Arm` (base placement baked into its model).
+        arm: a :class:`multiarm_pin.model.arm.Arm` (base placement baked into its model).
         placement: target tool placement in the world (``pin.SE3``).
         q_seed: (nq,) starting configuration.
         **kwargs: passed to :func:`solve_ik`.
@@ -491,7 +491,7 @@ def ik_frame_points(arm, frames: Sequence[str], points, q_seed=None, **kwargs) -
     """Configuration putting several frames of an arm (fingertips) at world points at once.
 
     Args:
-        arm: a :class:`multiarm_pin.arm.Arm`.
+        arm: a :class:`multiarm_pin.model.arm.Arm`.
         frames: K frame names.
         points: (K, 3) target positions in the world [m].
         q_seed: (nq,) starting configuration.

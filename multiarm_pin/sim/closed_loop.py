@@ -1,10 +1,11 @@
 """One closed-loop evaluation: blocks, controller torques and forward dynamics on one buffer.
 
-:func:`closed_loop_evaluation` is what :func:`multiarm_pin.simulation.simulate` calls at every
+:func:`closed_loop_evaluation` is what :func:`multiarm_pin.sim.simulation.simulate` calls at every
 integrator stage. One Pinocchio pass and one set of compiled blocks (at zero torque,
 ``h = -nle``) serve both the controller (which reads them through the :class:`Evaluation`) and
 the forward dynamics: for the compiled solvers (``auto``, ``object_first``) the torques are
-added inside :func:`multiarm_pin.controller_kernels.solve_with_torques`, which solves on the
+added inside :func:`~multiarm_pin._compiled.controller_kernels.solve_with_torques`, which solves
+on the
 same buffer; no blocks are rebuilt or re-validated. The reference (numpy) path, controller then
 ``blocks.with_torques`` then :func:`multiarm_pin.dynamics.solve`, gives the same solution to
 round-off, and is what a doubtful case (singular arm, badly conditioned object matrix) and
@@ -17,7 +18,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from multiarm_pin import controller_kernels, kernels
+from multiarm_pin._compiled import controller_kernels, kernels
 from multiarm_pin.dynamics import Solution
 from multiarm_pin.dynamics import solve as solve_dynamics
 from multiarm_pin.exceptions import DynamicsError, InputError, MultiArmError

@@ -24,7 +24,7 @@ Unilateral contacts (fingertips, supports): when the system has any, every evalu
 the mixed complementarity problem on the *active set* of rows
 (:func:`multiarm_pin.dynamics.unilateral.solve_unilateral`, the rows of
 :meth:`MultiArmSystem.contact_blocks`), and separations and touchdowns (with impacts) are
-handled between steps, event-driven, as :mod:`multiarm_pin.contact_events` describes; every
+handled between steps, event-driven, as :mod:`multiarm_pin.sim.contact_events` describes; every
 event is in :attr:`SimulationResult.events`. ``rk45`` (adaptive, not event-aware) is only for
 systems without unilateral rows. Systems without unilateral rows use the bilateral solvers as
 before.
@@ -39,14 +39,14 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from multiarm_pin import contact_events as ce
-from multiarm_pin.closed_loop import closed_loop_evaluation, controller_torques
-from multiarm_pin.contact_events import ContactEvent
-from multiarm_pin.disturbances import WrenchSchedule
 from multiarm_pin.dynamics import SOLVERS, Solution
 from multiarm_pin.dynamics import solve as solve_dynamics
 from multiarm_pin.exceptions import DynamicsError, InputError, MultiArmError
-from multiarm_pin.rigid_object import ObjectState
+from multiarm_pin.model.rigid_object import ObjectState
+from multiarm_pin.sim import contact_events as ce
+from multiarm_pin.sim.closed_loop import closed_loop_evaluation, controller_torques
+from multiarm_pin.sim.contact_events import ContactEvent
+from multiarm_pin.sim.disturbances import WrenchSchedule
 from multiarm_pin.spatial import integrate_quaternion, quaternion_derivative
 from multiarm_pin.system import ContactRows, Evaluation, MultiArmSystem, SystemState
 
@@ -184,7 +184,7 @@ class _Stepper:
             return self._solve(t, full), None, np.zeros(0), rows
         if not self.unilateral and w is None and not s.supports.n_rows:
             # arms' bilateral rows only: one shared, fused evaluation (blocks, controller and
-            # forward dynamics on one buffer, multiarm_pin.closed_loop)
+            # forward dynamics on one buffer, multiarm_pin.sim.closed_loop)
             sol, ev, tau = closed_loop_evaluation(s, self.controller, t, state, self.solver,
                                                   self.baumgarte)
             ct = ev.constraints
@@ -552,7 +552,7 @@ def simulate(
         initial_state: the state at t = 0; must satisfy the joints (``|φ| <= initial_tol``
             [m], ``|φ̇| <= velocity_tol`` [m/s]) unless ``check_initial`` is False.
         controller: ``controller(t, state, evaluation) -> tau (nv,)`` (see
-            :mod:`multiarm_pin.controllers`), or None for zero torque.
+            :mod:`multiarm_pin.sim.controllers`), or None for zero torque.
         duration: simulated time [s] (> 0).
         dt: sampling period [s] (and step of the fixed-step integrators).
         integrator: ``"rk4"``, ``"rk45"`` or ``"semi_implicit"``.
@@ -567,7 +567,7 @@ def simulate(
         max_record_bytes: largest memory [bytes] the record may take
             (:func:`record_bytes`); default :func:`default_record_limit`.
         external_wrench: wrench on the object's COM over time intervals
-            (:class:`~multiarm_pin.disturbances.WrenchSchedule`), or None.
+            (:class:`~multiarm_pin.sim.disturbances.WrenchSchedule`), or None.
 
     Returns:
         :class:`SimulationResult`.

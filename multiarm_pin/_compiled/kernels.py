@@ -1,6 +1,6 @@
 """Compiled (numba) kernels of the per-step hot path: arm terms, constraint rows, assembly, solve.
 
-The numpy implementations (:meth:`multiarm_pin.arm_set.ArmSet.evaluate`,
+The numpy implementations (:meth:`multiarm_pin.model.arm_set.ArmSet.evaluate`,
 :meth:`multiarm_pin.constraints.ConstraintSet.evaluate`, ``MultiArmSystem._blocks_reference``
 and :func:`multiarm_pin.dynamics.object_first.solve_object_first_numpy`) are the references;
 these kernels compute the same quantities with plain loops over arms and contacts, so that one

@@ -1,10 +1,10 @@
 """Compiled (numba) object-level controller: ``ObjectPD`` on the buffer of the compiled path.
 
-:class:`~multiarm_pin.controllers.ObjectPD` computes, from the blocks of one state, the held
+:class:`~multiarm_pin.sim.controllers.ObjectPD` computes, from the blocks of one state, the held
 points' desired accelerations, the joint accelerations of their damped least-squares task,
 the force distribution and the inverse dynamics of thesis Eq 3.7-3.10. Its numpy version
 (``ObjectPD.reference``) is the oracle; :func:`object_pd_torques` computes the same torques
-arm by arm from the flat buffer of :mod:`multiarm_pin.kernels` (no dense system over all
+arm by arm from the flat buffer of :mod:`multiarm_pin._compiled.kernels` (no dense system over all
 arms, no SVD: the internal forces come from
 :func:`~multiarm_pin.dynamics.force_qp.least_norm_forces`, each arm's constraint rows are met
 by a Householder QR of ``W_i``), and :func:`closed_loop_step` then solves the forward dynamics
@@ -25,8 +25,7 @@ import math
 import numpy as np
 from numba import njit
 
-from multiarm_pin.dynamics.force_qp import QP_OK, least_norm_forces
-from multiarm_pin.kernels import (
+from multiarm_pin._compiled.kernels import (
     _arm_views,
     _block_views,
     _offsets,
@@ -36,6 +35,7 @@ from multiarm_pin.kernels import (
     object_first,
     quaternion_rotation,
 )
+from multiarm_pin.dynamics.force_qp import QP_OK, least_norm_forces
 
 PD_OK = 0
 """Status of :func:`object_pd_torques`: torques computed."""
@@ -276,8 +276,8 @@ def object_pd_torques(buf, dims, N, nv_arm, unilateral, obj_x, a_d, z, hold_tool
     """``ObjectPD`` torques from the flat buffer of the compiled path (see the module docstring).
 
     Args:
-        buf: the flat buffer of :func:`multiarm_pin.kernels.evaluate_system` (blocks at zero
-            torque, ``h = -nle``).
+        buf: the flat buffer of :func:`~multiarm_pin._compiled.kernels.evaluate_system`
+            (blocks at zero torque, ``h = -nle``).
         dims: (4,) int ``(k, m, nv, n)``.
         N: (n,) int constraint rows per arm.
         nv_arm: (n,) int joints per arm.
@@ -364,7 +364,7 @@ def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold
 
     Returns:
         ``(pd_status, solve_status)``: :data:`PD_OK` or the reason to use the reference;
-        the status of :func:`multiarm_pin.kernels.object_first` (-1 if not solved).
+        the status of :func:`multiarm_pin._compiled.kernels.object_first` (-1 if not solved).
     """
     obj_x = np.empty(18)
     Ro = np.empty((3, 3))
@@ -414,7 +414,7 @@ def solve_with_torques(buf, dims, N, params, tau):  # pragma: no cover - compile
         tau: (n, k) joint torques [N m], zero on padding.
 
     Returns:
-        The status of :func:`multiarm_pin.kernels.object_first`.
+        The status of :func:`multiarm_pin._compiled.kernels.object_first`.
     """
     k, m, n = dims[0], dims[1], dims[3]
     off = _offsets(n, k, m)

@@ -38,7 +38,7 @@ import pinocchio as pin
 import umsgpack
 
 from multiarm_pin.exceptions import InputError
-from multiarm_pin.polyhedron import Polyhedron
+from multiarm_pin.model.polyhedron import Polyhedron
 from multiarm_pin.spatial import as_array, quaternion_to_rotation
 
 OBJECT_COLOR = 0xE63946

@@ -8,7 +8,7 @@ gravity acts in the right direction. The tool frame is an operational frame adde
 accelerations all come from Pinocchio's own algorithms.
 
 For a state ``(q, v)`` :meth:`Arm.terms` computes, once, everything the dynamics needs
-(:class:`ArmTerms`). To evaluate many arms at once use :class:`multiarm_pin.arm_set.ArmSet`.
+(:class:`ArmTerms`). To evaluate many arms at once use :class:`multiarm_pin.model.arm_set.ArmSet`.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from multiarm_pin.exceptions import (
     SingularityError,
     URDFError,
 )
-from multiarm_pin.robots import ROBOTS
+from multiarm_pin.model.robots import ROBOTS
 from multiarm_pin.spatial import as_array
 
 TOOL_FRAME_NAME = "multiarm_tool"
@@ -41,7 +41,7 @@ ROBOT_DEFAULTS: dict[str, dict] = {
     e.name: {"tool_frame": e.tool_frame, "locked_joints": e.locked_joints}
     for e in ROBOTS.values()
 }
-"""Fixed-base arms of ``example_robot_data`` (:data:`multiarm_pin.robots.ROBOTS`) with their
+"""Fixed-base arms of ``example_robot_data`` (:data:`multiarm_pin.model.robots.ROBOTS`) with their
 default tool frame and the joints locked at their neutral value (grippers)."""
 
 
@@ -284,7 +284,7 @@ class Arm:
     ) -> Arm:
         """Load an arm from ``example_robot_data`` (``ur5``, ``ur10``, ``panda``, ...).
 
-        The registry (:data:`multiarm_pin.robots.ROBOTS`) gives the default tool frame (the
+        The registry (:data:`multiarm_pin.model.robots.ROBOTS`) gives the default tool frame (the
         flange or the hand) and the gripper joints locked at their neutral value
         (``pin.buildReducedModel``); ``locked_joints`` locks more.
 

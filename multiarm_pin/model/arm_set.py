@@ -6,7 +6,7 @@ Pinocchio model with ``pin.appendModel``, so each Pinocchio algorithm (CRBA, non
 Jacobians and their time variation) is a single call whatever the number of arms. The per-arm
 results are then gathered into stacked, padded arrays with a few numpy operations
 (:meth:`ArmSet.evaluate`, the reference) or by the compiled kernels of
-:mod:`multiarm_pin.kernels` (the hot path, after :meth:`ArmSet.pinocchio_pass`). Because
+:mod:`multiarm_pin._compiled.kernels` (the hot path, after :meth:`ArmSet.pinocchio_pass`). Because
 Pinocchio's cost per arm and its ``Data`` grow superlinearly in one combined model, the hot
 path uses groups of at most :data:`GROUP_SIZE` arms, each with its own combined model.
 
@@ -21,9 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from multiarm_pin.arm import Arm
 from multiarm_pin.exceptions import InputError
-from multiarm_pin.kinematics import BodyKinematics
+from multiarm_pin.model.arm import Arm
+from multiarm_pin.model.kinematics import BodyKinematics
 from multiarm_pin.spatial import as_array
 
 GROUP_SIZE = 16
@@ -279,7 +279,7 @@ class ArmSet:
         ``data.dJ``: world Jacobian columns at the world origin), ``crba`` (``data.M``, full
         symmetric) and ``nonLinearEffects`` (``data.nle``) on the group's combined model; the
         results stay in each group's ``data`` (``self.data`` for one group; read by
-        :meth:`evaluate` and the compiled kernels of :mod:`multiarm_pin.kernels`).
+        :meth:`evaluate` and the compiled kernels of :mod:`multiarm_pin._compiled.kernels`).
 
         Tool placements: one ``pin.updateFramePlacement`` per tool. Measured on 2 / 10 UR5s:
         3.7 / 7.6 µs, against 5.3 / 15 µs for ``pin.updateFramePlacements`` (every frame) and

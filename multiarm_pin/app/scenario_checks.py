@@ -63,7 +63,7 @@ def check_within_limits(file: str, key: str, arm, q: np.ndarray) -> None:
     Args:
         file: scenario file (for the message).
         key: key path of ``q`` (``arms[0].q0``).
-        arm: the :class:`~multiarm_pin.arm.Arm`.
+        arm: the :class:`~multiarm_pin.model.arm.Arm`.
         q: (nq,) configuration [rad or m].
 
     Raises:
@@ -85,7 +85,7 @@ def input_warnings(built, duration: float) -> list[str]:
     """Legal but suspicious values of a built scenario.
 
     Args:
-        built: a :class:`~multiarm_pin.scenario.BuiltScenario`.
+        built: a :class:`~multiarm_pin.app.scenario.BuiltScenario`.
         duration: the simulated time of the run [s] (after overrides).
 
     Returns:

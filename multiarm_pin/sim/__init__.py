@@ -1,0 +1,1 @@
+"""The closed loop: controllers, trajectories, disturbances, contact events, integration."""
