@@ -156,8 +156,8 @@ def build_bench(n: int, joint: str, robot: str, n_states: int, seed: int) -> Ben
                                    source=robot))
         q0.append(NOMINAL_Q[robot] + rng.uniform(-0.35, 0.35, model.nq))
     obj = RigidObject.box([2 * radius, 2 * radius, 0.3], 10.0 * n)
-    system, s0 = MultiArmSystem.from_initial_state(arms, obj, [joint] * n, q0,
-                                                   [0.0, 0.0, 0.45])
+    system, s0 = MultiArmSystem.from_initial_state(
+        arms, obj, [joint] * n, q0, pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.45])))
     states, taus = [], []
     g = system.gravity_torques(s0.q)
     for _ in range(n_states):

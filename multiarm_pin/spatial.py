@@ -141,6 +141,44 @@ def se3_from(
     return pin.SE3(R, p)
 
 
+def as_se3(value, name: str = "placement") -> pin.SE3:
+    """Check a placement given through the public API: a ``pin.SE3`` with a rotation matrix.
+
+    The public API takes every placement (arm base, object, IK target, grasp frame) as a
+    ``pin.SE3`` and nothing else, so that one call never mixes conventions.
+
+    Args:
+        value: the placement, ``pin.SE3(R, p)`` with ``R`` (3, 3) a rotation (body axes ->
+            world axes) and ``p`` (3,) [m].
+        name: what it is, for messages.
+
+    Returns:
+        A copy of ``value``.
+
+    Raises:
+        InputError: not a ``pin.SE3`` (e.g. a ``(position, quaternion)`` pair; the message
+            says how to build one), NaN, or a rotation that is not orthonormal with det +1
+            (within 1e-6).
+    """
+    if not isinstance(value, pin.SE3):
+        raise InputError(
+            f"{name}: expected a pinocchio.SE3, got {type(value).__name__}; build one with "
+            "pin.SE3(rotation (3, 3), position (3,)), or from a quaternion [x, y, z, w] with "
+            "pin.XYZQUATToSE3([px, py, pz, x, y, z, w])"
+        )
+    R, p = value.rotation, value.translation
+    if not (np.all(np.isfinite(R)) and np.all(np.isfinite(p))):
+        raise InputError(f"{name}: expected finite numbers, got {value.homogeneous.tolist()}")
+    if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+        raise InputError(f"{name}: the rotation is not a rotation matrix: {R.tolist()}")
+    return value.copy()
+
+
+def se3_to_pose(placement: pin.SE3) -> tuple[np.ndarray, np.ndarray]:
+    """``(position (3,) [m], quaternion (4,) [x, y, z, w] with w >= 0)`` of a placement."""
+    return placement.translation.copy(), rotation_to_quaternion(placement.rotation)
+
+
 def wrench_transform(R: np.ndarray, x: np.ndarray) -> np.ndarray:
     """6x6 map of a wrench ``[f; m]`` from a frame at ``x`` with axes ``R`` to the reference.
 

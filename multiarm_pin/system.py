@@ -55,7 +55,7 @@ from multiarm_pin.model.arm import Arm
 from multiarm_pin.model.arm_set import ArmSet, ArmSetTerms
 from multiarm_pin.model.kinematics import BodyKinematics
 from multiarm_pin.model.rigid_object import ObjectState, RigidObject
-from multiarm_pin.spatial import as_array, as_unit_quaternion, cross
+from multiarm_pin.spatial import as_array, as_se3, cross, se3_to_pose
 
 _COMPILED_SOLVERS = frozenset({"auto", "object_first"})
 """Solvers that :meth:`MultiArmSystem.forward_dynamics` runs fused with the blocks."""
@@ -138,30 +138,32 @@ JointSpec = Joint | str | Mapping | Callable[[pin.SE3, pin.SE3], Joint]
 def joints_from_initial_state(
     arms: Sequence[Arm],
     obj: RigidObject,
-    q0: Sequence,
-    object_position,
-    object_quaternion,
     specs: Sequence[JointSpec],
+    q0: Sequence,
+    object_placement: pin.SE3,
 ) -> list[Joint]:
     """Build each arm's joint from where its tool is at t = 0.
+
+    Same argument order as :meth:`MultiArmSystem.from_initial_state`.
 
     Args:
         arms: the n arms.
         obj: the object (its shape is used by fingertip grasps).
-        q0: n initial configurations, ``q0[i]`` of shape (nq_i,).
-        object_position: (3,) initial COM position [m].
-        object_quaternion: (4,) initial orientation ``[x, y, z, w]``.
         specs: one per arm, each either a ready :class:`Joint`; a joint type name of
             ``JOINT_DOF`` (``"weld"``, ``"revolute"``, ...; the joint frame is the tool frame at
             t = 0); a mapping ``{"type": name, **params}`` (extra parameters such as ``size``;
             for ``"fingertips"``: ``contacts`` = ``[(face, point_in_object), ...]`` and
             ``radius`` [m]); or a callable ``f(tool_placement, object_placement) -> Joint``.
+        q0: n initial configurations, ``q0[i]`` of shape (nq_i,).
+        object_placement: the object's (COM frame) initial placement in the world,
+            ``pin.SE3`` (object axes -> world axes, COM position [m]).
 
     Returns:
         The n joints.
 
     Raises:
-        InputError: wrong counts or a spec that is none of the above.
+        InputError: wrong counts, a placement that is not a ``pin.SE3``, or a spec that is
+            none of the above.
         ConstraintError: from the joint library (unknown type, bad parameters).
     """
     if len(arms) != len(specs) or len(arms) != len(q0):
@@ -169,11 +171,7 @@ def joints_from_initial_state(
             f"joints_from_initial_state: {len(arms)} arms, {len(q0)} configurations and "
             f"{len(specs)} joint specs; expected one of each per arm"
         )
-    oMo = pin.SE3(
-        pin.Quaternion(as_unit_quaternion(object_quaternion, "object quaternion"))
-        .toRotationMatrix(),
-        as_array(object_position, (3,), "object position"),
-    )
+    oMo = as_se3(object_placement, "object_placement")
     joints = []
     for i, (arm, q, spec) in enumerate(zip(arms, q0, specs, strict=True)):
         oMt = arm.tool_placement(q)
@@ -362,27 +360,28 @@ class MultiArmSystem:
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_initial_state(cls, arms: list[Arm], obj: RigidObject, specs: Sequence[JointSpec],
-                           q0: Sequence, object_position, object_quaternion=(0, 0, 0, 1),
+                           q0: Sequence, object_placement: pin.SE3,
                            gravity=(0.0, 0.0, -9.81)) -> tuple[MultiArmSystem, SystemState]:
         """A system whose joints hold the tools where they are at t = 0, and that state at rest.
+
+        Same argument order as :func:`joints_from_initial_state`.
 
         Args:
             arms: the arms.
             obj: the object.
             specs: one joint spec per arm (see :func:`joints_from_initial_state`).
             q0: n initial configurations (nq_i,).
-            object_position: (3,) initial COM position [m].
-            object_quaternion: (4,) initial orientation ``[x, y, z, w]``.
+            object_placement: the object's (COM frame) initial placement in the world,
+                ``pin.SE3``.
             gravity: (3,) [m/s²].
 
         Returns:
             ``(system, state)`` with zero velocities.
         """
-        joints = joints_from_initial_state(arms, obj, q0, object_position, object_quaternion,
-                                           specs)
+        joints = joints_from_initial_state(arms, obj, specs, q0, object_placement)
         system = cls(arms, obj, joints, gravity)
-        state = system.state(system.arm_set.stack_q(list(q0)), None, object_position,
-                             object_quaternion)
+        position, quaternion = se3_to_pose(object_placement)
+        state = system.state(system.arm_set.stack_q(list(q0)), None, position, quaternion)
         return system, state
 
     def state(self, q, v=None, object_position=(0, 0, 0), object_quaternion=(0, 0, 0, 1),

@@ -43,7 +43,8 @@ def random_case(seed: int, n_arms: int, kinds=None):
     quat /= np.linalg.norm(quat)
     system, state = MultiArmSystem.from_initial_state(
         [arm(r, i, n_arms) for i, r in enumerate(robots)], RigidObject.box(BOX_SIZE, 5.0),
-        [joint_spec(k) for k in kinds], q0, (0.0, 0.0, 0.3), quat, (0.3, -1.0, -9.0))
+        [joint_spec(k) for k in kinds], q0, pin.XYZQUATToSE3([0.0, 0.0, 0.3, *quat]),
+        (0.3, -1.0, -9.0))
     o = state.obj
     moving = SystemState(state.q, rng.normal(size=system.nv),
                          ObjectState(o.position, o.quaternion, rng.normal(size=6)))

@@ -65,8 +65,8 @@ def build_system(robots, kinds, rng=None, gravity=(0.0, 0.0, -9.81), mass=5.0, s
           for r in robots]
     obj = RigidObject.box(BOX_SIZE, mass)
     specs = [joint_spec(k) if isinstance(k, str) else k for k in kinds]
-    return MultiArmSystem.from_initial_state(arms, obj, specs, q0, object_position,
-                                             object_quaternion, gravity)
+    placement = pin.XYZQUATToSE3(np.concatenate([object_position, object_quaternion]))
+    return MultiArmSystem.from_initial_state(arms, obj, specs, q0, placement, gravity)
 
 
 def random_quaternion(rng):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 from multiarm_pin.dynamics.force_distribution import distribute_forces
@@ -28,8 +29,8 @@ def test_infeasible_margin_falls_back_and_contacts_separate_instead_of_pulling()
     tool = arm.tool_placement(q0).translation
     spec = {"type": "fingertips", "radius": 0.01,
             "contacts": [("-z", [0.0, 0.0, -0.1]), ("+x", [0.2, 0.0, 0.0])]}
-    system, state = MultiArmSystem.from_initial_state([arm], box, [spec], [q0],
-                                                      tool + [0.0, 0.0, 0.3])
+    system, state = MultiArmSystem.from_initial_state(
+        [arm], box, [spec], [q0], pin.SE3(np.eye(3), tool + [0.0, 0.0, 0.3]))
     ev = system.blocks(state)
     b = ev.blocks
     with pytest.raises(DynamicsError, match="no internal force keeps"):

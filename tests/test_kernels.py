@@ -247,8 +247,8 @@ def welded_ur5s(elbow: float):
     q0 = [np.array([0.0, -1.2, 1.5, -1.9, -1.57, 0.0]),
           np.array([0.3, -1.2, elbow, -1.0, 0.7, 0.2])]
     obj = RigidObject.box((0.4, 0.3, 0.2), 5.0)
-    system, state = MultiArmSystem.from_initial_state(arms, obj, ["weld", "weld"], q0,
-                                                      (0.0, 0.0, 0.3))
+    system, state = MultiArmSystem.from_initial_state(
+        arms, obj, ["weld", "weld"], q0, pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.3])))
     rng = np.random.default_rng(7)
     return system, moving_state(system, state, rng), rng.normal(size=system.nv)
 

@@ -1,6 +1,7 @@
 """Integrators, records, progress, warnings and errors of simulate()."""
 
 import numpy as np
+import pinocchio as pin
 import pytest
 from system_builders import build_system, moving_state, one_dof_arm
 
@@ -101,7 +102,7 @@ def test_singular_arms_switch_solver_and_are_reported():
     arms = [one_dof_arm("a", 0.0), one_dof_arm("b", np.pi)]
     system, state = MultiArmSystem.from_initial_state(
         arms, RigidObject.box((0.4, 0.3, 0.2), 5.0), ["weld", "weld"],
-        [np.zeros(1), np.zeros(1)], (0, 0, 0.3))
+        [np.zeros(1), np.zeros(1)], pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.3])))
     r = simulate(system, state, None, 0.05, 0.01, "rk4")
     assert r.solver_switches == [0.0] and set(r.solver) == {"singular"}
     assert np.abs(r.object_position - r.object_position[0]).max() < 1e-12

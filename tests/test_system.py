@@ -168,8 +168,8 @@ def test_singular_system_without_solution_raises():
     arms = [one_dof_arm("a", 0.0), one_dof_arm("b", np.pi)]
     obj = RigidObject.box(BOX_SIZE, 5.0)
     q0 = [np.zeros(1), np.zeros(1)]
-    system, state = MultiArmSystem.from_initial_state(arms, obj, ["weld", "weld"], q0,
-                                                      (0, 0, 0.3))
+    system, state = MultiArmSystem.from_initial_state(
+        arms, obj, ["weld", "weld"], q0, pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.3])))
     sol, _ = system.forward_dynamics(state)
     assert sol.solver == "singular" and set(sol.singular_arms) == {0, 1}
     np.testing.assert_allclose(sol.a_o, 0, atol=1e-9)
