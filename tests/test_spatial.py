@@ -5,6 +5,7 @@ import pytest
 from multiarm_pin.exceptions import InputError
 from multiarm_pin.spatial import (
     as_array,
+    as_se3,
     as_unit_quaternion,
     cross,
     integrate_quaternion,
@@ -13,6 +14,7 @@ from multiarm_pin.spatial import (
     rotation_to_quaternion,
     rpy_to_rotation,
     se3_from,
+    se3_to_pose,
     skew,
     wrench_transform,
 )
@@ -67,3 +69,26 @@ def test_validation_messages():
         se3_from([0, 0, 0], rpy=[0, 0, 0], quaternion=[0, 0, 0, 1])
     with pytest.raises(InputError, match="rotation matrix"):
         se3_from([0, 0, 0], rotation=np.ones((3, 3)))
+
+
+def test_se3_placements_round_trip_and_validation(rng):
+    for _ in range(10):
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        p = rng.normal(size=3)
+        M = pin.XYZQUATToSE3(np.concatenate([p, q]))
+        position, quaternion = se3_to_pose(as_se3(M))
+        np.testing.assert_allclose(position, p, atol=1e-15)
+        assert quaternion[3] >= 0  # the sign convention of rotation_to_quaternion
+        np.testing.assert_allclose(quaternion, q if q[3] >= 0 else -q, atol=1e-12)
+    M = pin.SE3.Random()
+    copy = as_se3(M)
+    copy.translation = np.zeros(3)
+    assert not np.allclose(M.translation, 0)  # a copy, not the caller's placement
+    with pytest.raises(InputError, match=r"base: expected a pinocchio.SE3, got tuple; build "
+                                         r"one with pin.SE3\(rotation"):
+        as_se3((np.zeros(3), np.array([0, 0, 0, 1.0])), "base")
+    with pytest.raises(InputError, match="finite"):
+        as_se3(pin.SE3(np.eye(3), np.array([0.0, np.nan, 0.0])), "base")
+    with pytest.raises(InputError, match="not a rotation matrix"):
+        as_se3(pin.SE3(-np.eye(3), np.zeros(3)), "base")  # det -1: a reflection
