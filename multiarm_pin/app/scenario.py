@@ -914,12 +914,13 @@ def _build_joint(scenario, spec: ArmSpec, arm, obj, q, oMo):
         raise ScenarioError(scenario.file, key, str(exc)) from exc
 
 
-def build_scenario(scenario: Scenario, load_visuals: bool = False) -> BuiltScenario:
+def build_scenario(scenario: Scenario, load_visuals: bool = True) -> BuiltScenario:
     """Load the arms, place them (given ``q0`` or inverse kinematics), build joints and system.
 
     Args:
         scenario: a validated :class:`Scenario`.
-        load_visuals: also load the arms' meshes (only the replay needs them).
+        load_visuals: also load the arms' meshes (only the replay needs them; True like
+            every arm loader, see :func:`~multiarm_pin.model.arm.load_arm`).
 
     Returns:
         :class:`BuiltScenario` with a consistent initial state (velocities projected onto the

@@ -29,7 +29,7 @@ from multiarm_pin.exceptions import (
     URDFError,
 )
 from multiarm_pin.model.robots import ROBOTS
-from multiarm_pin.spatial import as_array
+from multiarm_pin.spatial import as_array, as_se3
 
 TOOL_FRAME_NAME = "multiarm_tool"
 """Name of the operational frame that :class:`Arm` adds at its tool (frame + offset)."""
@@ -519,18 +519,52 @@ def validate_urdf(path: str | Path) -> None:
 
 def load_arm(
     robot: str | None = None,
+    *,
     urdf: str | Path | None = None,
+    name: str | None = None,
+    base: pin.SE3 | None = None,
     tool_frame: str | None = None,
-    **kwargs,
+    tool_offset: pin.SE3 | None = None,
+    locked_joints: tuple[str, ...] = (),
+    load_visuals: bool = True,
+    package_dirs: list[str] | None = None,
 ) -> Arm:
     """Load an arm by ``example_robot_data`` name or from a URDF path (exactly one of them).
 
-    Keyword arguments go to :meth:`Arm.from_robot_name` / :meth:`Arm.from_urdf`.
+    Example: ``load_arm("ur5", name="left", base=pin.SE3(np.eye(3), np.array([0, 0.5, 0])))``.
+
+    Args:
+        robot: a registered name (:func:`available_robots`), or None with ``urdf``.
+        urdf: a URDF file (then ``tool_frame`` is required).
+        name: the arm's name in its system (default: ``robot`` or the file's stem).
+        base: placement of the robot's root in the world, ``pin.SE3`` (default: identity).
+        tool_frame: frame of the tool (default for a robot name: the registry's flange or
+            hand).
+        tool_offset: fixed placement of the tool relative to ``tool_frame``, ``pin.SE3``.
+        locked_joints: joints locked at their neutral value (besides the registry's).
+        load_visuals: also load the meshes, which only the replay draws (True, the default of
+            every arm loader: a replay of arms loaded without them shows spheres at the
+            joints; the ``run`` command and studies pass False when they write no replay).
+        package_dirs: where a URDF's ``package://`` meshes are looked up.
+
+    Raises:
+        InputError: neither or both of ``robot`` and ``urdf``, a URDF without ``tool_frame``,
+            or a placement that is not a ``pin.SE3``.
+        RobotNotFoundError, URDFError, FrameNotFoundError, JointNotFoundError: see
+            :meth:`Arm.from_robot_name` and :meth:`Arm.from_urdf`.
     """
     if (robot is None) == (urdf is None):
         raise InputError("give exactly one of robot (a name) or urdf (a path)")
+    placements = {
+        "base_placement": None if base is None else as_se3(base, "load_arm base"),
+        "tool_offset": None if tool_offset is None else as_se3(tool_offset, "load_arm tool_offset"),
+    }
     if robot is not None:
-        return Arm.from_robot_name(robot, tool_frame, **kwargs)
+        if package_dirs is not None:
+            raise InputError(f"{robot}: package_dirs is for URDF arms only")
+        return Arm.from_robot_name(robot, tool_frame, name=name, locked_joints=locked_joints,
+                                   load_visuals=load_visuals, **placements)
     if tool_frame is None:
         raise InputError(f"{urdf}: a URDF arm needs tool_frame")
-    return Arm.from_urdf(urdf, tool_frame, **kwargs)
+    return Arm.from_urdf(urdf, tool_frame, name=name, package_dirs=package_dirs,
+                         locked_joints=locked_joints, load_visuals=load_visuals, **placements)
