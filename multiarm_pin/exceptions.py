@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import numpy as np
+
 
 class MultiArmError(Exception):
     """Root of every error raised on purpose by multiarm_pin."""
@@ -170,6 +172,29 @@ class JointNotFoundError(MultiArmError, KeyError):
 
     def __str__(self) -> str:
         return str(self.args[0])
+
+
+class UnreachableError(MultiArmError, ValueError):
+    """Inverse kinematics found no configuration meeting the targets (out of reach).
+
+    Attributes:
+        residual: the norm of the primary residual left at the best configuration found
+            [m for points/planes; mixed m and rad for poses].
+        q: (nq,) that best configuration.
+        details: a per-target description of what is left.
+    """
+
+    def __init__(self, what: str, residual: float, q: np.ndarray, details: str = ""):
+        self.residual = float(residual)
+        self.q = np.asarray(q, float).copy()
+        self.details = details
+        msg = (
+            f"{what}: out of reach, inverse kinematics left a residual of {self.residual:.3g} "
+            "(tolerance met nowhere from the seed and its perturbations)"
+        )
+        if details:
+            msg += f"; {details}"
+        super().__init__(msg)
 
 
 class StudyError(ScenarioError):

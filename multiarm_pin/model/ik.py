@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from multiarm_pin.exceptions import FrameNotFoundError, InputError, MultiArmError
+from multiarm_pin.exceptions import FrameNotFoundError, InputError, UnreachableError
 from multiarm_pin.model.arm import frame_id
 from multiarm_pin.spatial import as_array, skew
 
@@ -39,29 +39,6 @@ IK_TOLERANCE = 1e-10
 
 SECONDARY_WEIGHT = 0.03
 """Weight of secondary (preference) tasks relative to primary ones."""
-
-
-class UnreachableError(MultiArmError, ValueError):
-    """Inverse kinematics found no configuration meeting the targets (out of reach).
-
-    Attributes:
-        residual: the norm of the primary residual left at the best configuration found
-            [m for points/planes; mixed m and rad for poses].
-        q: (nq,) that best configuration.
-        details: a per-target description of what is left.
-    """
-
-    def __init__(self, what: str, residual: float, q: np.ndarray, details: str = ""):
-        self.residual = float(residual)
-        self.q = np.asarray(q, float).copy()
-        self.details = details
-        msg = (
-            f"{what}: out of reach, inverse kinematics left a residual of {self.residual:.3g} "
-            "(tolerance met nowhere from the seed and its perturbations)"
-        )
-        if details:
-            msg += f"; {details}"
-        super().__init__(msg)
 
 
 @dataclass(frozen=True)
