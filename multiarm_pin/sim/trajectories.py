@@ -22,7 +22,13 @@ import numpy as np
 import pinocchio as pin
 
 from multiarm_pin.exceptions import InputError
-from multiarm_pin.spatial import as_array, as_unit_quaternion, rotation_to_quaternion
+from multiarm_pin.spatial import (
+    as_array,
+    as_se3,
+    as_unit_quaternion,
+    rotation_to_quaternion,
+    se3_to_pose,
+)
 
 
 def minimum_jerk(tau: float) -> tuple[float, float, float]:
@@ -97,6 +103,25 @@ class MinimumJerkTrajectory:
         self._R = np.array([pin.Quaternion(x).toRotationMatrix() for x in q])
         # body-frame rotation vector of each segment: R_{k+1} = R_k exp(log_k)
         self._log = np.array([pin.log3(self._R[k].T @ self._R[k + 1]) for k in range(K - 1)])
+
+    @classmethod
+    def through(cls, times, placements) -> MinimumJerkTrajectory:
+        """Minimum-jerk segments through placements, the public API's form of waypoints.
+
+        Args:
+            times: (K,) strictly increasing waypoint times [s].
+            placements: K ``pin.SE3`` world placements of the body (its COM frame for the
+                object).
+
+        Raises:
+            InputError: a placement that is not a ``pin.SE3``, a count mismatch, or what the
+                constructor refuses.
+        """
+        Ms = [as_se3(M, f"trajectory placement {k}") for k, M in enumerate(placements)]
+        if not Ms:
+            raise InputError("trajectory: expected at least one placement")
+        poses = [se3_to_pose(M) for M in Ms]
+        return cls(times, [p for p, _ in poses], [q for _, q in poses])
 
     @classmethod
     def hold(cls, position, quaternion=(0.0, 0.0, 0.0, 1.0)) -> MinimumJerkTrajectory:
