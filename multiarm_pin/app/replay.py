@@ -686,3 +686,41 @@ def serve_replay(
     if open_browser:
         webbrowser.open(url, new=2)
     return url, vis
+
+
+def write_replay(result, system, path, fps: float = 30) -> Path:
+    """Write the replay page of a simulation run from Python (what ``multiarm-pin run`` writes).
+
+    A self-contained HTML page (:func:`write_replay_html`): the arms (their meshes when they
+    were loaded with ``load_visuals=True``, the default; spheres at the joints otherwise), the
+    object, every contact point with its force on the object (touching contacts yellow,
+    separated ones grey) and the supports, at ``fps`` frames per second.
+
+    Args:
+        result: the :class:`~multiarm_pin.sim.simulation.SimulationResult` of
+            ``simulate(system, ...)``.
+        system: the :class:`~multiarm_pin.system.MultiArmSystem` that was simulated.
+        path: the ``.html`` file to write; its folder must exist.
+        fps: frames per second of the replay.
+
+    Returns:
+        The path written.
+
+    Raises:
+        InputError: a result whose shapes are not those of ``system``, or a folder that does
+            not exist.
+    """
+    from multiarm_pin.app.runner import replay_parts, system_trajectory_arrays
+
+    q = getattr(result, "q", None)
+    mu = getattr(result, "mu", None)
+    if (q is None or mu is None or q.ndim != 2 or q.shape[1] != system.nq
+            or mu.shape[1:] != (system.n_blocks, system.rows_max)):
+        raise InputError(
+            f"write_replay: expected the SimulationResult of this system (q of shape (T, "
+            f"{system.nq}), mu (T, {system.n_blocks}, {system.rows_max})), got "
+            f"{type(result).__name__}"
+            + ("" if q is None or mu is None else f" with q {q.shape} and mu {mu.shape}"))
+    traj = system_trajectory_arrays(system, result)
+    arms, obj, contacts = replay_parts(system.arms, system.obj, traj)
+    return write_replay_html(path, arms, obj, traj["t"], contacts, fps=fps)

@@ -183,7 +183,11 @@ def make_controller(built: BuiltScenario):
 
 def trajectory_arrays(built: BuiltScenario, result) -> dict[str, np.ndarray]:
     """The ``trajectory.npz`` arrays of a run (see the module docstring for keys/shapes)."""
-    system = built.system
+    return system_trajectory_arrays(built.system, result)
+
+
+def system_trajectory_arrays(system, result) -> dict[str, np.ndarray]:
+    """:func:`trajectory_arrays` of a simulation of a ``MultiArmSystem`` built without a file."""
     aset = system.arm_set
     out = {
         "t": result.t,
@@ -196,7 +200,7 @@ def trajectory_arrays(built: BuiltScenario, result) -> dict[str, np.ndarray]:
         "momentum": result.momentum,
     }
     points, forces = [], []
-    for i, arm in enumerate(built.arms):
+    for i, arm in enumerate(system.arms):
         N = int(system.constraint_set.N[i])
         out[f"q_{arm.name}"] = result.q[:, aset.q_slices[i]]
         out[f"v_{arm.name}"] = result.v[:, aset.v_slices[i]]
