@@ -1,4 +1,5 @@
-"""Every name exported in an ``__all__`` must exist (a stale export is a defect)."""
+"""Every name exported in an ``__all__`` must exist (a stale export is a defect); the top
+level is the curated user API, with ``pin.SE3`` placements and one argument order."""
 
 import importlib
 
