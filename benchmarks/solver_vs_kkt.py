@@ -775,15 +775,16 @@ def targets(rev: Sequence[Row], weld: Sequence[Row]) -> list[str]:
         out.append(f"- [{'x' if s <= 10 else ' '}] linear scaling t1(64)/t1(8) = {s:.2f} "
                    "(<= 10; 8 would be exactly linear)")
     wb = {r.n_arms: r for r in weld}
-    if 2 in wb:
-        s = wb[2].t_full_step_s / wb[2].t_pinocchio_s
-        out.append(f"- [{'x' if s <= 3 else ' '}] full step within 3x of pin.constraintDynamics "
-                   f"at 2 arms: {s:.2f}x ({_us(wb[2].t_full_step_s)} vs "
-                   f"{_us(wb[2].t_pinocchio_s)} µs)")
-    if 10 in wb:
-        s = wb[10].t_full_step_s / wb[10].t_pinocchio_s
-        out.append(f"- [{'x' if s < 1 else ' '}] ahead of pin.constraintDynamics at 10 arms: "
-                   f"{s:.2f}x ({_us(wb[10].t_full_step_s)} vs {_us(wb[10].t_pinocchio_s)} µs)")
+
+    def against_pinocchio(n: int, met: Callable[[float], bool], claim: str) -> None:
+        """The row of a target on our full step / pin.constraintDynamics at ``n`` arms."""
+        if n in wb:
+            s = wb[n].t_full_step_s / wb[n].t_pinocchio_s
+            out.append(f"- [{'x' if met(s) else ' '}] {claim} at {n} arms: {s:.2f}x "
+                       f"({_us(wb[n].t_full_step_s)} vs {_us(wb[n].t_pinocchio_s)} µs)")
+
+    against_pinocchio(2, lambda s: s <= 3, "full step within 3x of pin.constraintDynamics")
+    against_pinocchio(10, lambda s: s < 1, "ahead of pin.constraintDynamics")
     if weld:
         n_ahead = crossover(weld)
         out.append(f"- ours ahead from n = {n_ahead}" if n_ahead is not None
