@@ -21,9 +21,6 @@ from multiarm_pin.system import ContactRows, Evaluation, MultiArmSystem, SystemS
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from multiarm_pin.sim.stepper import Stepper
 
-MAX_WARNINGS = 200
-"""Contact-separation warnings kept in a result (the rest are counted)."""
-
 
 @dataclass
 class SimulationResult:
@@ -110,10 +107,11 @@ class SimulationResult:
 class Recorder:
     """Preallocated arrays of T samples, filled one sample at a time by :meth:`record`."""
 
-    def __init__(self, system: MultiArmSystem, T: int, solver: str):
+    def __init__(self, system: MultiArmSystem, T: int, solver: str, max_warnings: int):
         n, m = system.n_blocks, system.rows_max
         self.system = system
         self.requested = solver
+        self.max_warnings = max_warnings  # separation warnings kept (the rest are counted)
         self.t = np.zeros(T)
         self.q = np.zeros((T, system.nq))
         self.v = np.zeros((T, system.nv))
@@ -174,7 +172,7 @@ class Recorder:
         negative = s.contact_unilateral & (sol.mu < 0.0)
         for i, j in zip(*np.nonzero(negative & ~self._negative), strict=True):
             self.n_warnings += 1
-            if len(self.warnings) < MAX_WARNINGS:
+            if len(self.warnings) < self.max_warnings:
                 self.warnings.append(
                     f"t = {t:.6g} s: arm {i} ({s.arms[i].name}) contact {j}: multiplier "
                     f"μ = {sol.mu[i, j]:.4g} N < 0, a frictionless contact would separate"
@@ -195,7 +193,7 @@ class Recorder:
             f"t = {e.t:.6g} s: arm {e.block} ({e.body}) contact {e.row}: separates (multiplier "
             f"μ = 0 N; holding it would need a pulling force)"
             for e in stepper.events if e.kind == "separation" and e.block < s.n_arms
-        ][:MAX_WARNINGS] + list(self.warnings) + [  # a controller's own (ObjectPD holding)
+        ][:self.max_warnings] + list(self.warnings) + [  # a controller's own (ObjectPD holding)
             w for w in getattr(stepper.controller, "warnings", ()) if isinstance(w, str)]
         if self.n_warnings > len(warnings):
             warnings.append(f"... {self.n_warnings - len(warnings)} more separation warnings")

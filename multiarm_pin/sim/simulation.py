@@ -62,6 +62,9 @@ from multiarm_pin.system import Evaluation, MultiArmSystem, SystemState
 INTEGRATORS = ("rk4", "rk45", "semi_implicit")
 """Names accepted by :func:`simulate`."""
 
+MAX_WARNINGS = 200
+"""Contact-separation warnings kept in a result (the rest are counted)."""
+
 Controller = Callable[[float, SystemState, Evaluation], np.ndarray]
 """``controller(t, state, evaluation) -> tau (nv,)``; ``evaluation`` holds the blocks at τ = 0."""
 
@@ -166,7 +169,7 @@ def simulate(
             "shorten the duration or lengthen dt"
         )
     times = np.arange(n_steps + 1) * dt
-    rec = Recorder(system, len(times), solver)
+    rec = Recorder(system, len(times), solver, MAX_WARNINGS)
 
     def report(frac: float) -> None:
         if progress is not None:
