@@ -37,14 +37,13 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
-import csv  # noqa: E402
 import math  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Sequence  # noqa: E402
-from dataclasses import asdict, dataclass  # noqa: E402
+from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -55,6 +54,7 @@ for _p in (str(ROOT), str(HERE)):
     if _p not in sys.path:
         sys.path.insert(0, _p)
 
+from report_tables import general, int_list, write_rows_csv  # noqa: E402
 from solver_vs_kkt import Timer, build_bench, build_peer, environment  # noqa: E402
 
 from multiarm_pin.app.runner import make_controller  # noqa: E402
@@ -221,15 +221,6 @@ def cold_start(duration: float) -> dict[str, float]:
     return out
 
 
-def write_csv(rows: Sequence[Row], path: Path) -> None:
-    with path.open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(Row.__dataclass_fields__))
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v)
-                        for k, v in asdict(r).items()})
-
-
 def _us(x: float) -> str:
     return "-" if not math.isfinite(x) else f"{x * 1e6:.1f}"
 
@@ -345,20 +336,9 @@ def plot(weld: Sequence[Row], path: Path) -> None:
     plt.close(fig)
 
 
-def _ints(text: str) -> tuple[int, ...]:
-    try:
-        vals = tuple(int(x) for x in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected comma-separated integers, got {text!r}") from None
-    if not vals or min(vals) < 1:
-        raise argparse.ArgumentTypeError(f"expected positive integers, got {text!r}")
-    return vals
-
-
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--arms", type=_ints, default=None, help="arm counts (default 2,...,64)")
+    p.add_argument("--arms", type=int_list, default=None, help="arm counts (default 2,...,64)")
     p.add_argument("--scenarios", default=None,
                    help="comma-separated scenario names (default: all shipped)")
     p.add_argument("--duration", type=float, default=None,
@@ -398,7 +378,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if cold is not None:
         print(f"cold start: {cold}", flush=True)
     wall = time.perf_counter() - t0
-    write_csv(weld + scen, args.out / "closed_loop.csv")
+    write_rows_csv(weld + scen, args.out / "closed_loop.csv", Row, general)
     write_report(args.out / "closed_loop.md", weld, scen, cold, env, args, wall)
     plot(weld, args.out / "closed_loop.png")
     print(f"wrote {args.out / 'closed_loop.csv'}, closed_loop.md, closed_loop.png")

@@ -50,7 +50,6 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
-import csv  # noqa: E402
 import gc  # noqa: E402
 import math  # noqa: E402
 import platform  # noqa: E402
@@ -66,6 +65,8 @@ import pinocchio as pin  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # run from a checkout without installing
     sys.path.insert(0, str(ROOT))
+
+from report_tables import int_list, write_rows_csv  # noqa: E402
 
 from multiarm_pin.app.scenario import build_scenario, load_scenario  # noqa: E402
 from multiarm_pin.dynamics import (  # noqa: E402
@@ -320,8 +321,6 @@ class Row:
     max_rel_diff_pinocchio: float
 
 
-COLUMNS = list(Row.__dataclass_fields__)
-
 
 def measure_case(bench: Bench, case: str, timer: Timer, peer: PinocchioPeer | None) -> Row:
     """Time coefficient blocks, both solvers, the full step and (weld) Pinocchio."""
@@ -428,8 +427,6 @@ class ContactRow:
     states_compared: int
     repeats: int
 
-
-CONTACT_COLUMNS = list(ContactRow.__dataclass_fields__)
 
 
 def with_table(b: SystemBlocks, R: np.ndarray, vertices: np.ndarray) -> SystemBlocks:
@@ -563,28 +560,6 @@ def run_contacts(args: argparse.Namespace, timer: Timer) -> list[ContactRow]:
               f"{r.mean_pivots:.1f}  separating {r.separating_rows}  comp "
               f"{r.max_complementarity:.1e}", flush=True)
     return rows
-
-
-def write_contact_csv(rows: Sequence[ContactRow], path: Path) -> None:
-    with path.open("w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(CONTACT_COLUMNS)
-        for r in rows:
-            w.writerow([_csv_value(getattr(r, c)) for c in CONTACT_COLUMNS])
-
-
-def write_csv(rows: Sequence[Row], path: Path) -> None:
-    with path.open("w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(COLUMNS)
-        for r in rows:
-            w.writerow([_csv_value(getattr(r, c)) for c in COLUMNS])
-
-
-def _csv_value(x):
-    if isinstance(x, float):
-        return "nan" if math.isnan(x) else f"{x:.6e}"
-    return x
 
 
 def _us(x: float) -> str:
@@ -800,15 +775,16 @@ def targets(rev: Sequence[Row], weld: Sequence[Row]) -> list[str]:
         out.append(f"- [{'x' if s <= 10 else ' '}] linear scaling t1(64)/t1(8) = {s:.2f} "
                    "(<= 10; 8 would be exactly linear)")
     wb = {r.n_arms: r for r in weld}
-    if 2 in wb:
-        s = wb[2].t_full_step_s / wb[2].t_pinocchio_s
-        out.append(f"- [{'x' if s <= 3 else ' '}] full step within 3x of pin.constraintDynamics "
-                   f"at 2 arms: {s:.2f}x ({_us(wb[2].t_full_step_s)} vs "
-                   f"{_us(wb[2].t_pinocchio_s)} µs)")
-    if 10 in wb:
-        s = wb[10].t_full_step_s / wb[10].t_pinocchio_s
-        out.append(f"- [{'x' if s < 1 else ' '}] ahead of pin.constraintDynamics at 10 arms: "
-                   f"{s:.2f}x ({_us(wb[10].t_full_step_s)} vs {_us(wb[10].t_pinocchio_s)} µs)")
+
+    def against_pinocchio(n: int, met: Callable[[float], bool], claim: str) -> None:
+        """The row of a target on our full step / pin.constraintDynamics at ``n`` arms."""
+        if n in wb:
+            s = wb[n].t_full_step_s / wb[n].t_pinocchio_s
+            out.append(f"- [{'x' if met(s) else ' '}] {claim} at {n} arms: {s:.2f}x "
+                       f"({_us(wb[n].t_full_step_s)} vs {_us(wb[n].t_pinocchio_s)} µs)")
+
+    against_pinocchio(2, lambda s: s <= 3, "full step within 3x of pin.constraintDynamics")
+    against_pinocchio(10, lambda s: s < 1, "ahead of pin.constraintDynamics")
     if weld:
         n_ahead = crossover(weld)
         out.append(f"- ours ahead from n = {n_ahead}" if n_ahead is not None
@@ -850,27 +826,16 @@ def plot(rows: Sequence[Row], path: Path) -> None:
 
 
 # ---------------------------------------------------------------------------- main
-def _ints(text: str) -> tuple[int, ...]:
-    try:
-        values = tuple(int(x) for x in text.split(",") if x.strip())
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected comma-separated integers, got {text!r}") from None
-    if not values or min(values) < 1:
-        raise argparse.ArgumentTypeError(f"expected positive integers, got {text!r}")
-    return values
-
-
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--arms", type=_ints, default=None,
+    p.add_argument("--arms", type=int_list, default=None,
                    help="numbers of arms of the revolute case (thesis Table 4.4 + scaling); "
                         f"default {','.join(map(str, DEFAULT_ARMS))}")
-    p.add_argument("--peer-arms", type=_ints, default=None,
+    p.add_argument("--peer-arms", type=int_list, default=None,
                    help="numbers of arms of the weld case against pin.constraintDynamics; "
                         f"default {','.join(map(str, DEFAULT_PEER_ARMS))}")
-    p.add_argument("--profile-arms", type=_ints, default=None,
+    p.add_argument("--profile-arms", type=int_list, default=None,
                    help="numbers of arms for the stage profile (weld); default "
                         f"{','.join(map(str, DEFAULT_PROFILE_ARMS))}")
     p.add_argument("--repeat", type=int, default=None,
@@ -909,7 +874,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     timer = Timer(args.repeat, warmup=args.warmup, budget_s=args.budget)
     if args.unilateral_only:
         contact_rows = run_contacts(args, timer)
-        write_contact_csv(contact_rows, args.out / "unilateral.csv")
+        write_rows_csv(contact_rows, args.out / "unilateral.csv", ContactRow)
         L = ["# Unilateral contacts: exact mixed-LCP solve vs bilateral solve\n",
              f"Generated by `benchmarks/solver_vs_kkt.py {' '.join(sys.argv[1:])}` in "
              f"{time.perf_counter() - start:.0f} s; timing method as in `solver_vs_kkt.md` "
@@ -941,8 +906,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         del bench
         gc.collect()
     contact_rows = run_contacts(args, timer)
-    write_csv(rows, args.out / "solver_vs_kkt.csv")
-    write_contact_csv(contact_rows, args.out / "solver_vs_kkt_unilateral.csv")
+    write_rows_csv(rows, args.out / "solver_vs_kkt.csv", Row)
+    write_rows_csv(contact_rows, args.out / "solver_vs_kkt_unilateral.csv", ContactRow)
     write_report(args.out / "solver_vs_kkt.md", rows, profiles, env, args,
                  time.perf_counter() - start, contact_rows)
     plot(rows, args.out / "solver_vs_kkt.png")

@@ -139,9 +139,9 @@ def _failing_after(monkeypatch, calls: int, exc: BaseException):
     The stepper solves once per closed-loop evaluation (fused with the blocks and the
     controller, ``multiarm_pin.sim.closed_loop``), so the evaluation is what fails here.
     """
-    import multiarm_pin.sim.simulation as simulation
+    import multiarm_pin.sim.stepper as stepper
 
-    real = simulation.closed_loop_evaluation
+    real = stepper.closed_loop_evaluation
     count = [0]
 
     def evaluate(*args, **kwargs):
@@ -150,7 +150,7 @@ def _failing_after(monkeypatch, calls: int, exc: BaseException):
             raise exc
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(simulation, "closed_loop_evaluation", evaluate)
+    monkeypatch.setattr(stepper, "closed_loop_evaluation", evaluate)
 
 
 @pytest.mark.parametrize("integrator, calls", [("rk4", 23), ("semi_implicit", 6),
@@ -193,11 +193,11 @@ def test_rk45_record_equals_scipy_solve_ivp(moving):
     """The stepwise rk45 gives solve_ivp(t_eval=grid)'s values (independent driver)."""
     from scipy.integrate import solve_ivp
 
-    from multiarm_pin.sim.simulation import _Stepper
+    from multiarm_pin.sim.stepper import Stepper
 
     system, state = moving
     r = simulate(system, state, None, 0.05, 0.01, "rk45")
-    st = _Stepper(system, None, "auto", None)
+    st = Stepper(system, None, "auto", None)
     nq, nv = system.nq, system.nv
 
     def fun(t, y):

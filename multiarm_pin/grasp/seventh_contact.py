@@ -17,7 +17,9 @@ Two methods give the region, both as a convex polygon in the face's own 2-D coor
   origin turned by -90° about ``e7``) turns moments into face points.
 
 The region is open (strict inequalities); the polygon returned is its closure clipped to the
-face, and it is reported empty when it has no area.
+face, and it is reported empty when it has no area. The 2-D polygon geometry (area, clipping,
+hulls) is :mod:`multiarm_pin.grasp.polygon2d`; ``polygon_area`` and ``signed_inside_distance``
+are re-exported here.
 """
 
 from __future__ import annotations
@@ -27,11 +29,19 @@ from itertools import combinations
 
 import numpy as np
 from scipy.optimize import linprog
-from scipy.spatial import ConvexHull, QhullError
 
 from multiarm_pin.exceptions import GraspError
 from multiarm_pin.grasp.contacts import Grasp
 from multiarm_pin.grasp.independence import block_decomposition
+from multiarm_pin.grasp.polygon2d import (
+    clip_polygon,
+    convex_hull_2d,
+    edges_to_halfplanes,
+    halfplanes_bounded,
+    polygon_area,
+    signed_inside_distance,
+    unique_rows,
+)
 from multiarm_pin.model.polyhedron import Polyhedron
 from multiarm_pin.spatial import skew
 
@@ -203,21 +213,22 @@ def region_by_generators(grasp: Grasp, face: int | str, fixed=None) -> ContactRe
     s_dirs = np.array([U.T @ np.cross(e7, r) for r in dirs]).reshape(-1, 2)
     norms = np.linalg.norm(s_dirs, axis=1)
     s_dirs = s_dirs[norms > 1e-12] / norms[norms > 1e-12, None] if len(s_dirs) else s_dirs
-    s_dirs = _unique_rows(s_dirs, 1e-9)
-    s_pts = _unique_rows(s_pts, 1e-12 * scale)
+    s_dirs = unique_rows(s_dirs, 1e-9)
+    s_pts = unique_rows(s_pts, 1e-12 * scale)
     face2d = _face_polygon(poly, k, origin, R)
     if len(s_pts) == 0:
         return empty("no admissible moment lies in the face's plane (Eq 2.4 has no solution)")
     reach = 10.0 * (np.abs(face2d).max() + np.abs(s_pts).max() + 1.0)
     big = np.vstack([s_pts] + [s_pts + 1e3 * reach * d for d in s_dirs])
-    hull = _hull2d(big)
-    polygon = _clip(face2d, _edges_to_halfplanes(hull)) if len(hull) >= 3 else np.zeros((0, 2))
+    hull = convex_hull_2d(big)
+    polygon = (clip_polygon(face2d, edges_to_halfplanes(hull)) if len(hull) >= 3
+               else np.zeros((0, 2)))
     face_area = polygon_area(face2d)
     reason = ""
     if len(polygon) < 3 or polygon_area(polygon) <= AREA_TOLERANCE * face_area:
         polygon = np.zeros((0, 2))
         reason = "the admissible region does not meet the face with positive area"
-    halfplanes = _edges_to_halfplanes(hull) if len(s_dirs) == 0 and len(hull) >= 3 else None
+    halfplanes = edges_to_halfplanes(hull) if len(s_dirs) == 0 and len(hull) >= 3 else None
     return ContactRegion(
         k,
         name,
@@ -272,22 +283,6 @@ def box_corner_region_lines(
     return A, np.array([0.0, 0.0, -1.0])
 
 
-def polygon_area(poly2d: np.ndarray) -> float:
-    """Signed area [m^2] of a polygon (V, 2) (positive when counter-clockwise)."""
-    P = np.asarray(poly2d, dtype=float).reshape(-1, 2)
-    if len(P) < 3:
-        return 0.0
-    x, y = P[:, 0], P[:, 1]
-    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
-
-
-def signed_inside_distance(poly2d: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """For a convex CCW polygon (V, 2): min over edges of the distance inside (k,) [m]."""
-    A, b = _edges_to_halfplanes(poly2d)
-    s = np.asarray(s, dtype=float).reshape(-1, 2)
-    return np.min(b[None, :] - s @ A.T, axis=1)
-
-
 # --- helpers ---------------------------------------------------------------------------------
 
 
@@ -333,103 +328,15 @@ def _region_from_halfplanes(poly, k, origin, R, A, b) -> ContactRegion:
         )
     An, bn = A[~const] / row[~const, None], b[~const] / row[~const]
     face2d = _face_polygon(poly, k, origin, R)
-    polygon = _clip(face2d, (An, bn))
+    polygon = clip_polygon(face2d, (An, bn))
     reason = ""
     if len(polygon) < 3 or polygon_area(polygon) <= AREA_TOLERANCE * polygon_area(face2d):
         polygon = np.zeros((0, 2))
         reason = "the half-planes of Eq 2.3 do not meet inside the face"
-    bounded = _halfplanes_bounded(An)
+    bounded = halfplanes_bounded(An)
     return ContactRegion(
         k, name, origin, R, polygon, bounded, "inverse", (An, bn), None, None, reason
     )
-
-
-def _halfplanes_bounded(A: np.ndarray) -> bool:
-    """Whether {s: A s <= b} is bounded (when non-empty): its recession cone is {0}."""
-    if len(A) == 0:
-        return False
-    for a in A:
-        for d in (np.array([-a[1], a[0]]), np.array([a[1], -a[0]])):
-            if np.all(A @ d <= 1e-12):
-                return False
-    return True
-
-
-def _clip(polygon: np.ndarray, halfplanes) -> np.ndarray:
-    """Sutherland-Hodgman: convex polygon (V, 2) ∩ {s: A s <= b}."""
-    A, b = halfplanes
-    P = np.asarray(polygon, dtype=float)
-    for a, beta in zip(A, b, strict=True):
-        if len(P) == 0:
-            break
-        val = P @ a - beta
-        out = []
-        for i in range(len(P)):
-            j = (i + 1) % len(P)
-            vi, vj = val[i], val[j]
-            if vi <= 0:
-                out.append(P[i])
-            if (vi < 0 < vj) or (vj < 0 < vi):
-                t = vi / (vi - vj)
-                out.append(P[i] + t * (P[j] - P[i]))
-        P = np.array(out).reshape(-1, 2)
-    return _drop_collinear(_unique_rows_ordered(P, 1e-12))
-
-
-def _drop_collinear(P: np.ndarray, tol: float = 1e-10) -> np.ndarray:
-    """Remove vertices lying on the segment between their neighbours (round-off leftovers)."""
-    changed = True
-    while changed and len(P) > 3:
-        changed = False
-        for i in range(len(P)):
-            a, b, c = P[i - 1], P[i], P[(i + 1) % len(P)]
-            ab, bc = b - a, c - b
-            scale = max(np.linalg.norm(ab) * np.linalg.norm(bc), 1e-300)
-            if abs(ab[0] * bc[1] - ab[1] * bc[0]) <= tol * scale and ab @ bc >= 0:
-                P = np.delete(P, i, axis=0)
-                changed = True
-                break
-    return P
-
-
-def _edges_to_halfplanes(poly2d: np.ndarray):
-    """Half-planes ``A s <= b`` (unit rows) of a CCW convex polygon's edges."""
-    P = np.asarray(poly2d, dtype=float)
-    d = np.roll(P, -1, axis=0) - P
-    normals = np.column_stack([d[:, 1], -d[:, 0]])  # outward for CCW
-    lens = np.linalg.norm(normals, axis=1)
-    keep = lens > 1e-15
-    normals = normals[keep] / lens[keep, None]
-    return normals, np.einsum("ij,ij->i", normals, P[keep])
-
-
-def _hull2d(points: np.ndarray) -> np.ndarray:
-    pts = np.asarray(points, dtype=float)
-    if len(pts) < 3:
-        return np.zeros((0, 2))
-    try:
-        hull = ConvexHull(pts)
-    except QhullError:
-        return np.zeros((0, 2))
-    return pts[hull.vertices]  # CCW in 2-D
-
-
-def _unique_rows(X: np.ndarray, tol: float) -> np.ndarray:
-    out: list[np.ndarray] = []
-    for x in np.asarray(X, dtype=float).reshape(len(X), -1):
-        if not any(np.linalg.norm(x - y) <= tol for y in out):
-            out.append(x)
-    return np.array(out).reshape(-1, np.asarray(X).shape[1] if np.ndim(X) == 2 else 2)
-
-
-def _unique_rows_ordered(P: np.ndarray, tol: float) -> np.ndarray:
-    out: list[np.ndarray] = []
-    for x in P:
-        if not out or np.linalg.norm(x - out[-1]) > tol:
-            out.append(x)
-    if len(out) > 1 and np.linalg.norm(out[0] - out[-1]) <= tol:
-        out.pop()
-    return np.array(out).reshape(-1, 2)
 
 
 def _strictly_positive_force_solution(E: np.ndarray, e7: np.ndarray) -> bool:
@@ -517,3 +424,14 @@ def _cut_with_plane(points, rays, h, tol):
                 (wi * rj - wj * ri) / (wi - wj) if wi > 0 else (wj * ri - wi * rj) / (wj - wi)
             )
     return out_pts, out_rays
+
+
+__all__ = [
+    "AREA_TOLERANCE",
+    "ContactRegion",
+    "box_corner_region_lines",
+    "polygon_area",
+    "region_by_generators",
+    "region_by_inverse",
+    "signed_inside_distance",
+]

@@ -1,0 +1,294 @@
+"""The stepper of :func:`~multiarm_pin.sim.simulation.simulate`: evaluations, steps, events.
+
+:class:`Stepper` evaluates the closed-loop dynamics at a state (the controller called with the
+blocks at zero torque, its torque added, the forward dynamics solved on the active set of
+rows: :func:`multiarm_pin.dynamics.solve` or, with unilateral rows,
+:func:`multiarm_pin.dynamics.unilateral.solve_unilateral`), takes fixed steps (``"rk4"``,
+``"semi_implicit"``) and, with unilateral rows, handles separations and touchdowns (with
+impacts) inside a step, event-driven, as :mod:`multiarm_pin.sim.contact_events` describes; the
+events are located by :mod:`multiarm_pin.sim.event_location`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from multiarm_pin.dynamics import Solution
+from multiarm_pin.dynamics import solve as solve_dynamics
+from multiarm_pin.exceptions import DynamicsError, MultiArmError
+from multiarm_pin.model.rigid_object import ObjectState
+from multiarm_pin.sim import contact_events as ce
+from multiarm_pin.sim.closed_loop import closed_loop_evaluation, controller_torques
+from multiarm_pin.sim.contact_events import ContactEvent
+from multiarm_pin.sim.disturbances import WrenchSchedule
+from multiarm_pin.sim.event_location import locate_separation, locate_touchdown
+from multiarm_pin.spatial import integrate_quaternion, quaternion_derivative
+from multiarm_pin.system import ContactRows, MultiArmSystem, SystemState
+
+
+class Stepper:
+    """Evaluates the closed-loop dynamics on the active set and handles contact events."""
+
+    def __init__(self, system: MultiArmSystem, controller, solver: str, baumgarte,
+                 wrench: WrenchSchedule | None = None):
+        self.system = system
+        self.controller = controller
+        self.solver = solver
+        self.baumgarte = baumgarte
+        self.wrench = wrench if wrench else None
+        self.model = None if system.arm_set is None else system.arm_set.model
+        self.unilateral = bool(system.contact_unilateral.any())
+        self.active = system.contact_mask.copy()
+        self.events: list[ContactEvent] = []
+        self._cache = None  # (t, state, active, result) of the last evaluation
+
+    def evaluate(self, t: float, state: SystemState):
+        """``(solution, evaluation, tau, rows)`` at ``(t, state)`` with the current active set.
+
+        Errors carry the time (same type, message prefixed with ``t = ... s``).
+        """
+        c = self._cache
+        if c is not None and c[0] == t and c[1] is state and np.array_equal(c[2], self.active):
+            return c[3]
+        try:
+            out = self._evaluate(t, state)
+            self._cache = (t, state, self.active.copy(), out)
+            return out
+        except MultiArmError as exc:
+            if exc.args and isinstance(exc.args[0], str) and not exc.args[0].startswith("t = "):
+                exc.args = (f"t = {t:.6g} s: {exc.args[0]}", *exc.args[1:])
+            raise
+
+    def _evaluate(self, t: float, state: SystemState):
+        s = self.system
+        w = None if self.wrench is None else self.wrench(t)
+        if not s.n_arms:
+            full, rows = s.contact_blocks(state, None, None, self.baumgarte, w)
+            return self._solve(t, full), None, np.zeros(0), rows
+        if not self.unilateral and w is None and not s.supports.n_rows:
+            # arms' bilateral rows only: one shared, fused evaluation (blocks, controller and
+            # forward dynamics on one buffer, multiarm_pin.sim.closed_loop)
+            sol, ev, tau = closed_loop_evaluation(s, self.controller, t, state, self.solver,
+                                                  self.baumgarte)
+            ct = ev.constraints
+            return sol, ev, tau, ContactRows(ct.phi, ct.phi_dot, ct.contact_points, ct.normals)
+        ev = s.blocks(state, None, self.baumgarte)
+        if self.unilateral:  # the controller sees which contacts touch
+            ev = ev.with_active(self.active[:s.n_arms, :s.N_max].copy())
+        if self.controller is None:
+            tau = np.zeros(s.nv)
+            blocks = ev.blocks
+        else:
+            tau = controller_torques(self.controller, t, state, ev, s.nv)
+            blocks = ev.blocks.with_torques(s.pad(tau))
+        full, rows = s.contact_blocks(state, blocks, ev.constraints, self.baumgarte, w)
+        return self._solve(t, full), ev, tau, rows
+
+    def _solve(self, t: float, blocks):
+        try:
+            if self.unilateral:
+                from multiarm_pin.dynamics.unilateral import solve_unilateral
+
+                return solve_unilateral(blocks, self.system.contact_unilateral, self.active)
+            return solve_dynamics(blocks, self.solver)
+        except DynamicsError as exc:
+            raise DynamicsError(f"t = {t:.6g} s: {exc}") from exc
+
+    def derivative(self, state: SystemState, sol: Solution) -> np.ndarray:
+        """Tangent ``[q̇ (nv); v̇ (nv); ṗ (3); q̇uat (4); ȧ (6)]``."""
+        o = state.obj
+        return np.concatenate([state.v, self.system.unpad(sol.qdd), o.twist[:3],
+                               quaternion_derivative(o.quaternion, o.twist[3:]), sol.a_o])
+
+    def advance(self, state: SystemState, d: np.ndarray, h: float) -> SystemState:
+        """The state ``h`` [s] along the tangent ``d`` (:meth:`derivative`'s layout)."""
+        nv = self.system.nv
+        q = state.q if self.model is None else pin.integrate(self.model, state.q, h * d[:nv])
+        v = state.v + h * d[nv:2 * nv]
+        o = state.obj
+        p = o.position + h * d[2 * nv:2 * nv + 3]
+        quat = o.quaternion + h * d[2 * nv + 3:2 * nv + 7]
+        quat = quat / np.linalg.norm(quat)
+        tw = o.twist + h * d[2 * nv + 7:]
+        return SystemState(q, v, ObjectState(p, quat, tw))
+
+    def step(self, integrator: str, t: float, state: SystemState, sol: Solution,
+             h: float) -> SystemState:
+        """One step of size ``h`` [s] from ``(t, state)`` whose solution is ``sol``."""
+        if integrator == "rk4":
+            d1 = self.derivative(state, sol)
+            s2 = self.advance(state, d1, 0.5 * h)
+            d2 = self.derivative(s2, self.evaluate(t + 0.5 * h, s2)[0])
+            s3 = self.advance(state, d2, 0.5 * h)
+            d3 = self.derivative(s3, self.evaluate(t + 0.5 * h, s3)[0])
+            s4 = self.advance(state, d3, h)
+            d4 = self.derivative(s4, self.evaluate(t + h, s4)[0])
+            return self.advance(state, (d1 + 2.0 * d2 + 2.0 * d3 + d4) / 6.0, h)
+        system = self.system  # semi-implicit Euler
+        v = state.v + h * system.unpad(sol.qdd)
+        tw = state.obj.twist + h * sol.a_o
+        o = state.obj
+        q = state.q if self.model is None else pin.integrate(self.model, state.q, h * v)
+        return SystemState(q, v, ObjectState(o.position + h * tw[:3],
+                                             integrate_quaternion(o.quaternion, tw[3:], h), tw))
+
+    # ------------------------------------------------------------------ events
+    def _event(self, t: float, kind: str, b: int, r: int, **kw) -> None:
+        s = self.system
+        label = next(lab for bb, rr, lab in s.contact_labels if bb == b and rr == r)
+        body = s.arms[b].name if b < s.n_arms else s.supports.supports[
+            int(s.supports.support_index[r])].name
+        self.events.append(ContactEvent(float(t), kind, int(b), int(r), label, body, **kw))
+
+    def init_active(self, rows: ContactRows, tol: float) -> None:
+        """Active at t = 0: bilateral rows, and unilateral rows whose gap is within ``tol``."""
+        s = self.system
+        self.active = s.contact_mask & (~s.contact_unilateral | (rows.phi <= tol))
+
+    def separations(self, t: float, sol, rows: ContactRows, keep=None) -> bool:
+        """Drop active unilateral rows that the solution lets go; True if any was dropped.
+
+        ``keep``: (B, R) bool rows not to drop now (those that just touched down: they stay
+        active until the next sample, where the check runs again).
+        """
+        if not self.unilateral:
+            return False
+        s = self.system
+        leave = self.active & s.contact_unilateral & (
+            ((sol.mu <= 0.0) & (sol.phi_dd > ce.SEPARATION_ACCELERATION))
+            | (rows.phi > ce.SEPARATION_GAP) | (rows.phi_dot > ce.SEPARATION_SPEED))
+        if keep is not None:
+            leave &= ~keep
+        for b, r in zip(*np.nonzero(leave), strict=True):
+            self._event(t, "separation", b, r, phi_dot=float(rows.phi_dot[b, r]),
+                        phi_dot_after=float(rows.phi_dot[b, r]))
+        self.active = self.active & ~leave
+        return bool(leave.any())
+
+    def _watch(self) -> np.ndarray:
+        s = self.system
+        return s.contact_mask & s.contact_unilateral & ~self.active
+
+    def gaps(self, state: SystemState) -> np.ndarray:
+        """(B, R) gaps [m] of every row at a state."""
+        s = self.system
+        out = np.zeros((s.n_blocks, s.rows_max))
+        if s.n_arms:
+            out[:s.n_arms, :s.N_max] = s.blocks(state).constraints.phi
+        if s.supports.n_rows:
+            out[s.n_arms, :s.supports.n_rows] = s.support_terms(state).phi
+        return out
+
+    def advance_with_events(self, integrator: str, t: float, state: SystemState, sol,
+                            h: float, t_end: float | None = None) -> SystemState:
+        """The state at ``t + h``: steps, touchdowns located and impacts applied on the way.
+
+        ``t_end``: the grid time ``t + h`` exactly (default ``t + h`` in floating point), so
+        that the step's final evaluation, made to look for separations, is the one the next
+        step starts from (cached) and a wrench switching at a grid time is read there.
+        """
+        if not self.unilateral:
+            return self.step(integrator, t, state, sol, h)
+        tol = ce.GAP_TOLERANCE
+        t_end = t + h if t_end is None else float(t_end)
+        for _ in range(ce.MAX_EVENTS_PER_STEP):
+            h = t_end - t
+            new = self.step(integrator, t, state, sol, h)
+            # a separation inside the step: the step ends there (touchdowns before it first)
+            sep = locate_separation(self, integrator, t, state, sol, h, new, t_end)
+            if sep is not None:
+                theta_s, new, leaving = sep
+                h = theta_s * h
+            watch = self._watch()
+            # a row far below the band at the step's start is not watched: its tip went
+            # round an edge, behind the (infinite) plane of its face, and touches nothing
+            watch &= self.gaps(state) >= -ce.LOST_GAP
+            g_hi = float(self.gaps(new)[watch].min()) if watch.any() else 0.0
+            if g_hi >= -tol:
+                if sep is None:
+                    return new
+                t, state = t + h, new
+                self._separate(t, state, leaving)
+                sol, _, _, rows = self.evaluate(t, state)
+                if self.separations(t, sol, rows):
+                    sol = self.evaluate(t, state)[0]
+                if t_end - t <= ce.TIME_TOLERANCE:
+                    return state
+                continue
+            theta, s_e = locate_touchdown(self, integrator, t, state, sol, h, watch, g_hi)
+            t = t + theta * h
+            state, joined = self._impact(t, s_e, watch)
+            sol, _, _, rows = self.evaluate(t, state)
+            if self.separations(t, sol, rows, keep=joined):
+                sol = self.evaluate(t, state)[0]
+            if t_end - t <= ce.TIME_TOLERANCE:
+                return state
+        raise DynamicsError(f"t = {t:.6g} s: more than {ce.MAX_EVENTS_PER_STEP} contact events "
+                            "in one step")
+
+    def _separate(self, t: float, state: SystemState, leaving: np.ndarray) -> None:
+        """Drop ``leaving`` rows from the active set, with their events at ``t``."""
+        leaving = leaving & self.active
+        if not leaving.any():
+            return
+        rows = self.blocks_at(t, state)[1]
+        for b, r in zip(*np.nonzero(leaving), strict=True):
+            self._event(t, "separation", b, r, phi_dot=float(rows.phi_dot[b, r]),
+                        phi_dot_after=float(rows.phi_dot[b, r]))
+        self.active = self.active & ~leaving
+
+    def _impact(self, t: float, state: SystemState, watch: np.ndarray
+                ) -> tuple[SystemState, np.ndarray]:
+        """Apply the impact law at a touchdown, update the active set.
+
+        Returns:
+            The state after the impact and the (B, R) mask of rows that joined the active set.
+        """
+        from multiarm_pin.dynamics.unilateral import solve_impact
+
+        s = self.system
+        full, rows = self.blocks_at(t, state)
+        touching = watch & (rows.phi <= ce.GAP_TOLERANCE)
+        candidates = self.active | touching
+        e = np.where(np.abs(rows.phi_dot) < ce.RESTING_SPEED, 0.0, s.contact_restitution)
+        uni = s.contact_unilateral
+        try:
+            imp = solve_impact(full, uni, candidates, rows.phi_dot, e)
+            for _ in range(3):  # capture rows that would leave slower than RESTING_SPEED
+                slow = (candidates & uni & (imp.phi_dot_plus > ce.REBOUND_SPEED)
+                        & (imp.phi_dot_plus <= ce.RESTING_SPEED))
+                if not slow.any():
+                    break
+                uni = uni & ~slow  # held at φ̇⁺ = 0 by this impact (as bilateral rows)
+                imp = solve_impact(full, uni, candidates, rows.phi_dot, e)
+        except DynamicsError as exc:
+            raise DynamicsError(f"t = {t:.6g} s: impact: {exc}") from exc
+        o = state.obj
+        new = SystemState(state.q, state.v + s.unpad(imp.dqd),
+                          ObjectState(o.position, o.quaternion, o.twist + imp.dv_o))
+        leave = candidates & s.contact_unilateral & (imp.phi_dot_plus > ce.REBOUND_SPEED)
+        for b, r in zip(*np.nonzero(touching), strict=True):
+            self._event(t, "touchdown", b, r, phi_dot=float(rows.phi_dot[b, r]),
+                        phi_dot_after=float(imp.phi_dot_plus[b, r]),
+                        impulse=float(imp.P[b, r]), rebound=bool(leave[b, r]))
+        for b, r in zip(*np.nonzero(self.active & leave), strict=True):
+            self._event(t, "separation", b, r, phi_dot=float(rows.phi_dot[b, r]),
+                        phi_dot_after=float(imp.phi_dot_plus[b, r]),
+                        impulse=float(imp.P[b, r]))
+        joined = touching & ~leave
+        self.active = candidates & ~leave
+        return new, joined
+
+    def blocks_at(self, t: float, state: SystemState):
+        """``(blocks, rows)`` of every contact row at a state, without torques.
+
+        The impact law uses only ``M``, ``W``, ``W_o`` and ``M_o``: no controller call.
+        """
+        s = self.system
+        w = None if self.wrench is None else self.wrench(t)
+        if not s.n_arms:
+            return s.contact_blocks(state, None, None, self.baumgarte, w)
+        ev = s.blocks(state, None, self.baumgarte)
+        return s.contact_blocks(state, ev.blocks, ev.constraints, self.baumgarte, w)
+
