@@ -10,11 +10,12 @@ without materials, so the colours come from elsewhere, in this order of preceden
    ``meshColor``) paints the whole geometry;
 3. a COLLADA (``.dae``) file's own materials: each triangle group (``<triangles>``,
    ``<polylist>``, ``<polygons>``) takes its material's diffuse colour, read with
-   pycollada; the geometry is then the file's as pycollada reads it (node transforms
-   applied, ``meshScale`` applied), after checking that its bounding box is coal's, so
-   the drawn mesh sits where Pinocchio's does. (The points are coal's; the triangles are
-   the file's ``<p>`` lists: coal's loader joins other vertices for about 7 % of the
-   UR5's faces, which showed as ragged wrists.)
+   pycollada (its alpha is the opacity; COLLADA's ``<transparency>``, whose meaning
+   exporters disagree on, is ignored); the geometry is then the file's as pycollada
+   reads it (node transforms applied, ``meshScale`` applied), after checking that its
+   bounding box is coal's, so the drawn mesh sits where Pinocchio's does. (The points
+   are coal's; the triangles are the file's ``<p>`` lists: coal's loader joins other
+   vertices for about 7 % of the UR5's faces, which showed as ragged wrists.)
 4. otherwise (STL, OBJ, a COLLADA file that cannot be read, a textured material), the
    geometry's ``meshColor`` (Pinocchio's default light grey when the URDF names none).
 
@@ -49,8 +50,9 @@ class VisualMesh:
 
     Attributes:
         vertices: (V, 3) float32 vertex positions in the geometry frame, scale applied [m].
-        faces: (F, 3) uint32 vertex indices, counter-clockwise seen from outside; the
-            faces of group ``k`` are rows ``starts[k] : starts[k] + counts[k]``.
+        faces: (F, 3) uint32 vertex indices, in the mesh file's winding (the materials
+            are double-sided); the faces of group ``k`` are rows
+            ``starts[k] : starts[k] + counts[k]``.
         starts: first face of each group.
         counts: number of faces of each group (all positive, summing to F).
         colors: RGBA in [0, 1] of each group, all different.
