@@ -57,7 +57,7 @@ def ur5():
     return erd.load("ur5")
 
 
-def _two_ur5_scene(ur5, seed=0):
+def _two_ur5_scene(ur5, seed=0, color=None):
     rng = np.random.default_rng(seed)
     t = np.linspace(0.0, DURATION, T_SAMPLES)
     q0 = np.array([0.0, -1.2, 1.6, -1.9, -1.57, 0.0])
@@ -65,9 +65,9 @@ def _two_ur5_scene(ur5, seed=0):
     q = q0 + np.sin(np.pi * t)[:, None] * amp
     arms = [
         ReplayArm("left", ur5.model, ur5.visual_model,
-                  pin.SE3(np.eye(3), np.array([0, 0.6, 0])), q),
+                  pin.SE3(np.eye(3), np.array([0, 0.6, 0])), q, color),
         ReplayArm("right", ur5.model, ur5.visual_model,
-                  pin.SE3(pin.rpy.rpyToMatrix(0, 0, np.pi), np.array([0, -0.6, 0])), q),
+                  pin.SE3(pin.rpy.rpyToMatrix(0, 0, np.pi), np.array([0, -0.6, 0])), q, color),
     ]
     position = np.column_stack([0 * t, 0 * t, 0.4 + 0.1 * np.sin(np.pi * t)])
     quaternion = np.array([pin.Quaternion(pin.rpy.rpyToMatrix(0, 0, 0.5 * s)).coeffs()
@@ -189,6 +189,51 @@ def test_arm_without_visual_model_draws_joint_spheres(ur5):
     pin.forwardKinematics(ur5.model, data, q[0])
     _, pos = _track(anim, "arms/bare/joints/elbow_joint", "position")
     np.testing.assert_allclose(pos[0], data.oMi[ur5.model.getJointId("elbow_joint")].translation)
+
+
+def _rgb(color: int) -> np.ndarray:
+    """(3,) RGB in [0, 255] of a three.js colour int 0xRRGGBB."""
+    return np.array([(color >> 16) & 255, (color >> 8) & 255, color & 255])
+
+
+def test_arm_meshes_are_sent_in_their_material_colours(ur5):
+    # UR5: each mesh one binary buffer, one three.js group and Lambert material per COLLADA
+    # material; an explicit arm colour paints everything; the mp6's URDF colours stay.
+    mp6, mp6_visual = pin.buildModelsFromUrdf(str(MP6), str(MP6.parent),
+                                              geometry_types=pin.GeometryType.VISUAL)
+    t = [0.0, 0.1]
+    arms = [ReplayArm("ur5", ur5.model, ur5.visual_model, pin.SE3.Identity(), np.zeros((2, 6))),
+            ReplayArm("painted", ur5.model, ur5.visual_model,
+                      pin.SE3(np.eye(3), np.array([1.0, 0, 0])), np.zeros((2, 6)),
+                      color=(0.2, 0.6, 1.0, 1.0)),
+            ReplayArm("mp6", mp6, mp6_visual, pin.SE3(np.eye(3), np.array([-1.0, 0, 0])),
+                      np.zeros((2, 6)))]
+    window = RecordingWindow()
+    build_animation(Visualizer(window=window), arms, None, None, t)
+    objects = {c["path"]: c["object"] for c in window.commands if c["type"] == "set_object"}
+
+    shoulder = objects["/meshcat/arms/ur5/visuals/shoulder_link_0"]
+    geometry = shoulder["geometries"][0]
+    index = geometry["data"]["index"]
+    assert index["type"] == "Uint16Array"
+    n_index = len(index["array"].data) // 2
+    groups = geometry["data"]["groups"]
+    assert [g["materialIndex"] for g in groups] == [0, 1, 2]
+    assert groups[0]["start"] == 0 and sum(g["count"] for g in groups) == n_index
+    ends = [g["start"] + g["count"] for g in groups]
+    assert ends[:-1] == [g["start"] for g in groups[1:]]  # contiguous
+    assert shoulder["object"]["material"] == [m["uuid"] for m in shoulder["materials"]]
+    # shoulder.dae's diffuse colours: verbindung 0.1784 grey, Scheibe 0.064 grey, blau
+    # (0.3136, 0.4344, 0.512), times 255 and rounded
+    assert sorted(m["color"] for m in shoulder["materials"]) == [0x101010, 0x2D2D2D, 0x506F83]
+
+    for g in ur5.visual_model.geometryObjects:
+        painted = objects[f"/meshcat/arms/painted/visuals/{g.name}"]
+        assert [m["color"] for m in painted["materials"]] == [0x3399FF]
+        assert "groups" not in painted["geometries"][0]["data"]
+    for g in mp6_visual.geometryObjects:
+        (material,) = objects[f"/meshcat/arms/mp6/visuals/{g.name}"]["materials"]
+        np.testing.assert_allclose(_rgb(material["color"]), 255 * g.meshColor[:3], atol=1)
 
 
 # ------------------------------------------------------------------ camera
@@ -360,6 +405,9 @@ def _object_pixels(img: np.ndarray) -> int:
     return int(np.sum((r > g + 40) & (r > b + 15)))
 
 
+LIGHT_GREY = (0.9, 0.9, 0.9, 1.0)
+
+
 def _arm_pixels(img: np.ndarray) -> int:
     """Pixels of the light-grey UR5 meshes: bright and unsaturated (the sky is saturated)."""
     return int(np.sum((img.min(axis=2) > 150) & (img.max(axis=2) - img.min(axis=2) < 40)))
@@ -368,7 +416,10 @@ def _arm_pixels(img: np.ndarray) -> int:
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed "
                     "(apt-get install -y chromium); the browser test needs it")
 def test_page_renders_arms_and_object_in_headless_chromium(ur5, tmp_path):
-    arms, obj, contacts, t = _two_ur5_scene(ur5)
+    # Light-grey arms (Pinocchio's default meshColor, the UR5's look before its COLLADA
+    # materials were used), which _arm_pixels tells from the sky; the UR5's own dark and
+    # blue colours are checked by test_page_shows_the_ur5_in_its_material_colours.
+    arms, obj, contacts, t = _two_ur5_scene(ur5, color=LIGHT_GREY)
     scene = write_replay_html(tmp_path / "scene.html", arms, obj, t, contacts=contacts)
     empty = write_replay_html(tmp_path / "empty.html", [], None, t)
     img = _screenshot(scene, tmp_path / "scene.png", tmp_path / "profile_scene")
@@ -379,6 +430,60 @@ def test_page_renders_arms_and_object_in_headless_chromium(ur5, tmp_path):
     # The empty scene has a few such pixels too (the red x axis, the grid): count the excess.
     assert _object_pixels(img) - _object_pixels(ref) > 5000
     assert _arm_pixels(img) - _arm_pixels(ref) > 5000
+
+
+UR5_CAMERA_TARGET = np.array([0.2, 0.1, 0.35])
+UR5_CAMERA_EYE = UR5_CAMERA_TARGET + np.array([0.55, -0.8, 0.35])
+
+
+def _ur5_screenshot(tmp_path: Path, name: str, arms) -> np.ndarray:
+    """Screenshot of a page with ``arms`` at rest, seen by one fixed camera."""
+    with contextlib.redirect_stdout(io.StringIO()):
+        vis = Visualizer()
+    try:
+        build_animation(vis, arms, None, None, [0.0, 0.1])
+        set_camera(vis, UR5_CAMERA_TARGET, UR5_CAMERA_EYE)
+        html = vis.static_html()
+    finally:
+        close_visualizer(vis)
+    page = tmp_path / f"{name}.html"
+    page.write_text(html, encoding="utf-8")
+    return _screenshot(page, tmp_path / f"{name}.png", tmp_path / f"profile_{name}")
+
+
+def _blue_pixels(img: np.ndarray, mask: np.ndarray) -> int:
+    """Pixels in ``mask`` with chroma max - min > 40 whose strongest channel is blue."""
+    chroma = img.max(axis=2) - img.min(axis=2)
+    return int(np.sum(mask & (chroma > 40) & (img[..., 2] == img.max(axis=2))))
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed "
+                    "(apt-get install -y chromium); the browser test needs it")
+def test_page_shows_the_ur5_in_its_material_colours(ur5, tmp_path):
+    """One UR5 in its COLLADA colours against the same UR5 in light grey, same camera.
+
+    The arm's pixels are those where both pages differ from the page without the arm
+    (the sky is blue, so colour is only looked for there). The UR5's caps are blue
+    (0.3136, 0.4344, 0.512): measured (Chromium 1xx, SwiftShader, 1024 x 768) 3021 blue
+    pixels of chroma > 40 on the coloured arm's 30056 pixels against 276 on the grey arm
+    (anti-aliased edges over the sky); at least 1000 more are required.
+    """
+    q = np.tile([0.0, -1.2, 1.6, -1.9, -1.57, 0.0], (2, 1))
+
+    def arm(color):
+        return [ReplayArm("ur5", ur5.model, ur5.visual_model, pin.SE3.Identity(), q, color)]
+
+    empty = _ur5_screenshot(tmp_path, "empty", [])
+    grey = _ur5_screenshot(tmp_path, "grey", arm(LIGHT_GREY))
+    coloured = _ur5_screenshot(tmp_path, "coloured", arm(None))
+    grey_arm = np.any(np.abs(grey - empty) > 30, axis=2)
+    coloured_arm = np.any(np.abs(coloured - empty) > 30, axis=2)
+    assert _arm_pixels(grey) - _arm_pixels(empty) > 15000  # the grey arm fills the view
+    # the same arm at the same place (dark parts over the dark sky blur the edge a little)
+    assert np.sum(grey_arm ^ coloured_arm) < 0.06 * np.sum(grey_arm)
+    region = grey_arm & coloured_arm
+    blue, blue_in_grey = _blue_pixels(coloured, region), _blue_pixels(grey, region)
+    assert blue - blue_in_grey > 1000, (blue, blue_in_grey, int(region.sum()))
 
 
 def _red_centroid(img: np.ndarray) -> tuple[int, np.ndarray]:

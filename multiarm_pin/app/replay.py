@@ -3,7 +3,9 @@
 The scene has three parts, all animated on one Meshcat timeline:
 
 - ``arms/<name>/visuals/<geometry>``: each arm's visual geometry (real meshes from its
-  URDF, loaded through :class:`pinocchio.visualize.MeshcatVisualizer`), placed at
+  URDF, sent as binary arrays in their materials' colours by
+  :mod:`multiarm_pin.app.replay_meshes`; primitives through
+  :class:`pinocchio.visualize.MeshcatVisualizer`), placed at
   ``base_placement * oMg(q)`` for every frame;
 - ``object``: the manipulated object's polyhedron, a semi-transparent triangle mesh posed
   by its COM position and quaternion ``[x, y, z, w]``;
@@ -35,8 +37,8 @@ import meshcat.animation
 import meshcat.geometry as mg
 import numpy as np
 import pinocchio as pin
-import umsgpack
 
+from multiarm_pin.app.replay_meshes import lambert_material, mesh_object, visual_mesh
 from multiarm_pin.exceptions import InputError
 from multiarm_pin.model.polyhedron import Polyhedron
 from multiarm_pin.spatial import as_array, quaternion_to_rotation
@@ -86,7 +88,8 @@ class ReplayArm:
         base_placement: pose of the model's origin in the world.
         q: (T, nq) joint positions over time [rad or m].
         color: optional RGBA in [0, 1] for all of the arm's geometry; ``None`` keeps each
-            geometry's own colour (``GeometryObject.meshColor``, from the URDF material).
+            geometry's own colours: its URDF material, else its COLLADA file's materials,
+            else ``GeometryObject.meshColor`` (see :mod:`multiarm_pin.app.replay_meshes`).
     """
 
     name: str
@@ -294,54 +297,6 @@ def _rotation_y_to(direction: np.ndarray) -> np.ndarray:
     return np.column_stack([x, y, z])
 
 
-class _CompactMesh(mg.TriangularMeshGeometry):
-    """A triangle mesh whose index buffer is 16-bit when it can be (halves its size)."""
-
-    def lower(self, object_data):
-        out = super().lower(object_data)
-        if len(self.vertices) < 2**16:
-            index = out["data"]["index"]
-            index["type"] = "Uint16Array"  # msgpack extension 0x14 in meshcat's viewer
-            index["array"] = umsgpack.Ext(0x14, self.faces.astype(np.uint16).tobytes("C"))
-        return out
-
-
-def _rgba_to_int(rgba) -> int:
-    r, g, b = (int(round(255 * float(c))) for c in rgba[:3])
-    return (r << 16) + (g << 8) + b
-
-
-def _material(rgba) -> mg.MeshLambertMaterial:
-    opacity = float(rgba[3])
-    return mg.MeshLambertMaterial(color=_rgba_to_int(rgba), transparent=opacity < 1.0,
-                                  opacity=opacity)
-
-
-def _mesh_arrays(geometry_object, cache: dict):
-    """(vertices (V, 3) float32 [m], faces (F, 3)) of a triangle-mesh geometry, or None.
-
-    Meshes are sent as binary arrays rather than as their COLLADA text: a page with two
-    UR5s shrinks from about 19 MB to a few MB. The mesh scale is applied to the vertices.
-    """
-    try:
-        import coal
-    except ImportError:  # pragma: no cover - pinocchio wheels ship coal
-        return None
-    geom = geometry_object.geometry
-    if not isinstance(geom, coal.BVHModelBase) or geom.num_tris == 0:
-        return None
-    scale = np.asarray(geometry_object.meshScale, dtype=float)
-    key = (geometry_object.meshPath, tuple(scale), geom.num_vertices, geom.num_tris)
-    if key not in cache:
-        vertices = (np.asarray(geom.vertices(), dtype=float) * scale).astype(np.float32)
-        faces = np.empty((geom.num_tris, 3), dtype=np.uint32)
-        for k in range(geom.num_tris):
-            tri = geom.tri_indices(k)
-            faces[k] = (tri[0], tri[1], tri[2])
-        cache[key] = (vertices, faces)
-    return cache[key]
-
-
 class _ArmDrawer:
     """Loads one arm's geometry into Meshcat and computes its node poses for a q."""
 
@@ -363,10 +318,9 @@ class _ArmDrawer:
             self.scales = []
             for g in self.geom.geometryObjects:
                 node = viz.getViewerNodeName(g, pin.GeometryType.VISUAL)
-                rgba = arm.color if arm.color is not None else g.meshColor
-                arrays = _mesh_arrays(g, mesh_cache)
-                if arrays is not None:  # scale already applied to the vertices
-                    vis[node].set_object(_CompactMesh(*arrays), _material(rgba))
+                mesh = visual_mesh(g, arm.color, mesh_cache)
+                if mesh is not None:  # scale already applied to the vertices
+                    vis[node].set_object(mesh_object(mesh))
                     self.scales.append(np.ones(3))
                 else:  # primitives and other formats: Pinocchio's own loader
                     viz.loadViewerGeometryObject(g, pin.GeometryType.VISUAL, arm.color)
@@ -379,7 +333,7 @@ class _ArmDrawer:
             self.scales = [np.ones(3)] * len(self.nodes)
             rgba = arm.color if arm.color is not None else (0.55, 0.55, 0.55, 1.0)
             for node in self.nodes:
-                vis[node].set_object(mg.Sphere(0.04), _material(rgba))
+                vis[node].set_object(mg.Sphere(0.04), lambert_material(rgba))
 
     def poses(self, q: np.ndarray) -> list[np.ndarray]:
         """World poses (4, 4), pure rotation + translation, of this arm's nodes at ``q``."""
