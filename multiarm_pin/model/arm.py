@@ -24,11 +24,10 @@ from multiarm_pin.exceptions import (
     FrameNotFoundError,
     InputError,
     JointNotFoundError,
-    RobotNotFoundError,
     SingularityError,
     URDFError,
 )
-from multiarm_pin.model.robots import ROBOTS
+from multiarm_pin.model.robots import ROBOTS, robot_entry
 from multiarm_pin.spatial import as_array
 
 TOOL_FRAME_NAME = "multiarm_tool"
@@ -36,14 +35,6 @@ TOOL_FRAME_NAME = "multiarm_tool"
 
 LAMBDA_CONDITION_LIMIT = 1e10
 """Largest condition number of ``Λ⁻¹`` for which the operational-space inertia ``Λ`` exists."""
-
-ROBOT_DEFAULTS: dict[str, dict] = {
-    e.name: {"tool_frame": e.tool_frame, "locked_joints": e.locked_joints}
-    for e in ROBOTS.values()
-}
-"""Fixed-base arms of ``example_robot_data`` (:data:`multiarm_pin.model.robots.ROBOTS`) with their
-default tool frame and the joints locked at their neutral value (grippers)."""
-
 
 def frame_id(model: pin.Model, name: str, source: str = "") -> int:
     """Id of the frame called ``name``; when several share it, the body frame (then any).
@@ -66,14 +57,12 @@ def frame_id(model: pin.Model, name: str, source: str = "") -> int:
 
 @functools.cache
 def _load_example_robot(robot: str) -> tuple[pin.Model, pin.GeometryModel]:
-    """``example_robot_data.load(robot)``'s model and visual model, loaded once per process.
+    """The registry entry's model and visual model (:meth:`RobotEntry.load`), once per process.
 
     Loading parses the URDF and reads every mesh (seconds for some robots); callers never
     modify the cached objects (reducing and appending them makes copies).
     """
-    import example_robot_data as erd
-
-    wrapper = erd.load(robot)
+    wrapper = robot_entry(robot).load()
     return wrapper.model, wrapper.visual_model
 
 
@@ -109,7 +98,7 @@ def _lock(model: pin.Model, visual, joints, source: str):
 
 def available_robots() -> list[str]:
     """Names accepted by :meth:`Arm.from_robot_name` (fixed-base arms), sorted."""
-    return sorted(ROBOT_DEFAULTS)
+    return sorted(ROBOTS)
 
 
 @dataclass(frozen=True)
@@ -302,9 +291,7 @@ class Arm:
             FrameNotFoundError: ``tool_frame`` missing (the message lists the frames).
             JointNotFoundError: a locked joint is not a joint of the robot (lists them).
         """
-        if robot not in ROBOTS:
-            raise RobotNotFoundError(robot, available_robots())
-        entry = ROBOTS[robot]
+        entry = robot_entry(robot)
         model, visual = _load_example_robot(robot)
         locked = tuple(dict.fromkeys((*entry.locked_joints, *locked_joints)))
         if locked:
