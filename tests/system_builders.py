@@ -15,6 +15,7 @@ from multiarm_pin.constraints import JOINT_TYPES
 from multiarm_pin.model.arm import Arm, load_arm
 from multiarm_pin.model.rigid_object import ObjectState, RigidObject
 from multiarm_pin.model.robots import ROBOTS
+from multiarm_pin.model.sources import load_example_robot
 from multiarm_pin.system import MultiArmSystem, SystemState
 
 Q_NOMINAL = {
@@ -81,8 +82,8 @@ def random_mixed_system(rng, n_arms, gravity=(0.0, 0.0, -9.81)):
 
 def one_dof_arm(name: str, angle: float) -> Arm:
     """A UR5 with all joints but the shoulder pan locked: one joint for six constraints."""
-    entry = ROBOTS["ur5"]  # the raw model: the joints are locked at Q_NOMINAL, not neutral
-    model, tool = entry.load().model, entry.tool_frame
+    # the registry's raw model (loaded once): the joints are locked at Q_NOMINAL, not neutral
+    model, tool = load_example_robot("ur5")[0], ROBOTS["ur5"].tool_frame
     lock = [model.getJointId(j) for j in model.names[2:]]
     reduced = pin.buildReducedModel(model, lock, Q_NOMINAL["ur5"])
     base = pin.SE3(pin.rpy.rpyToMatrix(0, 0, angle + np.pi),
