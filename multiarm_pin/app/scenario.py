@@ -880,7 +880,7 @@ def _solve_arm_ik(scenario, spec: ArmSpec, arm, poly, oMo):
 
 
 def _build_joint(scenario, spec: ArmSpec, arm, obj, q, oMo):
-    from multiarm_pin.constraints import fingertips_on_faces, make_joint, relative_placement
+    from multiarm_pin.constraints import make_joint, relative_placement
 
     key = f"arms[{spec.index}].joint"
     j = spec.joint
@@ -905,8 +905,9 @@ def _build_joint(scenario, spec: ArmSpec, arm, obj, q, oMo):
                         f"fingertip {c.tip!r} touches the plane of face {c.face!r} at "
                         f"{np.round(point, 4).tolist()} (object frame), outside the face")
                 contacts.append((f, point))
-            return fingertips_on_faces(obj.shape, contacts, r, tips, M, name=label, tol=1e-5,
-                                       unilateral=j.params.get("unilateral", True))
+            return make_joint(j.type, polyhedron=obj.shape, contacts=contacts, radius=r,
+                              tip_points_in_tool=tips, tool_in_object=M, name=label, tol=1e-5,
+                              unilateral=j.params.get("unilateral", True))
         if j.placement_in_object is not None:
             return make_joint(j.type, joint_in_object=j.placement_in_object,
                               joint_in_tool=j.placement_in_tool, name=label, **j.params)
