@@ -7,6 +7,7 @@ input (valid names, the shape that was expected, the gap that was measured).
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Sequence
 
 import numpy as np
@@ -31,7 +32,11 @@ class RobotNotFoundError(MultiArmError, KeyError):
     def __init__(self, name: str, available: Sequence[str]):
         self.name = name
         self.available = sorted(available)
-        super().__init__(f"unknown robot {name!r}; available robots: {', '.join(self.available)}")
+        close = difflib.get_close_matches(name, self.available, n=1) if isinstance(name, str) \
+            else []
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        super().__init__(
+            f"unknown robot {name!r}{hint}; available robots: {', '.join(self.available)}")
 
     def __str__(self) -> str:  # KeyError would otherwise quote the message
         return str(self.args[0])

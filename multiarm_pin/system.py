@@ -36,29 +36,21 @@ import pinocchio as pin
 
 from multiarm_pin._compiled import kernels
 from multiarm_pin.constraints import (
-    JOINT_DOF,
+    JOINT_TYPES,
     ConstraintSet,
     ConstraintTerms,
     Joint,
-    fingertips_from_placements,
     make_joint_from_placements,
 )
 from multiarm_pin.constraints.supports import Support, SupportSet
-from multiarm_pin.dynamics import Solution, SystemBlocks, solve
-from multiarm_pin.dynamics.object_first import (
-    DEFAULT_RCOND_TOL,
-    OBJECT_RCOND_TOL,
-    solve_object_first_numpy,
-)
+from multiarm_pin.dynamics import Solution, SystemBlocks, solve, solver_entry
+from multiarm_pin.dynamics.object_first import DEFAULT_RCOND_TOL, OBJECT_RCOND_TOL
 from multiarm_pin.exceptions import ConstraintError, DynamicsError, InputError
 from multiarm_pin.model.arm import Arm
 from multiarm_pin.model.arm_set import ArmSet, ArmSetTerms
 from multiarm_pin.model.kinematics import BodyKinematics
 from multiarm_pin.model.rigid_object import ObjectState, RigidObject
 from multiarm_pin.spatial import as_array, as_se3, cross, se3_to_pose
-
-_COMPILED_SOLVERS = frozenset({"auto", "object_first"})
-"""Solvers that :meth:`MultiArmSystem.forward_dynamics` runs fused with the blocks."""
 
 VELOCITY_TOLERANCE = 1e-6
 """Default largest accepted initial ``|φ̇|`` [m/s] (:meth:`MultiArmSystem.check_initial_state`)."""
@@ -150,10 +142,12 @@ def joints_from_initial_state(
         arms: the n arms.
         obj: the object (its shape is used by fingertip grasps).
         specs: one per arm, each either a ready :class:`Joint`; a joint type name of
-            ``JOINT_DOF`` (``"weld"``, ``"revolute"``, ...; the joint frame is the tool frame at
-            t = 0); a mapping ``{"type": name, **params}`` (extra parameters such as ``size``;
-            for ``"fingertips"``: ``contacts`` = ``[(face, point_in_object), ...]`` and
-            ``radius`` [m]); or a callable ``f(tool_placement, object_placement) -> Joint``.
+            :data:`~multiarm_pin.constraints.JOINT_TYPES` that is placeable (``"weld"``,
+            ``"revolute"``, ...; the joint frame is the tool frame at t = 0); a mapping
+            ``{"type": name, **params}`` (extra parameters such as ``size``; for
+            ``"fingertips"``, given the object's shape: ``contacts`` =
+            ``[(face, point_in_object), ...]`` and ``radius`` [m]); or a callable
+            ``f(tool_placement, object_placement) -> Joint``.
         q0: n initial configurations, ``q0[i]`` of shape (nq_i,).
         object_placement: the object's (COM frame) initial placement in the world,
             ``pin.SE3`` (object axes -> world axes, COM position [m]).
@@ -183,16 +177,12 @@ def joints_from_initial_state(
             params = dict(spec)
             kind = params.pop("type", None)
             params.setdefault("name", f"{arm.name}:{kind}")
-            if kind == "fingertips":
-                joints.append(fingertips_from_placements(obj.shape, tool_placement=oMt,
-                                                         object_placement=oMo, **params))
-            elif kind in JOINT_DOF:
+            if kind in JOINT_TYPES and JOINT_TYPES[kind].from_contacts:
+                params.setdefault("polyhedron", obj.shape)
+            try:
                 joints.append(make_joint_from_placements(kind, oMt, oMo, **params))
-            else:
-                raise ConstraintError(
-                    f"arm {i} ({arm.name}): joint type {kind!r} cannot be built from the "
-                    f"initial state; known: {', '.join(sorted([*JOINT_DOF, 'fingertips']))}"
-                )
+            except ConstraintError as exc:
+                raise ConstraintError(f"arm {i} ({arm.name}): {exc}") from exc
         elif callable(spec):
             joints.append(spec(oMt, oMo))
         else:
@@ -697,10 +687,11 @@ class MultiArmSystem:
             DynamicsError: NaN in the state, or no solution (inconsistent constraints).
             InputError: unknown solver (lists the known ones).
         """
-        if solver in _COMPILED_SOLVERS:  # blocks and solve in one compiled call
+        entry = solver_entry(solver)
+        if entry.compiled:  # blocks and solve in one compiled call
             ev, sol = self._compiled(state, tau, baumgarte, True)
-            if sol is None:  # doubtful case: the numpy solver decides, falls back or raises
-                sol = solve_object_first_numpy(ev.blocks, fallback=solver == "auto")
+            if sol is None:  # doubtful case: the numpy reference decides, falls back or raises
+                sol = entry.function(ev.blocks, compiled=False)
             return sol, ev
         ev = self.blocks(state, tau, baumgarte)
         return solve(ev.blocks, solver), ev

@@ -11,9 +11,11 @@ from functools import cache
 import numpy as np
 import pinocchio as pin
 
-from multiarm_pin.constraints import JOINT_DOF
-from multiarm_pin.model.arm import ROBOT_DEFAULTS, Arm
+from multiarm_pin.constraints import JOINT_TYPES
+from multiarm_pin.model.arm import Arm, load_arm
 from multiarm_pin.model.rigid_object import ObjectState, RigidObject
+from multiarm_pin.model.robots import ROBOTS
+from multiarm_pin.model.sources import load_example_robot
 from multiarm_pin.system import MultiArmSystem, SystemState
 
 Q_NOMINAL = {
@@ -22,29 +24,17 @@ Q_NOMINAL = {
 }
 BOX_SIZE = (0.4, 0.3, 0.2)
 FINGERTIP_CONTACTS = [("+x", [0.2, 0.05, 0.03]), ("-x", [-0.2, -0.1, 0.0]), ("+z", [0.1, 0.1, 0.1])]
-JOINT_KINDS = sorted(JOINT_DOF) + ["fingertips"]
-
-
-@cache
-def robot_model(robot: str) -> tuple[pin.Model, str]:
-    """The example-robot-data model (Panda fingers locked) and its tool frame, loaded once."""
-    import example_robot_data as erd
-
-    model = erd.load(robot).model
-    defaults = ROBOT_DEFAULTS[robot]
-    locked = [model.getJointId(j) for j in defaults.get("locked_joints", ())]
-    if locked:
-        model = pin.buildReducedModel(model, locked, pin.neutral(model))
-    return model, defaults["tool_frame"]
+JOINT_KINDS = sorted(k for k, e in JOINT_TYPES.items() if e.placeable and not e.from_contacts) + [
+    "fingertips"]
+"""Placeable joint types, framed ones sorted then fingertips (the order seeded draws use)."""
 
 
 @cache
 def make_arm(robot: str, name: str, angle: float, radius: float = 0.9) -> Arm:
-    """An arm on a circle of ``radius`` around the origin, facing it."""
+    """An arm on a circle of ``radius`` around the origin, facing it (the public loader)."""
     base = pin.SE3(pin.rpy.rpyToMatrix(0, 0, angle + np.pi),
                    np.array([radius * np.cos(angle), radius * np.sin(angle), 0.0]))
-    model, tool = robot_model(robot)
-    return Arm.from_model(model, tool, name=name, base_placement=base, source=robot)
+    return load_arm(robot, name=name, base_placement=base, load_visuals=False)
 
 
 def joint_spec(kind: str):
@@ -92,7 +82,8 @@ def random_mixed_system(rng, n_arms, gravity=(0.0, 0.0, -9.81)):
 
 def one_dof_arm(name: str, angle: float) -> Arm:
     """A UR5 with all joints but the shoulder pan locked: one joint for six constraints."""
-    model, tool = robot_model("ur5")
+    # the registry's raw model (loaded once): the joints are locked at Q_NOMINAL, not neutral
+    model, tool = load_example_robot("ur5")[0], ROBOTS["ur5"].tool_frame
     lock = [model.getJointId(j) for j in model.names[2:]]
     reduced = pin.buildReducedModel(model, lock, Q_NOMINAL["ur5"])
     base = pin.SE3(pin.rpy.rpyToMatrix(0, 0, angle + np.pi),

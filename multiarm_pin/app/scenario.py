@@ -29,19 +29,21 @@ object, the controller and the simulation settings (format in the README and iss
 
 The object may carry ``external_wrench: [{from: s, to: s, wrench: [fx, fy, fz, mx, my,
 mz]}]`` (at the COM, world axes [N, N m], over each interval). A joint may say ``unilateral:
-true/false`` to override its contacts' default (fingertip ``contacts`` push only; the
-mechanical joints are bilateral). ``arms`` may be empty when there are supports.
+true/false`` to override its contacts' default (``fingertips`` and ``corner_gripper`` push
+only; the mechanical joints are bilateral). ``arms`` may be empty when there are supports.
 
-Joint types: ``weld``, ``revolute``, ``prismatic``, ``cylindrical``, ``universal``,
-``spherical`` (parameters ``size``, ``tip_radius``, ``points_on``, and optionally
-``placement_in_object`` / ``placement_in_tool`` of the joint frame), and ``contacts``
-(spherical fingertips on named faces: ``tip_radius`` and ``contacts: [{tip: frame, face:
-+x, point: [..]}, ...]``). Without ``placement_in_object`` a joint is built where the tool is
-at ``q0``. Without ``q0`` the arm is placed by inverse kinematics (:mod:`multiarm_pin.model.ik`)
-from ``q_seed``, meeting only what the joint constrains (the centre of a spherical joint;
-centre and axis of a revolute one; axis and line of a cylindrical one; the full placement
-of weld, prismatic and universal joints; each fingertip touching its face, as near to the
-given point as the gripper allows), near the seed.
+Joint types (the placeable entries of :data:`~multiarm_pin.constraints.JOINT_TYPES`):
+``weld``, ``revolute``, ``prismatic``, ``cylindrical``, ``universal``, ``spherical``,
+``corner_gripper`` (parameters ``size``, ``tip_radius``, ``points_on`` (not for
+``corner_gripper``), and optionally ``placement_in_object`` / ``placement_in_tool`` of the
+joint frame), and ``fingertips`` (spherical fingertips on named faces: ``tip_radius`` and
+``contacts: [{tip: frame, face: +x, point: [..]}, ...]``; the old name ``contacts`` is still
+read, with a deprecation warning). Without ``placement_in_object`` a joint is built where
+the tool is at ``q0``. Without ``q0`` the arm is placed by inverse kinematics
+(:mod:`multiarm_pin.model.ik`) from ``q_seed``, meeting only what the joint constrains (the
+centre of a spherical joint; centre and axis of a revolute one; axis and line of a
+cylindrical one; the full placement of weld, prismatic and universal joints; each fingertip
+touching its face, as near to the given point as the gripper allows), near the seed.
 
 Files are read strictly (:mod:`multiarm_pin.app.yaml_strict`: UTF-8, no duplicate keys). Every
 error is a :class:`~multiarm_pin.exceptions.ScenarioError` naming the file, the key path
@@ -52,6 +54,7 @@ error is a :class:`~multiarm_pin.exceptions.ScenarioError` naming the file, the 
 from __future__ import annotations
 
 import difflib
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -59,6 +62,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from multiarm_pin.constraints.joint_types import JOINT_TYPES
 from multiarm_pin.dynamics import SOLVERS
 from multiarm_pin.exceptions import (
     FrameNotFoundError,
@@ -68,17 +72,19 @@ from multiarm_pin.exceptions import (
     ScenarioError,
     URDFError,
 )
+from multiarm_pin.sim.controllers import CONTROLLERS
+from multiarm_pin.sim.simulation import INTEGRATORS
 
-PLACED_JOINT_TYPES = ("weld", "revolute", "prismatic", "cylindrical", "universal", "spherical")
-"""Joint types defined by a joint frame (placed in the object and in the tool)."""
-JOINT_TYPE_NAMES = (*PLACED_JOINT_TYPES, "contacts")
-"""Every joint type a scenario may name."""
-CONTROLLER_TYPES = ("none", "gravity_compensation", "joint_pd", "object_pd")
-"""Controller types a scenario may name."""
-INTEGRATORS = ("rk45", "rk4", "semi_implicit")
-"""Integrators a scenario may name."""
-SOLVER_NAMES = tuple(SOLVERS)  # auto | object_first | dense_kkt | singular | object_first_numpy
-"""Forward-dynamics solvers a scenario may name."""
+JOINT_TYPE_NAMES = tuple(k for k, e in JOINT_TYPES.items() if e.placeable)
+"""Joint types a scenario may name: the placeable entries of the registry (not ``custom``)."""
+DEPRECATED_JOINT_TYPES = {"contacts": "fingertips"}
+"""Old joint type names still read (with a warning), and the name that replaced them."""
+CONTROLLER_TYPES = tuple(CONTROLLERS)
+"""Controller types a scenario may name (:data:`multiarm_pin.sim.controllers.CONTROLLERS`)."""
+INTEGRATOR_NAMES = tuple(INTEGRATORS)
+"""Integrators a scenario may name (:data:`multiarm_pin.sim.simulation.INTEGRATORS`)."""
+SOLVER_NAMES = tuple(SOLVERS)
+"""Forward-dynamics solvers a scenario may name (:data:`multiarm_pin.dynamics.SOLVERS`)."""
 INITIAL_GAP_TOLERANCE = 1e-6
 """Largest gap [m] of any contact in the initial state."""
 
@@ -140,7 +146,7 @@ class SupportSpec:
 
 @dataclass(frozen=True)
 class ContactSpec:
-    """One fingertip contact of a ``contacts`` joint.
+    """One fingertip contact of a ``fingertips`` joint.
 
     Attributes:
         tip: frame name of the fingertip's sphere centre in the arm's model.
@@ -163,7 +169,7 @@ class JointSpec:
         params: extra parameters of the joint library (``size``, ``tip_radius``, ...).
         placement_in_object: joint frame in the object frame, or None (tool at ``q0``).
         placement_in_tool: joint frame in the tool frame, or None (identity).
-        contacts: fingertip contacts (``contacts`` type only).
+        contacts: fingertip contacts (``fingertips`` type only).
     """
 
     type: str
@@ -219,7 +225,7 @@ class SimulationSpec:
     """Simulation settings.
 
     Attributes:
-        duration: [s]. integrator: one of :data:`INTEGRATORS`. dt: step and output sampling
+        duration: [s]. integrator: one of :data:`INTEGRATOR_NAMES`. dt: step and output sampling
         period [s]. solver: one of :data:`SOLVER_NAMES`. baumgarte: ``(α, β)`` [1/s].
     """
 
@@ -554,7 +560,8 @@ def _parse_arm(r: _Reader, index: int, base_dir: Path) -> ArmSpec:
     q_seed = r.get("q_seed").array((None,), "joint positions [rad]") if "q_seed" in d else None
     v0 = r.get("v0").array((None,), "joint velocities [rad/s]") if "v0" in d else None
     joint = _parse_joint(r.get("joint"))
-    if q0 is None and joint.placement_in_object is None and joint.type != "contacts":
+    if q0 is None and joint.placement_in_object is None and \
+            not JOINT_TYPES[joint.type].from_contacts:
         raise r.error(
             "give q0, or place the joint in the object (joint.placement_in_object) so that "
             "inverse kinematics can put the arm there", f"{r.path}.q0")
@@ -564,7 +571,12 @@ def _parse_arm(r: _Reader, index: int, base_dir: Path) -> ArmSpec:
 
 def _parse_joint(r: _Reader) -> JointSpec:
     d = r.mapping(_JOINT_KEYS, required=("type",))
-    kind = r.get("type").string(JOINT_TYPE_NAMES)
+    kind = r.get("type").string((*JOINT_TYPE_NAMES, *DEPRECATED_JOINT_TYPES))
+    if kind in DEPRECATED_JOINT_TYPES:
+        kind = DEPRECATED_JOINT_TYPES[kind]
+        warnings.warn(f"{r.file}: {r.path}.type: {r.value['type']!r} is deprecated; write "
+                      f"{kind!r}", FutureWarning, stacklevel=2)
+    fingertips = JOINT_TYPES[kind].from_contacts
     params = {}
     if "unilateral" in d:
         if not isinstance(d["unilateral"], bool):
@@ -575,14 +587,14 @@ def _parse_joint(r: _Reader) -> JointSpec:
         if key in d:
             params[key] = r.get(key).number(positive=(key == "size"), nonnegative=True)
     if "points_on" in d:
-        if kind == "contacts":
-            raise r.get("points_on").error("not a parameter of 'contacts' joints")
+        if "points_on" not in JOINT_TYPES[kind].parameters:
+            raise r.get("points_on").error(f"not a parameter of {kind!r} joints")
         params["points_on"] = r.get("points_on").string(("tool", "object"))
-    if kind == "contacts":
+    if fingertips:
         for key in ("placement_in_object", "placement_in_tool", "size"):
             if key in d:
                 raise r.get(key).error(
-                    "not a parameter of 'contacts' joints (expected contacts, tip_radius)")
+                    f"not a parameter of {kind!r} joints (expected contacts, tip_radius)")
         if "contacts" not in d:
             raise r.error("missing required key 'contacts' (list of {tip, face, point})",
                           f"{r.path}.contacts")
@@ -602,7 +614,7 @@ def _parse_joint(r: _Reader) -> JointSpec:
             contacts.append(ContactSpec(cc.get("tip").string(), face, point))
         return JointSpec(kind, params, contacts=tuple(contacts))
     if "contacts" in d:
-        raise r.get("contacts").error(f"only 'contacts' joints take contacts, not {kind!r}")
+        raise r.get("contacts").error(f"only 'fingertips' joints take contacts, not {kind!r}")
     J_o = r.get("placement_in_object").placement() if "placement_in_object" in d else None
     J_t = r.get("placement_in_tool").placement() if "placement_in_tool" in d else None
     return JointSpec(kind, params, J_o, J_t)
@@ -610,12 +622,7 @@ def _parse_joint(r: _Reader) -> JointSpec:
 
 def _controller_keys(kind: str) -> tuple[str, ...]:
     """Keyword parameters accepted by the controller class of ``kind`` (besides system)."""
-    import inspect
-
-    from multiarm_pin.sim.controllers import CONTROLLERS
-
-    sig = inspect.signature(CONTROLLERS[kind].__init__)
-    return tuple(p for p in sig.parameters if p not in ("self", "system"))
+    return CONTROLLERS[kind].parameters
 
 
 def _parse_controller(r: _Reader, obj: ObjectSpec) -> ControllerSpec:
@@ -630,9 +637,7 @@ def _parse_controller(r: _Reader, obj: ObjectSpec) -> ControllerSpec:
     if "type" not in r.value:
         raise r.error("missing required key 'type'", f"{r.path}.type")
     kind = r.get("type").string(CONTROLLER_TYPES)
-    allowed = ("type", *_controller_keys(kind))
-    if kind == "object_pd":
-        allowed = (*allowed, "waypoints")
+    allowed = ("type", *_controller_keys(kind))  # object_pd's include waypoints
     d = r.mapping(allowed)
     params = {k: v for k, v in d.items() if k not in ("type", "waypoints")}
     if "waypoints" in d:
@@ -667,7 +672,8 @@ def _parse_simulation(r: _Reader) -> SimulationSpec:
     d = r.mapping(_SIM_KEYS)
     s = SimulationSpec()
     duration = r.get("duration").number(positive=True) if "duration" in d else s.duration
-    integrator = r.get("integrator").string(INTEGRATORS) if "integrator" in d else s.integrator
+    integrator = (r.get("integrator").string(INTEGRATOR_NAMES) if "integrator" in d
+                  else s.integrator)
     dt = r.get("dt").number(positive=True) if "dt" in d else s.dt
     solver = r.get("solver").string(SOLVER_NAMES) if "solver" in d else s.solver
     baum = s.baumgarte
@@ -854,7 +860,7 @@ def _solve_arm_ik(scenario, spec: ArmSpec, arm, poly, oMo):
     if seed is not None and len(seed) != arm.nq:
         raise ScenarioError(scenario.file, f"arms[{spec.index}].q_seed",
                             f"expected {arm.nq} numbers (nq of {arm.source}), got {len(seed)}")
-    if spec.joint.type == "contacts":
+    if JOINT_TYPES[spec.joint.type].from_contacts:
         targets = _contact_targets(scenario, spec, poly, oMo)
         what = f"arm {spec.name!r}: fingertips on faces"
         key = f"arms[{spec.index}].joint.contacts"
@@ -874,13 +880,13 @@ def _solve_arm_ik(scenario, spec: ArmSpec, arm, poly, oMo):
 
 
 def _build_joint(scenario, spec: ArmSpec, arm, obj, q, oMo):
-    from multiarm_pin.constraints import fingertips_on_faces, make_joint, relative_placement
+    from multiarm_pin.constraints import make_joint, relative_placement
 
     key = f"arms[{spec.index}].joint"
     j = spec.joint
     label = f"{spec.name}:{j.type}"
     try:
-        if j.type == "contacts":
+        if JOINT_TYPES[j.type].from_contacts:
             tips = _tips_in_tool(scenario, spec, arm)
             M = relative_placement(arm.tool_placement(q), oMo)
             r = j.params.get("tip_radius", 0.0)
@@ -899,8 +905,9 @@ def _build_joint(scenario, spec: ArmSpec, arm, obj, q, oMo):
                         f"fingertip {c.tip!r} touches the plane of face {c.face!r} at "
                         f"{np.round(point, 4).tolist()} (object frame), outside the face")
                 contacts.append((f, point))
-            return fingertips_on_faces(obj.shape, contacts, r, tips, M, name=label, tol=1e-5,
-                                       unilateral=j.params.get("unilateral", True))
+            return make_joint(j.type, polyhedron=obj.shape, contacts=contacts, radius=r,
+                              tip_points_in_tool=tips, tool_in_object=M, name=label, tol=1e-5,
+                              unilateral=j.params.get("unilateral", True))
         if j.placement_in_object is not None:
             return make_joint(j.type, joint_in_object=j.placement_in_object,
                               joint_in_tool=j.placement_in_tool, name=label, **j.params)
@@ -941,7 +948,7 @@ def build_scenario(scenario: Scenario, load_visuals: bool = True) -> BuiltScenar
     for spec in scenario.arms:
         arm = build_arm(scenario, spec, load_visuals)
         key = f"arms[{spec.index}]"
-        if spec.joint.type == "contacts":
+        if JOINT_TYPES[spec.joint.type].from_contacts:
             _tips_in_tool(scenario, spec, arm)  # fingertip frames exist (did-you-mean)
         if spec.q0 is not None:
             if len(spec.q0) != arm.nq:
@@ -1031,9 +1038,9 @@ def _check_support_gaps(scenario: Scenario, system, state) -> None:
 
 __all__ = [
     "CONTROLLER_TYPES",
-    "INTEGRATORS",
+    "DEPRECATED_JOINT_TYPES",
+    "INTEGRATOR_NAMES",
     "JOINT_TYPE_NAMES",
-    "PLACED_JOINT_TYPES",
     "SOLVER_NAMES",
     "ArmSpec",
     "BuiltScenario",

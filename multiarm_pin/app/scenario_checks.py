@@ -108,7 +108,7 @@ def input_warnings(built, duration: float) -> list[str]:
     shape = built.obj.shape
     for spec in sc.arms:
         J_o = spec.joint.placement_in_object
-        if J_o is None or spec.joint.type == "contacts":
+        if J_o is None or spec.joint.type == "fingertips":
             continue
         p = J_o.translation
         depth = -float(np.max(shape.normals @ p - shape.offsets))

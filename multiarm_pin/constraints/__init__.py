@@ -6,18 +6,20 @@ frames follow docs/ARCHITECTURE.md. The hot path is :class:`ConstraintSet.evalua
 
 from multiarm_pin.constraints.constraint_set import ConstraintSet, ConstraintTerms
 from multiarm_pin.constraints.contact import Contact, ContactState
+from multiarm_pin.constraints.fingertips import fingertips_from_placements, fingertips_on_faces
 from multiarm_pin.constraints.joint import TWIST_NAMES, Joint, JointTerms
-from multiarm_pin.constraints.library import (
-    JOINT_DOF,
+from multiarm_pin.constraints.joint_types import (
     JOINT_TYPES,
+    JointType,
+    joint_type,
+    make_joint,
+    make_joint_from_placements,
+)
+from multiarm_pin.constraints.library import (
     as_placement,
     corner_gripper,
     custom,
     cylindrical,
-    fingertips_from_placements,
-    fingertips_on_faces,
-    make_joint,
-    make_joint_from_placements,
     prismatic,
     relative_placement,
     revolute,
@@ -30,7 +32,6 @@ from multiarm_pin.constraints.supports import Support, SupportSet, SupportTerms
 from multiarm_pin.constraints.surfaces import Cylinder, Plane, Sphere, Surface, make_surface
 
 __all__ = [
-    "JOINT_DOF",
     "JOINT_TYPES",
     "TWIST_NAMES",
     "ConstraintSet",
@@ -40,6 +41,7 @@ __all__ = [
     "Cylinder",
     "Joint",
     "JointTerms",
+    "JointType",
     "Plane",
     "Sphere",
     "Support",
@@ -52,6 +54,7 @@ __all__ = [
     "cylindrical",
     "fingertips_from_placements",
     "fingertips_on_faces",
+    "joint_type",
     "make_joint",
     "make_joint_from_placements",
     "make_surface",

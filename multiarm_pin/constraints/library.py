@@ -16,6 +16,10 @@ default); the two coincide when the joint is assembled. In J:
 - corner gripper (Example 3.1): J at a corner of a box occupying x, y, z <= 0; contacts 1 and
   3 on the face z = 0, 2 on y = 0, 4 on x = 0; 2 DOF.
 
+Fingertip grasps (no joint frame) are in :mod:`multiarm_pin.constraints.fingertips`; the
+registry of every joint type, and :func:`make_joint`, in
+:mod:`multiarm_pin.constraints.joint_types`.
+
 By default the tips are on the tool and the surfaces on the object (``points_on="tool"``).
 ``size`` [m] is the joint's characteristic length (lever arms of its contacts), ``tip_radius``
 [m] the radius of the tips. Placements are ``pin.SE3``, 4x4 matrices, or mappings with
@@ -24,7 +28,7 @@ By default the tips are on the tool and the surfaces on the object (``points_on=
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -33,7 +37,6 @@ from multiarm_pin.constraints.contact import POINT_ON, Contact
 from multiarm_pin.constraints.joint import Joint
 from multiarm_pin.constraints.surfaces import Cylinder, Plane, Sphere, Surface, make_surface
 from multiarm_pin.exceptions import ConstraintError, InputError
-from multiarm_pin.model.polyhedron import Polyhedron
 from multiarm_pin.spatial import as_array, se3_from
 
 DEFAULT_SIZE = 0.05
@@ -318,122 +321,6 @@ def corner_gripper(joint_in_object, joint_in_tool=None, points=None, size: float
                   name, alpha_rows, unilateral)
 
 
-def fingertips_on_faces(
-    polyhedron: Polyhedron,
-    contacts: Sequence[tuple[int | str, Sequence[float]]],
-    radius: float,
-    tip_points_in_tool,
-    tool_in_object=None,
-    name: str = "",
-    tol: float = 1e-6,
-    unilateral: bool = True,
-) -> Joint:
-    """Spherical fingertips of one arm's tool touching faces of a polyhedral object.
-
-    Args:
-        polyhedron: the object's shape in the object (COM) frame.
-        contacts: ``[(face, point_in_object), ...]``: face index or name, and the contact
-            point (3,) on that face in the object frame [m].
-        radius: fingertip radius [m] (0 for sharp points).
-        tip_points_in_tool: (n, 3) fingertip centres in the tool frame [m].
-        tool_in_object: the tool's placement in the object frame at assembly; fitted to the
-            tips (least squares rigid fit) when None.
-        name: label.
-        tol: largest mismatch [m] between the tips and the contact points.
-        unilateral: fingertips on faces only push (True, the default); False holds them as
-            bilateral rows.
-
-    Raises:
-        ConstraintError: a point off its face, a count mismatch, or tips that no rigid
-            placement of the tool brings onto the contact points.
-    """
-    try:
-        tips = as_array(tip_points_in_tool, (None, 3), "tip_points_in_tool")
-    except InputError as exc:
-        raise ConstraintError(str(exc)) from exc
-    centres, planes = _face_contacts(polyhedron, contacts, radius, tol)
-    if len(tips) != len(centres):
-        raise ConstraintError(
-            f"fingertips_on_faces: {len(centres)} contacts but {len(tips)} tip points"
-        )
-    if tool_in_object is None:
-        M = _rigid_fit(tips, centres)
-    else:
-        M = as_placement(tool_in_object, "tool_in_object")
-    contact_list = [
-        Contact(point=t, surface=pl, radius=float(radius), point_on="tool", name=f"tip[{k}]",
-                unilateral=bool(unilateral))
-        for k, (t, pl) in enumerate(zip(tips, planes, strict=True))
-    ]
-    try:
-        return Joint(contact_list, M, kind="fingertips", name=name or "fingertips",
-                     gap_tolerance=tol)
-    except ConstraintError as exc:
-        raise ConstraintError(f"fingertips_on_faces: tips do not match the points: {exc}") from exc
-
-
-def fingertips_from_placements(polyhedron: Polyhedron, contacts, radius: float, tool_placement,
-                               object_placement, name: str = "", tol: float = 1e-6,
-                               unilateral: bool = True) -> Joint:
-    """Fingertips placed where they are at t = 0 (tips computed from the initial placements).
-
-    Args:
-        polyhedron: the object's shape in the object (COM) frame.
-        contacts: ``[(face, point_in_object), ...]`` as in :func:`fingertips_on_faces`.
-        radius: fingertip radius [m].
-        tool_placement: tool world placement at t = 0.
-        object_placement: object (COM frame) world placement at t = 0.
-        name: label.
-        tol: tolerance [m] for points on faces.
-        unilateral: as in :func:`fingertips_on_faces`.
-    """
-    M = relative_placement(tool_placement, object_placement)
-    centres, _ = _face_contacts(polyhedron, contacts, radius, tol)
-    tips = np.array([M.actInv(c) for c in centres])
-    return fingertips_on_faces(polyhedron, contacts, radius, tips, M, name, tol, unilateral)
-
-
-def _face_contacts(polyhedron, contacts, radius, tol):
-    r = float(radius)
-    if not np.isfinite(r) or r < 0:
-        raise ConstraintError(f"fingertip radius must be >= 0 [m], got {radius!r}")
-    if len(contacts) == 0:
-        raise ConstraintError("fingertips_on_faces: needs at least one (face, point) contact")
-    centres, planes = [], []
-    for k, item in enumerate(contacts):
-        try:
-            face, point = item
-        except (TypeError, ValueError) as exc:
-            raise ConstraintError(
-                f"fingertip contact {k}: expected (face, point_in_object), got {item!r}"
-            ) from exc
-        try:
-            f = polyhedron.face_index(face)
-            p = as_array(point, (3,), f"fingertip contact {k} point")
-        except InputError as exc:
-            raise ConstraintError(f"fingertip contact {k}: {exc}") from exc
-        if not polyhedron.point_on_face(p, f, tol):
-            raise ConstraintError(
-                f"fingertip contact {k}: point {p.tolist()} is not on face {face!r} "
-                f"(distance to its plane {polyhedron.signed_distance_to_face(p, f):.3g} m, "
-                f"tolerance {tol:g} m) or lies outside the polyhedron"
-            )
-        n = polyhedron.normals[f]
-        centres.append(p + r * n)
-        planes.append(Plane(p, n))
-    return np.array(centres), planes
-
-
-def _rigid_fit(tips_in_tool: np.ndarray, centres_in_object: np.ndarray) -> pin.SE3:
-    """Least-squares placement M (tool in object) with ``M * tips ≈ centres`` (Kabsch)."""
-    a0, b0 = tips_in_tool.mean(axis=0), centres_in_object.mean(axis=0)
-    H = (tips_in_tool - a0).T @ (centres_in_object - b0)
-    U, _, Vt = np.linalg.svd(H)
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
-    R = Vt.T @ D @ U.T
-    return pin.SE3(R, b0 - R @ a0)
-
-
 def custom(contacts: Sequence[Mapping], joint_in_object, joint_in_tool=None,
            expected_dof: int | None = None, name: str = "", alpha_rows=None,
            unilateral: bool = False) -> Joint:
@@ -476,87 +363,12 @@ def custom(contacts: Sequence[Mapping], joint_in_object, joint_in_tool=None,
                  expected_dof=expected_dof, alpha_rows=alpha_rows)
 
 
-JOINT_TYPES: dict[str, Callable[..., Joint]] = {
-    "weld": weld,
-    "revolute": revolute,
-    "prismatic": prismatic,
-    "cylindrical": cylindrical,
-    "universal": universal,
-    "spherical": spherical,
-    "corner_gripper": corner_gripper,
-    "fingertips": fingertips_on_faces,
-    "custom": custom,
-}
-"""Joint constructors by type name (``make_joint``)."""
-
-JOINT_DOF = {"weld": 0, "revolute": 1, "prismatic": 1, "cylindrical": 2, "universal": 2,
-             "spherical": 3, "corner_gripper": 2}
-"""Degrees of freedom of each fixed-structure joint type."""
-
-
-def make_joint(kind: str, **params) -> Joint:
-    """Build a joint by type name from plain parameters (e.g. read from YAML).
-
-    Args:
-        kind: one of ``JOINT_TYPES``.
-        **params: the keyword arguments of that constructor.
-
-    Raises:
-        ConstraintError: unknown type (the message lists the known ones), or bad parameters.
-    """
-    if kind not in JOINT_TYPES:
-        raise ConstraintError(
-            f"unknown joint type {kind!r}; known types: {', '.join(sorted(JOINT_TYPES))}"
-        )
-    try:
-        return JOINT_TYPES[kind](**params)
-    except TypeError as exc:
-        raise ConstraintError(f"joint {kind!r}: bad parameters {sorted(params)}: {exc}") from exc
-
-
-def make_joint_from_placements(kind: str, tool_placement, object_placement, **params) -> Joint:
-    """A joint whose frame J is the tool frame at t = 0 (the tool is where it is).
-
-    Args:
-        kind: a type of ``JOINT_DOF`` (weld, revolute, ...) or ``"fingertips"``.
-        tool_placement: tool world placement ``oMtool`` at t = 0.
-        object_placement: object (COM frame) world placement ``oMobject`` at t = 0.
-        **params: other parameters of that type (``size``, ``tip_radius``, ...; for
-            fingertips ``polyhedron``, ``contacts``, ``radius`` as in
-            :func:`fingertips_from_placements`).
-
-    Raises:
-        ConstraintError: unknown type or bad parameters.
-    """
-    if kind == "fingertips":
-        try:
-            return fingertips_from_placements(
-                tool_placement=tool_placement, object_placement=object_placement, **params
-            )
-        except TypeError as exc:
-            raise ConstraintError(f"joint 'fingertips': bad parameters {sorted(params)}: {exc}") \
-                from exc
-    if kind not in JOINT_DOF:
-        raise ConstraintError(
-            f"make_joint_from_placements: unknown joint type {kind!r}; known types: "
-            f"{', '.join(sorted(JOINT_DOF) + ['fingertips'])}"
-        )
-    M = relative_placement(tool_placement, object_placement)
-    return make_joint(kind, joint_in_object=M, joint_in_tool=None, **params)
-
-
 __all__ = [
     "DEFAULT_SIZE",
-    "JOINT_DOF",
-    "JOINT_TYPES",
     "as_placement",
     "corner_gripper",
     "custom",
     "cylindrical",
-    "fingertips_from_placements",
-    "fingertips_on_faces",
-    "make_joint",
-    "make_joint_from_placements",
     "prismatic",
     "relative_placement",
     "revolute",

@@ -26,7 +26,7 @@ from multiarm_pin.dynamics.object_first import (
     solve_object_first_numpy,
 )
 from multiarm_pin.dynamics.singular import solve_singular
-from multiarm_pin.dynamics.solve import SOLVERS, solve
+from multiarm_pin.dynamics.solve import SOLVERS, SolverEntry, solve, solve_auto, solver_entry
 from multiarm_pin.dynamics.unilateral import (
     ContactResiduals,
     ContactSolution,
@@ -50,6 +50,7 @@ __all__ = [
     "InverseDynamicsResult",
     "Residuals",
     "Solution",
+    "SolverEntry",
     "SystemBlocks",
     "assemble_kkt",
     "constraint_jacobian",
@@ -61,10 +62,12 @@ __all__ = [
     "reduce_arms",
     "redundant_constraints",
     "solve",
+    "solve_auto",
     "solve_dense_kkt",
     "solve_impact",
     "solve_object_first",
     "solve_object_first_numpy",
     "solve_singular",
     "solve_unilateral",
+    "solver_entry",
 ]

@@ -7,13 +7,15 @@ gravity acts in the right direction. The tool frame is an operational frame adde
 (``<tool_frame>`` plus an optional fixed offset), so tool placements, twists, Jacobians and
 accelerations all come from Pinocchio's own algorithms.
 
+Where the models come from (the robot registry, URDF files, locking joints, frame look-up) is
+:mod:`multiarm_pin.model.sources`.
+
 For a state ``(q, v)`` :meth:`Arm.terms` computes, once, everything the dynamics needs
 (:class:`ArmTerms`). To evaluate many arms at once use :class:`multiarm_pin.model.arm_set.ArmSet`.
 """
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -23,12 +25,17 @@ import pinocchio as pin
 from multiarm_pin.exceptions import (
     FrameNotFoundError,
     InputError,
-    JointNotFoundError,
-    RobotNotFoundError,
     SingularityError,
     URDFError,
 )
-from multiarm_pin.model.robots import ROBOTS
+from multiarm_pin.model.robots import ROBOTS, robot_entry
+from multiarm_pin.model.sources import (
+    frame_id,
+    load_example_robot,
+    lock_joints,
+    unique_frame_names,
+    validate_urdf,
+)
 from multiarm_pin.spatial import as_array, as_se3
 
 TOOL_FRAME_NAME = "multiarm_tool"
@@ -37,79 +44,9 @@ TOOL_FRAME_NAME = "multiarm_tool"
 LAMBDA_CONDITION_LIMIT = 1e10
 """Largest condition number of ``Λ⁻¹`` for which the operational-space inertia ``Λ`` exists."""
 
-ROBOT_DEFAULTS: dict[str, dict] = {
-    e.name: {"tool_frame": e.tool_frame, "locked_joints": e.locked_joints}
-    for e in ROBOTS.values()
-}
-"""Fixed-base arms of ``example_robot_data`` (:data:`multiarm_pin.model.robots.ROBOTS`) with their
-default tool frame and the joints locked at their neutral value (grippers)."""
-
-
-def frame_id(model: pin.Model, name: str, source: str = "") -> int:
-    """Id of the frame called ``name``; when several share it, the body frame (then any).
-
-    Some URDFs give a link and its parent joint the same name (Unitree Z1's
-    ``gripperStator``), which ``model.getFrameId(name)`` refuses.
-
-    Raises:
-        FrameNotFoundError: no frame has that name (lists the frames).
-    """
-    ids = [i for i, f in enumerate(model.frames) if f.name == name]
-    if not ids:
-        raise FrameNotFoundError(name, [f.name for f in model.frames], source)
-    for kind in (pin.FrameType.OP_FRAME, pin.FrameType.BODY):
-        for i in ids:
-            if model.frames[i].type == kind:
-                return i
-    return ids[0]
-
-
-@functools.cache
-def _load_example_robot(robot: str) -> tuple[pin.Model, pin.GeometryModel]:
-    """``example_robot_data.load(robot)``'s model and visual model, loaded once per process.
-
-    Loading parses the URDF and reads every mesh (seconds for some robots); callers never
-    modify the cached objects (reducing and appending them makes copies).
-    """
-    import example_robot_data as erd
-
-    wrapper = erd.load(robot)
-    return wrapper.model, wrapper.visual_model
-
-
-def _unique_frame_names(model: pin.Model) -> pin.Model:
-    """A copy of ``model`` whose frames have unique names (``pin.appendModel`` needs them).
-
-    A frame sharing its name with a body frame is renamed ``<name>_<type>`` (Unitree Z1's
-    fixed joint ``gripperStator`` becomes ``gripperStator_fixed_joint``); the body keeps it.
-    """
-    names = [f.name for f in model.frames]
-    if len(set(names)) == len(names):
-        return model
-    model = model.copy()
-    for i, n in enumerate(names):
-        if names.count(n) > 1 and i != frame_id(model, n):
-            fr = model.frames[i]
-            fr.name = f"{n}_{str(fr.type).split('.')[-1].lower()}"
-            model.frames[i] = fr
-    return model
-
-
-def _lock(model: pin.Model, visual, joints, source: str):
-    """Lock ``joints`` at their neutral value; returns ``(model, visual)``."""
-    missing = [j for j in joints if not model.existJointName(j)]
-    if missing:
-        raise JointNotFoundError(missing, list(model.names)[1:], source)
-    ids = [model.getJointId(j) for j in joints]
-    q_ref = pin.neutral(model)
-    if visual is not None:
-        return pin.buildReducedModel(model, visual, ids, q_ref)
-    return pin.buildReducedModel(model, ids, q_ref), None
-
-
 def available_robots() -> list[str]:
     """Names accepted by :meth:`Arm.from_robot_name` (fixed-base arms), sorted."""
-    return sorted(ROBOT_DEFAULTS)
+    return sorted(ROBOTS)
 
 
 @dataclass(frozen=True)
@@ -240,7 +177,7 @@ class Arm:
             raise FrameNotFoundError(tool_frame, names, source or name)
         if model.njoints > 1 and model.joints[1].shortname() == "JointModelFreeFlyer":
             raise InputError(f"{source or name}: a free-floating robot is not an arm")
-        model = _unique_frame_names(model)
+        model = unique_frame_names(model)
         world = pin.Model()
         world.gravity = model.gravity
         if visual_model is not None:
@@ -302,13 +239,11 @@ class Arm:
             FrameNotFoundError: ``tool_frame`` missing (the message lists the frames).
             JointNotFoundError: a locked joint is not a joint of the robot (lists them).
         """
-        if robot not in ROBOTS:
-            raise RobotNotFoundError(robot, available_robots())
-        entry = ROBOTS[robot]
-        model, visual = _load_example_robot(robot)
+        entry = robot_entry(robot)
+        model, visual = load_example_robot(robot)
         locked = tuple(dict.fromkeys((*entry.locked_joints, *locked_joints)))
         if locked:
-            model, visual = _lock(model, visual, locked, f"example_robot_data:{robot}")
+            model, visual = lock_joints(model, visual, locked, f"example_robot_data:{robot}")
         return cls.from_model(
             model,
             tool_frame or entry.tool_frame,
@@ -367,7 +302,7 @@ class Arm:
             except Exception:  # meshes missing: the arm still simulates, without visuals
                 visual = None
         if locked_joints:
-            model, visual = _lock(model, visual, locked_joints, str(path))
+            model, visual = lock_joints(model, visual, locked_joints, str(path))
         return cls.from_model(
             model,
             tool_frame,
@@ -480,41 +415,6 @@ def inverse_operational_space_inertia(M: np.ndarray, J: np.ndarray) -> tuple[np.
     s = np.linalg.svd(Lambda_inv, compute_uv=False)
     cond = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
     return Lambda_inv, cond
-
-
-def validate_urdf(path: str | Path) -> None:
-    """Check that ``path`` is a readable, well-formed URDF robot, with ``yourdfpy``.
-
-    Raises:
-        URDFError: naming the file and what is wrong.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise URDFError(str(path), "file not found")
-    import xml.etree.ElementTree as ET
-
-    import yourdfpy
-
-    try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as exc:
-        raise URDFError(str(path), f"malformed URDF (XML error: {exc})") from exc
-    if root.tag != "robot":
-        raise URDFError(str(path), f"malformed URDF: root element is <{root.tag}>, not <robot>")
-    try:
-        urdf = yourdfpy.URDF.load(
-            str(path), build_scene_graph=False, load_meshes=False, load_collision_meshes=False
-        )
-    except Exception as exc:  # lxml / yourdfpy raise many types for malformed XML
-        raise URDFError(str(path), f"malformed URDF: {exc}") from exc
-    if urdf.robot is None or not urdf.robot.links:
-        raise URDFError(str(path), "no <robot> with links found")
-    try:
-        ok = urdf.validate()
-    except Exception as exc:
-        raise URDFError(str(path), f"invalid URDF: {exc}") from exc
-    if ok is False:
-        raise URDFError(str(path), "invalid URDF (yourdfpy validation failed)")
 
 
 def load_arm(

@@ -13,11 +13,22 @@ and it runs a short weld scenario.
 | ``kinova`` (Jaco j2s6s200) | ``j2s6s200_end_effector`` | hand | |
 | ``xarm7`` | ``link_eef`` | flange | |
 | ``z1`` | ``gripperStator`` (its body frame) | hand | ``jointGripper`` |
+
+Each entry also says how it is loaded: ``example_robot_data.load(name)``, or a named
+``example_robot_data`` loader class when that registry is wrong: example-robot-data 5.0.0
+registers ``ur3`` with its UR5 loader (``ur5_robot.urdf``), so our ``ur3`` entry names
+``UR3Loader`` (``ur3_robot.urdf``: 0.1198 m shoulder offset, not the UR5's 0.13585 m).
+
+Configurations: ``q0`` has ``nq`` numbers, which is not always the number of joints: a
+continuous (unbounded revolute) joint is stored as ``(cos θ, sin θ)``. The Kinova Jaco has
+three, so its ``q0`` takes 9 numbers (``nq = 9``, ``nv = 6``).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+
+from multiarm_pin.exceptions import RobotNotFoundError
 
 
 @dataclass(frozen=True)
@@ -30,6 +41,8 @@ class RobotEntry:
         tool_kind: ``"flange"`` (tool mounting face) or ``"hand"`` (gripper body/centre).
         locked_joints: joints locked at their neutral value (gripper fingers).
         description: one line for humans.
+        loader: name of the ``example_robot_data.robots_loader`` class that loads it, or
+            ``""`` for ``example_robot_data.load(name)``.
     """
 
     name: str
@@ -37,12 +50,27 @@ class RobotEntry:
     tool_kind: str
     locked_joints: tuple[str, ...] = ()
     description: str = ""
+    loader: str = ""
+
+    def load(self):
+        """The ``example_robot_data`` robot wrapper (``.model``, ``.visual_model``).
+
+        Loading parses the URDF and reads every mesh (seconds for some robots).
+        """
+        import example_robot_data as erd
+
+        if not self.loader:
+            return erd.load(self.name)
+        from example_robot_data import robots_loader
+
+        return getattr(robots_loader, self.loader)().robot
 
 
 _PANDA_FINGERS = ("panda_finger_joint1", "panda_finger_joint2")
 
 ROBOTS: dict[str, RobotEntry] = {e.name: e for e in (
-    RobotEntry("ur3", "tool0", "flange", description="Universal Robots UR3, 6 joints"),
+    RobotEntry("ur3", "tool0", "flange", description="Universal Robots UR3, 6 joints",
+               loader="UR3Loader"),
     RobotEntry("ur5", "tool0", "flange", description="Universal Robots UR5, 6 joints"),
     RobotEntry("ur10", "tool0", "flange", description="Universal Robots UR10, 6 joints"),
     RobotEntry("ur5_limited", "tool0", "flange",
@@ -54,8 +82,8 @@ ROBOTS: dict[str, RobotEntry] = {e.name: e for e in (
     RobotEntry("panda_collision", "panda_hand_tcp", "hand", _PANDA_FINGERS,
                "Panda with collision meshes as visuals"),
     RobotEntry("kinova", "j2s6s200_end_effector", "hand",
-               description="Kinova Jaco j2s6s200, 6 joints (3 continuous: nq = 9, nv = 6); "
-                           "its fingers are fixed links"),
+               description="Kinova Jaco j2s6s200, 6 joints (3 continuous: q0 takes nq = 9 "
+                           "numbers, nv = 6); its fingers are fixed links"),
     RobotEntry("xarm7", "link_eef", "flange", description="UFactory xArm7, 7 joints"),
     RobotEntry("z1", "gripperStator", "hand", ("jointGripper",),
                "Unitree Z1, 6 joints; the gripper's moving jaw is locked"),
@@ -63,9 +91,16 @@ ROBOTS: dict[str, RobotEntry] = {e.name: e for e in (
 """Arms loadable by name, by name."""
 
 
-def robot_entry(name: str) -> RobotEntry | None:
-    """The registry entry of ``name``, or None if it is not registered."""
-    return ROBOTS.get(name)
+def robot_entry(name: str) -> RobotEntry:
+    """The registry entry of ``name``.
+
+    Raises:
+        RobotNotFoundError: unknown name (lists the known ones, with a did-you-mean).
+    """
+    try:
+        return ROBOTS[name]
+    except (KeyError, TypeError):
+        raise RobotNotFoundError(name, ROBOTS) from None
 
 
 __all__ = ["ROBOTS", "RobotEntry", "robot_entry"]

@@ -19,13 +19,14 @@ from collections.abc import Callable
 import numpy as np
 
 from multiarm_pin._compiled import controller_kernels, kernels
-from multiarm_pin.dynamics import Solution
+from multiarm_pin.dynamics import SOLVERS, Solution
 from multiarm_pin.dynamics import solve as solve_dynamics
 from multiarm_pin.exceptions import DynamicsError, InputError, MultiArmError
 from multiarm_pin.system import Evaluation, MultiArmSystem, SystemState
 
-FUSED_SOLVERS = frozenset({"auto", "object_first"})
-"""Solvers whose compiled kernel :func:`closed_loop_evaluation` runs on the shared buffer."""
+FUSED_SOLVERS = frozenset(name for name, e in SOLVERS.items() if e.compiled)
+"""Solvers whose compiled kernel :func:`closed_loop_evaluation` runs on the shared buffer
+(those whose :data:`~multiarm_pin.dynamics.SOLVERS` entry says ``compiled``)."""
 
 
 def closed_loop_evaluation(system: MultiArmSystem, controller: Callable | None, t: float,

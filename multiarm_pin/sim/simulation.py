@@ -40,13 +40,16 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
-from multiarm_pin.dynamics import SOLVERS
+from multiarm_pin._registry import lookup
+from multiarm_pin.dynamics import solver_entry
 from multiarm_pin.exceptions import DynamicsError, InputError
 from multiarm_pin.model.rigid_object import ObjectState
 from multiarm_pin.sim.contact_events import ContactEvent
+from multiarm_pin.sim.controllers.base import ControllerFunction
 from multiarm_pin.sim.disturbances import WrenchSchedule
 from multiarm_pin.sim.result import (
     Recorder,
@@ -57,16 +60,43 @@ from multiarm_pin.sim.result import (
     record_bytes,
 )
 from multiarm_pin.sim.stepper import Stepper
-from multiarm_pin.system import Evaluation, MultiArmSystem, SystemState
+from multiarm_pin.system import MultiArmSystem, SystemState
 
-INTEGRATORS = ("rk4", "rk45", "semi_implicit")
-"""Names accepted by :func:`simulate`."""
+
+@dataclass(frozen=True)
+class IntegratorEntry:
+    """One integrator of the registry (see the module docstring for the schemes).
+
+    Attributes:
+        name: the integrator name (:func:`simulate`'s ``integrator``, scenarios' too).
+        order: order of accuracy of the scheme (global error ``O(dt^order)``; rk45's
+            Dormand-Prince pair advances with its 5th-order solution).
+        adaptive: it chooses its own steps (``rtol``, ``atol``) and outputs on the ``dt``
+            grid; not event-aware, so only for systems without unilateral rows and with
+            ``nq == nv``.
+        description: one line for humans.
+    """
+
+    name: str
+    order: int
+    adaptive: bool
+    description: str
+
+
+INTEGRATORS: dict[str, IntegratorEntry] = {e.name: e for e in (
+    IntegratorEntry("rk4", 4, False, "classical fixed-step Runge-Kutta (default)"),
+    IntegratorEntry("rk45", 5, True, "scipy's adaptive Dormand-Prince RK45 (the thesis's ode45)"),
+    IntegratorEntry("semi_implicit", 1, False,
+                    "symplectic Euler: velocities first, then positions with them"),
+)}
+"""Every integrator, by name (the names :func:`simulate` and scenarios accept)."""
 
 MAX_WARNINGS = 200
 """Contact-separation warnings kept in a result (the rest are counted)."""
 
-Controller = Callable[[float, SystemState, Evaluation], np.ndarray]
-"""``controller(t, state, evaluation) -> tau (nv,)``; ``evaluation`` holds the blocks at τ = 0."""
+Controller = ControllerFunction
+"""``controller(t, state, evaluation) -> tau (nv,)`` (the protocol
+:class:`~multiarm_pin.sim.controllers.ControllerFunction`)."""
 
 
 def simulate(
@@ -128,12 +158,8 @@ def simulate(
     t_start = time.perf_counter()
     if max_record_bytes is None:
         max_record_bytes = default_record_limit()
-    if integrator not in INTEGRATORS:
-        raise InputError(
-            f"unknown integrator {integrator!r}; known integrators: {', '.join(INTEGRATORS)}"
-        )
-    if solver not in SOLVERS:
-        raise InputError(f"unknown solver {solver!r}; known solvers: {', '.join(SOLVERS)}")
+    lookup(INTEGRATORS, integrator, "integrator")
+    solver_entry(solver)
     duration, dt = float(duration), float(dt)
     if not (np.isfinite(dt) and dt > 0):
         raise InputError(f"dt: expected a positive time step [s], got {dt}")
@@ -260,6 +286,7 @@ def _run_rk45(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nda
 
 __all__ = [
     "INTEGRATORS",
+    "IntegratorEntry",
     "ContactEvent",
     "Controller",
     "SimulationResult",

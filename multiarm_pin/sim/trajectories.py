@@ -16,6 +16,7 @@ held at the first waypoint, after the last time at the last one.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,6 +28,7 @@ from multiarm_pin.spatial import (
     as_se3,
     as_unit_quaternion,
     rotation_to_quaternion,
+    se3_from,
     se3_to_pose,
 )
 
@@ -127,6 +129,47 @@ class MinimumJerkTrajectory:
     def hold(cls, position, quaternion=(0.0, 0.0, 0.0, 1.0)) -> MinimumJerkTrajectory:
         """A constant pose (one waypoint at t = 0)."""
         return cls([0.0], [position], [quaternion])
+
+    @classmethod
+    def from_waypoints(cls, waypoints, start=None) -> MinimumJerkTrajectory:
+        """The trajectory through pose waypoints written as mappings (as in a scenario file).
+
+        Args:
+            waypoints: non-empty sequence of ``{t, position, quaternion | rpy}``: time [s]
+                (>= 0, strictly increasing), position (3,) [m], orientation as a quaternion
+                ``[x, y, z, w]`` or roll-pitch-yaw [rad] (identity if neither), world.
+            start: ``(position (3,), quaternion (4,))`` prepended at t = 0 when the first
+                waypoint is later (the pose the motion starts from); None: nothing prepended.
+
+        Raises:
+            InputError: not a list of such mappings, unknown or missing keys, bad numbers,
+                times not increasing.
+        """
+        if isinstance(waypoints, str | bytes | Mapping) or not isinstance(waypoints, Sequence) \
+                or not waypoints:
+            raise InputError(f"waypoints: expected a non-empty list of {{t, position, "
+                             f"quaternion | rpy}}, got {waypoints!r}")
+        times, positions, quats = [], [], []
+        for k, w in enumerate(waypoints):
+            keys = set(w) if isinstance(w, Mapping) else set()
+            if not isinstance(w, Mapping) or not {"t", "position"} <= keys or \
+                    keys - {"t", "position", "quaternion", "rpy"}:
+                raise InputError(f"waypoint {k}: expected a mapping with t, position and "
+                                 f"optionally quaternion or rpy, got {w!r}")
+            t = float(as_array(w["t"], (), f"waypoint {k} t [s]"))
+            if t < 0 or (times and t <= times[-1]):
+                raise InputError(f"waypoint {k}: times must be >= 0 and increase strictly, "
+                                 f"got {t} after {times[-1] if times else 'none'}")
+            M = se3_from(w["position"], quaternion=w.get("quaternion"), rpy=w.get("rpy"),
+                         name=f"waypoint {k}")
+            times.append(t)
+            positions.append(M.translation.copy())
+            quats.append(rotation_to_quaternion(M.rotation))
+        if start is not None and times[0] > 0:
+            times.insert(0, 0.0)
+            positions.insert(0, as_array(start[0], (3,), "start position"))
+            quats.insert(0, as_unit_quaternion(start[1], "start quaternion"))
+        return cls(times, positions, quats)
 
     @property
     def duration(self) -> float:

@@ -464,7 +464,7 @@ def _contact_points(base, base_kind: str, f: str, key: str):
     else:
         for a, arm in enumerate(base["arms"]):
             joint = arm.get("joint", {})
-            if joint.get("type") == "contacts":
+            if joint.get("type") in ("fingertips", "contacts"):  # contacts: deprecated name
                 for k, c in enumerate(joint.get("contacts", [])):
                     items.append((f"arms[{a}].joint.contacts[{k}]", c))
     if not items:

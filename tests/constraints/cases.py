@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import pinocchio as pin
 
-from multiarm_pin.constraints import JOINT_DOF, custom, fingertips_from_placements, make_joint
+from multiarm_pin.constraints import JOINT_TYPES, custom, fingertips_from_placements, make_joint
 from multiarm_pin.model.polyhedron import box
 
 from .trajectories import RigidTrajectory, random_rotation
 
-KINDS = sorted(JOINT_DOF) + ["fingertips", "custom_sockets"]
+FRAMED_KINDS = sorted(k for k, e in JOINT_TYPES.items() if e.placeable and not e.from_contacts)
+"""Joint types placed by a joint frame, built from the initial state (weld, revolute, ...)."""
+KINDS = FRAMED_KINDS + ["fingertips", "custom_sockets"]
 
 
 def random_placement(rng, scale=0.3) -> pin.SE3:

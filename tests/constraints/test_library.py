@@ -5,7 +5,7 @@ import pinocchio as pin
 import pytest
 
 from multiarm_pin.constraints import (
-    JOINT_DOF,
+    JOINT_TYPES,
     as_placement,
     corner_gripper,
     fingertips_from_placements,
@@ -38,7 +38,7 @@ EXPECTED_DOF = {"weld": 0, "revolute": 1, "prismatic": 1, "cylindrical": 2, "uni
 @pytest.mark.parametrize("kind", sorted(EXPECTED_DOF))
 def test_degrees_of_freedom(kind):
     rng = np.random.default_rng(20)
-    assert JOINT_DOF[kind] == EXPECTED_DOF[kind]
+    assert JOINT_TYPES[kind].dof == EXPECTED_DOF[kind]
     for points_on in ("tool", "object"):
         params = {"joint_in_object": random_placement(rng), "joint_in_tool": random_placement(rng)}
         if kind != "corner_gripper":

@@ -1,39 +1,15 @@
-"""Controllers: joint torques from the time, the state and the blocks of the dynamics.
+"""``object_pd``: object-level computed torque on the inverse dynamics with force distribution.
 
-A controller is a callable ``controller(t, state, evaluation) -> tau (nv,)`` [N m] where
-``evaluation`` (:class:`~multiarm_pin.system.Evaluation`) holds the blocks at zero torque
-(``h = -nle``), so a controller can use the mass matrices, Jacobians and constraint rows
-without recomputing them. Build one by name with :func:`make_controller`:
-
-- ``none``: zero torque;
-- ``gravity_compensation``: ``τ = g(q)``, the arms' own weight only (the object's weight is
-  not compensated);
-- ``joint_pd``: ``τ = g(q) + K_p (q_ref ⊖ q) - K_d v`` (``q_ref`` defaults to the
-  configuration at the first call, i.e. ``q0``);
-- ``object_pd``: object-level computed torque. A desired object trajectory
-  (:class:`~multiarm_pin.sim.trajectories.MinimumJerkTrajectory`; default: hold the pose of the
-  first call) and PD on the object pose give a desired acceleration
-  ``a_d = a_ref + K_d (v_ref - v_o) + K_p [p_ref - p; log(R_ref Rᵀ)]``. The internal forces
-  come from :func:`multiarm_pin.dynamics.force_distribution.distribute_forces` (every
-  unilateral contact pushes with at least ``margin``, forces as small as possible). The
-  secondary objective holds every contact's tip centre at its first-call place *relative to
-  the object* (the relative motion ``T_i α_i`` of thesis Sec 3.5, Eq 3.5-3.6): a PD on each
-  point's position in the object frame gives a desired relative acceleration, the point's
-  desired classical acceleration is that of the object's material point there under ``a_d``
-  plus this correction (:func:`tool_acceleration_from_object`), and the desired joint
-  accelerations are the least-squares solution of these point tasks, with a joint-space PD
-  on the motions they leave free. The inverse dynamics
-  (:func:`~multiarm_pin.dynamics.inverse_dynamics.inverse_dynamics`, Eq 3.10) keeps of them
-  what the constraint rows leave free and gives the torques. With these torques the forward
-  dynamics returns exactly ``a_d`` and those multipliers, and frictionless fingertips do not
-  slide along their faces.
+See :class:`ObjectPD` (the algorithm, step by step) and the package docstring of
+:mod:`multiarm_pin.sim.controllers`. Its compiled path is
+:mod:`multiarm_pin._compiled.controller_kernels`; :meth:`ObjectPD.reference` is the numpy
+reference it mirrors. The module is close to 500 lines because the controller's two paths
+(compiled and reference) and its hold-still fallback share its state and belong together.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import ClassVar
 
 import numpy as np
 import pinocchio as pin
@@ -44,145 +20,12 @@ from multiarm_pin.dynamics.force_distribution import distribute_forces
 from multiarm_pin.dynamics.force_qp import WarmForceDistribution
 from multiarm_pin.dynamics.inverse_dynamics import InverseDynamicsResult, inverse_dynamics
 from multiarm_pin.exceptions import DynamicsError, InputError
+from multiarm_pin.sim.controllers.base import Controller
+from multiarm_pin.sim.controllers.base import gain as _gain
+from multiarm_pin.sim.controllers.relative_motion import transported_acceleration
 from multiarm_pin.sim.trajectories import MinimumJerkTrajectory, pose_error
-from multiarm_pin.spatial import as_array, cross
+from multiarm_pin.spatial import cross
 from multiarm_pin.system import Evaluation, MultiArmSystem, SystemState
-
-
-class Controller:
-    """Base class: ``controller(t, state, evaluation) -> tau (nv,)`` [N m].
-
-    Args:
-        system: the system it controls.
-    """
-
-    name: ClassVar[str] = "controller"
-
-    def __init__(self, system: MultiArmSystem):
-        if not isinstance(system, MultiArmSystem):
-            raise InputError(f"system: expected a MultiArmSystem, got {type(system).__name__}")
-        self.system = system
-
-    def __call__(self, t: float, state: SystemState, evaluation: Evaluation) -> np.ndarray:
-        """Joint torques (nv,) [N m] at time ``t`` [s]."""
-        raise NotImplementedError
-
-
-class ZeroTorque(Controller):
-    """``τ = 0``."""
-
-    name = "none"
-
-    def __call__(self, t, state, evaluation) -> np.ndarray:
-        """(nv,) zeros."""
-        return np.zeros(self.system.nv)
-
-
-class GravityCompensation(Controller):
-    """``τ = g(q)``: the arms' own gravity torques (not the object's weight)."""
-
-    name = "gravity_compensation"
-
-    def __call__(self, t, state, evaluation) -> np.ndarray:
-        """(nv,) gravity torques [N m]."""
-        return self.system.gravity_torques(state.q)
-
-
-def _gain(value, size: int, name: str) -> np.ndarray:
-    arr = np.asarray(value, dtype=float)
-    if arr.ndim == 0:
-        arr = np.full(size, float(arr))
-    if arr.shape != (size,) or not np.all(np.isfinite(arr)) or np.any(arr < 0):
-        raise InputError(f"{name}: expected a gain >= 0 or {size} of them, got {value!r}")
-    return arr
-
-
-class JointPD(Controller):
-    """``τ = g(q) + K_p (q_ref ⊖ q) - K_d v``.
-
-    Args:
-        system: the system.
-        kp: stiffness [N m/rad], scalar or (nv,).
-        kd: damping [N m s/rad], scalar or (nv,).
-        q_ref: (nq,) reference configuration; the configuration at the first call if None.
-    """
-
-    name = "joint_pd"
-
-    def __init__(self, system: MultiArmSystem, kp=100.0, kd=20.0, q_ref=None):
-        super().__init__(system)
-        self.kp = _gain(kp, system.nv, "joint_pd kp")
-        self.kd = _gain(kd, system.nv, "joint_pd kd")
-        self.q_ref = None
-        if q_ref is not None:
-            q = np.asarray(q_ref, dtype=float)
-            if q.shape != (system.nq,) or not np.all(np.isfinite(q)):
-                raise InputError(f"joint_pd q_ref: expected ({system.nq},) numbers, got {q_ref!r}")
-            self.q_ref = q
-
-    def __call__(self, t, state, evaluation) -> np.ndarray:
-        """(nv,) torques [N m]."""
-        if self.q_ref is None:
-            self.q_ref = np.array(state.q, dtype=float)
-        model = self.system.arm_set.model
-        err = pin.difference(model, state.q, self.q_ref)
-        return self.system.gravity_torques(state.q) + self.kp * err - self.kd * state.v
-
-
-def tool_acceleration_from_object(offset, object_twist, object_acceleration,
-                                  relative_twist=None, relative_acceleration=None) -> np.ndarray:
-    """Classical accelerations of frames that move relative to the object (thesis Eq 3.6).
-
-    A frame (a tool) at ``p = x_o + r`` with orientation ``R = R_o R_rel`` moves relative to
-    the object frame (COM ``x_o``, orientation ``R_o``, twist ``[ẋ_o; ω_o]``) with relative
-    twist ``[ṗ_rel; ω_rel]`` and relative acceleration ``[a_rel; α_rel]`` (the time derivatives
-    of its coordinates in the object frame, rotated to world axes). Its classical acceleration
-    is the transport of the object's plus the relative motion::
-
-        p̈ = ẍ_o + ω̇_o × r + ω_o × (ω_o × r) + 2 ω_o × ṗ_rel + a_rel
-        ω̇ = ω̇_o + ω_o × ω_rel + α_rel
-
-    With zero relative twist and acceleration this is the acceleration of the object-fixed
-    frame at ``p``.
-
-    Args:
-        offset: (n, 3) ``r = p - x_o``, world axes [m].
-        object_twist: (6,) ``[ẋ_o; ω_o]`` world axes at the COM [m/s, rad/s].
-        object_acceleration: (6,) classical ``[ẍ_o; ω̇_o]`` world axes at the COM
-            [m/s², rad/s²].
-        relative_twist: (n, 6) ``[ṗ_rel; ω_rel] = [ṗ - ẋ_o - ω_o × r; ω - ω_o]``, world axes
-            [m/s, rad/s] (``R_o`` times the rates of the frame's coordinates in the object
-            frame); zero if None.
-        relative_acceleration: (n, 6) ``R_o`` times the second derivatives of those
-            coordinates, ``[R_o d²(R_oᵀ r)/dt²; R_o d(R_oᵀ ω_rel)/dt]``, world axes
-            [m/s², rad/s²]; zero if None.
-
-    Returns:
-        (n, 6) classical accelerations ``[p̈; ω̇]`` of the frames, world axes (LWA).
-
-    Raises:
-        InputError: wrong shapes or NaN.
-    """
-    r = as_array(offset, (None, 3), "offset (n, 3)")
-    n = len(r)
-    v_o = as_array(object_twist, (6,), "object_twist")
-    a_o = as_array(object_acceleration, (6,), "object_acceleration")
-    rel_v = (np.zeros((n, 6)) if relative_twist is None
-             else as_array(relative_twist, (n, 6), f"relative_twist ({n}, 6)"))
-    rel_a = (np.zeros((n, 6)) if relative_acceleration is None
-             else as_array(relative_acceleration, (n, 6), f"relative_acceleration ({n}, 6)"))
-    return _transport(r, v_o, a_o, rel_v, rel_a)
-
-
-def _transport(r, v_o, a_o, rel_v, rel_a) -> np.ndarray:
-    """:func:`tool_acceleration_from_object` without the checks (hot path)."""
-    w = v_o[3:]
-    out = np.empty((len(r), 6))
-    out[:, :3] = (a_o[:3] + cross(a_o[3:], r) + cross(w, cross(w, r))
-                  + 2.0 * cross(w, rel_v[:, :3]) + rel_a[:, :3])
-    out[:, 3:] = a_o[3:] + cross(w, rel_v[:, 3:]) + rel_a[:, 3:]
-    return out
-
 
 JACOBIAN_DAMPING = 1e-8
 """Damping ``ε`` of ``object_pd``'s least-squares hold ``(AᵀA + ε I)⁻¹ Aᵀ``, relative to the
@@ -269,6 +112,10 @@ class ObjectPD(Controller):
         trajectory: desired object pose over time (a :class:`MinimumJerkTrajectory`, or a
             mapping ``{"times", "positions", "quaternions"}``); hold the first call's pose if
             None.
+        waypoints: instead of ``trajectory``, the object's COM-frame world poses
+            ``[{t, position, quaternion | rpy}, ...]``
+            (:meth:`MinimumJerkTrajectory.from_waypoints`; the pose of the first call is
+            prepended at t = 0 when the first waypoint is later).
         kp: pose stiffness [1/s²], scalar or (6,) ``[x y z, rx ry rz]``.
         kd: pose damping [1/s], scalar or (6,).
         margin: least push [N] of every unilateral contact.
@@ -318,8 +165,16 @@ class ObjectPD(Controller):
 
     def __init__(self, system: MultiArmSystem, trajectory=None, kp=100.0, kd=20.0,
                  margin: float = 1.0, null_kp: float = 25.0, null_kd: float = 10.0,
-                 hold_kp: float = 100.0, hold_kd: float = 20.0, compiled: bool = True):
+                 hold_kp: float = 100.0, hold_kd: float = 20.0, compiled: bool = True,
+                 waypoints=None):
         super().__init__(system)
+        self.waypoints = None
+        if waypoints is not None:
+            if trajectory is not None:
+                raise InputError("object_pd: give either waypoints or trajectory, not both")
+            trajectory = MinimumJerkTrajectory.from_waypoints(waypoints)  # checks them
+            if trajectory.times[0] > 0:  # starts from the first call's pose
+                self.waypoints, trajectory = list(waypoints), None
         if trajectory is not None and not isinstance(trajectory, MinimumJerkTrajectory):
             try:
                 trajectory = MinimumJerkTrajectory(**dict(trajectory))
@@ -366,11 +221,17 @@ class ObjectPD(Controller):
         tau = (blocks.M @ z[:, :, None])[:, :, 0] - blocks.h
         return s.unpad(np.where(blocks.dof_mask, tau, 0.0))
 
+    def _start_trajectory(self, o) -> MinimumJerkTrajectory:
+        """At the first call: hold the object's pose ``o``, or go through the waypoints from it."""
+        if self.waypoints is None:
+            return MinimumJerkTrajectory.hold(o.position, o.quaternion)
+        return MinimumJerkTrajectory.from_waypoints(self.waypoints, (o.position, o.quaternion))
+
     def desired_acceleration(self, t: float, state: SystemState) -> np.ndarray:
         """(6,) ``a_d = a_ref + K_d (v_ref - v_o) + K_p e`` [m/s², rad/s²], world at the COM."""
         o = state.obj
         if self.trajectory is None:
-            self.trajectory = MinimumJerkTrajectory.hold(o.position, o.quaternion)
+            self.trajectory = self._start_trajectory(o)
         ref = self.trajectory(t)
         e = pose_error(ref.position, ref.rotation, o.position, o.rotation)
         return ref.acceleration + self.kd * (ref.twist - o.twist) + self.kp * e
@@ -492,7 +353,7 @@ class ObjectPD(Controller):
             self._shapes = ((s.n_arms, s.arm_set.nv_max), (s.n_arms, s.N_max))
         o = state.obj
         if self.trajectory is None:
-            self.trajectory = MinimumJerkTrajectory.hold(o.position, o.quaternion)
+            self.trajectory = self._start_trajectory(o)
         t = float(t)
         ref = self._motion_cache.get(t)  # RK4 samples t + dt/2 twice, t + dt again next step
         if ref is None or ref[0] is not self.trajectory:
@@ -567,9 +428,9 @@ class ObjectPD(Controller):
         n, m = self.hold_mask.shape
         zero = np.zeros((n * m, 3))
         rel_a = np.concatenate([self.hold_kp * e - self.hold_kd * u, np.zeros_like(e)], axis=2)
-        a_pts = _transport(r.reshape(-1, 3), o.twist, a_d,
-                           np.concatenate([u.reshape(-1, 3), zero], axis=1),
-                           rel_a.reshape(-1, 6))[:, :3].reshape(n, m, 3)
+        a_pts = transported_acceleration(r.reshape(-1, 3), o.twist, a_d,
+                                         np.concatenate([u.reshape(-1, 3), zero], axis=1),
+                                         rel_a.reshape(-1, 6))[:, :3].reshape(n, m, 3)
         self.last_point_acceleration = a_pts
         # Task rows of the tool-fixed points: ṗ = v_t + ω_t × d, i.e. A = J_v + J_ω × d;
         # their classical acceleration at q̈ = 0: J̇q̇_v + J̇q̇_ω × d + ω_t × (ω_t × d).
@@ -605,47 +466,4 @@ class ObjectPD(Controller):
         return s.unpad(last.tau)
 
 
-CONTROLLERS: dict[str, type[Controller]] = {
-    c.name: c for c in (ZeroTorque, GravityCompensation, JointPD, ObjectPD)
-}
-"""Controller classes by type name."""
-
-
-def make_controller(kind: str, system: MultiArmSystem, **params) -> Controller:
-    """Build a controller by type name.
-
-    Args:
-        kind: one of ``CONTROLLERS`` (``none``, ``gravity_compensation``, ``joint_pd``,
-            ``object_pd``).
-        system: the system to control.
-        **params: the keyword arguments of that controller.
-
-    Raises:
-        InputError: unknown type (lists the known ones) or bad parameters.
-    """
-    if kind not in CONTROLLERS:
-        raise InputError(
-            f"unknown controller type {kind!r}; known types: {', '.join(sorted(CONTROLLERS))}"
-        )
-    try:
-        return CONTROLLERS[kind](system, **params)
-    except TypeError as exc:
-        raise InputError(f"controller {kind!r}: bad parameters {sorted(params)}: {exc}") from exc
-
-
-ControllerFunction = Callable[[float, SystemState, Evaluation], np.ndarray]
-
-__all__ = [
-    "CONTROLLERS",
-    "Controller",
-    "ControllerFunction",
-    "GravityCompensation",
-    "JointPD",
-    "ObjectPD",
-    "GRASP_RANK_TOLERANCE",
-    "ObjectPDPlan",
-    "ZeroTorque",
-    "grasp_rank",
-    "make_controller",
-    "tool_acceleration_from_object",
-]
+__all__ = ["GRASP_RANK_TOLERANCE", "JACOBIAN_DAMPING", "ObjectPD", "ObjectPDPlan", "grasp_rank"]

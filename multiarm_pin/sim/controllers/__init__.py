@@ -1,0 +1,135 @@
+"""Controllers: joint torques from the time, the state and the blocks of the dynamics.
+
+A controller is a callable ``controller(t, state, evaluation) -> tau (nv,)`` [N m] where
+``evaluation`` (:class:`~multiarm_pin.system.Evaluation`) holds the blocks at zero torque
+(``h = -nle``), so a controller can use the mass matrices, Jacobians and constraint rows
+without recomputing them (the protocol :class:`ControllerFunction`). Build one by name with
+:func:`make_controller`, the one dispatch point of the registry :data:`CONTROLLERS`:
+
+- ``none``: zero torque;
+- ``gravity_compensation``: ``τ = g(q)``, the arms' own weight only (the object's weight is
+  not compensated);
+- ``joint_pd``: ``τ = g(q) + K_p (q_ref ⊖ q) - K_d v`` (``q_ref`` defaults to the
+  configuration at the first call, i.e. ``q0``);
+- ``object_pd``: object-level computed torque. A desired object trajectory
+  (:class:`~multiarm_pin.sim.trajectories.MinimumJerkTrajectory`, or ``waypoints``; default:
+  hold the pose of the first call) and PD on the object pose give a desired acceleration
+  ``a_d = a_ref + K_d (v_ref - v_o) + K_p [p_ref - p; log(R_ref Rᵀ)]``. The internal forces
+  come from :func:`multiarm_pin.dynamics.force_distribution.distribute_forces` (every
+  unilateral contact pushes with at least ``margin``, forces as small as possible). The
+  secondary objective holds every contact's tip centre at its first-call place *relative to
+  the object* (the relative motion ``T_i α_i`` of thesis Sec 3.5, Eq 3.5-3.6): a PD on each
+  point's position in the object frame gives a desired relative acceleration, the point's
+  desired classical acceleration is that of the object's material point there under ``a_d``
+  plus this correction (:func:`tool_acceleration_from_object`), and the desired joint
+  accelerations are the least-squares solution of these point tasks, with a joint-space PD
+  on the motions they leave free. The inverse dynamics
+  (:func:`~multiarm_pin.dynamics.inverse_dynamics.inverse_dynamics`, Eq 3.10) keeps of them
+  what the constraint rows leave free and gives the torques. With these torques the forward
+  dynamics returns exactly ``a_d`` and those multipliers, and frictionless fingertips do not
+  slide along their faces.
+
+One module per controller family: :mod:`~multiarm_pin.sim.controllers.base` (the protocol,
+the base class and the simple controllers), :mod:`~multiarm_pin.sim.controllers.object_pd`
+and :mod:`~multiarm_pin.sim.controllers.relative_motion` (its kinematics).
+"""
+
+from __future__ import annotations
+
+import inspect
+from dataclasses import dataclass
+
+from multiarm_pin._registry import lookup
+from multiarm_pin.exceptions import InputError
+from multiarm_pin.sim.controllers.base import (
+    Controller,
+    ControllerFunction,
+    GravityCompensation,
+    JointPD,
+    ZeroTorque,
+)
+from multiarm_pin.sim.controllers.object_pd import (
+    GRASP_RANK_TOLERANCE,
+    JACOBIAN_DAMPING,
+    ObjectPD,
+    ObjectPDPlan,
+    grasp_rank,
+)
+from multiarm_pin.sim.controllers.relative_motion import tool_acceleration_from_object
+from multiarm_pin.system import MultiArmSystem
+
+
+@dataclass(frozen=True)
+class ControllerType:
+    """One controller type of the registry.
+
+    Attributes:
+        name: the type name (the scenario's ``controller.type``).
+        cls: the :class:`Controller` subclass, ``cls(system, **params)``.
+        follows_trajectory: it takes a desired object motion (``trajectory`` or
+            ``waypoints``); the others hold or act in joint space.
+        description: one line for humans.
+    """
+
+    name: str
+    cls: type[Controller]
+    follows_trajectory: bool
+    description: str
+
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        """Keyword parameters the controller accepts (besides ``system``), in order."""
+        sig = inspect.signature(self.cls.__init__)
+        return tuple(p for p in sig.parameters if p not in ("self", "system"))
+
+
+CONTROLLERS: dict[str, ControllerType] = {e.name: e for e in (
+    ControllerType("none", ZeroTorque, False, "zero torque"),
+    ControllerType("gravity_compensation", GravityCompensation, False,
+                   "the arms' own gravity torques g(q) (not the object's weight)"),
+    ControllerType("joint_pd", JointPD, False,
+                   "g(q) + K_p (q_ref - q) - K_d v toward the first call's configuration"),
+    ControllerType("object_pd", ObjectPD, True,
+                   "object-level computed torque with force distribution (waypoints)"),
+)}
+"""Every controller type, by name (the names :func:`make_controller` and scenarios accept)."""
+
+
+def make_controller(kind: str, system: MultiArmSystem, **params) -> Controller:
+    """Build a controller by type name: the one dispatch point of :data:`CONTROLLERS`.
+
+    Args:
+        kind: a name of :data:`CONTROLLERS` (``none``, ``gravity_compensation``,
+            ``joint_pd``, ``object_pd``).
+        system: the system to control.
+        **params: the keyword arguments of that controller (:attr:`ControllerType.parameters`;
+            e.g. ``kp``, ``kd``, ``waypoints`` for ``object_pd``).
+
+    Raises:
+        InputError: unknown type (lists the known ones, with a did-you-mean) or bad
+            parameters (lists the accepted ones).
+    """
+    entry = lookup(CONTROLLERS, kind, "controller type", plural="types")
+    unknown = sorted(set(params) - set(entry.parameters))
+    if unknown:
+        raise InputError(f"controller {kind!r}: bad parameters {unknown}; accepted: "
+                         f"{', '.join(entry.parameters) or 'none'}")
+    return entry.cls(system, **params)
+
+
+__all__ = [
+    "CONTROLLERS",
+    "GRASP_RANK_TOLERANCE",
+    "JACOBIAN_DAMPING",
+    "Controller",
+    "ControllerFunction",
+    "ControllerType",
+    "GravityCompensation",
+    "JointPD",
+    "ObjectPD",
+    "ObjectPDPlan",
+    "ZeroTorque",
+    "grasp_rank",
+    "make_controller",
+    "tool_acceleration_from_object",
+]
