@@ -34,7 +34,7 @@ def make_arm(robot: str, name: str, angle: float, radius: float = 0.9) -> Arm:
     """An arm on a circle of ``radius`` around the origin, facing it (the public loader)."""
     base = pin.SE3(pin.rpy.rpyToMatrix(0, 0, angle + np.pi),
                    np.array([radius * np.cos(angle), radius * np.sin(angle), 0.0]))
-    return load_arm(robot, name=name, base_placement=base, load_visuals=False)
+    return load_arm(robot, name=name, base=base, load_visuals=False)
 
 
 def joint_spec(kind: str):
