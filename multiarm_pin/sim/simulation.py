@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from multiarm_pin.constraints.joint import INITIAL_GAP_TOLERANCE
 from multiarm_pin.dynamics import SOLVERS, Solution
 from multiarm_pin.dynamics import solve as solve_dynamics
 from multiarm_pin.exceptions import DynamicsError, InputError, MultiArmError
@@ -538,7 +539,7 @@ def simulate(
     progress: Callable[[float], None] | None = None,
     *,
     check_initial: bool = True,
-    initial_tol: float = 1e-6,
+    initial_tol: float = INITIAL_GAP_TOLERANCE,
     velocity_tol: float = 1e-6,
     rtol: float = 1e-9,
     atol: float = 1e-11,
