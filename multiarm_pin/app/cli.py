@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -143,8 +144,8 @@ def _scenarios(args: argparse.Namespace) -> int:
         for f in shipped_files(folder):
             data = load_yaml_file(f)
             text = data.get("description", "") if isinstance(data, dict) else ""
-            first = " ".join(str(text).split())[:70]
-            print(f"  {f.name:<34} {first}")
+            line = " ".join(str(text).split())
+            print(f"  {f.name:<32} {line if len(line) <= 72 else line[:69] + '...'}")
     return 0
 
 
@@ -271,6 +272,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader of our output stopped (`| head`): not an error of ours
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":
