@@ -102,6 +102,24 @@ class ConstraintError(MultiArmError, ValueError):
     """A joint or contact definition is invalid or violated beyond tolerance."""
 
 
+class InitialGapError(ConstraintError):
+    """An initial state leaves a contact open (or penetrating) beyond the tolerance.
+
+    Attributes:
+        arm: index of the arm whose joint is violated, or None (a support, or a joint alone).
+        support: index of the penetrated support, or None (a joint).
+        contact: the contact's index in its joint, or the point's index in its support.
+        gap: the contact's gap φ [m] (negative: penetration).
+        tol: the tolerance it exceeds [m].
+    """
+
+    def __init__(self, message: str, *, arm: int | None = None, support: int | None = None,
+                 contact: int = 0, gap: float = 0.0, tol: float = 0.0):
+        super().__init__(message)
+        self.arm, self.support, self.contact = arm, support, contact
+        self.gap, self.tol = float(gap), float(tol)
+
+
 class DynamicsError(MultiArmError, ArithmeticError):
     """The equations of motion have no solution, or the state is invalid (NaN, inconsistent)."""
 

@@ -42,10 +42,11 @@ from multiarm_pin.constraints import (
     Joint,
     make_joint_from_placements,
 )
+from multiarm_pin.constraints.joint import INITIAL_GAP_TOLERANCE
 from multiarm_pin.constraints.supports import Support, SupportSet
 from multiarm_pin.dynamics import Solution, SystemBlocks, solve, solver_entry
 from multiarm_pin.dynamics.object_first import DEFAULT_RCOND_TOL, OBJECT_RCOND_TOL
-from multiarm_pin.exceptions import ConstraintError, DynamicsError, InputError
+from multiarm_pin.exceptions import ConstraintError, DynamicsError, InitialGapError, InputError
 from multiarm_pin.model.arm import Arm
 from multiarm_pin.model.arm_set import ArmSet, ArmSetTerms
 from multiarm_pin.model.kinematics import BodyKinematics
@@ -427,7 +428,7 @@ class MultiArmSystem:
                     f"state: {name} contains NaN or infinity at index(es) {bad}: {arr.tolist()}"
                 )
 
-    def check_initial_state(self, state: SystemState, tol: float = 1e-6,
+    def check_initial_state(self, state: SystemState, tol: float = INITIAL_GAP_TOLERANCE,
                             velocity_tol: float = VELOCITY_TOLERANCE) -> None:
         """Check that an initial state satisfies every joint at position and velocity level.
 
@@ -829,21 +830,23 @@ class MultiArmSystem:
                             self._N_blocks.copy())
         return full, ContactRows(phi, phi_dot, pts, nrm)
 
-    def check_supports(self, state: SystemState, tol: float = 1e-6) -> None:
+    def check_supports(self, state: SystemState, tol: float = INITIAL_GAP_TOLERANCE) -> None:
         """Raise if the object penetrates a support by more than ``tol`` [m].
 
         Raises:
-            ConstraintError: names the support, the point and its gap.
+            InitialGapError: names the support, the point and its gap.
         """
         if not self.supports.n_rows:
             return
         st = self.support_terms(state)
         k = int(np.argmin(st.phi))
         if st.phi[k] < -tol:
-            raise ConstraintError(
+            raise InitialGapError(
                 f"the object starts penetrating support {self.supports.labels[k]!r}: gap "
                 f"{st.phi[k]:.6g} m (tolerance {tol:g} m, "
-                f"{int((st.phi < -tol).sum())} point(s) below the plane)"
+                f"{int((st.phi < -tol).sum())} point(s) below the plane)",
+                support=int(self.supports.support_index[k]),
+                contact=int(self.supports.point_index[k]), gap=st.phi[k], tol=tol,
             )
 
     # ------------------------------------------------------------------ physics

@@ -5,23 +5,32 @@ Subcommands:
     ``replay DIR``          serve the replay of a finished run from a Meshcat server
     ``grasp FILE.yaml``     grasp analysis report (form closure, margin, seventh contact)
     ``sweep STUDY.yaml``    a study (sweep / Monte Carlo) of a scenario or grasp, on Dask
-    ``demo``                run the default scenario (the README's main command)
+    ``demo``                run the shipped default scenario (the README's main command)
+    ``scenarios``           list the shipped scenario, grasp and study files
     ``info``                load arms and an object and print their key quantities
+
+The argument parsing of ``run``, ``replay``, ``demo`` and ``scenarios`` lives here; the work is
+done by :mod:`multiarm_pin.app.runner` (``grasp`` and ``sweep`` bring their own parsers from
+:mod:`multiarm_pin.grasp.cli` and :mod:`multiarm_pin.study.cli`).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import json
+import os
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from multiarm_pin.exceptions import MultiArmError
-
-REPO_ROOT = Path(__file__).resolve().parents[2]
-DEFAULT_SCENARIO = REPO_ROOT / "scenarios" / "two_ur5_box.yaml"
+from multiarm_pin.app.run_results import REPLAY_FPS, load_run, run_status
+from multiarm_pin.app.runner import http_status, run_scenario, serve_run
+from multiarm_pin.data import DEMO_SCENARIO, data_path, shipped_files
+from multiarm_pin.exceptions import MultiArmError, RunFailedError, RunInterrupted
 
 
 def _info(args: argparse.Namespace) -> int:
@@ -86,26 +95,26 @@ def _build_parser() -> argparse.ArgumentParser:
     grasp_cli.configure_parser(p)
     p.set_defaults(func=grasp_cli.run)
 
-    from multiarm_pin.app import runner
-
     p = sub.add_parser("run", help="simulate a scenario file")
-    runner.configure_run_parser(p)
-    p.set_defaults(func=runner.run_command)
+    configure_run_parser(p)
+    p.set_defaults(func=run_command)
     p = sub.add_parser("replay", help="serve the replay of a finished run")
-    runner.configure_replay_parser(p)
-    p.set_defaults(func=runner.replay_command)
+    configure_replay_parser(p)
+    p.set_defaults(func=replay_command)
     from multiarm_pin.study import cli as study_cli
 
     p = sub.add_parser("sweep", help="run a study (sweep / Monte Carlo) on Dask")
     study_cli.configure_parser(p)
     p.set_defaults(func=study_cli.run)
-    p = sub.add_parser("demo", help=f"run the default scenario ({DEFAULT_SCENARIO.name})")
+    p = sub.add_parser("demo", help=f"run the shipped default scenario ({DEMO_SCENARIO})")
     p.add_argument("--out", default="results/demo", help="output folder (default results/demo)")
     p.add_argument("--duration", type=float, default=None, help="override the duration [s]")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--overwrite", action="store_true",
                    help="replace a results folder of another scenario file")
     p.set_defaults(func=_demo)
+    p = sub.add_parser("scenarios", help="list the shipped scenario, grasp and study files")
+    p.set_defaults(func=_scenarios)
 
     p = sub.add_parser("info", help="print key quantities of two arms and an object")
     p.set_defaults(func=_info)
@@ -113,17 +122,138 @@ def _build_parser() -> argparse.ArgumentParser:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from multiarm_pin.app import runner
-
+    """``multiarm-pin demo``: ``run`` on the shipped default scenario, from any folder."""
     ns = argparse.Namespace(
-        scenario=str(DEFAULT_SCENARIO),
+        scenario=str(data_path("scenarios", DEMO_SCENARIO)),
         out=args.out,
         solver=None,
         duration=args.duration,
         quiet=args.quiet,
         overwrite=args.overwrite,
     )
-    return runner.run_command(ns)
+    return run_command(ns)
+
+
+def _scenarios(args: argparse.Namespace) -> int:
+    """``multiarm-pin scenarios``: the shipped files, with their descriptions."""
+    from multiarm_pin.yaml_reader import load_yaml_file
+
+    for folder, command in (("scenarios", "run"), ("scenarios/grasps", "grasp"),
+                            ("scenarios/studies", "sweep")):
+        print(f"{folder} (multiarm-pin {command} FILE): {data_path(*folder.split('/'))}")
+        for f in shipped_files(folder):
+            data = load_yaml_file(f)
+            text = data.get("description", "") if isinstance(data, dict) else ""
+            line = " ".join(str(text).split())
+            print(f"  {f.name:<32} {line if len(line) <= 72 else line[:69] + '...'}")
+    return 0
+
+
+# ----------------------------------------------------------------------------- run, replay
+def configure_run_parser(p: argparse.ArgumentParser) -> None:
+    """Arguments of ``multiarm-pin run``."""
+    p.add_argument("scenario", help="scenario YAML file")
+    p.add_argument("--out", default=None, help="results folder (default results/<name>)")
+    p.add_argument("--solver", default=None,
+                   help="forward-dynamics solver: object_first, dense_kkt, auto, singular")
+    p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--no-html", dest="html", action="store_false",
+                   help="skip the replay page (faster)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace a results folder of another scenario file")
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """``multiarm-pin run``: simulate, write results, print where they are.
+
+    Returns:
+        0 for a complete run, 1 for a run that failed after its simulation started, 130 for
+        an interrupted run (Ctrl-C, SIGTERM); partial results are written in both cases.
+    """
+    html = getattr(args, "html", True)
+    try:
+        res = run_scenario(args.scenario, args.out, args.solver, args.duration,
+                           quiet=bool(args.quiet), html=html,
+                           overwrite=bool(getattr(args, "overwrite", False)))
+    except RunFailedError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        if exc.out_dir is not None:
+            print(f"partial results (status failed, t_end = {exc.t_end:.6g} s): {exc.out_dir}; "
+                  f"replay them with: multiarm-pin replay {exc.out_dir}", file=sys.stderr)
+        return 1
+    except RunInterrupted as exc:
+        print(f"interrupted: {exc}", file=sys.stderr)
+        if exc.out_dir is not None:
+            status = "interrupted"
+            with contextlib.suppress(OSError, ValueError):
+                status = json.loads((Path(exc.out_dir) / "summary.json").read_text(
+                    encoding="utf-8")).get("status", status)
+            what = "partial results" if status != "complete" else "results"
+            print(f"{what} (status {status}, t_end = {exc.t_end:.6g} s): {exc.out_dir}; "
+                  f"replay them with: multiarm-pin replay {exc.out_dir}", file=sys.stderr)
+        return 130
+    s = res.summary
+    out = res.out_dir.resolve()
+    print(f"scenario {s['scenario']}: {s['steps']} steps of {s['dt']:g} s "
+          f"({s['integrator']}, solver {s['solver']}) in {s['wall_time']:.2f} s wall time")
+    forces = ("none" if s["min_contact_force"] is None else
+              f"{s['min_contact_force']:.4g} .. {s['max_contact_force']:.4g} N")
+    print(f"  max constraint violation {s['max_constraint_violation']:.3g} m, contact forces "
+          f"{forces}")
+    if s.get("events"):
+        e0 = s["events"][0]
+        print(f"  {len(s['events'])} contact events (separations, touchdowns); first: "
+              f"{e0['kind']} of {e0['label']} at t = {e0['t']:.4g} s")
+    for w in s["warnings"][:10]:
+        print(f"  warning: {w}")
+    if len(s["warnings"]) > 10:
+        print(f"  ... {len(s['warnings']) - 10} more warnings in summary.json")
+    print(f"results: {out}")
+    print(f"  trajectory: {out / 'trajectory.npz'}")
+    print(f"  summary:    {out / 'summary.json'}")
+    pngs = ("object_pose.png", "contact_forces.png", "constraint_violation.png")
+    print("  plots:      " + ", ".join(str(out / f) for f in pngs))
+    if "replay" in res.files:
+        print(f"replay (open in a browser, works offline): {out / 'replay.html'}")
+    print(f"live replay: multiarm-pin replay {out}")
+    return 0
+
+
+def configure_replay_parser(p: argparse.ArgumentParser) -> None:
+    """Arguments of ``multiarm-pin replay``."""
+    p.add_argument("dir", help="results folder written by 'multiarm-pin run'")
+    p.add_argument("--fps", type=float, default=REPLAY_FPS, help="frames per second")
+    p.add_argument("--open", action="store_true", help="open the page in the browser")
+    p.add_argument("--no-block", "--once", dest="block", action="store_false",
+                   help="check that the server answers, then stop (for scripts and tests)")
+
+
+def replay_command(args: argparse.Namespace) -> int:
+    """``multiarm-pin replay DIR``: serve the run and print its URL until Ctrl-C."""
+    from multiarm_pin.app.replay import close_visualizer
+
+    summary = load_run(args.dir)[2]
+    if summary.get("status", "complete") != "complete":
+        print(f"note: {Path(args.dir).resolve()} holds a {run_status(summary)}; replaying what "
+              "was simulated", flush=True)
+    url, vis = serve_run(args.dir, fps=args.fps, open_browser=bool(getattr(args, "open", False)))
+    try:
+        print(f"replay of {Path(args.dir).resolve()} ({run_status(summary).split(':')[0]}) "
+              f"served at {url}", flush=True)
+        if not getattr(args, "block", True):
+            status = http_status(url)
+            print(f"server answered HTTP {status}; stopping (--no-block)")
+            return 0 if status == 200 else 1
+        print("press Ctrl-C to stop", flush=True)
+        try:
+            while True:
+                time.sleep(1.0)
+        except KeyboardInterrupt:
+            print("stopped")
+        return 0
+    finally:
+        close_visualizer(vis)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -142,6 +272,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader of our output stopped (`| head`): not an error of ours
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":

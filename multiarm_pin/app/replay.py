@@ -664,7 +664,7 @@ def write_replay(result, system, path, fps: float = 30) -> Path:
         InputError: a result whose shapes are not those of ``system``, or a folder that does
             not exist.
     """
-    from multiarm_pin.app.runner import replay_parts, system_trajectory_arrays
+    from multiarm_pin.app.run_results import replay_parts, system_trajectory_arrays
 
     q = getattr(result, "q", None)
     mu = getattr(result, "mu", None)

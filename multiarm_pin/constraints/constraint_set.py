@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from multiarm_pin.constraints.joint import Joint
+from multiarm_pin.constraints.joint import INITIAL_GAP_TOLERANCE, Joint
 from multiarm_pin.exceptions import ConstraintError, InputError
 from multiarm_pin.model.kinematics import BodyKinematics
 
@@ -230,7 +230,8 @@ class ConstraintSet:
             normals=out[:, :, 18:21],
         )
 
-    def check_initial(self, tools: BodyKinematics, obj: BodyKinematics, tol: float = 1e-6) -> None:
+    def check_initial(self, tools: BodyKinematics, obj: BodyKinematics,
+                      tol: float = INITIAL_GAP_TOLERANCE) -> None:
         """Raise if any contact of any joint (dropped ones included) has ``|φ| > tol``.
 
         Args:

@@ -36,7 +36,7 @@ import numpy as np
 import pinocchio as pin
 
 from multiarm_pin.constraints.contact import Contact, ContactState
-from multiarm_pin.exceptions import ConstraintError, InputError, SingularityError
+from multiarm_pin.exceptions import ConstraintError, InitialGapError, InputError, SingularityError
 from multiarm_pin.model.kinematics import BodyKinematics
 from multiarm_pin.spatial import as_array
 
@@ -49,8 +49,9 @@ RANK_TOLERANCE = 1e-7
 ALPHA_THRESHOLD = 0.2
 """Least singular value a chosen ``α`` row set must keep (rows of an orthonormal basis)."""
 
-REFERENCE_GAP_TOLERANCE = 1e-6
-"""Largest gap [m] a contact may have at the joint's reference placement."""
+INITIAL_GAP_TOLERANCE = 1e-6
+"""Largest gap [m] a contact may have where it is assembled: at its joint's reference
+placement and in a system's initial state (scenarios, simulations)."""
 
 
 @dataclass(frozen=True)
@@ -155,7 +156,7 @@ class Joint:
         name: str = "",
         expected_dof: int | None = None,
         alpha_rows: Sequence[int | str] | None = None,
-        gap_tolerance: float = REFERENCE_GAP_TOLERANCE,
+        gap_tolerance: float = INITIAL_GAP_TOLERANCE,
         unilateral: bool | None = None,
     ):
         self.kind = kind
@@ -315,20 +316,21 @@ class Joint:
             alpha=rel[list(self.alpha_rows)],
         )
 
-    def check_initial(self, tool: BodyKinematics, obj: BodyKinematics, tol: float = 1e-6,
+    def check_initial(self, tool: BodyKinematics, obj: BodyKinematics,
+                      tol: float = INITIAL_GAP_TOLERANCE,
                       arm: int | None = None) -> None:
         """Raise if any contact (kept or dropped) has ``|φ| > tol`` at this state.
 
         Raises:
-            ConstraintError: names the arm (if given), the joint, the contact, the gap, tol.
+            InitialGapError: names the arm (if given), the joint, the contact, the gap, tol.
         """
         for k, s in enumerate(self.contact_states(tool, obj, active_only=False)):
             if abs(s.phi) > tol:
                 where = f"arm {arm}: " if arm is not None else ""
-                raise ConstraintError(
+                raise InitialGapError(
                     f"{where}joint {self.name!r} ({self.kind}) contact {k} "
                     f"{self.contacts[k].name!r}: initial gap {s.phi:.6g} m exceeds the "
-                    f"tolerance {tol:g} m"
+                    f"tolerance {tol:g} m", arm=arm, contact=k, gap=s.phi, tol=tol,
                 )
 
     # -- motion space ---------------------------------------------------------------------

@@ -23,7 +23,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         "--picture",
         metavar="PATH",
         default=None,
-        help="where to save the picture (default: <stem>_grasp.png next to FILE)",
+        help="where to save the picture (default: <stem>_grasp.png next to FILE, or in the "
+             "current folder for a file shipped with the package)",
     )
     parser.add_argument("--no-picture", action="store_true", help="do not draw the picture")
 
@@ -33,6 +34,16 @@ def picture_formats() -> list[str]:
     from matplotlib.backend_bases import FigureCanvasBase
 
     return sorted(FigureCanvasBase.get_supported_filetypes())
+
+
+def _default_picture(file: Path) -> Path:
+    """``<stem>_grasp.png`` beside ``file``, or in the current folder for a shipped file."""
+    from multiarm_pin.data import data_path
+
+    name = f"{file.stem}_grasp.png"
+    if file.resolve().is_relative_to(data_path().resolve()):
+        return Path(name)  # never write into the installed package
+    return file.with_name(name)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -62,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {args.file}: {exc}", file=sys.stderr)
         return 2
     if not getattr(args, "no_picture", False):
-        path = picture or gf.path.with_name(f"{gf.path.stem}_grasp.png")
+        path = picture or _default_picture(gf.path)
         try:
             draw_grasp(gf.grasp, region, path, title=gf.path.name)
             rep["picture"] = str(path)

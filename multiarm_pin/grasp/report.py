@@ -22,8 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from multiarm_pin.app.yaml_strict import load_yaml_file
-from multiarm_pin.exceptions import GraspError, InputError, MultiArmError, ScenarioError
+from multiarm_pin.exceptions import GraspError, InputError, MultiArmError
 from multiarm_pin.grasp.contacts import Grasp, contact_from_point_normal, contact_on_face
 from multiarm_pin.grasp.form_closure import MIN_CONTACTS, form_closure
 from multiarm_pin.grasp.independence import check_independence
@@ -34,6 +33,7 @@ from multiarm_pin.grasp.seventh_contact import (
 )
 from multiarm_pin.grasp.stability import closure_bound, independence_bound, linearised_margins
 from multiarm_pin.model.polyhedron import box, from_vertices
+from multiarm_pin.yaml_reader import Reader, describe, load_yaml_file
 
 
 @dataclass(frozen=True)
@@ -66,64 +66,66 @@ def load_grasp_file(path: str | Path) -> GraspFile:
     return grasp_from_data(data, path)
 
 
+_TOP_KEYS = ("object", "contacts", "seventh_contact_face", "length_scale", "name", "description")
+
+
 def grasp_from_data(data, path: str | Path) -> GraspFile:
     """Validate a parsed grasp mapping (as read by :func:`load_grasp_file` from ``path``).
 
+    Read with the scenarios' key-path reader (:class:`~multiarm_pin.yaml_reader.Reader`).
+
     Raises:
-        ScenarioError: an invalid key (names ``path`` and the key path).
+        ScenarioError: an invalid key (names ``path``, the key path and what was expected,
+            with a did-you-mean for unknown keys and values).
     """
     path = Path(path)
-    f = str(path)
-    if not isinstance(data, dict):
-        raise ScenarioError(f, "", "expected a mapping with keys object, contacts")
-    unknown = set(data) - {"object", "contacts", "seventh_contact_face", "length_scale", "name",
-                           "description"}  # fmt: skip
-    if unknown:
-        raise ScenarioError(f, sorted(unknown)[0], "unknown key; expected object, contacts, "
-                            "seventh_contact_face, length_scale, name, description")  # fmt: skip
-    shape = _get(data, "object", dict, f)
-    shape = _get(shape, "shape", dict, f, "object.")
-    kind = shape.get("type")
+    root = Reader(str(path), "", data)
+    d = root.mapping(_TOP_KEYS, required=("object", "contacts"))
+    obj = root.get("object")
+    obj.mapping(("shape",), required=("shape",))
+    sr = obj.get("shape")
+    sd = sr.mapping(("type", "size", "vertices"), required=("type",))
+    kind = sr.get("type").string(("box", "polyhedron"))
+    key = "size" if kind == "box" else "vertices"
+    if key not in sd:
+        raise sr.error(f"missing required key {key!r}", f"{sr.path}.{key}")
     try:
         if kind == "box":
-            poly = box(shape.get("size"))
-        elif kind == "polyhedron":
-            poly = from_vertices(shape.get("vertices"))
+            poly = box(sr.get("size").array((3,), "edge lengths [m]"))
         else:
-            raise ScenarioError(
-                f, "object.shape.type", f"expected 'box' or 'polyhedron', got {kind!r}"
-            )
+            poly = from_vertices(sr.get("vertices").array((None, 3), "vertices [m]"))
     except InputError as exc:
-        key = "object.shape.size" if kind == "box" else "object.shape.vertices"
-        raise ScenarioError(f, key, str(exc)) from exc
-    items = _get(data, "contacts", list, f)
+        raise sr.get(key).error(str(exc)) from exc
+    cr = root.get("contacts")
+    if not isinstance(cr.value, list):
+        raise cr.error(f"expected a list of {{face, point}} or {{point, normal}}, got "
+                       f"{describe(cr.value)}")
     contacts = []
-    for i, item in enumerate(items):
-        key = f"contacts[{i}]"
-        if not isinstance(item, dict):
-            raise ScenarioError(f, key, "expected a mapping {face, point} or {point, normal}")
+    for i, item in enumerate(cr.value):
+        c = cr.child(i, item)
+        cd = c.mapping(("face", "point", "normal"))
+        point = c.get("point").array((3,), "object frame [m]") if "point" in cd else None
         try:
-            if "face" in item:
-                face = item["face"]
+            if "face" in cd:
+                face = cd["face"]
                 if isinstance(face, str) and face.lstrip("-").isdigit():
                     face = int(face)
-                contacts.append(contact_on_face(poly, face, item.get("point")))
-            elif "normal" in item:
-                contacts.append(contact_from_point_normal(item.get("point"), item["normal"], poly))
+                contacts.append(contact_on_face(poly, face, point))
+            elif "normal" in cd:
+                normal = c.get("normal").array((3,), "inward normal, object frame")
+                contacts.append(contact_from_point_normal(point, normal, poly))
             else:
-                raise ScenarioError(f, key, "expected a 'face' or a 'normal' key")
+                raise c.error("expected a 'face' or a 'normal' key")
         except (GraspError, InputError) as exc:
-            raise ScenarioError(f, key, str(exc)) from exc
-    face = data.get("seventh_contact_face")
+            raise c.error(str(exc)) from exc
+    face = d.get("seventh_contact_face")
     if face is not None:
         try:
             poly.face_index(face)
         except InputError as exc:
-            raise ScenarioError(f, "seventh_contact_face", str(exc)) from exc
-    L = data.get("length_scale", 1.0)
-    if not isinstance(L, int | float) or isinstance(L, bool) or not L > 0:
-        raise ScenarioError(f, "length_scale", f"expected a positive length [m], got {L!r}")
-    return GraspFile(path, Grasp(tuple(contacts), poly), face, float(L))
+            raise root.get("seventh_contact_face").error(str(exc)) from exc
+    L = root.get("length_scale").number(positive=True) if "length_scale" in d else 1.0
+    return GraspFile(path, Grasp(tuple(contacts), poly), face, L)
 
 
 def analyse(gf: GraspFile) -> tuple[dict[str, Any], ContactRegion | None]:
@@ -334,11 +336,3 @@ def draw_grasp(
     fig.savefig(out, dpi=100)
     plt.close(fig)
     return out
-
-
-def _get(d: dict, key: str, typ: type, f: str, prefix: str = ""):
-    if key not in d:
-        raise ScenarioError(f, prefix + key, "missing")
-    if not isinstance(d[key], typ):
-        raise ScenarioError(f, prefix + key, f"expected a {typ.__name__}, got {d[key]!r}")
-    return d[key]

@@ -45,6 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from multiarm_pin._registry import lookup
+from multiarm_pin.constraints.joint import INITIAL_GAP_TOLERANCE
 from multiarm_pin.dynamics import solver_entry
 from multiarm_pin.exceptions import DynamicsError, InputError
 from multiarm_pin.model.rigid_object import ObjectState
@@ -111,7 +112,7 @@ def simulate(
     progress: Callable[[float], None] | None = None,
     *,
     check_initial: bool = True,
-    initial_tol: float = 1e-6,
+    initial_tol: float = INITIAL_GAP_TOLERANCE,
     velocity_tol: float = 1e-6,
     rtol: float = 1e-9,
     atol: float = 1e-11,

@@ -222,8 +222,8 @@ def load_study(path) -> StudySpec:
 
 
 def _load_yaml(path: Path, f: str):
-    """Strict YAML (:mod:`multiarm_pin.app.yaml_strict`: duplicate keys, encodings, 1e12 floats)."""
-    from multiarm_pin.app.yaml_strict import load_yaml_file
+    """Strict YAML (:mod:`multiarm_pin.yaml_reader`: duplicate keys, encodings, 1e12 floats)."""
+    from multiarm_pin.yaml_reader import load_yaml_file
     from multiarm_pin.exceptions import ScenarioError
 
     try:

@@ -2,8 +2,8 @@
 
 import pytest
 
-from multiarm_pin.app.yaml_strict import load_yaml_file, load_yaml_text
 from multiarm_pin.exceptions import ScenarioError
+from multiarm_pin.yaml_reader import load_yaml_file, load_yaml_text
 
 
 def test_duplicate_keys_name_both_lines_and_the_key_path():

@@ -1,0 +1,49 @@
+"""Scenario files: format and validation (:mod:`.schema`), specs (:mod:`.specs`), building.
+
+``load_scenario(path)`` reads and validates a file into a :class:`Scenario`;
+``build_scenario(scenario)`` loads the arms, places them and builds the
+:class:`~multiarm_pin.system.MultiArmSystem` with its checked initial state
+(:class:`BuiltScenario`). The file format is described in :mod:`.schema`.
+"""
+
+from multiarm_pin.app.scenario.build import BuiltScenario, build_arm, build_object, build_scenario
+from multiarm_pin.app.scenario.schema import load_scenario, parse_scenario
+from multiarm_pin.app.scenario.specs import (
+    CONTROLLER_TYPES,
+    DEPRECATED_JOINT_TYPES,
+    INTEGRATOR_NAMES,
+    JOINT_TYPE_NAMES,
+    SOLVER_NAMES,
+    ArmSpec,
+    ContactSpec,
+    ControllerSpec,
+    JointSpec,
+    ObjectSpec,
+    Scenario,
+    SimulationSpec,
+    SupportSpec,
+)
+from multiarm_pin.yaml_reader import did_you_mean
+
+__all__ = [
+    "CONTROLLER_TYPES",
+    "DEPRECATED_JOINT_TYPES",
+    "INTEGRATOR_NAMES",
+    "JOINT_TYPE_NAMES",
+    "SOLVER_NAMES",
+    "ArmSpec",
+    "BuiltScenario",
+    "ContactSpec",
+    "ControllerSpec",
+    "JointSpec",
+    "ObjectSpec",
+    "Scenario",
+    "SimulationSpec",
+    "SupportSpec",
+    "build_arm",
+    "build_object",
+    "build_scenario",
+    "did_you_mean",
+    "load_scenario",
+    "parse_scenario",
+]
