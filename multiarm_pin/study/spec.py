@@ -223,8 +223,8 @@ def load_study(path) -> StudySpec:
 
 def _load_yaml(path: Path, f: str):
     """Strict YAML (:mod:`multiarm_pin.yaml_reader`: duplicate keys, encodings, 1e12 floats)."""
-    from multiarm_pin.yaml_reader import load_yaml_file
     from multiarm_pin.exceptions import ScenarioError
+    from multiarm_pin.yaml_reader import load_yaml_file
 
     try:
         return load_yaml_file(path)
