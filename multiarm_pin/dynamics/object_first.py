@@ -8,8 +8,8 @@ every ``μ_i`` from the object equation::
     μ_i = S_i⁻¹ (r_i - W_o,iᵀ a_o),     q̈_i = M_i⁻¹ (h_i + W_i μ_i)
 
 :func:`solve_object_first` runs the compiled kernel
-:func:`multiarm_pin._compiled.kernels.object_first` (per-arm Cholesky factorisations of ``M_i`` and
-``S_i``, same conditioning criteria) and hands every doubtful case to
+:func:`multiarm_pin._compiled.object_first.object_first` (per-arm Cholesky factorisations of
+``M_i`` and ``S_i``, same conditioning criteria) and hands every doubtful case to
 :func:`solve_object_first_numpy`, the vectorised reference described next.
 
 In :func:`solve_object_first_numpy` all per-arm work is done on stacked arrays with batched
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lapack
 
-from multiarm_pin._compiled import kernels as _kernels
+from multiarm_pin._compiled.object_first import SOLVE_OK, object_first
 from multiarm_pin.dynamics.blocks import Solution, SystemBlocks
 from multiarm_pin.exceptions import DynamicsError, InputError, SingularityError
 
@@ -187,10 +187,10 @@ def solve_object_first(
 ) -> Solution:
     """Forward dynamics by eliminating the multipliers into the object (Eq 4.10-4.12), compiled.
 
-    The compiled kernel :func:`multiarm_pin._compiled.kernels.object_first` (per-arm Cholesky of
-    ``M_i`` and ``S_i``, the same conditioning criterion and thresholds). Whenever it reports
-    a problem (a singular or badly conditioned ``S_i`` or reduced object matrix, a singular
-    ``M_i``, NaN) the call is handed to :func:`solve_object_first_numpy`, which decides,
+    The compiled kernel :func:`multiarm_pin._compiled.object_first.object_first` (per-arm
+    Cholesky of ``M_i`` and ``S_i``, the same conditioning criterion and thresholds). Whenever
+    it reports a problem (a singular or badly conditioned ``S_i`` or reduced object matrix, a
+    singular ``M_i``, NaN) the call is handed to :func:`solve_object_first_numpy`, which decides,
     falls back to the singular variant or raises exactly as documented there; so results and
     errors are those of the numpy version (to round-off).
 
@@ -213,10 +213,10 @@ def solve_object_first(
     a_o = np.empty(6)
     qdd = np.empty((n, k))
     mu = np.empty((n, m))
-    status = _kernels.object_first(
+    status = object_first(
         _c(b.M), _c(b.h), _c(b.W), _c(b.W_o), _c(b.c), _c(b.M_o), _c(b.h_o), b.N,
         float(rcond_tol), OBJECT_RCOND_TOL, a_o, qdd, mu)
-    if status != _kernels.SOLVE_OK:
+    if status != SOLVE_OK:
         return solve_object_first_numpy(b, rcond_tol, fallback=fallback)
     return Solution(a_o, qdd, mu, "object_first", (), b)
 

@@ -84,7 +84,7 @@ import numpy as np
 from numba import njit
 from scipy.linalg import lapack
 
-from multiarm_pin._compiled import kernels as _kernels
+from multiarm_pin._compiled import linalg as _kernels
 from multiarm_pin.dynamics.blocks import SystemBlocks
 from multiarm_pin.dynamics.object_first import _batched_solve, solve_object_first
 from multiarm_pin.exceptions import DynamicsError, InputError, SingularityError

@@ -1,0 +1,86 @@
+"""Compiled small dense linear algebra: Cholesky factor, solve and inverse diagonal.
+
+Mirrors the LAPACK calls of the numpy references (``dpotrf`` / ``dpotrs`` through
+``numpy.linalg.solve`` and :mod:`scipy.linalg.lapack` in
+:mod:`multiarm_pin.dynamics.object_first`): the same factorisation, written as plain loops on
+the leading ``size`` x ``size`` block of preallocated arrays so that the kernels of
+:mod:`multiarm_pin._compiled` call it without allocating. Tested against numpy in
+``tests/test_kernels.py``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, error_model="numpy")
+def cholesky(A, L, size):  # pragma: no cover - compiled
+    """Lower Cholesky factor of the leading ``size`` x ``size`` block of ``A`` into ``L``.
+
+    Returns False (``L`` partly written) if a pivot is not positive or not finite.
+    """
+    for j in range(size):
+        s = A[j, j]
+        for p in range(j):
+            s -= L[j, p] * L[j, p]
+        if not (s > 0.0 and s < np.inf):
+            return False
+        d = math.sqrt(s)
+        L[j, j] = d
+        for i in range(j + 1, size):
+            t = A[i, j]
+            for p in range(j):
+                t -= L[i, p] * L[j, p]
+            L[i, j] = t / d
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def cholesky_solve(L, B, size, ncols):  # pragma: no cover - compiled
+    """``B[:size, :ncols] ← A⁻¹ B`` in place, ``A = L Lᵀ`` (L from :func:`cholesky`).
+
+    Row-oriented: the innermost loops run along the right-hand sides, independent of each
+    other (no dependency chain; the compiler vectorises them).
+    """
+    for i in range(size):
+        for p in range(i):
+            lip = L[i, p]
+            for col in range(ncols):
+                B[i, col] -= lip * B[p, col]
+        d = 1.0 / L[i, i]
+        for col in range(ncols):
+            B[i, col] *= d
+    for i in range(size - 1, -1, -1):
+        for p in range(i + 1, size):
+            lpi = L[p, i]
+            for col in range(ncols):
+                B[i, col] -= lpi * B[p, col]
+        d = 1.0 / L[i, i]
+        for col in range(ncols):
+            B[i, col] *= d
+
+
+@njit(cache=True, error_model="numpy")
+def inverse_diagonal(L, size, out, col):  # pragma: no cover - compiled
+    """``out[j] = (A⁻¹)_jj`` for ``A = L Lᵀ``: squared column norms of ``L⁻¹``.
+
+    ``col`` is scratch of length ``size``.
+    """
+    for j in range(size):
+        for i in range(size):
+            col[i] = 0.0
+        col[j] = 1.0 / L[j, j]
+        acc = col[j] * col[j]
+        for i in range(j + 1, size):
+            t = 0.0
+            for p in range(j, i):
+                t -= L[i, p] * col[p]
+            col[i] = t / L[i, i]
+            acc += col[i] * col[i]
+        out[j] = acc
+
+
+__all__ = ["cholesky", "cholesky_solve", "inverse_diagonal"]
