@@ -1,4 +1,4 @@
-"""Compiled small dense linear algebra: Cholesky factor, solve and inverse diagonal.
+"""Compiled small dense linear algebra: Cholesky factor, solve, inverse diagonal, batched solve.
 
 Mirrors the LAPACK calls of the numpy references (``dpotrf`` / ``dpotrs`` through
 ``numpy.linalg.solve`` and :mod:`scipy.linalg.lapack` in
@@ -83,4 +83,30 @@ def inverse_diagonal(L, size, out, col):  # pragma: no cover - compiled
         out[j] = acc
 
 
-__all__ = ["cholesky", "cholesky_solve", "inverse_diagonal"]
+
+@njit(cache=True, error_model="numpy")
+def batched_spd_solve(A, B):  # pragma: no cover - compiled
+    """``A_i⁻¹ B_i`` for a stack of symmetric positive definite ``A`` (n, k, k), ``B`` (n, k, p).
+
+    By :func:`cholesky` and :func:`cholesky_solve` per matrix; the result of a matrix that
+    is not positive definite (a pivot not positive or not finite) is NaN, so that the caller
+    finds the failed ones with one ``isfinite`` (the contract of ``numpy.linalg.solve``'s
+    batched LAPACK gufunc with floating-point errors ignored, on SPD matrices).
+
+    Returns:
+        (n, k, p) new array.
+    """
+    n, k, p = B.shape
+    out = np.empty((n, k, p))
+    L = np.zeros((k, k))
+    for i in range(n):
+        ok = cholesky(A[i], L, k)
+        for a in range(k):
+            for c in range(p):
+                out[i, a, c] = B[i, a, c] if ok else np.nan
+        if ok:
+            cholesky_solve(L, out[i], k, p)
+    return out
+
+
+__all__ = ["batched_spd_solve", "cholesky", "cholesky_solve", "inverse_diagonal"]

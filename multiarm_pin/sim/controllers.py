@@ -511,7 +511,7 @@ class ObjectPD(Controller):
         a_pts = np.zeros(self.hold_points_in_tool.shape)
         a_d = np.empty(6)
         status, solved = controller_kernels.object_pd_step(
-            buffer.buf, path.dims, path.N, path.nv_arm, self._unilateral,
+            buffer, path.dims, path.N, path.nv_arm, self._unilateral,
             layout.object_state_vector(o.position, o.quaternion, o.twist), ref[1],
             self._pd_gains, z,
             self.hold_points_in_tool, self.hold_points_in_object, self._hold_n, self._gains,
