@@ -22,6 +22,11 @@ State layout: ``q`` (nq,) and ``v`` (nv,) are the arms' configurations and veloc
 concatenated in arm order (``system.arm_set.q_slices`` / ``v_slices``); the object has its
 own :class:`~.model.rigid_object.ObjectState` (COM position, quaternion ``[x, y, z, w]``,
 twist ``[ẋ; ω]`` in world axes).
+
+This module is the public system only (about 650 lines, most of them the public methods'
+docstrings); the compiled evaluation and its buffer views are in
+:mod:`multiarm_pin.dynamics.evaluation`, the stacking of every contact row (arms and
+supports) in :mod:`multiarm_pin.dynamics.contact_rows`.
 """
 
 from __future__ import annotations
@@ -42,10 +47,10 @@ from multiarm_pin.constraints import (
 )
 from multiarm_pin.constraints.supports import Support, SupportSet
 from multiarm_pin.dynamics import Solution, SystemBlocks, solve
+from multiarm_pin.dynamics.contact_rows import ContactRows, ContactRowTable, stack_contact_blocks
 from multiarm_pin.dynamics.evaluation import (
     CompiledSystem,
     Evaluation,
-    baumgarte_gains,
     reference_evaluation,
 )
 from multiarm_pin.dynamics.object_first import solve_object_first_numpy
@@ -75,25 +80,6 @@ class SystemState:
     q: np.ndarray
     v: np.ndarray
     obj: ObjectState
-
-
-@dataclass(frozen=True)
-class ContactRows:
-    """Every contact row of the system at one state: the arms' rows, then the supports'.
-
-    Shapes ``(B, R)`` with ``B = n_blocks`` (the n arms, plus one zero-dof block holding every
-    support row when the system has supports) and ``R = rows_max``; padding is zero.
-
-    Attributes:
-        phi: (B, R) gaps [m]; phi_dot: (B, R) gap rates [m/s].
-        contact_points: (B, R, 3) world contact points [m].
-        normals: (B, R, 3) world directions in which each row pushes the object.
-    """
-
-    phi: np.ndarray
-    phi_dot: np.ndarray
-    contact_points: np.ndarray
-    normals: np.ndarray
 
 
 JointSpec = Joint | str | Mapping | Callable[[pin.SE3, pin.SE3], Joint]
@@ -254,33 +240,15 @@ class MultiArmSystem:
 
     def _init_contact_rows(self) -> None:
         """Row tables of :meth:`contact_blocks` (arms' rows, then the supports' block)."""
-        n, K = self.n_arms, self.supports.n_rows
-        self.n_blocks = n + (1 if K else 0)
-        self.rows_max = max(self.N_max, K)
-        B, R = self.n_blocks, self.rows_max
-        mask = np.zeros((B, R), dtype=bool)
-        uni = np.zeros((B, R), dtype=bool)
-        rest = np.zeros((B, R))
-        labels = []
-        for i in range(n):
-            Ni = int(self._N[i])
-            mask[i, :Ni] = True
-            uni[i, :Ni] = self.unilateral[i, :Ni]
-            names = [c.name for c in self.joints[i].active_contacts]
-            labels += [(i, k, f"{self.arms[i].name}:{names[k]}") for k in range(Ni)]
-        if K:
-            mask[n, :K] = True
-            uni[n, :K] = True
-            rest[n, :K] = self.supports.restitution
-            labels += [(n, k, lab) for k, lab in enumerate(self.supports.labels)]
-        for a in (mask, uni, rest):
-            a.setflags(write=False)
-        self.contact_mask, self.contact_unilateral = mask, uni
-        self.contact_restitution = rest
-        self.contact_labels = labels
-        self._nv_blocks = np.concatenate([self._nv_arm, [0] * (B - n)]).astype(int)
-        self._N_blocks = np.concatenate([self._N, [K] * (B - n)]).astype(int)
-        self._nv_max_blocks = max(int(self._nv_arm.max()) if n else 0, 1)
+        names = [[f"{arm.name}:{c.name}" for c in joint.active_contacts]
+                 for arm, joint in zip(self.arms, self.joints, strict=True)]
+        table = ContactRowTable.build(self._nv_arm, self._N, self.unilateral, names,
+                                      self.supports)
+        self._contact_rows = table
+        self.n_blocks, self.rows_max = table.n_blocks, table.rows_max
+        self.contact_mask, self.contact_unilateral = table.mask, table.unilateral
+        self.contact_restitution = table.restitution
+        self.contact_labels = table.labels
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -601,7 +569,6 @@ class MultiArmSystem:
             ``rows_max`` rows, and their :class:`ContactRows`.
         """
         n, K = self.n_arms, self.supports.n_rows
-        B, R = self.n_blocks, self.rows_max
         o = state.obj
         if n:
             M_o, h_o = blocks.M_o, blocks.h_o
@@ -615,43 +582,8 @@ class MultiArmSystem:
                 blocks = blocks.replaced(h_o=h_o)
             ct = constraints
             return blocks, ContactRows(ct.phi, ct.phi_dot, ct.contact_points, ct.normals)
-        st = self.support_terms(state)
-        c_s = -st.kappa
-        if baumgarte is not None:
-            a, b = baumgarte_gains(baumgarte)
-            c_s = c_s - 2.0 * a * st.phi_dot - b * b * st.phi
-        k = blocks.nv_max if n else self._nv_max_blocks
-        m = self.N_max
-        M = np.zeros((B, k, k))
-        M[n] = np.eye(k)
-        h = np.zeros((B, k))
-        W = np.zeros((B, k, R))
-        W_o = np.zeros((B, 6, R))
-        c = np.zeros((B, R))
-        phi = np.zeros((B, R))
-        phi_dot = np.zeros((B, R))
-        pts = np.zeros((B, R, 3))
-        nrm = np.zeros((B, R, 3))
-        if n:
-            M[:n] = blocks.M
-            h[:n] = blocks.h
-            W[:n, :, :m] = blocks.W
-            W_o[:n, :, :m] = blocks.W_o
-            c[:n, :m] = blocks.c
-            phi[:n, :m] = constraints.phi
-            phi_dot[:n, :m] = constraints.phi_dot
-            pts[:n, :m] = constraints.contact_points
-            nrm[:n, :m] = constraints.normals
-        W_o[n, :, :K] = st.G_object.T
-        c[n, :K] = c_s
-        phi[n, :K] = st.phi
-        phi_dot[n, :K] = st.phi_dot
-        pts[n, :K] = st.contact_points
-        nrm[n, :K] = st.normals
-        full = SystemBlocks(M, h, W, W_o, c, np.array(M_o, dtype=float),
-                            np.array(h_o, dtype=float), self._nv_blocks.copy(),
-                            self._N_blocks.copy())
-        return full, ContactRows(phi, phi_dot, pts, nrm)
+        return stack_contact_blocks(self._contact_rows, M_o, h_o, self.support_terms(state),
+                                    blocks, constraints, baumgarte)
 
     def check_supports(self, state: SystemState, tol: float = 1e-6) -> None:
         """Raise if the object penetrates a support by more than ``tol`` [m].
@@ -715,6 +647,7 @@ class MultiArmSystem:
 
 
 __all__ = [
+    "ContactRows",
     "Evaluation",
     "MultiArmSystem",
     "SystemState",
