@@ -12,7 +12,9 @@ import numpy as np
 from numba import njit
 
 from multiarm_pin._compiled.layout import (
-    P_BAUMGARTE,
+    P_BAUMGARTE_ALPHA,
+    P_BAUMGARTE_BETA,
+    P_BAUMGARTE_ON,
     P_GRAVITY,
     P_INERTIA,
     P_MASS,
@@ -42,7 +44,7 @@ def assemble(J, Jdq, nle, tau_padded, rows, params, obj_R, obj_twist, h, W, W_o,
             :func:`~multiarm_pin._compiled.constraint_rows.constraint_rows`.
         params: (N_PARAMS,) the parameter vector (:data:`~.layout.PARAM_FIELDS`: object
             mass [kg], inertia about the COM in object axes [kg m²], gravity [m/s²] in the
-            world, Baumgarte ``(α, β, on)``).
+            world, Baumgarte ``α``, ``β`` and on-flag).
         obj_R: (3, 3) object rotation.
         obj_twist: (6,) object twist ``[ẋ; ω]``, world axes.
         h: output (n, k) ``τ - nle``.
@@ -54,8 +56,8 @@ def assemble(J, Jdq, nle, tau_padded, rows, params, obj_R, obj_twist, h, W, W_o,
     """
     n, k = nle.shape
     m = rows.shape[1]
-    alpha, beta, on = (params[P_BAUMGARTE], params[P_BAUMGARTE + 1],
-                       params[P_BAUMGARTE + 2])
+    alpha, beta = params[P_BAUMGARTE_ALPHA], params[P_BAUMGARTE_BETA]
+    on = params[P_BAUMGARTE_ON]
     mass = params[P_MASS]
     inertia_body = params[P_INERTIA:P_INERTIA + 9].reshape((3, 3))
     gravity = params[P_GRAVITY:P_GRAVITY + 3]

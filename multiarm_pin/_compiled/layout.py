@@ -213,16 +213,19 @@ def dims_vector(k: int, m: int, nv: int, n: int) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ parameters
-PARAM_FIELDS = (("mass", 1), ("inertia", 9), ("gravity", 3), ("baumgarte", 3),
-                ("rcond_tol", 1), ("object_rcond_tol", 1))
+PARAM_FIELDS = (("mass", 1), ("inertia", 9), ("gravity", 3), ("baumgarte_alpha", 1),
+                ("baumgarte_beta", 1), ("baumgarte_on", 1), ("rcond_tol", 1),
+                ("object_rcond_tol", 1))
 """The float64 parameter vector: object mass [kg], inertia about the COM in object axes
-(row-major) [kg m²], gravity [m/s²], Baumgarte ``(α, β, on)`` [1/s, 1/s, flag], the solver
-thresholds on each ``S_i`` and on the reduced object matrix."""
+(row-major) [kg m²], gravity [m/s²], Baumgarte ``α``, ``β`` [1/s] and on-flag (1.0 = on), the
+solver thresholds on each ``S_i`` and on the reduced object matrix."""
 _P, N_PARAMS = _starts(PARAM_FIELDS)
 P_MASS = _P["mass"]
 P_INERTIA = _P["inertia"]
 P_GRAVITY = _P["gravity"]
-P_BAUMGARTE = _P["baumgarte"]
+P_BAUMGARTE_ALPHA = _P["baumgarte_alpha"]
+P_BAUMGARTE_BETA = _P["baumgarte_beta"]
+P_BAUMGARTE_ON = _P["baumgarte_on"]
 P_RCOND_TOL = _P["rcond_tol"]
 P_OBJECT_RCOND_TOL = _P["object_rcond_tol"]
 
@@ -242,7 +245,7 @@ def parameter_vector(mass: float, inertia: np.ndarray, gravity: np.ndarray, rcon
 def with_baumgarte(params: np.ndarray, alpha: float, beta: float) -> np.ndarray:
     """A copy of ``params`` with Baumgarte stabilisation ``(α, β)`` [1/s] switched on."""
     out = params.copy()
-    out[P_BAUMGARTE:P_BAUMGARTE + 3] = alpha, beta, 1.0
+    out[P_BAUMGARTE_ALPHA], out[P_BAUMGARTE_BETA], out[P_BAUMGARTE_ON] = alpha, beta, 1.0
     return out
 
 

@@ -105,6 +105,7 @@ class BufferLayout:
             a validated build.
         N: (n,) constraints per arm (read-only, shared by the constraint terms).
         mask: (n, N_max) real constraint slots (read-only, shared).
+        solution_segments: the segments ``a_o``, ``qdd``, ``mu``.
     """
 
     segments: dict
@@ -112,13 +113,13 @@ class BufferLayout:
     blocks_constant: dict
     N: np.ndarray
     mask: np.ndarray
+    solution_segments: tuple
 
     def solution(self, buf: np.ndarray, blocks: SystemBlocks) -> Solution:
         """The object-first :class:`Solution` in the solution segments of ``buf``."""
-        seg = self.segments
-        a_o, qdd, mu = (buf[s.start:s.stop].reshape(s.shape)  # inline: once per step
-                        for s in (seg["a_o"], seg["qdd"], seg["mu"]))
-        return Solution(a_o, qdd, mu, "object_first", (), blocks)
+        a_o, qdd, mu = self.solution_segments  # sliced inline: this runs once per step
+        return Solution(buf[a_o.start:a_o.stop], buf[qdd.start:qdd.stop].reshape(qdd.shape),
+                        buf[mu.start:mu.stop].reshape(mu.shape), "object_first", (), blocks)
 
     @classmethod
     def build(cls, nv_arm: np.ndarray, constraint_set: ConstraintSet, k: int) -> BufferLayout:
@@ -135,8 +136,8 @@ class BufferLayout:
                 arr.setflags(write=False)  # any SystemBlocks' (one compiled kernel variant)
             constant[name] = arr
         constant["has_constraint_padding"] = probe.has_constraint_padding
-        return cls(segments, segments["mu"].stop, constant, constraint_set.N,
-                   constraint_set.mask)
+        return cls(segments, segments[layout.SEGMENTS[-1]].stop, constant, constraint_set.N,
+                   constraint_set.mask, (segments["a_o"], segments["qdd"], segments["mu"]))
 
 
 class _View:
