@@ -401,3 +401,22 @@ def test_compiled_views_are_the_python_segments():
         np.testing.assert_array_equal(view, segments[name].view(buf), err_msg=name)
     assert layout.ROW_WIDTH == sum(w for _, w in layout.ROW_FIELDS) == 21
     assert layout.N_PARAMS == 18 and layout.CONTACT_FLOATS == 14
+
+
+def test_compiled_evaluation_is_read_only_views_of_one_buffer():
+    """Blocks, arm terms and rows of the compiled path share one buffer and cannot be set."""
+    system, state, _, tau = random_system_and_state(1, 3)
+    ev = system.blocks(state, tau)
+    assert np.shares_memory(ev.blocks.M, ev.arms.M)
+    assert all(np.shares_memory(a, ev.blocks.buffer) for a in (ev.constraints.phi, ev.arms.J))
+    with pytest.raises(AttributeError, match="read-only"):
+        ev.blocks.h = ev.blocks.h + 1.0
+    with pytest.raises(AttributeError, match="read-only"):
+        ev.constraints.phi = ev.constraints.phi
+    more = ev.blocks.dof_mask.astype(float)
+    shifted = ev.blocks.with_torques(more)
+    assert type(shifted) is type(ev.blocks) and np.shares_memory(shifted.W, ev.blocks.W)
+    np.testing.assert_array_equal(shifted.h, ev.blocks.h + more)
+    tables = system.constraint_set.contact_tables
+    assert tables is system.constraint_set.contact_tables  # built once
+    assert not tables.ints.flags.writeable and not tables.floats.flags.writeable
