@@ -19,6 +19,9 @@ the compiled path, ``MultiArmSystem.blocks(..., reference=True)``)::
     W_i = J_iᵀ G_tool,iᵀ        W_o,i = G_object,iᵀ        h_i = τ_i - nle_i
     c_i = -G_tool,i J̇q̇_i - κ_i  (Baumgarte: - 2α φ̇_i - β² φ_i)
     M_o = diag(m I, R I_c Rᵀ)   h_o = [m g; -ω × I_w ω]
+
+(About 570 lines, over the usual ~500: the compiled path, the views of its buffer and the
+numpy reference are the two implementations of one evaluation and belong together.)
 """
 
 from __future__ import annotations
