@@ -68,6 +68,7 @@ if str(ROOT) not in sys.path:  # run from a checkout without installing
 
 from report_tables import int_list, write_rows_csv  # noqa: E402
 
+from multiarm_pin._compiled.layout import state_vector  # noqa: E402
 from multiarm_pin.app.scenario import build_scenario, load_scenario  # noqa: E402
 from multiarm_pin.dynamics import (  # noqa: E402
     SystemBlocks,
@@ -349,7 +350,7 @@ def measure_case(bench: Bench, case: str, timer: Timer, peer: PinocchioPeer | No
 STAGES = (
     ("pinocchio", "Pinocchio: `computeJointJacobiansTimeVariation` + `crba` + "
                   "`nonLinearEffects` (groups of <= 16 arms) + tool placements"),
-    ("kernels", "compiled arm terms + constraint rows + assembly (`_compiled.kernels`)"),
+    ("kernels", "compiled arm terms + constraint rows + assembly (`_compiled.evaluate`)"),
     ("solve", "compiled object-first solve inside the step"),
     ("glue", "Python glue: input checks, state concatenation, result objects"),
 )
@@ -369,14 +370,14 @@ def profile_stages(bench: Bench, timer: Timer) -> dict[str, float]:
     system, states, taus, blocks = bench.system, bench.states, bench.taus, bench.blocks
     K = len(states)
     aset = system.arm_set
-    xs = [np.concatenate((s.obj.position, s.obj.quaternion, s.obj.twist, s.q, s.v, t))
+    xs = [state_vector(s.obj.position, s.obj.quaternion, s.obj.twist, s.q, s.v, t)
           for s, t in zip(states, taus, strict=True)]
     Hs = [aset.pinocchio_pass(s.q, s.v) for s in states]
-    buf = np.empty(system._k_size)
-    params = system._k_params
+    path = system.compiled
+    buf = np.empty(path.layout.size)
 
     def kernels_only(k, step):  # called right after pinocchio_pass(k): its data are state k's
-        return system._kernel_pass(Hs[k], xs[k], params, buf, step)
+        return path.kernel_pass(Hs[k], xs[k], path.params, buf, step)
 
     (t_pin, t_pk, t_pks, t_blocks, t_solve, t_np, t_full), _ = timer.medians([
         lambda k: aset.pinocchio_pass(states[k].q, states[k].v),

@@ -3,8 +3,8 @@
 :class:`MultiArmSystem` owns one :class:`~multiarm_pin.model.arm_set.ArmSet` (all arms as one
 combined Pinocchio model, with the system's gravity) and one
 :class:`~multiarm_pin.constraints.ConstraintSet`. For a :class:`SystemState` it computes, with
-one Pinocchio pass (per group of at most 16 arms) and one call of the compiled kernels of
-:mod:`multiarm_pin._compiled.kernels` (no Python loop over arms), the padded
+one Pinocchio pass (per group of at most 16 arms) and one call of the compiled kernels
+(:class:`~multiarm_pin.dynamics.evaluation.CompiledSystem`, no Python loop over arms), the padded
 :class:`~multiarm_pin.dynamics.SystemBlocks` of ``docs/ARCHITECTURE.md``; the numpy
 implementation (one vectorised constraint evaluation and a few ``einsum`` calls) stays as the
 reference, ``blocks(..., reference=True)``. :meth:`MultiArmSystem.forward_dynamics` with
@@ -22,19 +22,21 @@ State layout: ``q`` (nq,) and ``v`` (nv,) are the arms' configurations and veloc
 concatenated in arm order (``system.arm_set.q_slices`` / ``v_slices``); the object has its
 own :class:`~.model.rigid_object.ObjectState` (COM position, quaternion ``[x, y, z, w]``,
 twist ``[ẋ; ω]`` in world axes).
+
+This module is the public system only (about 650 lines, most of them the public methods'
+docstrings); the compiled evaluation and its buffer views are in
+:mod:`multiarm_pin.dynamics.evaluation`, the stacking of every contact row (arms and
+supports) in :mod:`multiarm_pin.dynamics.contact_rows`.
 """
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
 import pinocchio as pin
 
-from multiarm_pin._compiled import kernels
 from multiarm_pin.constraints import (
     JOINT_TYPES,
     ConstraintSet,
@@ -45,11 +47,15 @@ from multiarm_pin.constraints import (
 from multiarm_pin.constraints.joint import INITIAL_GAP_TOLERANCE
 from multiarm_pin.constraints.supports import Support, SupportSet
 from multiarm_pin.dynamics import Solution, SystemBlocks, solve, solver_entry
-from multiarm_pin.dynamics.object_first import DEFAULT_RCOND_TOL, OBJECT_RCOND_TOL
+from multiarm_pin.dynamics.contact_rows import ContactRows, ContactRowTable, stack_contact_blocks
+from multiarm_pin.dynamics.evaluation import (
+    CompiledSystem,
+    Evaluation,
+    reference_evaluation,
+)
 from multiarm_pin.exceptions import ConstraintError, DynamicsError, InitialGapError, InputError
 from multiarm_pin.model.arm import Arm
-from multiarm_pin.model.arm_set import ArmSet, ArmSetTerms
-from multiarm_pin.model.kinematics import BodyKinematics
+from multiarm_pin.model.arm_set import ArmSet
 from multiarm_pin.model.rigid_object import ObjectState, RigidObject
 from multiarm_pin.spatial import as_array, as_se3, cross, se3_to_pose
 
@@ -70,58 +76,6 @@ class SystemState:
     q: np.ndarray
     v: np.ndarray
     obj: ObjectState
-
-
-@dataclass(frozen=True)
-class ContactRows:
-    """Every contact row of the system at one state: the arms' rows, then the supports'.
-
-    Shapes ``(B, R)`` with ``B = n_blocks`` (the n arms, plus one zero-dof block holding every
-    support row when the system has supports) and ``R = rows_max``; padding is zero.
-
-    Attributes:
-        phi: (B, R) gaps [m]; phi_dot: (B, R) gap rates [m/s].
-        contact_points: (B, R, 3) world contact points [m].
-        normals: (B, R, 3) world directions in which each row pushes the object.
-    """
-
-    phi: np.ndarray
-    phi_dot: np.ndarray
-    contact_points: np.ndarray
-    normals: np.ndarray
-
-
-@dataclass(frozen=True)
-class Evaluation:
-    """Everything computed for one state (and torque).
-
-    Attributes:
-        blocks: the padded coefficient blocks (``h`` includes the torque given, if any).
-        arms: the arms' stacked Pinocchio terms (mass matrices, tool Jacobians, ...).
-        constraints: the constraint rows (``φ``, ``φ̇``, ``G``, ``κ``, contact points ...).
-        active: (n, N_max) bool, the arms' contact rows that touch (the active set of the
-            event-driven simulation: bilateral rows and touching unilateral rows), or None
-            (every row touches). :func:`~multiarm_pin.sim.simulation.simulate` sets it on the
-            evaluation it hands to the controller, before the call
-            (:meth:`with_active`); controllers that plan contact forces use it.
-    """
-
-    blocks: SystemBlocks
-    arms: ArmSetTerms
-    constraints: ConstraintTerms
-    active: np.ndarray | None = None
-
-    def with_active(self, active: np.ndarray | None) -> Evaluation:
-        """Set :attr:`active` and return ``self``.
-
-        In place: an evaluation belongs to one state and one active set.
-
-        Args:
-            active: (n, N_max) bool mask of the touching rows, or None (all touch).
-        """
-        mask = None if active is None else np.asarray(active, dtype=bool)
-        object.__setattr__(self, "active", mask)
-        return self
 
 
 JointSpec = Joint | str | Mapping | Callable[[pin.SE3, pin.SE3], Joint]
@@ -257,7 +211,8 @@ class MultiArmSystem:
         self._N = self.constraint_set.N.copy()
         self.N_max = self.constraint_set.N_max
         self.unilateral = self.constraint_set.unilateral  # per contact (Contact.unilateral)
-        self._init_kernel_tables()
+        self.compiled = CompiledSystem(self.arm_set, self.constraint_set, obj, self.gravity,
+                                       self.check_state)
         self._init_contact_rows()
 
     def _init_without_arms(self, obj: RigidObject) -> None:
@@ -272,81 +227,20 @@ class MultiArmSystem:
         self.N_max = 0
         self.unilateral = np.zeros((0, 0), dtype=bool)
         self.unilateral.setflags(write=False)
+        self.compiled = None
         self._init_contact_rows()
 
     def _init_contact_rows(self) -> None:
         """Row tables of :meth:`contact_blocks` (arms' rows, then the supports' block)."""
-        n, K = self.n_arms, self.supports.n_rows
-        self.n_blocks = n + (1 if K else 0)
-        self.rows_max = max(self.N_max, K)
-        B, R = self.n_blocks, self.rows_max
-        mask = np.zeros((B, R), dtype=bool)
-        uni = np.zeros((B, R), dtype=bool)
-        rest = np.zeros((B, R))
-        labels = []
-        for i in range(n):
-            Ni = int(self._N[i])
-            mask[i, :Ni] = True
-            uni[i, :Ni] = self.unilateral[i, :Ni]
-            names = [c.name for c in self.joints[i].active_contacts]
-            labels += [(i, k, f"{self.arms[i].name}:{names[k]}") for k in range(Ni)]
-        if K:
-            mask[n, :K] = True
-            uni[n, :K] = True
-            rest[n, :K] = self.supports.restitution
-            labels += [(n, k, lab) for k, lab in enumerate(self.supports.labels)]
-        for a in (mask, uni, rest):
-            a.setflags(write=False)
-        self.contact_mask, self.contact_unilateral = mask, uni
-        self.contact_restitution = rest
-        self.contact_labels = labels
-        self._nv_blocks = np.concatenate([self._nv_arm, [0] * (B - n)]).astype(int)
-        self._N_blocks = np.concatenate([self._N, [K] * (B - n)]).astype(int)
-        self._nv_max_blocks = max(int(self._nv_arm.max()) if n else 0, 1)
-
-    def _init_kernel_tables(self) -> None:
-        """Constant inputs of the compiled hot path (:mod:`multiarm_pin._compiled.kernels`)."""
-        aset, cs = self.arm_set, self.constraint_set
-        n, k, m = self.n_arms, aset.nv_max, self.N_max
-        self._k_arm_ints = np.concatenate(
-            (aset.nv_arm[:, None], aset._idx, aset._support.astype(int)), axis=1
-        ).astype(np.int64)
-        self._k_ints, self._k_floats = kernels.contact_tables(cs)
-        self._k_params = np.concatenate(
-            ([self.obj.mass], self.obj.inertia.ravel(), self.gravity, [0.0, 0.0, 0.0],
-             [DEFAULT_RCOND_TOL, OBJECT_RCOND_TOL])).astype(float)
-        self._k_dims = np.array([k, m, self.nv, n], dtype=np.int64)
-        self._k_v_starts = aset.v_starts
-        self._k_single = len(aset.groups) == 1
-        self._k_group_ints = []
-        for g in aset.groups:  # joint indices relative to the group's velocity vector
-            gi = self._k_arm_ints[g.arms].copy()
-            gi[:, 1:1 + k] = np.maximum(gi[:, 1:1 + k] - g.v.start, 0)
-            self._k_group_ints.append(gi)
-        self._k_N = np.ascontiguousarray(self._N, dtype=np.int64)
-        off, self._k_size = kernels.buffer_layout(n, k, m)
-        shapes = kernels.segment_shapes(n, k, m)
-        where = {name: (int(off[j]), int(off[j + 1]), shapes[name])
-                 for j, name in enumerate(kernels.SEGMENTS)}
-        self._k_segments = where
-        self._k_solution = [where[name] for name in ("a_o", "qdd", "mu")]
-        self._k_rows_range = where["rows"]
-        self._k_nx = 13 + self.nq + 2 * self.nv
-        self._k_rows_spec = (*self._k_rows_range, cs.N, cs.mask)
-        self._k_zero_tau = np.zeros(self.nv)
-        self._k_zero_tau.setflags(write=False)
-        # the derived (constant) fields of SystemBlocks, computed once by a validated build
-        probe = SystemBlocks(np.broadcast_to(np.eye(k), (n, k, k)).copy(), np.zeros((n, k)),
-                             np.zeros((n, k, m)), np.zeros((n, 6, m)), np.zeros((n, m)),
-                             np.eye(6), np.zeros(6), self._nv_arm, self._N)
-        derived = {}
-        for name in ("nv", "N", "dof_mask", "constraint_mask", "padding_diagonal"):
-            arr = getattr(probe, name)
-            if arr.dtype == bool or name == "padding_diagonal":  # nv, N stay writable like
-                arr.setflags(write=False)  # any SystemBlocks' (one compiled kernel variant)
-            derived[name] = arr
-        derived["has_constraint_padding"] = probe.has_constraint_padding
-        self._k_blocks_constant = derived
+        names = [[f"{arm.name}:{c.name}" for c in joint.active_contacts]
+                 for arm, joint in zip(self.arms, self.joints, strict=True)]
+        table = ContactRowTable.build(self._nv_arm, self._N, self.unilateral, names,
+                                      self.supports)
+        self._contact_rows = table
+        self.n_blocks, self.rows_max = table.n_blocks, table.rows_max
+        self.contact_mask, self.contact_unilateral = table.mask, table.unilateral
+        self.contact_restitution = table.restitution
+        self.contact_labels = table.labels
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -517,7 +411,7 @@ class MultiArmSystem:
                reference: bool = False) -> Evaluation:
         """The coefficient blocks of the equations of motion at a state.
 
-        Computed by the compiled kernels of :mod:`multiarm_pin._compiled.kernels` after the three
+        Computed by the compiled kernels of :mod:`multiarm_pin._compiled.evaluate` after the three
         Pinocchio calls of :meth:`ArmSet.pinocchio_pass`: every returned array is new (views
         of one buffer allocated per call), so an :class:`Evaluation` stays valid after later
         calls.
@@ -547,126 +441,17 @@ class MultiArmSystem:
                   ) -> tuple[Evaluation, Solution | None]:
         """The compiled hot path: blocks and, if ``step``, the object-first solution.
 
-        The solution is None if ``step`` is False or the kernel reported a doubtful case
-        (singular or badly conditioned ``S_i`` / object matrix), which the caller hands to
-        the numpy solvers.
+        :meth:`CompiledSystem.evaluate`; the solution is None if ``step`` is False or the
+        kernel reported a doubtful case, which the caller hands to the numpy solvers.
         """
-        if tau is None:
-            t = self._k_zero_tau
-        else:
-            t = np.asarray(tau, dtype=float)
-            if t.shape != (self.nv,):
-                raise InputError(f"tau: expected shape ({self.nv},), got {t.shape}")
-        try:  # cheap checks here: types and shapes (finiteness is checked by the kernel)
-            o = state.obj
-            q, v = state.q, state.v
-            x = np.concatenate((o.position, o.quaternion, o.twist, q, v, t))
-            ok = (q.shape == (self.nq,) and v.shape == (self.nv,) and x.shape[0] == self._k_nx
-                  and o.position.shape == (3,) and o.twist.shape == (6,)
-                  and x.dtype == np.float64)
-        except (AttributeError, TypeError, ValueError):
-            ok = False
-        if not ok:
-            self._check_state_and_tau(state, t)  # raises naming the field, or accepts
-            o = state.obj
-            q = np.ascontiguousarray(state.q, dtype=float)
-            v = np.ascontiguousarray(state.v, dtype=float)
-            x = np.concatenate((np.asarray(o.position, float), np.asarray(o.quaternion, float),
-                                np.asarray(o.twist, float), q, v, t))
-        params = self._k_params
-        if baumgarte is not None:
-            a, b = _baumgarte(baumgarte)
-            params = params.copy()
-            params[13:16] = a, b, 1.0
-        H = self.arm_set.pinocchio_pass(q, v)
-        buf = np.empty(self._k_size)
-        finite, status = self._kernel_pass(H, x, params, buf, step)
-        if not finite:
-            self._check_state_and_tau(state, t)  # raises naming the field
-            raise DynamicsError("state or torques contain NaN or infinity")
-        blocks = object.__new__(_BlocksView)  # trusted construction (see _trusted)
-        d = blocks.__dict__
-        d.update(self._k_blocks_constant)
-        d["_buf"] = buf
-        d["_seg"] = self._k_segments
-        ev = object.__new__(_EvaluationView)
-        d = ev.__dict__
-        d["blocks"] = blocks
-        d["_rows"] = self._k_rows_spec
-        if step and status == kernels.SOLVE_OK:
-            a_o, qdd, mu = [buf[lo:hi].reshape(shape) for lo, hi, shape in self._k_solution]
-            return ev, Solution(a_o, qdd, mu, "object_first", (), blocks)
-        return ev, None
-
-    def _kernel_pass(self, H: np.ndarray, x: np.ndarray, params: np.ndarray, buf: np.ndarray,
-                     step: bool) -> tuple[bool, int]:
-        """The compiled kernels after :meth:`ArmSet.pinocchio_pass` (which gave ``H``).
-
-        Args:
-            H: (n, 4, 4) tool placements.
-            x: (13 + nq + 2 nv,) object state, ``q``, ``v``, ``τ`` concatenated.
-            params: (18,) kernel parameters (object, Baumgarte, solver thresholds).
-            buf: the output buffer (:func:`multiarm_pin._compiled.kernels.buffer_layout`).
-            step: also solve (object-first) into the buffer.
-
-        Returns:
-            ``(finite, status)``: False if ``x`` holds NaN or infinity; the solve status
-            (``kernels.SOLVE_OK`` when not solving).
-        """
-        aset = self.arm_set
-        status = kernels.SOLVE_OK
-        if self._k_single:  # one compiled call
-            J, dJ, M, nle = aset.data_arrays()
-            args = (J, dJ, M, nle, H, x, self._k_arm_ints, self._k_v_starts, self._k_ints,
-                    self._k_floats, params, self._k_dims)
-            if step:
-                status = kernels.step_system(*args, self._k_N, buf)
-                return status != kernels.SOLVE_NOT_FINITE, status
-            return kernels.evaluate_system(*args, buf), status
-        for g, gi in zip(aset.groups, self._k_group_ints, strict=True):  # arm terms by group
-            kernels.group_arm_terms(*g.views, H[g.arms], x, gi, self._k_dims, g.v.start,
-                                    g.arms.start, buf)
-        finite = kernels.finish_system(x, self._k_arm_ints, self._k_v_starts, self._k_ints,
-                                       self._k_floats, params, self._k_dims, buf)
-        if step and finite:
-            status = kernels.solve_buffer(self._k_N, params, self._k_dims, buf)
-        return finite, status
-
-    def _check_state_and_tau(self, state: SystemState, tau: np.ndarray) -> None:
-        """Slow path of the checks: raise naming the field that is wrong or not finite."""
-        self.check_state(state)
-        if not np.all(np.isfinite(tau)):
-            raise DynamicsError(f"tau contains NaN or infinity: {tau.tolist()}")
+        return self.compiled.evaluate(state, tau, baumgarte, step)
 
     def _blocks_reference(self, state: SystemState, tau: np.ndarray | None = None,
                           baumgarte: tuple[float, float] | None = None) -> Evaluation:
         """:meth:`blocks` by the numpy reference implementation (the compiled path's oracle)."""
         self.check_state(state)
-        arms = self.arm_set.evaluate(state.q, state.v)
-        o = state.obj
-        R = o.rotation
-        ct = self.constraint_set.evaluate(
-            arms.tools, _single_body(o.position, R, o.twist)
-        )
-        Gt = ct.G_tool
-        W = np.einsum("niv,nki->nvk", arms.J, Gt)
-        W_o = ct.G_object.transpose(0, 2, 1).copy()
-        c = -np.einsum("nki,ni->nk", Gt, arms.Jdot_qdot) - ct.kappa
-        if baumgarte is not None:
-            a, b = _baumgarte(baumgarte)
-            c -= 2.0 * a * ct.phi_dot + b * b * ct.phi
-        h = -arms.nle
-        if tau is not None:
-            t = np.asarray(tau, dtype=float)
-            if t.shape != (self.nv,):
-                raise InputError(f"tau: expected shape ({self.nv},), got {t.shape}")
-            if not np.all(np.isfinite(t)):
-                raise DynamicsError(f"tau contains NaN or infinity: {t.tolist()}")
-            h = h + self.arm_set.pad_v(t)
-        M_o = self.obj.mass_matrix(R)
-        h_o = self.obj.bias_wrench(R, o.twist, self.gravity)
-        blocks = SystemBlocks(arms.M, h, W, W_o, c, M_o, h_o, self._nv_arm, self._N)
-        return Evaluation(blocks, arms, ct)
+        return reference_evaluation(self.arm_set, self.constraint_set, self.obj, self.gravity,
+                                    state, tau, baumgarte)
 
     def forward_dynamics(self, state: SystemState, tau: np.ndarray | None = None,
                          solver: str = "auto",
@@ -778,7 +563,6 @@ class MultiArmSystem:
             ``rows_max`` rows, and their :class:`ContactRows`.
         """
         n, K = self.n_arms, self.supports.n_rows
-        B, R = self.n_blocks, self.rows_max
         o = state.obj
         if n:
             M_o, h_o = blocks.M_o, blocks.h_o
@@ -789,46 +573,11 @@ class MultiArmSystem:
             h_o = h_o + np.asarray(external_wrench, dtype=float)
         if not K:
             if external_wrench is not None:
-                blocks = _replace_h_o(blocks, h_o)
+                blocks = blocks.replaced(h_o=h_o)
             ct = constraints
             return blocks, ContactRows(ct.phi, ct.phi_dot, ct.contact_points, ct.normals)
-        st = self.support_terms(state)
-        c_s = -st.kappa
-        if baumgarte is not None:
-            a, b = _baumgarte(baumgarte)
-            c_s = c_s - 2.0 * a * st.phi_dot - b * b * st.phi
-        k = blocks.nv_max if n else self._nv_max_blocks
-        m = self.N_max
-        M = np.zeros((B, k, k))
-        M[n] = np.eye(k)
-        h = np.zeros((B, k))
-        W = np.zeros((B, k, R))
-        W_o = np.zeros((B, 6, R))
-        c = np.zeros((B, R))
-        phi = np.zeros((B, R))
-        phi_dot = np.zeros((B, R))
-        pts = np.zeros((B, R, 3))
-        nrm = np.zeros((B, R, 3))
-        if n:
-            M[:n] = blocks.M
-            h[:n] = blocks.h
-            W[:n, :, :m] = blocks.W
-            W_o[:n, :, :m] = blocks.W_o
-            c[:n, :m] = blocks.c
-            phi[:n, :m] = constraints.phi
-            phi_dot[:n, :m] = constraints.phi_dot
-            pts[:n, :m] = constraints.contact_points
-            nrm[:n, :m] = constraints.normals
-        W_o[n, :, :K] = st.G_object.T
-        c[n, :K] = c_s
-        phi[n, :K] = st.phi
-        phi_dot[n, :K] = st.phi_dot
-        pts[n, :K] = st.contact_points
-        nrm[n, :K] = st.normals
-        full = SystemBlocks(M, h, W, W_o, c, np.array(M_o, dtype=float),
-                            np.array(h_o, dtype=float), self._nv_blocks.copy(),
-                            self._N_blocks.copy())
-        return full, ContactRows(phi, phi_dot, pts, nrm)
+        return stack_contact_blocks(self._contact_rows, M_o, h_o, self.support_terms(state),
+                                    blocks, constraints, baumgarte)
 
     def check_supports(self, state: SystemState, tol: float = INITIAL_GAP_TOLERANCE) -> None:
         """Raise if the object penetrates a support by more than ``tol`` [m].
@@ -893,116 +642,8 @@ class MultiArmSystem:
         return np.concatenate([lin, ang])
 
 
-class _EvaluationView(Evaluation):
-    """:class:`Evaluation` of the compiled path, ``arms`` and ``constraints`` made on demand.
-
-    Both are views of the buffer of ``blocks``; ``_rows`` is ``(lo, hi, shape, N, mask)`` of
-    the packed constraint rows. Built by :meth:`MultiArmSystem._compiled` only.
-    """
-
-    @cached_property
-    def arms(self) -> ArmSetTerms:
-        """The arms' terms (views of the buffer)."""
-        return _trusted(_ArmTermsView, _buf=self.blocks._buf, _seg=self.blocks._seg)
-
-    @cached_property
-    def constraints(self) -> ConstraintTerms:
-        """The constraint rows (views of the buffer)."""
-        lo, hi, shape, N, mask = self._rows
-        return _trusted(_ConstraintTermsView, _rows=self.blocks._buf[lo:hi].reshape(shape),
-                        N=N, mask=mask)
-
-
-class _BufferView:
-    """Mixin: ``_view(name)`` is the segment ``name`` of the buffer ``_buf`` (layout ``_seg``)."""
-
-    def _view(self, name: str) -> np.ndarray:
-        lo, hi, shape = self._seg[name]
-        return self._buf[lo:hi].reshape(shape)
-
-
-class _BlocksView(_BufferView, SystemBlocks):
-    """:class:`SystemBlocks` of the compiled path, its arrays made on first access.
-
-    Views of the step's buffer; the derived constant fields (masks) are shared per system.
-    Built by :func:`_trusted` only (the public constructor validates; this one is trusted).
-    """
-
-    M = cached_property(lambda self: self._view("M"))
-    h = cached_property(lambda self: self._view("h"))
-    W = cached_property(lambda self: self._view("W"))
-    W_o = cached_property(lambda self: self._view("W_o"))
-    c = cached_property(lambda self: self._view("c"))
-    M_o = cached_property(lambda self: self._view("M_o"))
-    h_o = cached_property(lambda self: self._view("h_o"))
-
-
-class _ArmTermsView(_BufferView, ArmSetTerms):
-    """:class:`ArmSetTerms` of the compiled path, its arrays made on first access.
-
-    Fields are views of the step's buffer (``M`` shares memory with the blocks' ``M``);
-    built by :func:`_trusted` only. Saves the view creation when only the blocks are used.
-    """
-
-    M = cached_property(lambda self: self._view("M"))
-    nle = cached_property(lambda self: self._view("nle"))
-    J = cached_property(lambda self: self._view("J"))
-    Jdot_qdot = cached_property(lambda self: self._view("Jdot_qdot"))
-    v = cached_property(lambda self: self._view("v"))
-    tools = cached_property(lambda self: BodyKinematics(
-        self._view("position"), self._view("rotation"), self._view("twist")))
-
-
-class _ConstraintTermsView(ConstraintTerms):
-    """:class:`ConstraintTerms` of the compiled path, its arrays made on first access.
-
-    Fields are views of the packed ``(n, N_max, 21)`` rows of the step's buffer; built by
-    :func:`_trusted` only.
-    """
-
-    phi = cached_property(lambda self: self._rows[:, :, 0])
-    phi_dot = cached_property(lambda self: self._rows[:, :, 1])
-    kappa = cached_property(lambda self: self._rows[:, :, 2])
-    G_tool = cached_property(lambda self: self._rows[:, :, 3:9])
-    G_object = cached_property(lambda self: self._rows[:, :, 9:15])
-    contact_points = cached_property(lambda self: self._rows[:, :, 15:18])
-    normals = cached_property(lambda self: self._rows[:, :, 18:21])
-
-
-def _trusted(cls, **fields):
-    """An instance of the (non-slots) dataclass ``cls`` with ``fields`` set as they are.
-
-    The trusted internal constructor of the hot path: no ``__init__``/``__post_init__``, so
-    no validation (the compiled path builds shapes that are right by construction). Public
-    construction (``SystemBlocks(...)``) still validates.
-    """
-    obj = object.__new__(cls)
-    obj.__dict__.update(fields)
-    return obj
-
-
-def _replace_h_o(blocks: SystemBlocks, h_o: np.ndarray) -> SystemBlocks:
-    """A shallow copy of ``blocks`` with another ``h_o`` (no re-validation)."""
-    out = copy.copy(blocks)
-    out.__dict__["h_o"] = h_o  # shadows the lazy view of the compiled path, like with_torques
-    return out
-
-
-def _single_body(position, rotation, twist) -> BodyKinematics:
-    return BodyKinematics(position[None], rotation[None], twist[None])
-
-
-def _baumgarte(value) -> tuple[float, float]:
-    try:
-        a, b = (float(x) for x in value)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"baumgarte: expected (alpha, beta) [1/s], got {value!r}") from exc
-    if not (np.isfinite(a) and np.isfinite(b) and a >= 0 and b >= 0):
-        raise InputError(f"baumgarte: expected finite (alpha, beta) >= 0 [1/s], got {value!r}")
-    return a, b
-
-
 __all__ = [
+    "ContactRows",
     "Evaluation",
     "MultiArmSystem",
     "SystemState",

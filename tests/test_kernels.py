@@ -1,4 +1,4 @@
-"""Compiled hot path (multiarm_pin._compiled.kernels) against the numpy reference implementation.
+"""Compiled hot path (multiarm_pin._compiled) against the numpy reference implementation.
 
 The numpy path (``MultiArmSystem.blocks(..., reference=True)``: ``ArmSet.evaluate``,
 ``ConstraintSet.evaluate``, einsum assembly; solver ``object_first_numpy``) is itself tested
@@ -19,7 +19,13 @@ import pytest
 from dynamics.synthetic import random_system
 from system_builders import JOINT_KINDS, build_system, joint_spec, moving_state
 
-from multiarm_pin._compiled import kernels
+from multiarm_pin._compiled import evaluate, layout, linalg
+from multiarm_pin._compiled.object_first import (
+    SOLVE_ARM_SINGULAR,
+    SOLVE_OBJECT_SINGULAR,
+    SOLVE_OK,
+    object_first,
+)
 from multiarm_pin.constraints import custom
 from multiarm_pin.dynamics import DEFAULT_RCOND_TOL, SystemBlocks, reduce_arms, solve
 from multiarm_pin.exceptions import DynamicsError, InputError, SingularityError
@@ -128,10 +134,12 @@ def test_every_surface_and_tip_placement_is_exercised():
     seen = set()
     for seed in range(10):
         system, *_ = random_system_and_state(seed, 1 + seed % 8)
-        ints, floats = kernels.contact_tables(system.constraint_set)
+        tables = system.constraint_set.contact_tables
+        ints, floats = tables.ints, tables.floats
         for row_i, row_f in zip(ints, floats, strict=True):
-            kind = ("plane" if row_f[12] else "curved", "inside" if row_f[11] < 0 else "out",
-                    "tool-tip" if row_i[3] else "object-tip")
+            kind = ("plane" if row_f[layout.CF_IS_PLANE] else "curved",
+                    "inside" if row_f[layout.CF_CURVATURE_SIGN] < 0 else "out",
+                    "tool-tip" if row_i[layout.CI_TOOL_CARRIES] else "object-tip")
             seen.add(kind)
         seen.add(("padding", system.N_max > int(system.constraint_set.N.min())))
         seen.add(("dof padding", system.arm_set.nv_max > int(system.arm_set.nv_arm.min())))
@@ -259,9 +267,9 @@ def test_singular_arm_falls_back_exactly_as_before():
     assert np.linalg.svd(J, compute_uv=False)[-1] < 1e-12  # a genuine singularity
     b = system.blocks(state, tau).blocks
     out = (np.empty(6), np.empty((2, 6)), np.empty((2, 6)))
-    status = kernels.object_first(b.M, b.h, b.W, b.W_o, b.c, b.M_o, b.h_o, b.N, 1e-7, 1e-7,
+    status = object_first(b.M, b.h, b.W, b.W_o, b.c, b.M_o, b.h_o, b.N, 1e-7, 1e-7,
                                   *out)
-    assert status == kernels.SOLVE_ARM_SINGULAR
+    assert status == SOLVE_ARM_SINGULAR
     sol, _ = system.forward_dynamics(state, tau, "auto")
     assert sol.solver == "singular" and sol.singular_arms == (1,)
     ref = solve(system.blocks(state, tau, reference=True).blocks, "dense_kkt")
@@ -305,11 +313,11 @@ def test_badly_conditioned_object_matrix_is_flagged(heavy):
     b, _, _ = random_system(rng, [6], [5])
     big = SystemBlocks(b.M * heavy, b.h * heavy, b.W, b.W_o, b.c, b.M_o, b.h_o, b.nv, b.N)
     out = (np.empty(6), np.empty((1, 6)), np.empty((1, 5)))
-    status = kernels.object_first(big.M, big.h, big.W, big.W_o, big.c, big.M_o, big.h_o,
-                                  big.N, 1e-7, 1e-7, *out)
-    assert status == kernels.SOLVE_OBJECT_SINGULAR
-    assert kernels.object_first(b.M, b.h, b.W, b.W_o, b.c, b.M_o, b.h_o, b.N, 1e-7, 1e-7,
-                                *out) == kernels.SOLVE_OK
+    status = object_first(big.M, big.h, big.W, big.W_o, big.c, big.M_o, big.h_o,
+                          big.N, 1e-7, 1e-7, *out)
+    assert status == SOLVE_OBJECT_SINGULAR
+    assert object_first(b.M, b.h, b.W, b.W_o, b.c, b.M_o, b.h_o, b.N, 1e-7, 1e-7,
+                        *out) == SOLVE_OK
     with pytest.raises(SingularityError, match="reduced object matrix"):
         solve(big, "object_first")
     assert solve(big, "auto").solver == "singular"
@@ -322,19 +330,19 @@ def test_cholesky_solve_and_inverse_diagonal(size):
     B = rng.normal(size=(size, size))
     A = B @ B.T + 0.1 * np.eye(size)
     L = np.zeros((size, size))
-    assert kernels.cholesky(A, L, size)
+    assert linalg.cholesky(A, L, size)
     np.testing.assert_allclose(np.tril(L), np.linalg.cholesky(A), rtol=1e-12, atol=1e-13)
     X = rng.normal(size=(size, 3))
     Y = X.copy()
-    kernels.cholesky_solve(L, Y, size, 3)
+    linalg.cholesky_solve(L, Y, size, 3)
     np.testing.assert_allclose(A @ Y, X, atol=1e-10 * np.abs(X).max() * np.linalg.cond(A))
     d = np.empty(size)
-    kernels.inverse_diagonal(L, size, d, np.empty(size))
+    linalg.inverse_diagonal(L, size, d, np.empty(size))
     np.testing.assert_allclose(d, np.diag(np.linalg.inv(A)), rtol=1e-10)
     indefinite = A - 2 * np.linalg.eigvalsh(A)[-1] * np.eye(size)
-    assert not kernels.cholesky(indefinite, L, size)
+    assert not linalg.cholesky(indefinite, L, size)
     A[0, 0] = np.nan
-    assert not kernels.cholesky(A, L, size)
+    assert not linalg.cholesky(A, L, size)
 
 
 # ------------------------------------------------------------------ errors
@@ -369,9 +377,46 @@ def test_bad_input_raises_the_same_clear_errors():
 
 
 def test_layout_covers_the_buffer():
-    off, size = kernels.buffer_layout(3, 7, 5)
-    shapes = kernels.segment_shapes(3, 7, 5)
-    assert list(shapes) == list(kernels.SEGMENTS)
+    off, size = layout.buffer_layout(3, 7, 5)
+    shapes = layout.segment_shapes(3, 7, 5)
+    assert list(shapes) == list(layout.SEGMENTS)
     assert off[0] == 0 and off[-1] == size
     assert all(off[j + 1] - off[j] == np.prod(shapes[s])
-               for j, s in enumerate(kernels.SEGMENTS))
+               for j, s in enumerate(layout.SEGMENTS))
+
+
+def test_compiled_views_are_the_python_segments():
+    """The kernels' views (numba, from SHAPE_CODES) and Python's (from SEGMENT_TABLE) agree."""
+    n, k, m = 3, 7, 5
+    segments = layout.segment_slices(n, k, m)
+    buf = np.arange(float(segments["mu"].stop))
+    off = layout.offsets(n, k, m)
+    arms = evaluate.arm_views(buf, off, n, k, m)
+    blocks = evaluate.block_views(buf, off, n, k, m)
+    solution = evaluate.solution_views(buf, off, n, k, m)
+    names = ("M", "nle", "J", "Jdot_qdot", "position", "rotation", "twist", "v", "rows", "h",
+             "W", "W_o", "c", "M_o", "h_o", "a_o", "qdd", "mu")
+    assert names == layout.SEGMENTS
+    for name, view in zip(names, (*arms, *blocks, *solution), strict=True):
+        np.testing.assert_array_equal(view, segments[name].view(buf), err_msg=name)
+    assert layout.ROW_WIDTH == sum(w for _, w in layout.ROW_FIELDS) == 21
+    assert layout.N_PARAMS == 18 and layout.CONTACT_FLOATS == 14
+
+
+def test_compiled_evaluation_is_read_only_views_of_one_buffer():
+    """Blocks, arm terms and rows of the compiled path share one buffer and cannot be set."""
+    system, state, _, tau = random_system_and_state(1, 3)
+    ev = system.blocks(state, tau)
+    assert np.shares_memory(ev.blocks.M, ev.arms.M)
+    assert all(np.shares_memory(a, ev.blocks.buffer) for a in (ev.constraints.phi, ev.arms.J))
+    with pytest.raises(AttributeError, match="read-only"):
+        ev.blocks.h = ev.blocks.h + 1.0
+    with pytest.raises(AttributeError, match="read-only"):
+        ev.constraints.phi = ev.constraints.phi
+    more = ev.blocks.dof_mask.astype(float)
+    shifted = ev.blocks.with_torques(more)
+    assert type(shifted) is type(ev.blocks) and np.shares_memory(shifted.W, ev.blocks.W)
+    np.testing.assert_array_equal(shifted.h, ev.blocks.h + more)
+    tables = system.constraint_set.contact_tables
+    assert tables is system.constraint_set.contact_tables  # built once
+    assert not tables.ints.flags.writeable and not tables.floats.flags.writeable

@@ -1,4 +1,9 @@
 """Compiled (numba) kernels of the fast path.
 
-Each kernel mirrors a numpy reference in the thesis layers and is tested against it.
+Each kernel mirrors a numpy reference in the thesis layers and is tested against it; one
+module per reference: :mod:`.linalg` (Cholesky, LAPACK), :mod:`.arm_terms`
+(``ArmSet.evaluate``), :mod:`.constraint_rows` (``ConstraintSet.evaluate``), :mod:`.assembly`
+(the reference blocks), :mod:`.object_first` (``solve_object_first_numpy``), :mod:`.evaluate`
+(all of them fused on one buffer) and :mod:`.controller_kernels` (``ObjectPD.reference``).
+The layout of every array they exchange with Python is defined once in :mod:`.layout`.
 """

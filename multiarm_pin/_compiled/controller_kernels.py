@@ -4,8 +4,8 @@
 points' desired accelerations, the joint accelerations of their damped least-squares task,
 the force distribution and the inverse dynamics of thesis Eq 3.7-3.10. Its numpy version
 (``ObjectPD.reference``) is the oracle; :func:`object_pd_torques` computes the same torques
-arm by arm from the flat buffer of :mod:`multiarm_pin._compiled.kernels` (no dense system over all
-arms, no SVD: the internal forces come from
+arm by arm from the flat buffer of :mod:`multiarm_pin._compiled.evaluate` (no dense system over
+all arms, no SVD: the internal forces come from
 :func:`~multiarm_pin.dynamics.force_qp.least_norm_forces`, each arm's constraint rows are met
 by a Householder QR of ``W_i``), and :func:`closed_loop_step` then solves the forward dynamics
 with these torques on the same blocks (one Pinocchio pass and one set of blocks per
@@ -15,7 +15,9 @@ Whenever a step is doubtful (an arm's ``W_i`` not of full column rank with margi
 QP not converged or degenerate, NaN) the kernels report it and the caller runs the numpy
 reference, which decides and raises exactly as documented there. Conventions as in
 ``docs/ARCHITECTURE.md``: SI units, ``[linear; angular]``, world axes, tool quantities LWA at
-the tool origin, object quantities at the COM, ``μ > 0`` pushing.
+the tool origin, object quantities at the COM, ``μ > 0`` pushing. The vectors the kernels
+read (object pose ``OX_*``, reference ``REF_*``, gains ``PD_*`` and ``GAIN_*``, parameters
+``P_*``, ``dims``) are laid out in :mod:`multiarm_pin._compiled.layout`.
 """
 
 from __future__ import annotations
@@ -25,16 +27,38 @@ import math
 import numpy as np
 from numba import njit
 
-from multiarm_pin._compiled.kernels import (
-    _arm_views,
-    _block_views,
-    _offsets,
-    _solution_views,
-    cholesky,
-    cholesky_solve,
-    object_first,
+from multiarm_pin._compiled.evaluate import (
+    arm_views,
+    block_views,
     quaternion_rotation,
+    solution_views,
+    solve_views,
 )
+from multiarm_pin._compiled.layout import (
+    DIMS_K,
+    DIMS_M,
+    DIMS_N,
+    GAIN_DAMPING,
+    GAIN_HOLD_KD,
+    GAIN_HOLD_KP,
+    GAIN_MARGIN,
+    OX_POSITION,
+    OX_ROTATION,
+    OX_TWIST,
+    PD_KD,
+    PD_KP,
+    REF_ACCELERATION,
+    REF_POSITION,
+    REF_ROTATION,
+    REF_TWIST,
+    SEG_M,
+    X_POSITION,
+    X_QUATERNION,
+    X_TWIST,
+    offsets,
+    view3,
+)
+from multiarm_pin._compiled.linalg import cholesky, cholesky_solve
 from multiarm_pin.dynamics.force_qp import QP_OK, least_norm_forces
 
 PD_OK = 0
@@ -131,7 +155,8 @@ def _torques(arms, blocks, N, nv_arm, unilateral, obj_x, a_d, z, hold_tool, hold
     M, nle, J, Jdq, tp, tR, ttw, vp = arms
     rows, h, W, W_o, c, M_o, h_o = blocks
     n, k, m = W.shape
-    hold_kp, hold_kd, damping, margin = gains[0], gains[1], gains[2], gains[3]
+    hold_kp, hold_kd = gains[GAIN_HOLD_KP], gains[GAIN_HOLD_KD]
+    damping, margin = gains[GAIN_DAMPING], gains[GAIN_MARGIN]
     # 1. internal forces: the least-norm QP, warm-started
     wrench = np.empty(6)
     for a in range(6):
@@ -144,10 +169,10 @@ def _torques(arms, blocks, N, nv_arm, unilateral, obj_x, a_d, z, hold_tool, hold
     if status != QP_OK:
         return PD_FORCES_FAILED
     # 2. held points' desired accelerations, per arm
-    op = obj_x[0:3]
-    oR = obj_x[3:12].reshape((3, 3))
-    ov = obj_x[12:15]
-    ow = obj_x[15:18]
+    op = obj_x[OX_POSITION:OX_POSITION + 3]
+    oR = obj_x[OX_ROTATION:OX_ROTATION + 9].reshape((3, 3))
+    ov = obj_x[OX_TWIST:OX_TWIST + 3]
+    ow = obj_x[OX_TWIST + 3:OX_TWIST + 6]
     hmax = hold_tool.shape[1]
     A = np.zeros((3 * hmax, k))
     rhs = np.zeros(3 * hmax)
@@ -276,20 +301,21 @@ def object_pd_torques(buf, dims, N, nv_arm, unilateral, obj_x, a_d, z, hold_tool
     """``ObjectPD`` torques from the flat buffer of the compiled path (see the module docstring).
 
     Args:
-        buf: the flat buffer of :func:`~multiarm_pin._compiled.kernels.evaluate_system`
+        buf: the flat buffer of :func:`~multiarm_pin._compiled.evaluate.evaluate_system`
             (blocks at zero torque, ``h = -nle``).
-        dims: (4,) int ``(k, m, nv, n)``.
+        dims: (DIMS_SIZE,) int ``(k, m, nv, n)``.
         N: (n,) int constraint rows per arm.
         nv_arm: (n,) int joints per arm.
         unilateral: (n, m) bool mask of unilateral multipliers.
-        obj_x: (18,) object COM position [m], rotation (9, row-major), twist ``[ẋ; ω]``.
+        obj_x: (OBJECT_POSE_SIZE,) object COM position [m], rotation (9, row-major), twist
+            ``[ẋ; ω]`` (``OBJECT_POSE_FIELDS``).
         a_d: (6,) desired object acceleration ``[ẍ; ω̇]`` at the COM [m/s², rad/s²].
         z: (n, k) joint-space PD ``null_kp (q_ref ⊖ q) - null_kd v`` [rad/s²], zero padding.
         hold_tool: (n, h, 3) held points in the tool frame [m].
         hold_obj: (n, h, 3) their places in the object frame [m].
         hold_n: (n,) int held points per arm (the first ``hold_n[i]`` are real).
-        gains: (4,) ``hold_kp`` [1/s²], ``hold_kd`` [1/s], Jacobian damping (relative),
-            margin [N].
+        gains: (HOLD_GAINS_SIZE,) ``hold_kp`` [1/s²], ``hold_kd`` [1/s], Jacobian damping
+            (relative), margin [N] (``HOLD_GAIN_FIELDS``).
         active: (n, m) uint8 active set of the force QP (in: warm start, out: the new one).
         tau: output (n, k) torques [N m] to add to ``h``.
         mu: output (n, m) planned multipliers [N].
@@ -299,9 +325,9 @@ def object_pd_torques(buf, dims, N, nv_arm, unilateral, obj_x, a_d, z, hold_tool
     Returns:
         :data:`PD_OK`, or the reason the caller must use the reference.
     """
-    k, m, n = dims[0], dims[1], dims[3]
-    off = _offsets(n, k, m)
-    return _torques(_arm_views(buf, off, n, k), _block_views(buf, off, n, k, m), N, nv_arm,
+    k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
+    off = offsets(n, k, m)
+    return _torques(arm_views(buf, off, n, k, m), block_views(buf, off, n, k, m), N, nv_arm,
                     unilateral, obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains, active,
                     tau, mu, qdd, a_pts)
 
@@ -340,20 +366,21 @@ def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold
 
     Args:
         buf: the flat buffer (blocks at zero torque).
-        dims: (4,) int ``(k, m, nv, n)``.
+        dims: (DIMS_SIZE,) int ``(k, m, nv, n)``.
         N: (n,) int constraint rows per arm.
         nv_arm: (n,) int joints per arm.
         unilateral: (n, m) bool.
-        obj: (13,) object position [m], quaternion ``[x, y, z, w]``, twist ``[ẋ; ω]``.
-        ref: (24,) reference position (3) [m], rotation (9, row-major), twist (6), classical
-            acceleration (6), world axes at the COM.
-        pd_gains: (12,) ``K_p`` (6) [1/s²], ``K_d`` (6) [1/s].
+        obj: (OBJECT_STATE_SIZE,) object position [m], quaternion ``[x, y, z, w]``, twist
+            ``[ẋ; ω]`` (``OBJECT_STATE_FIELDS``).
+        ref: (REFERENCE_SIZE,) reference position [m], rotation (row-major), twist, classical
+            acceleration, world axes at the COM (``REFERENCE_FIELDS``).
+        pd_gains: (PD_GAINS_SIZE,) ``K_p`` (6) [1/s²], ``K_d`` (6) [1/s] (``PD_GAIN_FIELDS``).
         z: (n, k) joint-space PD (see :func:`object_pd_torques`).
         hold_tool: (n, h, 3).
         hold_obj: (n, h, 3).
         hold_n: (n,) int.
-        gains: (4,) ``hold_kp``, ``hold_kd``, Jacobian damping, margin.
-        params: (18,) kernel parameters (the last two the solver thresholds).
+        gains: (HOLD_GAINS_SIZE,) ``hold_kp``, ``hold_kd``, Jacobian damping, margin.
+        params: (N_PARAMS,) the parameter vector (the solver thresholds are read).
         active: (n, m) uint8 warm start of the force QP (updated).
         tau: output (n, k) torques [N m].
         mu: output (n, m) planned multipliers [N].
@@ -364,34 +391,37 @@ def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold
 
     Returns:
         ``(pd_status, solve_status)``: :data:`PD_OK` or the reason to use the reference;
-        the status of :func:`multiarm_pin._compiled.kernels.object_first` (-1 if not solved).
+        the status of :func:`multiarm_pin._compiled.object_first.object_first` (-1 if not
+        solved).
     """
-    obj_x = np.empty(18)
+    obj_x = np.empty(OX_TWIST + 6)
     Ro = np.empty((3, 3))
-    quaternion_rotation(obj[3:7], Ro)
+    quaternion_rotation(obj[X_QUATERNION:X_QUATERNION + 4], Ro)
     for a in range(3):
-        obj_x[a] = obj[a]
+        obj_x[OX_POSITION + a] = obj[X_POSITION + a]
         for b in range(3):
-            obj_x[3 + 3 * a + b] = Ro[a, b]
+            obj_x[OX_ROTATION + 3 * a + b] = Ro[a, b]
     for a in range(6):
-        obj_x[12 + a] = obj[7 + a]
+        obj_x[OX_TWIST + a] = obj[X_TWIST + a]
     # pose error: [p_ref - p; log(R_ref Rᵀ)]
     E = np.empty((3, 3))
     for a in range(3):
         for b in range(3):
             acc = 0.0
             for p in range(3):
-                acc += ref[3 + 3 * a + p] * Ro[b, p]
+                acc += ref[REF_ROTATION + 3 * a + p] * Ro[b, p]
             E[a, b] = acc
     rot = np.empty(3)
     if not log3(E, rot):
         return PD_LARGE_ROTATION, -1
     for a in range(6):
-        e = ref[a] - obj[a] if a < 3 else rot[a - 3]
-        a_d[a] = ref[18 + a] + pd_gains[6 + a] * (ref[12 + a] - obj[7 + a]) + pd_gains[a] * e
-    k, m, n = dims[0], dims[1], dims[3]
-    off = _offsets(n, k, m)
-    status = _torques(_arm_views(buf, off, n, k), _block_views(buf, off, n, k, m), N, nv_arm,
+        e = ref[REF_POSITION + a] - obj[X_POSITION + a] if a < 3 else rot[a - 3]
+        a_d[a] = (ref[REF_ACCELERATION + a]
+                  + pd_gains[PD_KD + a] * (ref[REF_TWIST + a] - obj[X_TWIST + a])
+                  + pd_gains[PD_KP + a] * e)
+    k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
+    off = offsets(n, k, m)
+    status = _torques(arm_views(buf, off, n, k, m), block_views(buf, off, n, k, m), N, nv_arm,
                       unilateral, obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains, active,
                       tau, mu, qdd, a_pts)
     if status != PD_OK or not solve:
@@ -408,21 +438,19 @@ def solve_with_torques(buf, dims, N, params, tau):  # pragma: no cover - compile
 
     Args:
         buf: the flat buffer (blocks at zero torque).
-        dims: (4,) int ``(k, m, nv, n)``.
+        dims: (DIMS_SIZE,) int ``(k, m, nv, n)``.
         N: (n,) int constraint rows per arm.
-        params: (18,) kernel parameters (the last two the solver thresholds).
+        params: (N_PARAMS,) the parameter vector (the solver thresholds are read).
         tau: (n, k) joint torques [N m], zero on padding.
 
     Returns:
-        The status of :func:`multiarm_pin._compiled.kernels.object_first`.
+        The status of :func:`multiarm_pin._compiled.object_first.object_first`.
     """
-    k, m, n = dims[0], dims[1], dims[3]
-    off = _offsets(n, k, m)
-    M = _arm_views(buf, off, n, k)[0]
-    rows, h, W, W_o, c, M_o, h_o = _block_views(buf, off, n, k, m)
-    a_o, qdd, mu = _solution_views(buf, off, n, k, m)
-    ht = h + tau
-    return object_first(M, ht, W, W_o, c, M_o, h_o, N, params[16], params[17], a_o, qdd, mu)
+    k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
+    off = offsets(n, k, m)
+    blocks = block_views(buf, off, n, k, m)
+    return solve_views(N, params, view3(buf, off, SEG_M, n, k, m), blocks[1] + tau, blocks,
+                       solution_views(buf, off, n, k, m))
 
 
 __all__ = ["PD_ARM_RANK", "PD_FORCES_FAILED", "PD_LARGE_ROTATION", "PD_NOT_FINITE", "PD_OK",

@@ -18,6 +18,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from multiarm_pin._compiled.layout import (
+    ROW_G_OBJECT,
+    ROW_G_TOOL,
+    ROW_KAPPA,
+    ROW_NORMAL,
+    ROW_PHI,
+    ROW_PHI_DOT,
+    ROW_POINT,
+    ROW_WIDTH,
+    ContactTables,
+    row_field,
+)
 from multiarm_pin.constraints.joint import INITIAL_GAP_TOLERANCE, Joint
 from multiarm_pin.exceptions import ConstraintError, InputError
 from multiarm_pin.model.kinematics import BodyKinematics
@@ -50,6 +62,29 @@ class ConstraintTerms:
     contact_points: np.ndarray
     normals: np.ndarray
 
+    @classmethod
+    def from_rows(cls, rows: np.ndarray, N: np.ndarray, mask: np.ndarray) -> ConstraintTerms:
+        """The terms as views of packed rows.
+
+        Args:
+            rows: (n, N_max, ROW_WIDTH) packed rows, fields ``ROW_*`` of
+                :mod:`multiarm_pin._compiled.layout` (the layout of the compiled path's
+                ``rows`` segment).
+            N: (n,) constraints per arm (shared, read-only).
+            mask: (n, N_max) real constraint slots (shared, read-only).
+        """
+        return cls(
+            phi=row_field(rows, "phi"),
+            phi_dot=row_field(rows, "phi_dot"),
+            G_tool=row_field(rows, "G_tool"),
+            G_object=row_field(rows, "G_object"),
+            kappa=row_field(rows, "kappa"),
+            N=N,
+            mask=mask,
+            contact_points=row_field(rows, "contact_point"),
+            normals=row_field(rows, "normal"),
+        )
+
 
 class ConstraintSet:
     """The joints of a system; ``joints[i]`` connects arm i's tool and the object.
@@ -64,6 +99,8 @@ class ConstraintSet:
         mask: (n, N_max) True on real (non-padded) constraint slots.
         unilateral: (n, N_max) True on rows of unilateral contacts (:attr:`Contact.unilateral`
             of each joint's kept contacts), False on bilateral rows and padding.
+        contact_tables: the kept contacts' geometry as the compiled constraint rows read it
+            (:class:`~multiarm_pin._compiled.layout.ContactTables`, built once).
 
     Raises:
         ConstraintError: an empty list or something that is not a Joint.
@@ -130,6 +167,24 @@ class ConstraintSet:
         self._sigma = np.array([1.0, -1.0])[:, None]
         self._tool_first = np.stack([np.where(on_tool, 0, 1), np.where(on_tool, 1, 0)])
         self._arange = np.arange(len(ordered))[None, :]
+        self._contact_tables = ContactTables.build(
+            carrier=self._bodies[0], surface=self._bodies[1], slot=self._flat,
+            tool_carries=on_tool, tip=self._tip.T, tip_radius=self._radius,
+            direction=self._surface_local[:, 0, :].T, point=self._surface_local[:, 1, :].T,
+            curvature_radius=radius, curvature_sign=sign, is_plane=self._is_plane,
+            push_sign=self._push_sign)
+
+    @property
+    def contact_tables(self) -> ContactTables:
+        """Per-contact tables of the kept contacts (flattened in arm order) for the kernels.
+
+        ``ints`` (K, CONTACT_INTS): carrier and surface body (``0..n-1`` the tools, ``n`` the
+        object), flat slot ``arm * N_max + row``, 1 if the tool carries the tip; ``floats``
+        (K, CONTACT_FLOATS): tip point in the carrier frame [m], tip radius [m], surface
+        direction and point in the surface body's frame, curvature radius [m] and sign, plane
+        flag, push sign (columns of :mod:`multiarm_pin._compiled.layout`). Read-only.
+        """
+        return self._contact_tables
 
     def evaluate(self, tools: BodyKinematics, obj: BodyKinematics) -> ConstraintTerms:
         """All constraint rows at a state, vectorised over arms and contacts.
@@ -201,34 +256,21 @@ class ConstraintSet:
         G[3:] = _cross(r, nu[:, None])
         G *= self._sigma  # +1 carrier, -1 surface body
         G = G[:, self._tool_first, self._arange]  # (6, 2, K): tool, object
-        packed = np.concatenate(
-            [
-                (g - self._radius)[None],
-                (nu * u).sum(0)[None],
-                kappa[None],
-                G[:, 0],
-                G[:, 1],
-                c - g * nu,
-                self._push_sign * nu,
-            ]
-        ).T
+        packed = np.empty((ROW_WIDTH, K))  # the fields of the compiled path's packed rows
+        packed[ROW_PHI] = g - self._radius
+        packed[ROW_PHI_DOT] = (nu * u).sum(0)
+        packed[ROW_KAPPA] = kappa
+        packed[ROW_G_TOOL:ROW_G_TOOL + 6] = G[:, 0]
+        packed[ROW_G_OBJECT:ROW_G_OBJECT + 6] = G[:, 1]
+        packed[ROW_POINT:ROW_POINT + 3] = c - g * nu
+        packed[ROW_NORMAL:ROW_NORMAL + 3] = self._push_sign * nu
         if self._dense:
-            out = packed.reshape(n, self.N_max, 21)
+            out = packed.T.reshape(n, self.N_max, ROW_WIDTH)
         else:
-            out = np.zeros((n * self.N_max, 21))
-            out[self._flat] = packed
-            out = out.reshape(n, self.N_max, 21)
-        return ConstraintTerms(
-            phi=out[:, :, 0],
-            phi_dot=out[:, :, 1],
-            kappa=out[:, :, 2],
-            G_tool=out[:, :, 3:9],
-            G_object=out[:, :, 9:15],
-            N=self.N,
-            mask=self.mask,
-            contact_points=out[:, :, 15:18],
-            normals=out[:, :, 18:21],
-        )
+            out = np.zeros((n * self.N_max, ROW_WIDTH))
+            out[self._flat] = packed.T
+            out = out.reshape(n, self.N_max, ROW_WIDTH)
+        return ConstraintTerms.from_rows(out, self.N, self.mask)
 
     def check_initial(self, tools: BodyKinematics, obj: BodyKinematics,
                       tol: float = INITIAL_GAP_TOLERANCE) -> None:

@@ -276,11 +276,26 @@ class SystemBlocks:
         t = _as_float(tau, "tau", shape=(self.n, self.nv_max))
         if np.any(t[~self.dof_mask]):
             raise InputError("tau: expected zeros on padded dofs (beyond nv_i for arm i)")
-        # Only h changes and self is already validated: a shallow copy skips re-validating
-        # (shapes, Cholesky of M_o) on every simulation step. It keeps the class of self, so
-        # the compiled path's lazy views stay lazy; the new h shadows them in __dict__.
+        return self.replaced(h=self.h + t)
+
+    def replaced(self, *, h: np.ndarray | None = None,
+                 h_o: np.ndarray | None = None) -> SystemBlocks:
+        """The same blocks with another ``h`` and/or ``h_o`` (the other fields shared).
+
+        ``self`` is already validated and only force terms change, so nothing is
+        re-validated (shapes, Cholesky of ``M_o``): this runs on every simulation step.
+
+        Args:
+            h: (n, nv_max) new ``τ - nle`` [N m or N], zero on padding; None keeps it.
+            h_o: (6,) new object force terms [N, N m]; None keeps it.
+
+        Returns:
+            New blocks of the same class (the compiled path's stay views of their buffer).
+        """
         out = copy.copy(self)
-        out.__dict__["h"] = self.h + t
+        for name, value in (("h", h), ("h_o", h_o)):
+            if value is not None:
+                object.__setattr__(out, name, _replacement(value, getattr(self, name), name))
         return out
 
     def stacked_W_o(self) -> np.ndarray:
@@ -351,6 +366,14 @@ def expand_rows(values, index: np.ndarray) -> np.ndarray:
     i, k = np.nonzero(index >= 0)
     out[i, index[i, k]] = values[i, k]
     return out
+
+
+def _replacement(value, old: np.ndarray, name: str) -> np.ndarray:
+    """``value`` as a float64 array of the shape of ``old`` (see :meth:`SystemBlocks.replaced`)."""
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != old.shape:
+        raise InputError(f"SystemBlocks.{name}: expected shape {old.shape}, got {arr.shape}")
+    return arr
 
 
 def _as_float(value, name: str, shape: tuple | None = None, ndim: int | None = None) -> np.ndarray:

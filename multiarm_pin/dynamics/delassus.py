@@ -28,7 +28,7 @@ import numpy as np
 from numba import njit
 from scipy.linalg import lapack
 
-from multiarm_pin._compiled import kernels as _kernels
+from multiarm_pin._compiled import linalg as _kernels
 from multiarm_pin.dynamics.blocks import SystemBlocks
 from multiarm_pin.dynamics.mlcp import OK, mlcp
 from multiarm_pin.dynamics.object_first import _batched_solve

@@ -28,7 +28,7 @@ import math
 import numpy as np
 from numba import njit
 
-from multiarm_pin._compiled.kernels import cholesky, cholesky_solve, inverse_diagonal
+from multiarm_pin._compiled.linalg import cholesky, cholesky_solve, inverse_diagonal
 from multiarm_pin.dynamics.force_distribution import min_norm_forces
 from multiarm_pin.exceptions import InputError
 

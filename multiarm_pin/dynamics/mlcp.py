@@ -39,7 +39,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from multiarm_pin._compiled import kernels as _kernels
+from multiarm_pin._compiled import linalg as _kernels
 from multiarm_pin.exceptions import DynamicsError
 
 DEPENDENCY_RTOL = 1e-10

@@ -6,7 +6,7 @@ Pinocchio model with ``pin.appendModel``, so each Pinocchio algorithm (CRBA, non
 Jacobians and their time variation) is a single call whatever the number of arms. The per-arm
 results are then gathered into stacked, padded arrays with a few numpy operations
 (:meth:`ArmSet.evaluate`, the reference) or by the compiled kernels of
-:mod:`multiarm_pin._compiled.kernels` (the hot path, after :meth:`ArmSet.pinocchio_pass`). Because
+:mod:`multiarm_pin._compiled.arm_terms` (the hot path, after :meth:`ArmSet.pinocchio_pass`). Because
 Pinocchio's cost per arm and its ``Data`` grow superlinearly in one combined model, the hot
 path uses groups of at most :data:`GROUP_SIZE` arms, each with its own combined model.
 
@@ -279,7 +279,7 @@ class ArmSet:
         ``data.dJ``: world Jacobian columns at the world origin), ``crba`` (``data.M``, full
         symmetric) and ``nonLinearEffects`` (``data.nle``) on the group's combined model; the
         results stay in each group's ``data`` (``self.data`` for one group; read by
-        :meth:`evaluate` and the compiled kernels of :mod:`multiarm_pin._compiled.kernels`).
+        :meth:`evaluate` and the compiled kernels of :mod:`multiarm_pin._compiled.arm_terms`).
 
         Tool placements: one ``pin.updateFramePlacement`` per tool. Measured on 2 / 10 UR5s:
         3.7 / 7.6 µs, against 5.3 / 15 µs for ``pin.updateFramePlacements`` (every frame) and
@@ -314,6 +314,16 @@ class ArmSet:
         pin.nonLinearEffects(model, data, q, v)
         upd = pin.updateFramePlacement
         return np.array([upd(model, data, f).np for f in self._tool_ids])  # (n, 4, 4)
+
+    @property
+    def joint_index(self) -> np.ndarray:
+        """(n, nv_max) int: index of arm i's joint a in the combined velocity (0 on padding)."""
+        return self._idx
+
+    @property
+    def tool_support(self) -> np.ndarray:
+        """(n, nv_max) 1.0 where arm i's joint a moves its tool, 0.0 elsewhere and on padding."""
+        return self._support
 
     def data_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Views of ``data.J`` (6, nv), ``data.dJ`` (6, nv), ``data.M`` (nv, nv), ``data.nle``.

@@ -18,9 +18,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from multiarm_pin._compiled import controller_kernels, kernels
 from multiarm_pin.dynamics import SOLVERS, Solution
 from multiarm_pin.dynamics import solve as solve_dynamics
+from multiarm_pin.dynamics.evaluation import BufferEvaluation
 from multiarm_pin.exceptions import DynamicsError, InputError, MultiArmError
 from multiarm_pin.system import Evaluation, MultiArmSystem, SystemState
 
@@ -68,14 +68,9 @@ def closed_loop_evaluation(system: MultiArmSystem, controller: Callable | None, 
             call = getattr(controller, "reference", controller)
         if out is not None:
             tau, status = out
-            buf = ev.blocks._buf
-            with_tau = object.__new__(type(ev.blocks))  # lazy views, h with the torques
-            with_tau.__dict__.update(ev.blocks.__dict__)
-            with_tau.__dict__["h"] = ev.blocks.h + controller.last.tau
-            if status == kernels.SOLVE_OK:
-                a_o, qdd, mu = [buf[lo:hi].reshape(shape)
-                                for lo, hi, shape in system._k_solution]
-                return Solution(a_o, qdd, mu, "object_first", (), with_tau), ev, tau
+            with_tau, sol = system.compiled.with_torques(ev.blocks, controller.last.tau, status)
+            if sol is not None:
+                return sol, ev, tau
             try:
                 return solve_dynamics(with_tau, solver), ev, tau
             except DynamicsError as exc:
@@ -83,19 +78,12 @@ def closed_loop_evaluation(system: MultiArmSystem, controller: Callable | None, 
     tau = np.zeros(system.nv) if controller is None else controller_torques(
         call, t, state, ev, system.nv)
     tau_p = system.pad(tau)
-    blocks = ev.blocks
-    buf = None if reference else blocks.__dict__.get("_buf")
-    if buf is not None and solver in FUSED_SOLVERS:
-        status = controller_kernels.solve_with_torques(buf, system._k_dims, system._k_N,
-                                                       system._k_params, tau_p)
-        with_tau = object.__new__(type(blocks))  # the same lazy views, h with the torques
-        with_tau.__dict__.update(blocks.__dict__)
-        with_tau.__dict__["h"] = blocks.h + tau_p
-        if status == kernels.SOLVE_OK:
-            a_o, qdd, mu = [buf[lo:hi].reshape(shape) for lo, hi, shape in system._k_solution]
-            return Solution(a_o, qdd, mu, "object_first", (), with_tau), ev, tau
+    if not reference and isinstance(ev, BufferEvaluation) and solver in FUSED_SOLVERS:
+        with_tau, sol = system.compiled.solve_with_torques(ev.blocks, tau_p)
+        if sol is not None:
+            return sol, ev, tau
     else:
-        with_tau = blocks.with_torques(tau_p)
+        with_tau = ev.blocks.with_torques(tau_p)
     try:
         sol = solve_dynamics(with_tau, solver)
     except DynamicsError as exc:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from multiarm_pin._compiled import controller_kernels
+from multiarm_pin._compiled import controller_kernels, layout
 from multiarm_pin.dynamics.blocks import SystemBlocks, expand_rows, restrict_rows
 from multiarm_pin.dynamics.force_distribution import distribute_forces
 from multiarm_pin.dynamics.force_qp import WarmForceDistribution
@@ -328,12 +328,12 @@ class ObjectPD(Controller):
 
         Returns:
             ``(tau (nv,) [N m], solve_status)`` (``solve_status`` of
-            :func:`multiarm_pin._compiled.kernels.object_first`, -1 if not solved), or None when the
-            compiled path does not apply or reported a doubtful case (then call
+            :func:`multiarm_pin._compiled.object_first.object_first`, -1 if not solved), or None
+            when the compiled path does not apply or reported a doubtful case (then call
             :meth:`reference`).
         """
-        buf = evaluation.blocks.__dict__.get("_buf") if self.compiled else None
-        if buf is None:
+        buffer = getattr(evaluation, "buffer", None) if self.compiled else None
+        if buffer is None:
             return None
         active = getattr(evaluation, "active", None)
         if active is not None and not np.all(np.asarray(active)[evaluation.blocks.constraint_mask]):
@@ -343,13 +343,14 @@ class ObjectPD(Controller):
         if self.hold_mask is None:
             self._init_hold(state, evaluation)
         s = self.system
+        path = s.compiled
         if self._forces is None:
-            self._forces = WarmForceDistribution(s._k_N, s.unilateral)
+            self._forces = WarmForceDistribution(path.N, s.unilateral)
             self._hold_n = self.hold_mask.sum(axis=1).astype(np.int64)
-            self._gains = np.array([self.hold_kp, self.hold_kd, JACOBIAN_DAMPING, self.margin])
-            self._pd_gains = np.concatenate([self.kp, self.kd])
+            self._gains = layout.hold_gain_vector(self.hold_kp, self.hold_kd, JACOBIAN_DAMPING,
+                                                  self.margin)
+            self._pd_gains = layout.pd_gain_vector(self.kp, self.kd)
             self._unilateral = np.ascontiguousarray(s.unilateral)
-            self._nv_arm = np.ascontiguousarray(s._k_arm_ints[:, 0])
             self._shapes = ((s.n_arms, s.arm_set.nv_max), (s.n_arms, s.N_max))
         o = state.obj
         if self.trajectory is None:
@@ -358,7 +359,7 @@ class ObjectPD(Controller):
         ref = self._motion_cache.get(t)  # RK4 samples t + dt/2 twice, t + dt again next step
         if ref is None or ref[0] is not self.trajectory:
             p_ref, R_ref, v_ref, a_ref = self.trajectory.motion(t)
-            ref = (self.trajectory, np.concatenate((p_ref, R_ref.ravel(), v_ref, a_ref)))
+            ref = (self.trajectory, layout.reference_vector(p_ref, R_ref, v_ref, a_ref))
             if len(self._motion_cache) >= 4:
                 self._motion_cache.pop(next(iter(self._motion_cache)))
             self._motion_cache[t] = ref
@@ -371,10 +372,11 @@ class ObjectPD(Controller):
         a_pts = np.zeros(self.hold_points_in_tool.shape)
         a_d = np.empty(6)
         status, solved = controller_kernels.object_pd_step(
-            buf, s._k_dims, s._k_N, self._nv_arm, self._unilateral,
-            np.concatenate((o.position, o.quaternion, o.twist)), ref[1], self._pd_gains, z,
+            buffer, path.dims, path.N, path.nv_arm, self._unilateral,
+            layout.object_state_vector(o.position, o.quaternion, o.twist), ref[1],
+            self._pd_gains, z,
             self.hold_points_in_tool, self.hold_points_in_object, self._hold_n, self._gains,
-            s._k_params, self._forces.active, tau, mu, qdd, a_pts, a_d, solve)
+            path.params, self._forces.active, tau, mu, qdd, a_pts, a_d, solve)
         if status != controller_kernels.PD_OK:
             if status == controller_kernels.PD_FORCES_FAILED:
                 self._forces.cold_solves += 1

@@ -1,0 +1,310 @@
+"""Compiled fused evaluation: arm terms, constraint rows, blocks and solve into one buffer.
+
+Mirrors :meth:`multiarm_pin.system.MultiArmSystem.blocks` with ``reference=True`` followed by
+:func:`multiarm_pin.dynamics.object_first.solve_object_first_numpy`: one compiled call runs
+:func:`~multiarm_pin._compiled.arm_terms.arm_terms`,
+:func:`~multiarm_pin._compiled.constraint_rows.constraint_rows`,
+:func:`~multiarm_pin._compiled.assembly.assemble` and (for a step)
+:func:`~multiarm_pin._compiled.object_first.object_first`, so that one dynamics step costs a
+handful of Python calls whatever the number of arms (the numpy versions spend most of their
+time in the overhead of 60-80 small numpy calls).
+
+Everything here takes and returns plain float64 / int64 arrays laid out in
+:mod:`multiarm_pin._compiled.layout`: the state vector ``x`` (object state ``X_*``, then
+``q``, ``v``, ``τ``), the arm table (``ARM_*``), the contact tables (``CI_*``, ``CF_*``),
+the parameter vector (``P_*``), ``dims`` (``DIMS_*``) and the flat output buffer (segments
+``SEG_*``). Conventions are those of ``docs/ARCHITECTURE.md``: SI units, spatial vectors
+``[linear; angular]``, world axes, tool quantities LOCAL_WORLD_ALIGNED at the tool origin,
+object quantities at the COM, ``μ > 0`` pushing.
+
+Compilation is cached on disk (``cache=True``, in ``__pycache__``): the first call in a fresh
+checkout compiles every kernel (a few seconds), later processes load them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from multiarm_pin._compiled.arm_terms import arm_terms
+from multiarm_pin._compiled.assembly import assemble
+from multiarm_pin._compiled.constraint_rows import constraint_rows
+from multiarm_pin._compiled.layout import (
+    ARM_JOINTS,
+    ARM_NV,
+    DIMS_K,
+    DIMS_M,
+    DIMS_N,
+    DIMS_NV,
+    P_OBJECT_RCOND_TOL,
+    P_RCOND_TOL,
+    SEG_A_O,
+    SEG_C,
+    SEG_H,
+    SEG_H_O,
+    SEG_J,
+    SEG_JDOT_QDOT,
+    SEG_M,
+    SEG_M_O,
+    SEG_MU,
+    SEG_NLE,
+    SEG_POSITION,
+    SEG_QDD,
+    SEG_ROTATION,
+    SEG_ROWS,
+    SEG_TWIST,
+    SEG_V,
+    SEG_W,
+    SEG_W_O,
+    X_POSITION,
+    X_QUATERNION,
+    X_TWIST,
+    offsets,
+    view1,
+    view2,
+    view3,
+)
+from multiarm_pin._compiled.object_first import object_first
+
+SOLVE_NOT_FINITE = 3
+"""Status of :func:`step_system`: the state or the torques hold NaN or infinity (the other
+statuses are those of :func:`~multiarm_pin._compiled.object_first.object_first`)."""
+
+
+@njit(cache=True, error_model="numpy")
+def quaternion_rotation(quat, R):  # pragma: no cover - compiled
+    """Rotation matrix (3, 3) of a unit quaternion ``[x, y, z, w]`` into ``R``."""
+    x, y, z, w = quat[0], quat[1], quat[2], quat[3]
+    R[0, 0] = 1 - 2 * (y * y + z * z)
+    R[0, 1] = 2 * (x * y - z * w)
+    R[0, 2] = 2 * (x * z + y * w)
+    R[1, 0] = 2 * (x * y + z * w)
+    R[1, 1] = 1 - 2 * (x * x + z * z)
+    R[1, 2] = 2 * (y * z - x * w)
+    R[2, 0] = 2 * (x * z - y * w)
+    R[2, 1] = 2 * (y * z + x * w)
+    R[2, 2] = 1 - 2 * (x * x + y * y)
+
+
+@njit(cache=True, error_model="numpy")
+def arm_views(buf, off, n, k, m):  # pragma: no cover - compiled
+    """Views of the arm segments: M, nle, J, Jdot_qdot, position, rotation, twist, v."""
+    return (view3(buf, off, SEG_M, n, k, m), view2(buf, off, SEG_NLE, n, k, m),
+            view3(buf, off, SEG_J, n, k, m), view2(buf, off, SEG_JDOT_QDOT, n, k, m),
+            view2(buf, off, SEG_POSITION, n, k, m), view3(buf, off, SEG_ROTATION, n, k, m),
+            view2(buf, off, SEG_TWIST, n, k, m), view2(buf, off, SEG_V, n, k, m))
+
+
+@njit(cache=True, error_model="numpy")
+def block_views(buf, off, n, k, m):  # pragma: no cover - compiled
+    """Views of the constraint rows and block segments: rows, h, W, W_o, c, M_o, h_o."""
+    return (view3(buf, off, SEG_ROWS, n, k, m), view2(buf, off, SEG_H, n, k, m),
+            view3(buf, off, SEG_W, n, k, m), view3(buf, off, SEG_W_O, n, k, m),
+            view2(buf, off, SEG_C, n, k, m), view2(buf, off, SEG_M_O, n, k, m),
+            view1(buf, off, SEG_H_O))
+
+
+@njit(cache=True, error_model="numpy")
+def solution_views(buf, off, n, k, m):  # pragma: no cover - compiled
+    """Views of the solution segments: a_o, qdd, mu."""
+    return (view1(buf, off, SEG_A_O), view2(buf, off, SEG_QDD, n, k, m),
+            view2(buf, off, SEG_MU, n, k, m))
+
+
+@njit(cache=True, error_model="numpy")
+def _group_arms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_offset, lo, arms
+                ):  # pragma: no cover - compiled
+    """:func:`arm_terms` of the group of arms ``lo..lo + len(H)`` into the arm views."""
+    M, nle, J, Jdq, p, R, tw, vp = arms
+    k = M.shape[1]
+    hi = lo + H.shape[0]
+    start = x.shape[0] - 2 * nv + v_offset
+    v = x[start:start + M_full.shape[0]]
+    arm_terms(J_world, dJ_world, M_full, nle_full, v, H, arm_ints[:, ARM_JOINTS:ARM_JOINTS + k],
+              arm_ints[:, ARM_NV], arm_ints[:, ARM_JOINTS + k:ARM_JOINTS + 2 * k], M[lo:hi],
+              nle[lo:hi], J[lo:hi], Jdq[lo:hi], p[lo:hi], R[lo:hi], tw[lo:hi], vp[lo:hi])
+
+
+@njit(cache=True, error_model="numpy")
+def _finish(x, arm_ints, v_starts, ints, floats, params, nv, arms,
+            blocks):  # pragma: no cover - compiled
+    """Constraint rows and blocks from the arm views; False if ``x`` is not finite."""
+    for a in range(x.shape[0]):
+        if not math.isfinite(x[a]):
+            return False
+    M, nle, J, Jdq, p, R, tw, vp = arms
+    rows, h, W, W_o, c, M_o, h_o = blocks
+    n, k = nle.shape
+    obj_R = np.empty((3, 3))
+    quaternion_rotation(x[X_QUATERNION:X_QUATERNION + 4], obj_R)
+    obj_tw = x[X_TWIST:X_TWIST + 6]
+    constraint_rows(p, R, tw, x[X_POSITION:X_POSITION + 3], obj_R, obj_tw, ints, floats, rows)
+    tau = x[x.shape[0] - nv:]
+    tau_p = np.zeros((n, k))
+    for i in range(n):
+        for a in range(arm_ints[i, ARM_NV]):
+            tau_p[i, a] = tau[v_starts[i] + a]
+    assemble(J, Jdq, nle, tau_p, rows, params, obj_R, obj_tw, h, W, W_o, c, M_o, h_o)
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def solve_views(N, params, M, h, blocks, solution):  # pragma: no cover - compiled
+    """:func:`object_first` on ``M``, ``h`` and the other block views into the solution views."""
+    rows, _, W, W_o, c, M_o, h_o = blocks
+    a_o, qdd, mu = solution
+    return object_first(M, h, W, W_o, c, M_o, h_o, N, params[P_RCOND_TOL],
+                        params[P_OBJECT_RCOND_TOL], a_o, qdd, mu)
+
+
+@njit(cache=True, error_model="numpy")
+def group_arm_terms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, dims, v_offset,
+                    first_arm, buf):  # pragma: no cover - compiled
+    """:func:`arm_terms` of one group of consecutive arms into their rows of the buffer.
+
+    Args:
+        J_world: (6, nv_g) ``data.J`` of the group's combined Pinocchio model.
+        dJ_world: (6, nv_g) ``data.dJ``.
+        M_full: (nv_g, nv_g) ``data.M``.
+        nle_full: (nv_g,) ``data.nle``.
+        H: (n_g, 4, 4) the group's tool placements.
+        x: (13 + nq + 2 nv,) the state vector (see :func:`evaluate_system`).
+        arm_ints: (n_g, 1 + 2k) the group's rows of the arm table, joint indices relative
+            to the group's velocity vector.
+        dims: (DIMS_SIZE,) int ``(k, m, nv, n)``: nv_max, N_max, total joints and arms.
+        v_offset: index of the group's first joint in the combined velocity.
+        first_arm: index of the group's first arm.
+        buf: the flat output buffer.
+    """
+    k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
+    arms = arm_views(buf, offsets(n, k, m), n, k, m)
+    _group_arms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_offset, first_arm,
+                arms)
+
+
+@njit(cache=True, error_model="numpy")
+def finish_system(x, arm_ints, v_starts, ints, floats, params, dims,
+                  buf):  # pragma: no cover - compiled
+    """Constraint rows and blocks from the arm terms already in ``buf``.
+
+    Args:
+        x: (13 + nq + 2 nv,) the state vector (see :func:`evaluate_system`).
+        arm_ints: (n, 1 + 2k) the arm table (see :func:`evaluate_system`).
+        v_starts: (n,) int index of each arm's first joint in the combined velocity (joint
+            indices of ``arm_ints`` may be relative to a group).
+        ints: (K, CONTACT_INTS) int contact table.
+        floats: (K, CONTACT_FLOATS) float contact table.
+        params: (N_PARAMS,) the parameter vector.
+        dims: (DIMS_SIZE,) int ``(k, m, nv, n)``.
+        buf: the flat buffer (arm segments read, the others written).
+
+    Returns:
+        False (and nothing computed) if some entry of ``x`` is NaN or infinite.
+    """
+    k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
+    off = offsets(n, k, m)
+    return _finish(x, arm_ints, v_starts, ints, floats, params, nv,
+                   arm_views(buf, off, n, k, m), block_views(buf, off, n, k, m))
+
+
+@njit(cache=True, error_model="numpy")
+def solve_buffer(N, params, dims, buf):  # pragma: no cover - compiled
+    """:func:`object_first` on the blocks of the buffer, solution into its last segments.
+
+    Args:
+        N: (n,) int constraint rows per arm.
+        params: (N_PARAMS,) the parameter vector (the solver thresholds are read).
+        dims: (DIMS_SIZE,) int ``(k, m, nv, n)``.
+        buf: the flat buffer.
+
+    Returns:
+        The status of :func:`object_first`.
+    """
+    k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
+    off = offsets(n, k, m)
+    blocks = block_views(buf, off, n, k, m)
+    return solve_views(N, params, view3(buf, off, SEG_M, n, k, m), blocks[1], blocks,
+                       solution_views(buf, off, n, k, m))
+
+
+@njit(cache=True, error_model="numpy")
+def evaluate_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, ints,
+                    floats, params, dims, buf):  # pragma: no cover - compiled
+    """Arm terms, constraint rows and blocks of one state into the flat buffer ``buf``.
+
+    All arms in one combined Pinocchio model (one group); see :func:`group_arm_terms` and
+    :func:`finish_system` for several.
+
+    Args:
+        J_world: (6, nv) ``data.J`` (see :func:`arm_terms`).
+        dJ_world: (6, nv) ``data.dJ``.
+        M_full: (nv, nv) ``data.M``.
+        nle_full: (nv,) ``data.nle``.
+        H: (n, 4, 4) tool placements.
+        x: (13 + nq + 2 nv,) the state vector: the object state (``OBJECT_STATE_FIELDS``:
+            position [m], quaternion ``[x, y, z, w]``, twist ``[ẋ; ω]``), then the arms'
+            ``q`` (not read), ``v`` and joint torques ``τ`` [N m] (zeros for none): one array
+            so that one finiteness test covers all.
+        arm_ints: (n, 1 + 2k) int, the arm table (``ARM_*``: joints per arm, joint indices
+            (see ``idx`` of :func:`arm_terms`), tool-support mask).
+        v_starts: (n,) int index of each arm's first joint in the combined velocity.
+        ints: (K, CONTACT_INTS) int contact table (:class:`~.layout.ContactTables`).
+        floats: (K, CONTACT_FLOATS) float contact table.
+        params: (N_PARAMS,) the parameter vector (``PARAM_FIELDS``: object mass [kg],
+            inertia about the COM in object axes [kg m²], gravity [m/s²], Baumgarte
+            ``(α, β, on)``, the solver thresholds, read by :func:`solve_buffer` only).
+        dims: (DIMS_SIZE,) int ``(k, m, nv, n) = (nv_max, N_max, total joints, arms)``.
+        buf: output, the flat buffer (segments of :data:`~.layout.SEGMENT_TABLE`).
+
+    Returns:
+        False (and the buffer meaningless) if some entry of ``x`` is NaN or infinite.
+    """
+    k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
+    off = offsets(n, k, m)
+    arms = arm_views(buf, off, n, k, m)
+    _group_arms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, 0, 0, arms)
+    return _finish(x, arm_ints, v_starts, ints, floats, params, nv, arms,
+                   block_views(buf, off, n, k, m))
+
+
+@njit(cache=True, error_model="numpy")
+def step_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, ints, floats,
+                params, dims, N, buf):  # pragma: no cover - compiled
+    """:func:`evaluate_system` then :func:`object_first` on the buffer (one full step).
+
+    Args:
+        J_world: see :func:`evaluate_system` (likewise every argument but ``N``).
+        dJ_world: (6, nv).
+        M_full: (nv, nv).
+        nle_full: (nv,).
+        H: (n, 4, 4).
+        x: (13 + nq + 2 nv,).
+        arm_ints: (n, 1 + 2k).
+        v_starts: (n,).
+        ints: (K, CONTACT_INTS).
+        floats: (K, CONTACT_FLOATS).
+        params: (N_PARAMS,), the solver thresholds included.
+        dims: (DIMS_SIZE,).
+        N: (n,) int constraint rows per arm.
+        buf: output buffer; the segments ``a_o``, ``qdd``, ``mu`` receive the solution.
+
+    Returns:
+        The status of :func:`object_first`, or ``SOLVE_NOT_FINITE`` if ``x`` holds NaN or
+        infinity (nothing computed then).
+    """
+    k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
+    off = offsets(n, k, m)
+    arms = arm_views(buf, off, n, k, m)
+    blocks = block_views(buf, off, n, k, m)
+    _group_arms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, 0, 0, arms)
+    if not _finish(x, arm_ints, v_starts, ints, floats, params, nv, arms, blocks):
+        return SOLVE_NOT_FINITE
+    return solve_views(N, params, arms[0], blocks[1], blocks,
+                       solution_views(buf, off, n, k, m))
+
+
+__all__ = ["SOLVE_NOT_FINITE", "arm_views", "block_views",
+           "evaluate_system", "finish_system", "group_arm_terms", "quaternion_rotation",
+           "solution_views", "solve_buffer", "solve_views", "step_system"]

@@ -1,0 +1,427 @@
+"""The compiled path's data layout, defined once by name.
+
+Every flat array that crosses the boundary between Python and the numba kernels is described
+here, as a table of named fields; the integer constants below are derived from the tables
+(module-level ints, which numba reads as compile-time constants), and both the kernels and
+the Python code that builds or reads the arrays use them. No other module writes an index of
+these arrays as a literal.
+
+- **Buffer segments** (:data:`SEGMENTS`, ``SEG_*``): the flat float64 output buffer of
+  :func:`multiarm_pin._compiled.evaluate.evaluate_system`, one C-contiguous segment per
+  quantity, shapes in terms of ``n`` arms, ``k = nv_max`` joints and ``m = N_max`` rows.
+  :func:`offsets` (compiled, callable from Python) gives their start offsets; the kernels
+  take views with :func:`view1` / :func:`view2` / :func:`view3`, Python with
+  :func:`segment_slices`.
+- **Row fields** (``ROW_*``): the ``ROW_WIDTH`` values of one packed constraint row, the
+  layout of :meth:`multiarm_pin.constraints.ConstraintSet.evaluate` and of the ``rows``
+  segment.
+- **Contact table columns** (``CI_*``, ``CF_*``): :class:`ContactTables`, one row per kept
+  contact (built by :attr:`multiarm_pin.constraints.ConstraintSet.contact_tables`).
+- **Arm table columns** (``ARM_*``): joints per arm, joint indices, tool-support mask.
+- **Object state** (``X_*``): position, quaternion, twist, the head of the state vector ``x``.
+- **Dimensions** (``DIMS_*``): the int vector ``(k, m, nv, n)``.
+- **Parameter slots** (``P_*``): object, gravity, Baumgarte and solver thresholds.
+- **Controller vectors** (``OX_*``, ``REF_*``, ``PD_*``, ``GAIN_*``): the object pose
+  and the reference, gains of :mod:`multiarm_pin._compiled.controller_kernels`.
+
+Units are SI; spatial vectors ``[linear; angular]`` in world axes (``docs/ARCHITECTURE.md``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+
+def _starts(fields: Sequence[tuple[str, int]]) -> tuple[dict[str, int], int]:
+    """Start index of each ``(name, width)`` field laid out one after the other, and the total."""
+    starts, pos = {}, 0
+    for name, width in fields:
+        starts[name] = pos
+        pos += width
+    return starts, pos
+
+
+# ------------------------------------------------------------------ packed constraint rows
+ROW_FIELDS = (("phi", 1), ("phi_dot", 1), ("kappa", 1), ("G_tool", 6), ("G_object", 6),
+              ("contact_point", 3), ("normal", 3))
+"""Fields of one packed constraint row: gap ``φ`` [m], rate ``φ̇`` [m/s], ``κ`` [m/s²], the
+row at the tool origin (6) and at the object COM (6) (world axes), the contact point (3) [m]
+and the unit direction (3) in which the row pushes the object."""
+_ROW, ROW_WIDTH = _starts(ROW_FIELDS)
+_ROW_WIDTHS = dict(ROW_FIELDS)
+ROW_PHI = _ROW["phi"]
+ROW_PHI_DOT = _ROW["phi_dot"]
+ROW_KAPPA = _ROW["kappa"]
+ROW_G_TOOL = _ROW["G_tool"]
+ROW_G_OBJECT = _ROW["G_object"]
+ROW_POINT = _ROW["contact_point"]
+ROW_NORMAL = _ROW["normal"]
+
+
+def row_field(rows: np.ndarray, name: str) -> np.ndarray:
+    """The field ``name`` of :data:`ROW_FIELDS` of packed rows ``(..., ROW_WIDTH)``: a view.
+
+    Width-1 fields drop the last axis (``(...)``), the others keep it (``(..., width)``).
+    """
+    start, width = _ROW[name], _ROW_WIDTHS[name]
+    return rows[..., start] if width == 1 else rows[..., start:start + width]
+
+
+# ------------------------------------------------------------------ contact tables
+CONTACT_INT_FIELDS = (("carrier", 1), ("surface", 1), ("slot", 1), ("tool_carries", 1))
+"""Int columns per contact: carrier body and surface body (``0..n-1`` the tools, ``n`` the
+object), flat slot ``arm * N_max + row``, 1 if the tool carries the tip."""
+_CI, CONTACT_INTS = _starts(CONTACT_INT_FIELDS)
+CI_CARRIER = _CI["carrier"]
+CI_SURFACE = _CI["surface"]
+CI_SLOT = _CI["slot"]
+CI_TOOL_CARRIES = _CI["tool_carries"]
+
+CONTACT_FLOAT_FIELDS = (("tip", 3), ("tip_radius", 1), ("direction", 3), ("point", 3),
+                        ("curvature_radius", 1), ("curvature_sign", 1), ("is_plane", 1),
+                        ("push_sign", 1))
+"""Float columns per contact: tip point in the carrier's frame (3) [m], tip radius [m],
+surface direction (3) and point (3) in the surface body's frame (plane: normal and point;
+sphere: 0 and centre; cylinder: axis and a point of it), curvature radius [m], curvature sign
+(+1 outside, -1 inside), 1.0 for planes, push sign (-1 if the tip is on the tool)."""
+_CF, CONTACT_FLOATS = _starts(CONTACT_FLOAT_FIELDS)
+CF_TIP = _CF["tip"]
+CF_TIP_RADIUS = _CF["tip_radius"]
+CF_DIRECTION = _CF["direction"]
+CF_POINT = _CF["point"]
+CF_CURVATURE_RADIUS = _CF["curvature_radius"]
+CF_CURVATURE_SIGN = _CF["curvature_sign"]
+CF_IS_PLANE = _CF["is_plane"]
+CF_PUSH_SIGN = _CF["push_sign"]
+
+
+@dataclass(frozen=True)
+class ContactTables:
+    """Per-contact tables of a constraint set, the input of the compiled constraint rows.
+
+    Attributes:
+        ints: (K, CONTACT_INTS) int64, columns :data:`CONTACT_INT_FIELDS` (read-only).
+        floats: (K, CONTACT_FLOATS) float64, columns :data:`CONTACT_FLOAT_FIELDS` (read-only).
+    """
+
+    ints: np.ndarray
+    floats: np.ndarray
+
+    @classmethod
+    def build(cls, carrier, surface, slot, tool_carries, tip, tip_radius, direction, point,
+              curvature_radius, curvature_sign, is_plane, push_sign) -> ContactTables:
+        """The tables from per-contact arrays, one entry per contact (K of them).
+
+        Args:
+            carrier: (K,) carrier body of each tip (``0..n-1`` the tools, ``n`` the object).
+            surface: (K,) surface body.
+            slot: (K,) flat slot ``arm * N_max + row``.
+            tool_carries: (K,) 1 if the tool carries the tip.
+            tip: (K, 3) tip point in the carrier's frame [m].
+            tip_radius: (K,) [m].
+            direction: (K, 3) surface direction in the surface body's frame.
+            point: (K, 3) surface point in the surface body's frame [m].
+            curvature_radius: (K,) [m] (0 for planes).
+            curvature_sign: (K,) +1 outside, -1 inside.
+            is_plane: (K,) 1.0 for planes.
+            push_sign: (K,) -1 if the tip is on the tool, else +1.
+        """
+        K = len(slot)
+        ints = np.zeros((K, CONTACT_INTS), dtype=np.int64)
+        ints[:, CI_CARRIER] = carrier
+        ints[:, CI_SURFACE] = surface
+        ints[:, CI_SLOT] = slot
+        ints[:, CI_TOOL_CARRIES] = tool_carries
+        floats = np.zeros((K, CONTACT_FLOATS))
+        floats[:, CF_TIP:CF_TIP + 3] = tip
+        floats[:, CF_TIP_RADIUS] = tip_radius
+        floats[:, CF_DIRECTION:CF_DIRECTION + 3] = direction
+        floats[:, CF_POINT:CF_POINT + 3] = point
+        floats[:, CF_CURVATURE_RADIUS] = curvature_radius
+        floats[:, CF_CURVATURE_SIGN] = curvature_sign
+        floats[:, CF_IS_PLANE] = is_plane
+        floats[:, CF_PUSH_SIGN] = push_sign
+        ints.setflags(write=False)
+        floats.setflags(write=False)
+        return cls(ints, floats)
+
+
+# ------------------------------------------------------------------ arm table
+ARM_NV = 0
+"""Arm table ``(n, 1 + 2k)`` int64: column of the number of joints of each arm."""
+ARM_JOINTS = 1
+"""First of the ``k`` columns of joint indices in the combined velocity (padded with 0);
+the ``k`` columns of the tool-support mask (1 where the joint moves the tool) follow them,
+from ``ARM_JOINTS + k``."""
+
+
+def arm_table(nv_arm: np.ndarray, joints: np.ndarray, support: np.ndarray) -> np.ndarray:
+    """The arm table ``(n, 1 + 2k)`` int64 from ``nv_arm`` (n,), ``joints``, ``support`` (n, k)."""
+    n, k = joints.shape
+    table = np.zeros((n, ARM_JOINTS + 2 * k), dtype=np.int64)
+    table[:, ARM_NV] = nv_arm
+    table[:, ARM_JOINTS:ARM_JOINTS + k] = joints
+    table[:, ARM_JOINTS + k:ARM_JOINTS + 2 * k] = support
+    return table
+
+
+# ------------------------------------------------------------------ object state, state vector
+OBJECT_STATE_FIELDS = (("position", 3), ("quaternion", 4), ("twist", 6))
+"""The object's state as the kernels read it: COM position [m], quaternion ``[x, y, z, w]``,
+twist ``[ẋ; ω]`` (world axes). The state vector ``x`` of the kernels is this, then the
+arms' ``q``, ``v`` and torques ``τ``."""
+_X, OBJECT_STATE_SIZE = _starts(OBJECT_STATE_FIELDS)
+X_POSITION = _X["position"]
+X_QUATERNION = _X["quaternion"]
+X_TWIST = _X["twist"]
+
+
+def object_state_vector(position, quaternion, twist) -> np.ndarray:
+    """The object's state (OBJECT_STATE_SIZE,) as the kernels read it (``OBJECT_STATE_FIELDS``)."""
+    return np.concatenate((position, quaternion, twist))
+
+
+def state_vector(position, quaternion, twist, q, v, tau) -> np.ndarray:
+    """The kernels' state vector ``x`` (13 + nq + 2 nv,): object state, ``q``, ``v``, ``τ``."""
+    return np.concatenate((position, quaternion, twist, q, v, tau))
+
+
+def state_size(nq: int, nv: int) -> int:
+    """Length of :func:`state_vector` for ``nq`` positions and ``nv`` velocities."""
+    return OBJECT_STATE_SIZE + nq + 2 * nv
+
+
+# ------------------------------------------------------------------ dimensions
+DIMS_FIELDS = (("k", 1), ("m", 1), ("nv", 1), ("n", 1))
+"""The int64 vector ``dims``: ``nv_max``, ``N_max``, total joints, arms."""
+_D, DIMS_SIZE = _starts(DIMS_FIELDS)
+DIMS_K = _D["k"]
+DIMS_M = _D["m"]
+DIMS_NV = _D["nv"]
+DIMS_N = _D["n"]
+
+
+def dims_vector(k: int, m: int, nv: int, n: int) -> np.ndarray:
+    """The ``dims`` vector (:data:`DIMS_FIELDS`)."""
+    dims = np.zeros(DIMS_SIZE, dtype=np.int64)
+    dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N] = k, m, nv, n
+    return dims
+
+
+# ------------------------------------------------------------------ parameters
+PARAM_FIELDS = (("mass", 1), ("inertia", 9), ("gravity", 3), ("baumgarte_alpha", 1),
+                ("baumgarte_beta", 1), ("baumgarte_on", 1), ("rcond_tol", 1),
+                ("object_rcond_tol", 1))
+"""The float64 parameter vector: object mass [kg], inertia about the COM in object axes
+(row-major) [kg m²], gravity [m/s²], Baumgarte ``α``, ``β`` [1/s] and on-flag (1.0 = on), the
+solver thresholds on each ``S_i`` and on the reduced object matrix."""
+_P, N_PARAMS = _starts(PARAM_FIELDS)
+P_MASS = _P["mass"]
+P_INERTIA = _P["inertia"]
+P_GRAVITY = _P["gravity"]
+P_BAUMGARTE_ALPHA = _P["baumgarte_alpha"]
+P_BAUMGARTE_BETA = _P["baumgarte_beta"]
+P_BAUMGARTE_ON = _P["baumgarte_on"]
+P_RCOND_TOL = _P["rcond_tol"]
+P_OBJECT_RCOND_TOL = _P["object_rcond_tol"]
+
+
+def parameter_vector(mass: float, inertia: np.ndarray, gravity: np.ndarray, rcond_tol: float,
+                     object_rcond_tol: float) -> np.ndarray:
+    """The parameter vector (:data:`PARAM_FIELDS`), Baumgarte off."""
+    params = np.zeros(N_PARAMS)
+    params[P_MASS] = mass
+    params[P_INERTIA:P_INERTIA + 9] = np.asarray(inertia, dtype=float).ravel()
+    params[P_GRAVITY:P_GRAVITY + 3] = gravity
+    params[P_RCOND_TOL] = rcond_tol
+    params[P_OBJECT_RCOND_TOL] = object_rcond_tol
+    return params
+
+
+def with_baumgarte(params: np.ndarray, alpha: float, beta: float) -> np.ndarray:
+    """A copy of ``params`` with Baumgarte stabilisation ``(α, β)`` [1/s] switched on."""
+    out = params.copy()
+    out[P_BAUMGARTE_ALPHA], out[P_BAUMGARTE_BETA], out[P_BAUMGARTE_ON] = alpha, beta, 1.0
+    return out
+
+
+# ------------------------------------------------------------------ controller vectors
+OBJECT_POSE_FIELDS = (("position", 3), ("rotation", 9), ("twist", 6))
+"""The object as the controller kernels read it: COM position [m], rotation (row-major),
+twist ``[ẋ; ω]``."""
+_OX, OBJECT_POSE_SIZE = _starts(OBJECT_POSE_FIELDS)
+OX_POSITION = _OX["position"]
+OX_ROTATION = _OX["rotation"]
+OX_TWIST = _OX["twist"]
+
+REFERENCE_FIELDS = (("position", 3), ("rotation", 9), ("twist", 6), ("acceleration", 6))
+"""The reference motion of the object at one time: position [m], rotation (row-major), twist
+and classical acceleration, world axes at the COM."""
+_REF, REFERENCE_SIZE = _starts(REFERENCE_FIELDS)
+REF_POSITION = _REF["position"]
+REF_ROTATION = _REF["rotation"]
+REF_TWIST = _REF["twist"]
+REF_ACCELERATION = _REF["acceleration"]
+
+
+def reference_vector(position, rotation, twist, acceleration) -> np.ndarray:
+    """The reference vector (:data:`REFERENCE_FIELDS`)."""
+    return np.concatenate((position, np.asarray(rotation).ravel(), twist, acceleration))
+
+
+PD_GAIN_FIELDS = (("kp", 6), ("kd", 6))
+"""The object PD gains ``K_p`` [1/s²] and ``K_d`` [1/s], per component of ``[x; θ]``."""
+_PD, PD_GAINS_SIZE = _starts(PD_GAIN_FIELDS)
+PD_KP = _PD["kp"]
+PD_KD = _PD["kd"]
+
+
+def pd_gain_vector(kp, kd) -> np.ndarray:
+    """The PD gain vector (:data:`PD_GAIN_FIELDS`)."""
+    return np.concatenate((kp, kd)).astype(float)
+
+
+HOLD_GAIN_FIELDS = (("hold_kp", 1), ("hold_kd", 1), ("damping", 1), ("margin", 1))
+"""Held-point gains ``hold_kp`` [1/s²], ``hold_kd`` [1/s], the relative Jacobian damping and
+the force margin [N] of the controller kernels."""
+_HG, HOLD_GAINS_SIZE = _starts(HOLD_GAIN_FIELDS)
+GAIN_HOLD_KP = _HG["hold_kp"]
+GAIN_HOLD_KD = _HG["hold_kd"]
+GAIN_DAMPING = _HG["damping"]
+GAIN_MARGIN = _HG["margin"]
+
+
+def hold_gain_vector(hold_kp: float, hold_kd: float, damping: float, margin: float
+                     ) -> np.ndarray:
+    """The held-point gain vector (:data:`HOLD_GAIN_FIELDS`)."""
+    gains = np.zeros(HOLD_GAINS_SIZE)
+    gains[GAIN_HOLD_KP], gains[GAIN_HOLD_KD] = hold_kp, hold_kd
+    gains[GAIN_DAMPING], gains[GAIN_MARGIN] = damping, margin
+    return gains
+
+
+# ------------------------------------------------------------------ buffer segments
+SEGMENT_TABLE = (
+    ("M", ("n", "k", "k")), ("nle", ("n", "k")), ("J", ("n", 6, "k")), ("Jdot_qdot", ("n", 6)),
+    ("position", ("n", 3)), ("rotation", ("n", 3, 3)), ("twist", ("n", 6)), ("v", ("n", "k")),
+    ("rows", ("n", "m", ROW_WIDTH)), ("h", ("n", "k")), ("W", ("n", "k", "m")),
+    ("W_o", ("n", 6, "m")), ("c", ("n", "m")), ("M_o", (6, 6)), ("h_o", (6,)),
+    ("a_o", (6,)), ("qdd", ("n", "k")), ("mu", ("n", "m")),
+)
+"""The segments of the flat buffer, in order, with their shapes: the arms' terms (``M``,
+``nle``, ``J`` LWA, ``Jdot_qdot``, tool ``position``, ``rotation``, ``twist``, padded ``v``),
+the packed constraint ``rows``, the blocks (``h``, ``W``, ``W_o``, ``c``, ``M_o``, ``h_o``) and
+the solution (``a_o``, ``qdd``, ``mu``); ``n`` arms, ``k = nv_max``, ``m = N_max``."""
+SEGMENTS = tuple(name for name, _ in SEGMENT_TABLE)
+"""Names of the buffer segments, in order."""
+SEG_M = SEGMENTS.index("M")
+SEG_NLE = SEGMENTS.index("nle")
+SEG_J = SEGMENTS.index("J")
+SEG_JDOT_QDOT = SEGMENTS.index("Jdot_qdot")
+SEG_POSITION = SEGMENTS.index("position")
+SEG_ROTATION = SEGMENTS.index("rotation")
+SEG_TWIST = SEGMENTS.index("twist")
+SEG_V = SEGMENTS.index("v")
+SEG_ROWS = SEGMENTS.index("rows")
+SEG_H = SEGMENTS.index("h")
+SEG_W = SEGMENTS.index("W")
+SEG_W_O = SEGMENTS.index("W_o")
+SEG_C = SEGMENTS.index("c")
+SEG_M_O = SEGMENTS.index("M_o")
+SEG_H_O = SEGMENTS.index("h_o")
+SEG_A_O = SEGMENTS.index("a_o")
+SEG_QDD = SEGMENTS.index("qdd")
+SEG_MU = SEGMENTS.index("mu")
+N_SEGMENTS = len(SEGMENTS)
+
+_DIM_CODE = {"n": -1, "k": -2, "m": -3}
+_MAX_NDIM = 3
+SHAPE_CODES = np.array([[_DIM_CODE.get(d, d) for d in shape] + [1] * (_MAX_NDIM - len(shape))
+                        for _, shape in SEGMENT_TABLE], dtype=np.int64)
+"""(N_SEGMENTS, 3) int64: each segment's shape, ``-1, -2, -3`` standing for ``n, k, m``
+(padded with 1), the form in which the compiled code reads :data:`SEGMENT_TABLE`."""
+SEGMENT_NDIM = np.array([len(shape) for _, shape in SEGMENT_TABLE], dtype=np.int64)
+"""(N_SEGMENTS,) number of axes of each segment."""
+
+
+@njit(cache=True, error_model="numpy")
+def _dim(code, n, k, m):  # pragma: no cover - compiled
+    """A dimension of :data:`SHAPE_CODES` for ``n`` arms, ``k = nv_max``, ``m = N_max``."""
+    if code == -1:
+        return n
+    if code == -2:
+        return k
+    if code == -3:
+        return m
+    return code
+
+
+@njit(cache=True, error_model="numpy")
+def offsets(n, k, m):  # pragma: no cover - compiled
+    """Start offsets (N_SEGMENTS + 1,) int64 of the segments; the last entry is the total size."""
+    off = np.empty(N_SEGMENTS + 1, dtype=np.int64)
+    off[0] = 0
+    for j in range(N_SEGMENTS):
+        size = 1
+        for a in range(_MAX_NDIM):
+            size *= _dim(SHAPE_CODES[j, a], n, k, m)
+        off[j + 1] = off[j] + size
+    return off
+
+
+@njit(cache=True, error_model="numpy")
+def view1(buf, off, seg):  # pragma: no cover - compiled
+    """The one-axis segment ``seg`` of ``buf`` (offsets ``off``)."""
+    return buf[off[seg]:off[seg + 1]]
+
+
+@njit(cache=True, error_model="numpy")
+def view2(buf, off, seg, n, k, m):  # pragma: no cover - compiled
+    """The two-axis segment ``seg`` of ``buf``, shaped as :data:`SEGMENT_TABLE` says."""
+    return buf[off[seg]:off[seg + 1]].reshape((_dim(SHAPE_CODES[seg, 0], n, k, m),
+                                               _dim(SHAPE_CODES[seg, 1], n, k, m)))
+
+
+@njit(cache=True, error_model="numpy")
+def view3(buf, off, seg, n, k, m):  # pragma: no cover - compiled
+    """The three-axis segment ``seg`` of ``buf``, shaped as :data:`SEGMENT_TABLE` says."""
+    return buf[off[seg]:off[seg + 1]].reshape((_dim(SHAPE_CODES[seg, 0], n, k, m),
+                                               _dim(SHAPE_CODES[seg, 1], n, k, m),
+                                               _dim(SHAPE_CODES[seg, 2], n, k, m)))
+
+
+def segment_shapes(n: int, k: int, m: int) -> dict[str, tuple[int, ...]]:
+    """Shapes of the buffer segments for n arms, ``k = nv_max`` joints, ``m = N_max`` rows."""
+    size = {"n": n, "k": k, "m": m}
+    return {name: tuple(size.get(d, d) for d in shape) for name, shape in SEGMENT_TABLE}
+
+
+def buffer_layout(n: int, k: int, m: int) -> tuple[np.ndarray, int]:
+    """Start offsets (N_SEGMENTS + 1,) int64 of every segment (:func:`offsets`), and the size."""
+    off = offsets(n, k, m)
+    return off, int(off[-1])
+
+
+@dataclass(frozen=True)
+class Segment:
+    """Where a segment lies in the buffer: ``buf[start:stop].reshape(shape)``."""
+
+    start: int
+    stop: int
+    shape: tuple[int, ...]
+
+    def view(self, buf: np.ndarray) -> np.ndarray:
+        """The segment of ``buf`` (a view)."""
+        return buf[self.start:self.stop].reshape(self.shape)
+
+
+def segment_slices(n: int, k: int, m: int) -> dict[str, Segment]:
+    """Every segment's :class:`Segment` for n arms, ``k = nv_max``, ``m = N_max``."""
+    off, _ = buffer_layout(n, k, m)
+    shapes = segment_shapes(n, k, m)
+    return {name: Segment(int(off[j]), int(off[j + 1]), shapes[name])
+            for j, name in enumerate(SEGMENTS)}
