@@ -19,7 +19,9 @@ The scene has three parts, all animated on one Meshcat timeline:
 
 Samples are subsampled to ``fps`` frames per second (nearest sample in time, no
 interpolation), so a page's size grows with the duration, not with the integrator step.
-All positions are in the world frame [m]; forces [N].
+All positions are in the world frame [m]; forces [N]. The inputs (:class:`ReplayArm`,
+:class:`ReplayObject`, :class:`ReplaySupport`, :class:`ReplayContacts`) are defined and checked
+in :mod:`multiarm_pin.app.replay_scene` and re-exported here.
 """
 
 from __future__ import annotations
@@ -29,7 +31,6 @@ import io
 import math
 import webbrowser
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import meshcat
@@ -39,8 +40,15 @@ import numpy as np
 import pinocchio as pin
 
 from multiarm_pin.app.replay_meshes import lambert_material, mesh_object, visual_mesh
+from multiarm_pin.app.replay_scene import (
+    ReplayArm,
+    ReplayContacts,
+    ReplayObject,
+    check_replay_inputs,
+    frame_indices,
+    polyhedron_triangles,
+)
 from multiarm_pin.exceptions import InputError
-from multiarm_pin.model.polyhedron import Polyhedron
 from multiarm_pin.spatial import as_array, quaternion_to_rotation
 
 OBJECT_COLOR = 0xE63946
@@ -73,207 +81,6 @@ _SCENE_ROOT_ROTATION = np.array([[1.0, 0.0, 0.0, 0.0],
                                  [0.0, 0.0, 1.0, 0.0],
                                  [0.0, -1.0, 0.0, 0.0],
                                  [0.0, 0.0, 0.0, 1.0]])
-
-
-@dataclass
-class ReplayArm:
-    """One arm to draw.
-
-    Attributes:
-        name: unique name; its geometry goes under the Meshcat path ``arms/<name>``.
-        model: the arm's Pinocchio model (fixed base at the model's origin).
-        visual_model: its visual geometry (e.g. ``example_robot_data.load(n).visual_model``
-            or the VISUAL model of ``pin.buildModelsFromUrdf``); ``None`` draws a sphere
-            at each joint instead.
-        base_placement: pose of the model's origin in the world.
-        q: (T, nq) joint positions over time [rad or m].
-        color: optional RGBA in [0, 1] for all of the arm's geometry; ``None`` keeps each
-            geometry's own colours: its URDF material, else its COLLADA file's materials,
-            else ``GeometryObject.meshColor`` (see :mod:`multiarm_pin.app.replay_meshes`).
-    """
-
-    name: str
-    model: pin.Model
-    visual_model: pin.GeometryModel | None
-    base_placement: pin.SE3
-    q: np.ndarray
-    color: tuple[float, float, float, float] | None = None
-
-    def __post_init__(self):
-        if not isinstance(self.name, str) or not self.name or "/" in self.name:
-            raise InputError(f"ReplayArm.name: expected a non-empty string without '/', "
-                             f"got {self.name!r}")
-        if not isinstance(self.model, pin.Model):
-            raise InputError(f"ReplayArm {self.name!r}: model must be a pin.Model, "
-                             f"got {type(self.model).__name__}")
-        if self.visual_model is not None and not isinstance(self.visual_model, pin.GeometryModel):
-            raise InputError(f"ReplayArm {self.name!r}: visual_model must be a "
-                             f"pin.GeometryModel or None, got {type(self.visual_model).__name__}")
-        if not isinstance(self.base_placement, pin.SE3):
-            raise InputError(f"ReplayArm {self.name!r}: base_placement must be a pin.SE3, "
-                             f"got {type(self.base_placement).__name__}")
-        self.q = as_array(self.q, (None, self.model.nq), f"ReplayArm {self.name!r}.q (T, nq)")
-        if self.color is not None:
-            rgba = as_array(self.color, (4,), f"ReplayArm {self.name!r}.color (RGBA)")
-            if np.any(rgba < 0) or np.any(rgba > 1):
-                raise InputError(f"ReplayArm {self.name!r}.color: expected RGBA values in "
-                                 f"[0, 1], got {rgba.tolist()}")
-            self.color = tuple(float(c) for c in rgba)
-
-
-@dataclass
-class ReplayObject:
-    """The manipulated object over time.
-
-    Attributes:
-        polyhedron: its shape in the object frame (origin at the COM) [m].
-        position: (T, 3) COM position in the world [m].
-        quaternion: (T, 4) orientation ``[x, y, z, w]`` (object axes to world axes);
-            normalised here, a norm far from 1 is an error.
-    """
-
-    polyhedron: Polyhedron
-    position: np.ndarray
-    quaternion: np.ndarray
-
-    def __post_init__(self):
-        if not isinstance(self.polyhedron, Polyhedron):
-            raise InputError(f"ReplayObject.polyhedron: expected a Polyhedron, "
-                             f"got {type(self.polyhedron).__name__}")
-        self.position = as_array(self.position, (None, 3), "ReplayObject.position (T, 3)")
-        quat = as_array(self.quaternion, (len(self.position), 4),
-                        "ReplayObject.quaternion (T, 4) [x, y, z, w]")
-        norms = np.linalg.norm(quat, axis=1)
-        if np.any(np.abs(norms - 1.0) > 1e-3):
-            bad = int(np.argmax(np.abs(norms - 1.0)))
-            raise InputError(f"ReplayObject.quaternion: row {bad} has norm {norms[bad]:.6g}, "
-                             "expected unit quaternions [x, y, z, w]")
-        self.quaternion = quat / norms[:, None]
-
-
-@dataclass
-class ReplaySupport:
-    """A support plane drawn as a square slab whose top face lies on the plane.
-
-    Attributes:
-        name: scene node name (``supports/<name>``).
-        center: (3,) centre of the slab's top face, on the plane, world [m].
-        normal: (3,) unit normal out of the support, world axes.
-        half_size: half the side of the square [m].
-    """
-
-    name: str
-    center: np.ndarray
-    normal: np.ndarray
-    half_size: float
-
-    def __post_init__(self):
-        self.center = as_array(self.center, (3,), f"ReplaySupport {self.name!r}.center")
-        n = as_array(self.normal, (3,), f"ReplaySupport {self.name!r}.normal")
-        if np.linalg.norm(n) < 1e-9:
-            raise InputError(f"ReplaySupport {self.name!r}.normal: zero length")
-        self.normal = n / np.linalg.norm(n)
-        if not (math.isfinite(self.half_size) and self.half_size > 0):
-            raise InputError(f"ReplaySupport {self.name!r}.half_size: expected a positive "
-                             f"length [m], got {self.half_size!r}")
-
-
-@dataclass
-class ReplayContacts:
-    """Contact points and forces over time (K contacts, fixed count).
-
-    Attributes:
-        points: (T, K, 3) contact points in the world [m].
-        forces: (T, K, 3) force applied *on the object* at each point, world axes [N].
-        touching: (T, K) bool, True where contact k touches (None: always touching).
-        supports: support planes to draw (:class:`ReplaySupport`).
-    """
-
-    points: np.ndarray
-    forces: np.ndarray
-    touching: np.ndarray | None = None
-    supports: Sequence[ReplaySupport] = ()
-
-    def __post_init__(self):
-        self.points = as_array(self.points, (None, None, 3), "ReplayContacts.points (T, K, 3)")
-        self.forces = as_array(self.forces, self.points.shape, "ReplayContacts.forces (T, K, 3)")
-        if self.touching is not None:
-            tch = np.asarray(self.touching)
-            if tch.shape != self.points.shape[:2] or tch.dtype != bool:
-                raise InputError(f"ReplayContacts.touching: expected a bool array of shape "
-                                 f"{self.points.shape[:2]}, got {tch.dtype} {tch.shape}")
-            self.touching = tch
-        for sp in self.supports:
-            if not isinstance(sp, ReplaySupport):
-                raise InputError(f"ReplayContacts.supports: expected ReplaySupport items, got "
-                                 f"{type(sp).__name__}")
-
-
-# ----------------------------------------------------------------------------- helpers
-def frame_indices(t: np.ndarray, fps: float) -> np.ndarray:
-    """Sample index shown at each animation frame.
-
-    Args:
-        t: (T,) strictly increasing sample times [s].
-        fps: frames per second of the replay.
-
-    Returns:
-        (F,) int indices into ``t``: for frame ``k`` the sample nearest to
-        ``t[0] + k / fps``, ``F = floor((t[-1] - t[0]) fps) + 1``.
-    """
-    duration = float(t[-1] - t[0])
-    n_frames = int(math.floor(duration * fps + 1e-9)) + 1
-    times = t[0] + np.arange(n_frames) / fps
-    right = np.clip(np.searchsorted(t, times), 1, max(len(t) - 1, 1))
-    left = right - 1
-    if len(t) == 1:
-        return np.zeros(n_frames, dtype=int)
-    nearer_left = (times - t[left]) <= (t[right] - times)
-    return np.where(nearer_left, left, right)
-
-
-def polyhedron_triangles(poly: Polyhedron) -> np.ndarray:
-    """(M, 3) int vertex indices of a fan triangulation of every face, outward-facing."""
-    tris = []
-    for face in poly.faces:
-        for j in range(1, len(face) - 1):
-            tris.append((face[0], face[j], face[j + 1]))
-    return np.array(tris, dtype=np.uint32)
-
-
-def _check_inputs(arms, obj, contacts, t, fps) -> np.ndarray:
-    t = as_array(t, (None,), "t (T,) [s]")
-    if len(t) == 0:
-        raise InputError("t: expected at least one sample time, got an empty array")
-    if np.any(np.diff(t) <= 0):
-        raise InputError("t: sample times must be strictly increasing")
-    if not (isinstance(fps, int | float) and fps > 0 and math.isfinite(fps)):
-        raise InputError(f"fps: expected a positive number of frames per second, got {fps!r}")
-    if isinstance(arms, ReplayArm) or not isinstance(arms, Sequence):
-        raise InputError("arms: expected a list of ReplayArm")
-    names = set()
-    for arm in arms:
-        if not isinstance(arm, ReplayArm):
-            raise InputError(f"arms: expected ReplayArm items, got {type(arm).__name__}")
-        if arm.name in names:
-            raise InputError(f"arms: duplicate arm name {arm.name!r}")
-        names.add(arm.name)
-        if len(arm.q) != len(t):
-            raise InputError(f"arm {arm.name!r}: q has {len(arm.q)} rows, t has {len(t)} samples")
-    if obj is not None:
-        if not isinstance(obj, ReplayObject):
-            raise InputError(f"obj: expected a ReplayObject or None, got {type(obj).__name__}")
-        if len(obj.position) != len(t):
-            raise InputError(f"obj: position has {len(obj.position)} rows, "
-                             f"t has {len(t)} samples")
-    if contacts is not None:
-        if not isinstance(contacts, ReplayContacts):
-            raise InputError(f"contacts: expected ReplayContacts or None, "
-                             f"got {type(contacts).__name__}")
-        if len(contacts.points) != len(t):
-            raise InputError(f"contacts: points have {len(contacts.points)} rows, "
-                             f"t has {len(t)} samples")
-    return t
 
 
 _Y_TO_Z = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
@@ -450,7 +257,7 @@ def build_animation(
     Raises:
         InputError: inconsistent sample counts, non-increasing times, bad fps or scale.
     """
-    t = _check_inputs(arms, obj, contacts, t, fps)
+    t = check_replay_inputs(arms, obj, contacts, t, fps)
     if force_scale is not None and not (force_scale > 0 and math.isfinite(force_scale)):
         raise InputError(f"force_scale: expected a positive length per newton [m/N] or None, "
                          f"got {force_scale!r}")
@@ -594,7 +401,7 @@ def write_replay_html(
     path = Path(path)
     if not path.parent.is_dir():
         raise InputError(f"write_replay_html: folder {path.parent} does not exist")
-    t = _check_inputs(arms, obj, contacts, t, fps)
+    t = check_replay_inputs(arms, obj, contacts, t, fps)
     vis = _new_visualizer()
     try:
         anim = build_animation(vis, arms, obj, contacts, t, fps=fps)
@@ -628,7 +435,7 @@ def serve_replay(
         ``(url, vis)``: the page's URL and the visualizer; stop the server with
         :func:`close_visualizer` ``(vis)`` when done.
     """
-    t = _check_inputs(arms, obj, contacts, t, fps)
+    t = check_replay_inputs(arms, obj, contacts, t, fps)
     vis = _new_visualizer()
     try:
         anim = build_animation(vis, arms, obj, contacts, t, fps=fps)

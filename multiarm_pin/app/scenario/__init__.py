@@ -8,38 +8,13 @@
 
 from multiarm_pin.app.scenario.build import BuiltScenario, build_arm, build_object, build_scenario
 from multiarm_pin.app.scenario.schema import load_scenario, parse_scenario
-from multiarm_pin.app.scenario.specs import (
-    CONTROLLER_TYPES,
-    DEPRECATED_JOINT_TYPES,
-    INTEGRATOR_NAMES,
-    JOINT_TYPE_NAMES,
-    SOLVER_NAMES,
-    ArmSpec,
-    ContactSpec,
-    ControllerSpec,
-    JointSpec,
-    ObjectSpec,
-    Scenario,
-    SimulationSpec,
-    SupportSpec,
-)
+from multiarm_pin.app.scenario.specs import *  # noqa: F403 (the specs and names, re-exported)
+from multiarm_pin.app.scenario.specs import __all__ as _specs_all
 from multiarm_pin.yaml_reader import did_you_mean
 
 __all__ = [
-    "CONTROLLER_TYPES",
-    "DEPRECATED_JOINT_TYPES",
-    "INTEGRATOR_NAMES",
-    "JOINT_TYPE_NAMES",
-    "SOLVER_NAMES",
-    "ArmSpec",
+    *_specs_all,
     "BuiltScenario",
-    "ContactSpec",
-    "ControllerSpec",
-    "JointSpec",
-    "ObjectSpec",
-    "Scenario",
-    "SimulationSpec",
-    "SupportSpec",
     "build_arm",
     "build_object",
     "build_scenario",
