@@ -44,6 +44,7 @@ from multiarm_pin.app.replay_scene import (
     ReplayArm,
     ReplayContacts,
     ReplayObject,
+    ReplaySupport,
     check_replay_inputs,
     frame_indices,
     polyhedron_triangles,
@@ -485,3 +486,19 @@ def write_replay(result, system, path, fps: float = 30) -> Path:
     traj = system_trajectory_arrays(system, result)
     arms, obj, contacts = replay_parts(system.arms, system.obj, traj)
     return write_replay_html(path, arms, obj, traj["t"], contacts, fps=fps)
+
+
+__all__ = [
+    "ReplayArm",
+    "ReplayContacts",
+    "ReplayObject",
+    "ReplaySupport",
+    "build_animation",
+    "close_visualizer",
+    "frame_indices",
+    "polyhedron_triangles",
+    "serve_replay",
+    "set_camera",
+    "write_replay",
+    "write_replay_html",
+]
