@@ -16,6 +16,7 @@ import pinocchio as pin
 
 from multiarm_pin.dynamics import Solution
 from multiarm_pin.dynamics import solve as solve_dynamics
+from multiarm_pin.dynamics.evaluation import baumgarte_gains
 from multiarm_pin.exceptions import DynamicsError, MultiArmError
 from multiarm_pin.model.rigid_object import ObjectState
 from multiarm_pin.sim import contact_events as ce
@@ -35,7 +36,9 @@ class Stepper:
         self.system = system
         self.controller = controller
         self.solver = solver
-        self.baumgarte = baumgarte
+        # parsed once per run: the same tuple of floats at every evaluation (whose compiled
+        # parameter vector CompiledSystem keeps)
+        self.baumgarte = None if baumgarte is None else baumgarte_gains(baumgarte)
         self.wrench = wrench if wrench else None
         self.model = None if system.arm_set is None else system.arm_set.model
         self.unilateral = bool(system.contact_unilateral.any())
