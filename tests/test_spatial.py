@@ -92,3 +92,17 @@ def test_se3_placements_round_trip_and_validation(rng):
         as_se3(pin.SE3(np.eye(3), np.array([0.0, np.nan, 0.0])), "base")
     with pytest.raises(InputError, match="not a rotation matrix"):
         as_se3(pin.SE3(-np.eye(3), np.zeros(3)), "base")  # det -1: a reflection
+
+
+def test_small_vector_fast_paths_equal_the_array_paths_bit_for_bit(rng):
+    """cross of two (3,) float64 vectors and quaternion_to_rotation of a float64 array
+    (Python-float fast paths) equal the broadcast / NumPy-scalar paths exactly."""
+    for _ in range(50):
+        a, b = rng.normal(size=3), rng.normal(size=3)
+        assert np.array_equal(cross(a, b), cross(a[None], b[None])[0])
+        assert np.allclose(cross(a, b), np.cross(a, b), rtol=0, atol=1e-15)
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        assert np.array_equal(quaternion_to_rotation(q), quaternion_to_rotation(list(q)))
+    assert cross(np.arange(3), np.arange(1, 4)).dtype == np.cross(np.arange(3),
+                                                                   np.arange(1, 4)).dtype

@@ -83,3 +83,17 @@ def test_bad_input():
         MinimumJerkTrajectory([0, 1], np.zeros((2, 3)), [[0, 0, 0, 1], [0, 0, 0, 2]])
     with pytest.raises(InputError, match="finite"):
         MinimumJerkTrajectory.hold([0, 0, 0])(np.nan)
+
+
+def test_motion_equals_sample_bit_for_bit(traj, rng):
+    """motion() (the controller's hot path, per-segment terms precomputed, bisect) gives
+    exactly sample()'s position, rotation, twist and acceleration, at and between waypoints
+    and outside the time range."""
+    ts = [0.0, 0.5, 1.7, 2.4, 4.0, 5.0, *rng.uniform(0.5, 4.0, size=20)]
+    for t in ts:
+        p, R, tw, acc = traj.motion(float(t))
+        ref = traj(float(t))
+        assert np.array_equal(p, ref.position), t
+        assert np.array_equal(R, ref.rotation), t
+        assert np.array_equal(tw, ref.twist), t
+        assert np.array_equal(acc, ref.acceleration), t

@@ -376,6 +376,7 @@ class CompiledSystem:
         self._zero_tau = np.zeros(self.nv)
         self._zero_tau.setflags(write=False)
         self._check_state = check_state
+        self._baumgarte_key = self._baumgarte_params = None  # see _params_with
 
     def evaluate(self, state, tau, baumgarte, step: bool
                  ) -> tuple[BufferEvaluation, Solution | None]:
@@ -419,9 +420,7 @@ class CompiledSystem:
             x = layout.state_vector(np.asarray(o.position, float),
                                     np.asarray(o.quaternion, float),
                                     np.asarray(o.twist, float), q, v, t)
-        params = self.params
-        if baumgarte is not None:
-            params = layout.with_baumgarte(params, *baumgarte_gains(baumgarte))
+        params = self.params if baumgarte is None else self._params_with(baumgarte)
         H = self.arm_set.pinocchio_pass(q, v)
         buf = np.empty(self.layout.size)
         finite, status = self.kernel_pass(H, x, params, buf, step)
@@ -433,6 +432,19 @@ class CompiledSystem:
         if step and status == SOLVE_OK:
             return ev, self.layout.solution(buf, blocks)
         return ev, None
+
+    def _params_with(self, baumgarte) -> np.ndarray:
+        """The parameter vector with Baumgarte ``(α, β)`` on, checked once per value.
+
+        A run passes the same tuple at every evaluation: a tuple of Python floats (immutable)
+        is kept with its vector, so it is neither re-parsed nor copied again.
+        """
+        if baumgarte is self._baumgarte_key:
+            return self._baumgarte_params
+        params = layout.with_baumgarte(self.params, *baumgarte_gains(baumgarte))
+        if type(baumgarte) is tuple and all(type(x) is float for x in baumgarte):
+            self._baumgarte_key, self._baumgarte_params = baumgarte, params
+        return params
 
     def kernel_pass(self, H: np.ndarray, x: np.ndarray, params: np.ndarray, buf: np.ndarray,
                     step: bool) -> tuple[bool, int]:

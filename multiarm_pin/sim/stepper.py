@@ -11,11 +11,14 @@ events are located by :mod:`multiarm_pin.sim.event_location`.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
 
 from multiarm_pin.dynamics import Solution
 from multiarm_pin.dynamics import solve as solve_dynamics
+from multiarm_pin.dynamics.evaluation import baumgarte_gains
 from multiarm_pin.exceptions import DynamicsError, MultiArmError
 from multiarm_pin.model.rigid_object import ObjectState
 from multiarm_pin.sim import contact_events as ce
@@ -23,7 +26,7 @@ from multiarm_pin.sim.closed_loop import closed_loop_evaluation, controller_torq
 from multiarm_pin.sim.contact_events import ContactEvent
 from multiarm_pin.sim.disturbances import WrenchSchedule
 from multiarm_pin.sim.event_location import locate_separation, locate_touchdown
-from multiarm_pin.spatial import integrate_quaternion, quaternion_derivative
+from multiarm_pin.spatial import integrate_quaternion
 from multiarm_pin.system import ContactRows, MultiArmSystem, SystemState
 
 
@@ -35,13 +38,18 @@ class Stepper:
         self.system = system
         self.controller = controller
         self.solver = solver
-        self.baumgarte = baumgarte
+        # parsed once per run: the same tuple of floats at every evaluation (whose compiled
+        # parameter vector CompiledSystem keeps)
+        self.baumgarte = None if baumgarte is None else baumgarte_gains(baumgarte)
         self.wrench = wrench if wrench else None
         self.model = None if system.arm_set is None else system.arm_set.model
         self.unilateral = bool(system.contact_unilateral.any())
         self.active = system.contact_mask.copy()
         self.events: list[ContactEvent] = []
         self._cache = None  # (t, state, active, result) of the last evaluation
+        # _evaluate's fused branch, decided once: arms' bilateral rows only and no wrench
+        self._fused = bool(system.n_arms and not self.unilateral and self.wrench is None
+                           and not system.supports.n_rows)
 
     def evaluate(self, t: float, state: SystemState):
         """``(solution, evaluation, tau, rows)`` at ``(t, state)`` with the current active set.
@@ -56,8 +64,22 @@ class Stepper:
             self._cache = (t, state, self.active.copy(), out)
             return out
         except MultiArmError as exc:
-            if exc.args and isinstance(exc.args[0], str) and not exc.args[0].startswith("t = "):
-                exc.args = (f"t = {t:.6g} s: {exc.args[0]}", *exc.args[1:])
+            _with_time(exc, t)
+            raise
+
+    def stage(self, t: float, state: SystemState) -> Solution:
+        """The solution at an integrator stage: :meth:`evaluate`'s, without what it is not read for.
+
+        On the fused path (arms' bilateral rows only, no wrench) a stage state is new and
+        evaluated once: no cache entry and no :class:`ContactRows` views are made for it.
+        """
+        if not self._fused:
+            return self.evaluate(t, state)[0]
+        try:
+            return closed_loop_evaluation(self.system, self.controller, t, state, self.solver,
+                                          self.baumgarte)[0]
+        except MultiArmError as exc:
+            _with_time(exc, t)
             raise
 
     def _evaluate(self, t: float, state: SystemState):
@@ -96,21 +118,39 @@ class Stepper:
             raise DynamicsError(f"t = {t:.6g} s: {exc}") from exc
 
     def derivative(self, state: SystemState, sol: Solution) -> np.ndarray:
-        """Tangent ``[q̇ (nv); v̇ (nv); ṗ (3); q̇uat (4); ȧ (6)]``."""
+        """Tangent ``[q̇ (nv); v̇ (nv); ṗ (3); q̇uat (4); ȧ (6)]``.
+
+        Filled in place of one new array (the same values as concatenating
+        ``quaternion_derivative`` and the rest: the quaternion rate in Python floats, the same
+        IEEE operations in the same order).
+        """
+        nv = self.system.nv
         o = state.obj
-        return np.concatenate([state.v, self.system.unpad(sol.qdd), o.twist[:3],
-                               quaternion_derivative(o.quaternion, o.twist[3:]), sol.a_o])
+        d = np.empty(2 * nv + 13)
+        d[:nv] = state.v
+        d[nv:2 * nv] = self.system.unpad(sol.qdd)
+        tw = o.twist
+        d[2 * nv:2 * nv + 3] = tw[:3]
+        x, y, z, w = o.quaternion.tolist()
+        wx, wy, wz = tw[3:].tolist()
+        d[2 * nv + 3:2 * nv + 7] = (0.5 * (w * wx + wy * z - wz * y),
+                                    0.5 * (w * wy + wz * x - wx * z),
+                                    0.5 * (w * wz + wx * y - wy * x),
+                                    0.5 * -(wx * x + wy * y + wz * z))
+        d[2 * nv + 7:] = sol.a_o
+        return d
 
     def advance(self, state: SystemState, d: np.ndarray, h: float) -> SystemState:
         """The state ``h`` [s] along the tangent ``d`` (:meth:`derivative`'s layout)."""
         nv = self.system.nv
-        q = state.q if self.model is None else pin.integrate(self.model, state.q, h * d[:nv])
-        v = state.v + h * d[nv:2 * nv]
+        hd = h * d  # the same products as scaling each slice
+        q = state.q if self.model is None else pin.integrate(self.model, state.q, hd[:nv])
+        v = state.v + hd[nv:2 * nv]
         o = state.obj
-        p = o.position + h * d[2 * nv:2 * nv + 3]
-        quat = o.quaternion + h * d[2 * nv + 3:2 * nv + 7]
-        quat = quat / np.linalg.norm(quat)
-        tw = o.twist + h * d[2 * nv + 7:]
+        p = o.position + hd[2 * nv:2 * nv + 3]
+        quat = o.quaternion + hd[2 * nv + 3:2 * nv + 7]
+        quat = quat / math.sqrt(quat.dot(quat))  # np.linalg.norm's own formula, without its
+        tw = o.twist + hd[2 * nv + 7:]           # generic checks
         return SystemState(q, v, ObjectState(p, quat, tw))
 
     def step(self, integrator: str, t: float, state: SystemState, sol: Solution,
@@ -119,11 +159,11 @@ class Stepper:
         if integrator == "rk4":
             d1 = self.derivative(state, sol)
             s2 = self.advance(state, d1, 0.5 * h)
-            d2 = self.derivative(s2, self.evaluate(t + 0.5 * h, s2)[0])
+            d2 = self.derivative(s2, self.stage(t + 0.5 * h, s2))
             s3 = self.advance(state, d2, 0.5 * h)
-            d3 = self.derivative(s3, self.evaluate(t + 0.5 * h, s3)[0])
+            d3 = self.derivative(s3, self.stage(t + 0.5 * h, s3))
             s4 = self.advance(state, d3, h)
-            d4 = self.derivative(s4, self.evaluate(t + h, s4)[0])
+            d4 = self.derivative(s4, self.stage(t + h, s4))
             return self.advance(state, (d1 + 2.0 * d2 + 2.0 * d3 + d4) / 6.0, h)
         system = self.system  # semi-implicit Euler
         v = state.v + h * system.unpad(sol.qdd)
@@ -292,3 +332,8 @@ class Stepper:
         ev = s.blocks(state, None, self.baumgarte)
         return s.contact_blocks(state, ev.blocks, ev.constraints, self.baumgarte, w)
 
+
+def _with_time(exc: MultiArmError, t: float) -> None:
+    """Prefix the error's message with ``t = ... s`` (once)."""
+    if exc.args and isinstance(exc.args[0], str) and not exc.args[0].startswith("t = "):
+        exc.args = (f"t = {t:.6g} s: {exc.args[0]}", *exc.args[1:])

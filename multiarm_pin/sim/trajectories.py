@@ -16,6 +16,7 @@ held at the first waypoint, after the last time at the last one.
 
 from __future__ import annotations
 
+import bisect
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -105,6 +106,11 @@ class MinimumJerkTrajectory:
         self._R = np.array([pin.Quaternion(x).toRotationMatrix() for x in q])
         # body-frame rotation vector of each segment: R_{k+1} = R_k exp(log_k)
         self._log = np.array([pin.log3(self._R[k].T @ self._R[k + 1]) for k in range(K - 1)])
+        # per segment, for motion() (the controller's hot path): the times as Python floats,
+        # each segment's displacement and world rotation axis (the same expressions, once)
+        self._times = t.tolist()
+        self._dp = [p[k + 1] - p[k] for k in range(K - 1)]
+        self._axis = [self._R[k] @ self._log[k] for k in range(K - 1)]
 
     @classmethod
     def through(cls, times, placements) -> MinimumJerkTrajectory:
@@ -217,18 +223,18 @@ class MinimumJerkTrajectory:
             ``(position (3,) [m], rotation (3, 3), twist (6,) [m/s, rad/s], acceleration (6,)
             [m/s², rad/s²])``, world axes; the arrays may be the trajectory's own (read only).
         """
-        times = self.times
+        times = self._times
         if t <= times[0] or len(times) == 1:
             return self.positions[0], self._R[0], _ZERO6, _ZERO6
         if t >= times[-1]:
             return self.positions[-1], self._R[-1], _ZERO6, _ZERO6
-        k = int(np.searchsorted(times, t, side="right")) - 1
+        k = bisect.bisect_right(times, t) - 1  # np.searchsorted(side="right") - 1
         T = times[k + 1] - times[k]
         s, ds, dds = minimum_jerk((t - times[k]) / T)
-        dp = self.positions[k + 1] - self.positions[k]
+        dp = self._dp[k]
         log = self._log[k]
         Rk = self._R[k]
-        axis_world = Rk @ log
+        axis_world = self._axis[k]
         twist = np.empty(6)
         acc = np.empty(6)
         twist[:3] = (ds / T) * dp
