@@ -116,6 +116,25 @@ def test_interrupted_study_resumes_without_rerunning_finished_cases(client, tmp_
     assert again == []
 
 
+def test_local_cluster_workers_take_less_gil_from_the_case(client):
+    """The workers run with LOCAL_CLUSTER_CONFIG (no profiler sampling the case every
+    10 ms, a 1 s event-loop tick); this process's own Dask configuration is untouched."""
+    import dask.config
+
+    def worker_settings(dask_worker):
+        return {"profile": dask.config.get("distributed.worker.profile.enabled"),
+                "profiling": "profile" in dask_worker.periodic_callbacks,
+                "tick_ms": dask_worker.periodic_callbacks["tick"].callback_time,
+                "gil": dask.config.get("distributed.admin.system-monitor.gil.enabled")}
+
+    settings = client.run(worker_settings)
+    assert len(settings) == 2
+    for s in settings.values():
+        assert s == {"profile": False, "profiling": False, "tick_ms": 1000.0, "gil": False}
+    assert dask.config.get("distributed.worker.profile.enabled") is True
+    assert dask.config.get("distributed.admin.tick.interval") == "20ms"
+
+
 def test_killed_worker_tasks_rerun_elsewhere(client, tmp_path):
     study = Study.from_file(tiny_simulation_study(tmp_path, masses=(2.0, 3.0, 4.0),
                                                   samples=2, duration=0.02))
