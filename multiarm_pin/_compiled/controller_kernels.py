@@ -258,7 +258,7 @@ def _torques(arms, blocks, N, nv_arm, unilateral, obj_x, a_d, z, hold_tool, hold
             K[a, a] += eps
         if not cholesky(K, L, k):
             return PD_ARM_RANK
-        cholesky_solve(L, sol, k, 1)
+        cholesky_solve(L, sol, k, np.int64(1))
         # 4. inverse dynamics: the q̈_i closest to q̈_des with W_iᵀ q̈_i = c_i - W_o,iᵀ a_d
         Ni = N[i]
         nvi = nv_arm[i]

@@ -12,6 +12,8 @@ these arrays as a literal.
   :func:`offsets` (compiled, callable from Python) gives their start offsets; the kernels
   take views with :func:`view1` / :func:`view2` / :func:`view3`, Python with
   :func:`segment_slices`.
+  The three view helpers are inlined into their callers (``inline="always"``): called as
+  separate functions, numba compiled one specialisation per ``SEG_*`` constant (a literal).
 - **Row fields** (``ROW_*``): the ``ROW_WIDTH`` values of one packed constraint row, the
   layout of :meth:`multiarm_pin.constraints.ConstraintSet.evaluate` and of the ``rows``
   segment.
@@ -373,20 +375,20 @@ def offsets(n, k, m):  # pragma: no cover - compiled
     return off
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def view1(buf, off, seg):  # pragma: no cover - compiled
     """The one-axis segment ``seg`` of ``buf`` (offsets ``off``)."""
     return buf[off[seg]:off[seg + 1]]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def view2(buf, off, seg, n, k, m):  # pragma: no cover - compiled
     """The two-axis segment ``seg`` of ``buf``, shaped as :data:`SEGMENT_TABLE` says."""
     return buf[off[seg]:off[seg + 1]].reshape((_dim(SHAPE_CODES[seg, 0], n, k, m),
                                                _dim(SHAPE_CODES[seg, 1], n, k, m)))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def view3(buf, off, seg, n, k, m):  # pragma: no cover - compiled
     """The three-axis segment ``seg`` of ``buf``, shaped as :data:`SEGMENT_TABLE` says."""
     return buf[off[seg]:off[seg + 1]].reshape((_dim(SHAPE_CODES[seg, 0], n, k, m),

@@ -6,6 +6,10 @@ Mirrors the LAPACK calls of the numpy references (``dpotrf`` / ``dpotrs`` throug
 the leading ``size`` x ``size`` block of preallocated arrays so that the kernels of
 :mod:`multiarm_pin._compiled` call it without allocating. Tested against numpy in
 ``tests/test_kernels.py``.
+
+Callers pass the sizes as int64 values, never as integer literals (``np.int64(6)``, not
+``6``): numba compiles one specialisation per literal value of an argument, and each costs
+a compile at the first run (issue 14).
 """
 
 from __future__ import annotations

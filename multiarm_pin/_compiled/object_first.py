@@ -115,7 +115,7 @@ def object_first(M, h, W, W_o, c, M_o, h_o, N, rcond_tol, object_rcond_tol,
         for s in range(m):
             for r in range(6):
                 Zi[s, r] = W_o[i, r, s]
-        cholesky_solve(LS, Zi, m, 7)
+        cholesky_solve(LS, Zi, m, np.int64(7))
         for a in range(6):
             for s in range(m):
                 w = W_o[i, a, s]
@@ -123,12 +123,12 @@ def object_first(M, h, W, W_o, c, M_o, h_o, N, rcond_tol, object_rcond_tol,
                     A[a, b] += w * Zi[s, b]
                 rhs[a] += w * Zi[s, 6]
     LA = np.zeros((6, 6))
-    if not cholesky(A, LA, 6):
+    if not cholesky(A, LA, np.int64(6)):
         return SOLVE_OBJECT_SINGULAR
     inv = np.zeros((6, 6))
     for a in range(6):
         inv[a, a] = 1.0
-    cholesky_solve(LA, inv, 6, 6)
+    cholesky_solve(LA, inv, np.int64(6), np.int64(6))
     norm1 = 0.0
     trace = 0.0
     for b in range(6):
@@ -142,7 +142,7 @@ def object_first(M, h, W, W_o, c, M_o, h_o, N, rcond_tol, object_rcond_tol,
         return SOLVE_OBJECT_SINGULAR
     total = 0.0
     sol = rhs.reshape((6, 1)).copy()
-    cholesky_solve(LA, sol, 6, 1)
+    cholesky_solve(LA, sol, np.int64(6), np.int64(1))
     for a in range(6):
         a_o[a] = sol[a, 0]
         total += sol[a, 0]

@@ -187,7 +187,7 @@ def contact_kernel(M, h, W, W_o, c, M_o, h_o, nv, N, uni, act, guess, use_guess,
         _kernels.cholesky_solve(L, Xi, ni, Ni + 1)
     # object: Y = M_o⁻¹ [W_o of the active rows, h_o]
     Lo = np.zeros((6, 6))
-    if not _kernels.cholesky(M_o, Lo, 6):
+    if not _kernels.cholesky(M_o, Lo, np.int64(6)):
         return NOT_FINITE, 0, -1, -1, 0.0
     Y = np.zeros((6, P + 1))
     for a in range(P):
@@ -195,7 +195,7 @@ def contact_kernel(M, h, W, W_o, c, M_o, h_o, nv, N, uni, act, guess, use_guess,
             Y[r, a] = W_o[arm_of[a], r, row_of[a]]
     for r in range(6):
         Y[r, P] = h_o[r]
-    _kernels.cholesky_solve(Lo, Y, 6, P + 1)
+    _kernels.cholesky_solve(Lo, Y, np.int64(6), P + 1)
     # Delassus operator and free normal accelerations of the active rows
     G = np.zeros((P, P))
     bvec = np.zeros(P)

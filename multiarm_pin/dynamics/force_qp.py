@@ -97,9 +97,9 @@ def least_norm_forces(W_o, N, unilateral, wrench, margin, active, mu,
         for a in range(6):
             for b in range(a):
                 G[b, a] = G[a, b]
-        if not cholesky(G, L, 6):
+        if not cholesky(G, L, np.int64(6)):
             return QP_FAILED, it
-        inverse_diagonal(L, 6, dinv, col)
+        inverse_diagonal(L, np.int64(6), dinv, col)
         gmax = 0.0
         imax = 0.0
         for a in range(6):
@@ -107,7 +107,7 @@ def least_norm_forces(W_o, N, unilateral, wrench, margin, active, mu,
             imax = max(imax, dinv[a])
         if not (gmax * imax <= GRAM_COND_LIMIT):
             return QP_FAILED, it
-        cholesky_solve(L, lam, 6, 1)
+        cholesky_solve(L, lam, np.int64(6), np.int64(1))
         scale = max(wmax, margin)
         for i in range(n):
             for s in range(m):

@@ -122,7 +122,7 @@ def mlcp(G, b, uni, dep_rtol, viol_tol, cons_tol, max_pivots, start,
     if ok:
         for a in range(na):
             rhs[a, 0] = -b[act[a]]
-        _kernels.cholesky_solve(L, rhs, na, 1)
+        _kernels.cholesky_solve(L, rhs, na, np.int64(1))
         for a in range(na):
             if uni[act[a]] and not rhs[a, 0] >= 0.0:
                 ok = False
@@ -165,7 +165,7 @@ def mlcp(G, b, uni, dep_rtol, viol_tol, cons_tol, max_pivots, start,
                 _factor_active(G, act, na, GA, L)
                 for a in range(na):
                     rhs[a, 0] = G[act[a], q]
-                _kernels.cholesky_solve(L, rhs, na, 1)
+                _kernels.cholesky_solve(L, rhs, na, np.int64(1))
             s = G[q, q]
             for a in range(na):
                 s -= G[q, act[a]] * rhs[a, 0]
@@ -224,7 +224,7 @@ def _finish(G, b, uni, act, na, GA, L, rhs, mu, phi, in_a, pivots):  # pragma: n
     for a in range(na):
         rhs[a, 0] = -b[act[a]]
     if na > 0:
-        _kernels.cholesky_solve(L, rhs, na, 1)
+        _kernels.cholesky_solve(L, rhs, na, np.int64(1))
     for a in range(na):
         j = act[a]
         v = rhs[a, 0]
