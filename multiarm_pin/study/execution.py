@@ -13,12 +13,12 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import sys
 import time
 import uuid
 from collections.abc import Callable
 from pathlib import Path
 
+from multiarm_pin.app.progress import LineProgress
 from multiarm_pin.exceptions import StudyError
 from multiarm_pin.study.case import CaseTask, run_case
 from multiarm_pin.study.spec import Case, StudySpec, load_study
@@ -57,21 +57,18 @@ when it restarts a worker that died.
 """
 
 
-class CaseProgress:
+class CaseProgress(LineProgress):
     """A one-line progress bar over cases (stderr by default).
 
-    On a terminal it redraws in place; on a log file it writes a line per tenth of the cases.
+    On a terminal it redraws in place; on a log file it writes a line per tenth of the cases
+    (the first one at the start, for the cases found done by ``--resume``).
     """
 
     def __init__(self, label: str, total: int, done: int = 0, stream=None, width: int = 30):
-        self.label, self.total, self.width = label, max(int(total), 0), width
+        super().__init__(label, stream, width)
+        self.total = max(int(total), 0)
         self.done, self.failed, self.skipped = done, 0, done
-        self.stream = sys.stderr if stream is None else stream
-        isatty = getattr(self.stream, "isatty", None)
-        self.interactive = bool(isatty()) if callable(isatty) else False
-        self.start = time.perf_counter()
         self._next_tenth = 0.0
-        self.shown = False
 
     def update(self, failed: bool = False) -> None:
         """One more case finished (``failed``: with an error)."""
@@ -82,26 +79,13 @@ class CaseProgress:
     def draw(self) -> None:
         """Draw the bar (every call on a terminal, every tenth otherwise)."""
         f = self.done / self.total if self.total else 1.0
-        if not self.interactive:
-            if f < self._next_tenth and self.done < self.total:
-                return
-            self._next_tenth = (int(f * 10 + 1e-9) + 1) / 10
+        if not self.due(f):
+            return
         elapsed = time.perf_counter() - self.start
         ran = self.done - self.skipped
         left = (self.total - self.done) * elapsed / ran if ran else float("nan")
-        n = int(round(f * self.width))
-        start, end = ("\r", "") if self.interactive else ("", "\n")
-        self.stream.write(f"{start}{self.label} [{'#' * n}{'-' * (self.width - n)}] "
-                          f"{self.done}/{self.total} cases ({self.failed} failed), "
-                          f"{elapsed:.1f} s elapsed, ~{left:.0f} s left {end}")
-        self.stream.flush()
-        self.shown = True
-
-    def close(self) -> None:
-        """End the line on a terminal."""
-        if self.shown and self.interactive:
-            self.stream.write("\n")
-            self.stream.flush()
+        super().draw(f, f"{self.done}/{self.total} cases ({self.failed} failed), "
+                        f"{elapsed:.1f} s elapsed, ~{left:.0f} s left")
 
 
 def connect(scheduler: str, timeout: float = SCHEDULER_TIMEOUT):
