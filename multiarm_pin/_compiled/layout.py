@@ -24,7 +24,8 @@ these arrays as a literal.
 - **Dimensions** (``DIMS_*``): the int vector ``(k, m, nv, n)``.
 - **Parameter slots** (``P_*``): object, gravity, Baumgarte and solver thresholds.
 - **Controller vectors** (``OX_*``, ``REF_*``, ``PD_*``, ``GAIN_*``): the object pose
-  and the reference, gains of :mod:`multiarm_pin._compiled.controller_kernels`.
+  and the reference, gains of :mod:`multiarm_pin._compiled.controller_kernels`; the
+  trajectory table (``TR_*``) of :mod:`multiarm_pin._compiled.trajectory`.
 
 Units are SI; spatial vectors ``[linear; angular]`` in world axes (``docs/ARCHITECTURE.md``).
 """
@@ -273,6 +274,21 @@ REF_ACCELERATION = _REF["acceleration"]
 def reference_vector(position, rotation, twist, acceleration) -> np.ndarray:
     """The reference vector (:data:`REFERENCE_FIELDS`)."""
     return np.concatenate((position, np.asarray(rotation).ravel(), twist, acceleration))
+
+
+TRAJECTORY_FIELDS = (("time", 1), ("position", 3), ("rotation", 9), ("displacement", 3),
+                     ("log", 3), ("axis", 3))
+"""One row of a minimum-jerk trajectory's table per waypoint ``k``: its time [s], position
+[m] and rotation (row-major), then for the segment ``k -> k + 1`` (zeros on the last row) the
+displacement ``p_{k+1} - p_k`` [m], the body-frame rotation vector ``log(R_kᵀ R_{k+1})``
+[rad] and that vector in world axes ``R_k log``."""
+_TR, TRAJECTORY_WIDTH = _starts(TRAJECTORY_FIELDS)
+TR_TIME = _TR["time"]
+TR_POSITION = _TR["position"]
+TR_ROTATION = _TR["rotation"]
+TR_DISPLACEMENT = _TR["displacement"]
+TR_LOG = _TR["log"]
+TR_AXIS = _TR["axis"]
 
 
 PD_GAIN_FIELDS = (("kp", 6), ("kd", 6))

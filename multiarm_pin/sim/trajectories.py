@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from multiarm_pin._compiled import layout
 from multiarm_pin.exceptions import InputError
 from multiarm_pin.spatial import (
     as_array,
@@ -111,6 +112,7 @@ class MinimumJerkTrajectory:
         self._times = t.tolist()
         self._dp = [p[k + 1] - p[k] for k in range(K - 1)]
         self._axis = [self._R[k] @ self._log[k] for k in range(K - 1)]
+        self._table: np.ndarray | None = None  # see table()
 
     @classmethod
     def through(cls, times, placements) -> MinimumJerkTrajectory:
@@ -242,6 +244,28 @@ class MinimumJerkTrajectory:
         acc[:3] = (dds / (T * T)) * dp
         acc[3:] = (dds / (T * T)) * axis_world
         return self.positions[k] + s * dp, Rk @ pin.exp3(s * log), twist, acc
+
+    def table(self) -> np.ndarray:
+        """(K, TRAJECTORY_WIDTH) the trajectory as the compiled kernels read it.
+
+        One row per waypoint (:data:`multiarm_pin._compiled.layout.TRAJECTORY_FIELDS`): the
+        values :meth:`motion` uses, so that
+        :func:`multiarm_pin._compiled.trajectory.reference_motion` gives its motion. Made once
+        and kept (read-only).
+        """
+        if self._table is None:
+            K = len(self.times)
+            tab = np.zeros((K, layout.TRAJECTORY_WIDTH))
+            tab[:, layout.TR_TIME] = self.times
+            tab[:, layout.TR_POSITION:layout.TR_POSITION + 3] = self.positions
+            tab[:, layout.TR_ROTATION:layout.TR_ROTATION + 9] = self._R.reshape(K, 9)
+            for k in range(K - 1):
+                tab[k, layout.TR_DISPLACEMENT:layout.TR_DISPLACEMENT + 3] = self._dp[k]
+                tab[k, layout.TR_LOG:layout.TR_LOG + 3] = self._log[k]
+                tab[k, layout.TR_AXIS:layout.TR_AXIS + 3] = self._axis[k]
+            tab.setflags(write=False)
+            self._table = tab
+        return self._table
 
     def _still(self, k: int) -> PoseSample:
         return PoseSample(self.positions[k].copy(), self.quaternions[k].copy(),
