@@ -18,6 +18,18 @@ from multiarm_pin.sim.controllers import ObjectPD
 from multiarm_pin.sim.trajectories import MinimumJerkTrajectory
 from multiarm_pin.system import MultiArmSystem, SystemState
 
+EPS = np.finfo(float).eps
+TOL = 1e-12
+"""Relative agreement of the fused and the reference path."""
+
+TOL_RANK_DEFICIENT_HOLD = 1e-7
+"""Relative agreement on an arm whose hold task ``A_i`` is rank deficient (every Panda: 7
+joints, a rank-6 task). ``object_pd`` solves that task damped by ``ε = JACOBIAN_DAMPING =
+1e-8`` (relative): the solution's component along the task's null direction is
+``σ_min / (σ_min² + ε s) uᵀr`` with ``σ_min`` at round-off level (~1e-16 σ_max), i.e. noise
+of relative size ``ε_mach / ε ≈ 1e-8`` in either path (the two paths' Jacobians differ at
+round-off, and so do their solves); ten times that bounds the difference."""
+
 
 @cache
 def arm(robot: str, i: int, n: int) -> Arm:
@@ -64,3 +76,23 @@ def object_pd(system, trajectory, **kw) -> ObjectPD:
     """An ``object_pd`` controller with non-zero null-space gains (every term acts)."""
     return ObjectPD(system, trajectory, margin=kw.pop("margin", 0.5), null_kp=25.0,
                     null_kd=10.0, **kw)
+
+
+def rel_err(a, b) -> float:
+    """Largest difference of ``a`` and ``b`` relative to ``max(1, max |b|)``."""
+    return float(np.abs(np.asarray(a) - np.asarray(b)).max()
+                 / max(1.0, np.abs(np.asarray(b)).max()))
+
+
+def hold_task_conditions(ctrl, ev) -> np.ndarray:
+    """(n,) condition numbers ``σ_max / σ_min`` of the arms' hold rows ``A_i = J_v + J_ω × d``
+    (SVD; inf when ``A_i`` has fewer rows than joints)."""
+    out = []
+    for i in range(len(ctrl.hold_mask)):
+        J = ev.arms.J[i][:, :ev.blocks.nv[i]]
+        R = ev.arms.tools.rotation[i]
+        rows = [J[:3] - np.cross(R @ p, J[3:].T).T
+                for p in ctrl.hold_points_in_tool[i][ctrl.hold_mask[i]]]
+        s = np.linalg.svd(np.vstack(rows), compute_uv=False)
+        out.append(s[0] / s[-1] if len(s) == ev.blocks.nv[i] and s[-1] > 0 else np.inf)
+    return np.array(out)

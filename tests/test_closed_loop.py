@@ -9,7 +9,16 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
-from closed_loop_cases import JOINT_KINDS, object_pd, random_case
+from closed_loop_cases import (
+    EPS,
+    JOINT_KINDS,
+    TOL,
+    TOL_RANK_DEFICIENT_HOLD,
+    hold_task_conditions,
+    object_pd,
+    random_case,
+    rel_err,
+)
 
 from multiarm_pin._compiled import controller_kernels
 from multiarm_pin.app.runner import make_controller
@@ -23,38 +32,7 @@ from multiarm_pin.spatial import rotation_to_quaternion
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 
-EPS = np.finfo(float).eps
-TOL = 1e-12
-"""Relative agreement of the fused and the reference path."""
-
-TOL_RANK_DEFICIENT_HOLD = 1e-7
-"""Relative agreement on an arm whose hold task ``A_i`` is rank deficient (every Panda: 7
-joints, a rank-6 task). ``object_pd`` solves that task damped by ``ε = JACOBIAN_DAMPING =
-1e-8`` (relative): the solution's component along the task's null direction is
-``σ_min / (σ_min² + ε s) uᵀr`` with ``σ_min`` at round-off level (~1e-16 σ_max), i.e. noise
-of relative size ``ε_mach / ε ≈ 1e-8`` in either path (the two paths' Jacobians differ at
-round-off, and so do their solves); ten times that bounds the difference."""
-
 CASES = [(seed, 1 + seed % 6) for seed in range(12)]
-
-
-def rel_err(a, b) -> float:
-    return float(np.abs(np.asarray(a) - np.asarray(b)).max()
-                 / max(1.0, np.abs(np.asarray(b)).max()))
-
-
-def hold_task_conditions(ctrl, ev) -> np.ndarray:
-    """(n,) condition numbers ``σ_max / σ_min`` of the arms' hold rows ``A_i = J_v + J_ω × d``
-    (SVD; inf when ``A_i`` has fewer rows than joints)."""
-    out = []
-    for i in range(len(ctrl.hold_mask)):
-        J = ev.arms.J[i][:, :ev.blocks.nv[i]]
-        R = ev.arms.tools.rotation[i]
-        rows = [J[:3] - np.cross(R @ p, J[3:].T).T
-                for p in ctrl.hold_points_in_tool[i][ctrl.hold_mask[i]]]
-        s = np.linalg.svd(np.vstack(rows), compute_uv=False)
-        out.append(s[0] / s[-1] if len(s) == ev.blocks.nv[i] and s[-1] > 0 else np.inf)
-    return np.array(out)
 
 
 def hold_task_full_rank(ctrl, ev) -> np.ndarray:
