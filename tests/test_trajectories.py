@@ -97,3 +97,29 @@ def test_motion_equals_sample_bit_for_bit(traj, rng):
         assert np.array_equal(R, ref.rotation), t
         assert np.array_equal(tw, ref.twist), t
         assert np.array_equal(acc, ref.acceleration), t
+
+
+def test_compiled_reference_motion_equals_motion():
+    """``_compiled.trajectory.reference_motion`` on ``table()`` is ``motion`` (before, inside,
+    at and after the waypoints, small and large segment rotations)."""
+    from multiarm_pin._compiled import layout
+    from multiarm_pin._compiled.trajectory import reference_motion
+
+    rng = np.random.default_rng(3)
+    angles = (0.0, 1e-6, 0.5, 3.0)  # rotation of each segment [rad], one below EXP3_TAYLOR
+    quats = [np.array([0.0, 0.0, 0.0, 1.0])]
+    for a in angles[1:]:
+        axis = rng.normal(size=3)
+        R = pin.exp3(a * axis / np.linalg.norm(axis)) @ pin.Quaternion(quats[-1]).matrix()
+        quats.append(pin.Quaternion(R).coeffs().copy())
+    times = [0.3, 0.8, 1.6, 2.5]
+    traj = MinimumJerkTrajectory(times, rng.normal(size=(4, 3)), quats)
+    table, E, ref = traj.table(), np.empty((3, 3)), np.empty(layout.REFERENCE_SIZE)
+    worst = 0.0
+    for t in [*np.linspace(-0.5, 3.0, 701), *times]:
+        reference_motion(t, table, E, ref)
+        worst = max(worst, np.abs(ref - layout.reference_vector(*traj.motion(t))).max())
+    assert worst <= 1e-14
+    single = MinimumJerkTrajectory.hold([1.0, 2.0, 3.0], quats[2])
+    reference_motion(1.0, single.table(), E, ref)
+    np.testing.assert_array_equal(ref, layout.reference_vector(*single.motion(1.0)))
