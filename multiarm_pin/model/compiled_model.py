@@ -126,8 +126,11 @@ class CompiledModel:
         return cls(ints, floats, nj, len(tools), model.nq, model.nv)
 
     def outputs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Zeroed output arrays ``(J, dJ, M, nle, H)`` of the pass, shapes (6, nv), (6, nv),
-        (nv, nv), (nv,), (n_tools, 4, 4)."""
+        """Zeroed output arrays ``(J, dJ, M, nle, H)`` of the pass.
+
+        Shapes (6, nv), (6, nv), (nv, nv), (nv,), (n_tools, 4, 4); ``M`` must stay zero where
+        the pass does not write (joints of different arms or branches).
+        """
         nv = self.nv
         return (np.zeros((6, nv)), np.zeros((6, nv)), np.zeros((nv, nv)), np.zeros(nv),
                 np.zeros((self.n_tools, 4, 4)))
