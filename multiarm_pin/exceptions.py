@@ -197,6 +197,27 @@ class JointNotFoundError(MultiArmError, KeyError):
         return str(self.args[0])
 
 
+class UnsupportedJointError(MultiArmError, ValueError):
+    """A model has a joint type that the compiled rigid-body pass does not support.
+
+    Attributes:
+        joint: name of the (first) unsupported joint.
+        joint_type: its Pinocchio type (``shortname()``, e.g. ``"JointModelSpherical"``).
+        joints: names of every unsupported joint of the model.
+    """
+
+    def __init__(self, joint: str, joint_type: str, joints: Sequence[str] = ()):
+        self.joint = joint
+        self.joint_type = joint_type
+        self.joints = list(joints) or [joint]
+        others = f" (unsupported joints: {', '.join(self.joints)})" if len(self.joints) > 1 \
+            else ""
+        super().__init__(
+            f"joint {joint!r} is a {joint_type}, which the compiled rigid-body pass does not "
+            "support (revolute, prismatic and continuous joints about x, y, z or any axis "
+            f"only){others}: use Pinocchio's path for this model")
+
+
 class UnreachableError(MultiArmError, ValueError):
     """Inverse kinematics found no configuration meeting the targets (out of reach).
 

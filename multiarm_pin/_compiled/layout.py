@@ -19,6 +19,8 @@ these arrays as a literal.
   segment.
 - **Contact table columns** (``CI_*``, ``CF_*``): :class:`ContactTables`, one row per kept
   contact (built by :attr:`multiarm_pin.constraints.ConstraintSet.contact_tables`).
+- **Rigid-body model tables** (``KIND_*``, ``MI_*``, ``MF_*``): joints and tool frames of a
+  Pinocchio model, the input of :mod:`multiarm_pin._compiled.rigid_body`.
 - **Arm table columns** (``ARM_*``): joints per arm, joint indices, tool-support mask.
 - **Object state** (``X_*``): position, quaternion, twist, the head of the state vector ``x``.
 - **Dimensions** (``DIMS_*``): the int vector ``(k, m, nv, n)``.
@@ -151,6 +153,48 @@ class ContactTables:
         ints.setflags(write=False)
         floats.setflags(write=False)
         return cls(ints, floats)
+
+
+# ------------------------------------------------------------------ rigid-body model tables
+JOINT_KINDS = ("universe", "revolute", "prismatic", "revolute_unbounded", "frame")
+"""Kinds of the rows of the rigid-body model tables (:class:`~multiarm_pin.model.compiled_model.
+CompiledModel`): the universe (row 0), a revolute joint about an axis (``nq = nv = 1``), a
+prismatic joint along an axis, a continuous (unbounded) revolute joint (``nq = 2``:
+``[cos θ, sin θ]``, ``nv = 1``), and a tool frame (after the joints, one row per tool)."""
+KIND_UNIVERSE = JOINT_KINDS.index("universe")
+KIND_REVOLUTE = JOINT_KINDS.index("revolute")
+KIND_PRISMATIC = JOINT_KINDS.index("prismatic")
+KIND_REVOLUTE_UNBOUNDED = JOINT_KINDS.index("revolute_unbounded")
+KIND_FRAME = JOINT_KINDS.index("frame")
+
+MODEL_INT_FIELDS = (("parent", 1), ("kind", 1), ("idx_q", 1), ("idx_v", 1))
+"""Int columns per row of the model tables (row ``j < njoints``: Pinocchio joint ``j``, row 0
+the universe; then one row per tool frame): parent joint (-1 for the universe; a tool frame's
+joint), kind (:data:`JOINT_KINDS`), first index in ``q`` and in ``v`` (-1 for the universe and
+the frames)."""
+_MI, MODEL_INTS = _starts(MODEL_INT_FIELDS)
+MI_PARENT = _MI["parent"]
+MI_KIND = _MI["kind"]
+MI_IDX_Q = _MI["idx_q"]
+MI_IDX_V = _MI["idx_v"]
+
+MODEL_FLOAT_FIELDS = (("rotation", 9), ("translation", 3), ("axis", 3), ("mass", 1),
+                      ("lever", 3), ("inertia", 9), ("armature", 1), ("gravity", 6))
+"""Float columns per row of the model tables: placement in the parent joint's frame (a
+joint's ``jointPlacements``, a frame's ``placement``): rotation (row-major) and translation
+[m]; the joint's unit axis in its own frame; the body inertia attached to the joint (mass
+[kg], COM lever in the joint frame [m], rotational inertia about the COM in the joint axes,
+row-major [kg m²]); the joint's armature [kg m² or kg]; the model's gravity
+``[linear; angular]`` [m/s²] (row 0 only)."""
+_MF, MODEL_FLOATS = _starts(MODEL_FLOAT_FIELDS)
+MF_ROTATION = _MF["rotation"]
+MF_TRANSLATION = _MF["translation"]
+MF_AXIS = _MF["axis"]
+MF_MASS = _MF["mass"]
+MF_LEVER = _MF["lever"]
+MF_INERTIA = _MF["inertia"]
+MF_ARMATURE = _MF["armature"]
+MF_GRAVITY = _MF["gravity"]
 
 
 # ------------------------------------------------------------------ arm table

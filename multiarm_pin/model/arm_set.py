@@ -21,8 +21,10 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from multiarm_pin.exceptions import InputError
+from multiarm_pin._compiled.rigid_body import rigid_body_pass
+from multiarm_pin.exceptions import InputError, UnsupportedJointError
 from multiarm_pin.model.arm import Arm
+from multiarm_pin.model.compiled_model import CompiledModel, is_supported, unsupported_joints
 from multiarm_pin.model.kinematics import BodyKinematics
 from multiarm_pin.spatial import as_array
 
@@ -99,6 +101,9 @@ class ArmSet:
             of the system use it, the hot path uses the groups'.
         groups: the :class:`ArmGroup` list (one group, sharing ``model`` and ``data``, when
             ``n <= group_size``).
+        compiled_model: the tables of ``model`` and the n tool frames for the compiled
+            rigid-body pass (:meth:`compiled_pass`), or None when a joint type is not
+            supported there (then only Pinocchio's path is available).
     """
 
     def __init__(self, arms: list[Arm], group_size: int | None = None):
@@ -178,6 +183,9 @@ class ArmSet:
             self.groups.append(ArmGroup(gm, gd, slice(a0, a1), qs, vs, ids,
                                         (gd.J, gd.dJ, gd.M, gd.nle)))
         self.v_starts = np.array(v_starts, dtype=np.int64)
+        self.compiled_model = (CompiledModel.build(model, self._tool_ids) if is_supported(model)
+                               else None)
+        self._compiled_out: tuple = ()
 
     @property
     def data(self) -> pin.Data:
@@ -305,6 +313,39 @@ class ArmSet:
             pin.nonLinearEffects(model, data, qg, vg)
             H.extend([upd(model, data, f).np for f in g.tool_ids])
         return np.array(H)
+
+    def compiled_pass(self, q: np.ndarray, v: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The compiled equivalent of :meth:`pinocchio_pass` followed by :meth:`data_arrays`.
+
+        One call of :func:`multiarm_pin._compiled.rigid_body.rigid_body_pass` on the combined
+        model of all arms (no grouping: its cost is linear in the number of joints), into
+        arrays owned by the ArmSet and overwritten by the next call.
+
+        Args:
+            q: (nq,) combined configuration.
+            v: (nv,) combined velocity.
+
+        Returns:
+            ``(J, dJ, M, nle, H)``: (6, nv) world Jacobian columns at the world origin and
+            (6, nv) their time derivative (as ``data.J``, ``data.dJ``), (nv, nv) mass matrix
+            (full symmetric, zero between arms), (nv,) nonlinear effects, (n, 4, 4) world
+            placements of the n tool frames.
+
+        Raises:
+            UnsupportedJointError: :attr:`compiled_model` is None (a joint type the compiled
+                pass does not support).
+        """
+        cm = self.compiled_model
+        if cm is None:
+            name, kind = unsupported_joints(self.model)[0]
+            raise UnsupportedJointError(name, kind)
+        if not self._compiled_out:
+            self._compiled_out = cm.outputs()
+        J, dJ, M, nle, H = self._compiled_out
+        rigid_body_pass(cm.ints, cm.floats, np.ascontiguousarray(q, dtype=float),
+                        np.ascontiguousarray(v, dtype=float), J, dJ, M, nle, H)
+        return self._compiled_out
 
     def _full_pass(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """:meth:`pinocchio_pass` on the model of all arms (``self.data``), ungrouped."""
