@@ -61,8 +61,10 @@ from multiarm_pin.app.runner import make_controller  # noqa: E402
 from multiarm_pin.app.scenario import build_scenario, load_scenario  # noqa: E402
 from multiarm_pin.exceptions import MultiArmError  # noqa: E402
 from multiarm_pin.sim.closed_loop import closed_loop_evaluation  # noqa: E402
+from multiarm_pin.sim.compiled_loop import CompiledLoop  # noqa: E402
 from multiarm_pin.sim.controllers import ObjectPD  # noqa: E402
 from multiarm_pin.sim.simulation import partial_result, simulate  # noqa: E402
+from multiarm_pin.sim.stepper import Stepper  # noqa: E402
 from multiarm_pin.sim.trajectories import MinimumJerkTrajectory  # noqa: E402
 
 DEFAULT_ARMS = (2, 4, 8, 16, 32, 64)
@@ -83,6 +85,7 @@ class Row:
     t_open_s: float
     t_pin_s: float
     t_closed_ref_s: float
+    t_closed_api_s: float
     closed_over_open: float
     open_over_pin: float
     closed_per_arm_s: float
@@ -102,12 +105,17 @@ def lift_trajectory(state, seconds: float) -> MinimumJerkTrajectory:
 
 def measure(system, states, taus, make_ctrl, timer: Timer, peer=None, baumgarte=None,
             reference: bool = True) -> tuple[list[float], int]:
-    """Interleaved medians: closed loop, open-loop step, [Pinocchio], [reference closed loop]."""
+    """Interleaved medians: closed loop as ``simulate`` runs it, open-loop step, [Pinocchio],
+    [reference closed loop], closed loop through the Python API."""
     ctrl = make_ctrl()
     ctrl(0.0, states[0], system.blocks(states[0]))
-    fns = [lambda k: closed_loop_evaluation(system, ctrl, 0.1, states[k], "object_first",
-                                            baumgarte),
-           lambda k: system.forward_dynamics(states[k], taus[k], "object_first", baumgarte)]
+    api = [lambda k: closed_loop_evaluation(system, ctrl, 0.1, states[k], "object_first",
+                                            baumgarte)]
+    loop = CompiledLoop.for_run(Stepper(system, ctrl, "object_first", baumgarte), "rk4")
+    if loop is not None and loop.ready():  # the evaluation of simulate's compiled loop
+        api.insert(0, lambda k: loop.evaluate(0.1, states[k]))
+    fns = [api[0], lambda k: system.forward_dynamics(states[k], taus[k], "object_first",
+                                                     baumgarte)]
     if peer is not None:
         fns.append(peer.step)
     if reference:
@@ -117,12 +125,13 @@ def measure(system, states, taus, make_ctrl, timer: Timer, peer=None, baumgarte=
         fns.append(lambda k: closed_loop_evaluation(system, ref, 0.1, states[k],
                                                     "object_first_numpy", baumgarte,
                                                     reference=True))
+    fns.append(api[-1])
     times, rounds = timer.medians(fns, len(states))
-    out = [times[0], times[1], math.nan, math.nan]
+    out = [times[0], times[1], math.nan, math.nan, times[-1]]
     if peer is not None:
         out[2] = times[2]
     if reference:
-        out[3] = times[-1]
+        out[3] = times[-2]
     return out, rounds
 
 
@@ -150,15 +159,15 @@ def weld_rows(arms: Sequence[int], timer: Timer, n_states: int, sim_s: float) ->
         taus = [closed_loop_evaluation(s, ctrl, 0.1, st, "object_first")[2]
                 for st in bench.states]
         peer.tau = [np.concatenate([np.zeros(6), t]) for t in taus]
-        (tc, to, tp, tr), rounds = measure(s, bench.states, taus, make, timer, peer,
-                                           reference=n <= REFERENCE_MAX_ARMS)
+        (tc, to, tp, tr, ta), rounds = measure(s, bench.states, taus, make, timer, peer,
+                                               reference=n <= REFERENCE_MAX_ARMS)
         rest = s.project_velocities(s.state(bench.states[0].q, None,
                                             bench.states[0].obj.position,
                                             bench.states[0].obj.quaternion))
         sim, wall = run_rtf(s, rest, make(), sim_s, 0.002, integrator="rk4",
                             solver="object_first")
-        rows.append(Row("weld_ur5", n, s.nv, tc, to, tp, tr, tc / to, to / tp, tc / n, sim,
-                        wall, sim / wall, rounds))
+        rows.append(Row("weld_ur5", n, s.nv, tc, to, tp, tr, ta, tc / to, to / tp, tc / n,
+                        sim, wall, sim / wall, rounds))
         print(f"weld n={n:3d}: closed {tc * 1e6:8.1f} us, open {to * 1e6:8.1f} us, "
               f"pin {tp * 1e6:8.1f} us, RTF {sim / wall:6.2f}", flush=True)
     return rows
@@ -190,9 +199,10 @@ def scenario_rows(names: Sequence[str], timer: Timer, duration: float | None) ->
                        **kw)
         states = [res.state(k) for k in range(0, len(res.t), 4)]
         taus = [res.tau[k] for k in range(0, len(res.t), 4)]
-        (tc, to, _, tr), rounds = measure(s, states, taus, lambda b=built: make_controller(b),
-                                          timer, None, sim.baumgarte)
-        rows.append(Row(name, s.n_arms, s.nv, tc, to, math.nan, tr, tc / to, math.nan,
+        (tc, to, _, tr, ta), rounds = measure(s, states, taus,
+                                              lambda b=built: make_controller(b), timer, None,
+                                              sim.baumgarte)
+        rows.append(Row(name, s.n_arms, s.nv, tc, to, math.nan, tr, ta, tc / to, math.nan,
                         tc / s.n_arms, simt, wall, simt / wall, rounds, note))
         print(f"{name:26s}: closed {tc * 1e6:8.1f} us, open {to * 1e6:8.1f} us, "
               f"RTF {simt / wall:6.2f} ({simt:g} s in {wall:.2f} s)", flush=True)
@@ -269,26 +279,31 @@ def write_report(path: Path, weld: Sequence[Row], scen: Sequence[Row], cold: dic
               "Per-call times are medians of interleaved single calls (one call of each "
               "function per round, the same states), so their ratios hold within this run "
               "even on a loaded machine; absolute times depend on the load (above). "
-              "`closed` = one closed-loop evaluation (blocks + compiled object_pd + forward "
-              "dynamics on one buffer), `open` = the open-loop full step "
+              "`closed` = one closed-loop evaluation as `simulate` runs it (the compiled "
+              "loop's: arm terms, blocks, object_pd and forward dynamics in one compiled call, "
+              "`CompiledLoop.evaluate`), `closed API` = the same through the Python API "
+              "(`closed_loop_evaluation`, which returns the blocks' views), `open` = the "
+              "open-loop full step "
               "(`forward_dynamics`) at the same states with the same torques, `pin` = "
               "`pin.constraintDynamics` on one combined model (weld systems), `closed ref` = "
               "the numpy reference closed loop. RTF = simulated time / wall time of a whole "
               f"`simulate` run. Command: `{' '.join(sys.argv)}`; wall {wall:.0f} s.", "",
               "## n UR5s welded to one box", "",
-              "| n | nv | closed [us] | open [us] | pin [us] | closed ref [us] | closed/open "
-              "| open/pin | closed per arm [us] | RTF |",
-              "|---|---|---|---|---|---|---|---|---|---|"]
+              "| n | nv | closed [us] | closed API [us] | open [us] | pin [us] | closed ref [us] "
+              "| closed/open | open/pin | closed per arm [us] | RTF |",
+              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in weld:
-        lines.append(f"| {r.n_arms} | {r.nv} | {_us(r.t_closed_s)} | {_us(r.t_open_s)} | "
-                     f"{_us(r.t_pin_s)} | {_us(r.t_closed_ref_s)} | {_x(r.closed_over_open)} "
+        lines.append(f"| {r.n_arms} | {r.nv} | {_us(r.t_closed_s)} | {_us(r.t_closed_api_s)} "
+                     f"| {_us(r.t_open_s)} | {_us(r.t_pin_s)} | {_us(r.t_closed_ref_s)} | "
+                     f"{_x(r.closed_over_open)} "
                      f"| {_x(r.open_over_pin)} | {_us(r.closed_per_arm_s)} | {_x(r.rtf)} |")
     lines += ["", "## Shipped scenarios", "",
-              "| scenario | arms | closed [us] | open [us] | closed ref [us] | closed/open | "
-              "simulated [s] | wall [s] | RTF | note |",
-              "|---|---|---|---|---|---|---|---|---|---|"]
+              "| scenario | arms | closed [us] | closed API [us] | open [us] | closed ref [us] | "
+              "closed/open | simulated [s] | wall [s] | RTF | note |",
+              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in scen:
-        lines.append(f"| {r.case} | {r.n_arms} | {_us(r.t_closed_s)} | {_us(r.t_open_s)} | "
+        lines.append(f"| {r.case} | {r.n_arms} | {_us(r.t_closed_s)} | "
+                     f"{_us(r.t_closed_api_s)} | {_us(r.t_open_s)} | "
                      f"{_us(r.t_closed_ref_s)} | {_x(r.closed_over_open)} | {r.sim_time_s:g} | "
                      f"{r.wall_s:.2f} | {_x(r.rtf)} | {r.note} |")
     lines += ["", "## Cold start", ""]

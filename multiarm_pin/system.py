@@ -197,9 +197,7 @@ class MultiArmSystem:
             self._init_without_arms(obj)
             return
         self.arm_set = ArmSet(list(arms))
-        for model in {id(m): m for m in [self.arm_set.model]
-                      + [g.model for g in self.arm_set.groups]}.values():
-            model.gravity = pin.Motion(self.gravity, np.zeros(3))
+        self.arm_set.set_gravity(self.gravity)
         self.constraint_set = ConstraintSet(joints)
         self.obj = obj
         self.joints = list(joints)

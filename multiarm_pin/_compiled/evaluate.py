@@ -38,6 +38,7 @@ from multiarm_pin._compiled.layout import (
     DIMS_M,
     DIMS_N,
     DIMS_NV,
+    OBJECT_STATE_SIZE,
     P_OBJECT_RCOND_TOL,
     P_RCOND_TOL,
     SEG_A_O,
@@ -66,7 +67,8 @@ from multiarm_pin._compiled.layout import (
     view2,
     view3,
 )
-from multiarm_pin._compiled.object_first import object_first
+from multiarm_pin._compiled.object_first import SOLVE_OK, object_first
+from multiarm_pin._compiled.rigid_body import rigid_body_pass
 
 SOLVE_NOT_FINITE = 3
 """Status of :func:`step_system`: the state or the torques hold NaN or infinity (the other
@@ -305,6 +307,55 @@ def step_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, i
                        solution_views(buf, off, n, k, m))
 
 
-__all__ = ["SOLVE_NOT_FINITE", "arm_views", "block_views",
+@njit(cache=True, error_model="numpy")
+def evaluate_state(model_ints, model_floats, J_world, dJ_world, M_full, nle_full, H, x, arm_ints,
+                   v_starts, ints, floats, params, dims, N, step,
+                   buf):  # pragma: no cover - compiled
+    """:func:`evaluate_system` (``step``: :func:`step_system`) with the arm terms computed here.
+
+    :func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass` (Pinocchio's algorithms, on
+    the arms' model tables) fills ``J_world``, ``dJ_world``, ``M_full`` (arm blocks only: keep
+    it zero elsewhere), ``nle_full`` and ``H`` at the ``q``, ``v`` of ``x``; then the blocks
+    (and the solve) as there. One compiled call for the whole evaluation.
+
+    Args:
+        model_ints: the arms' model table
+            (:class:`~multiarm_pin.model.compiled_model.CompiledModel`).
+        model_floats: its float table.
+        J_world: workspace (6, nv), the world Jacobian columns on return.
+        dJ_world: workspace (6, nv), their time derivative.
+        M_full: workspace (nv, nv), the mass matrix (arm blocks; zero elsewhere).
+        nle_full: workspace (nv,), the nonlinear effects.
+        H: workspace (n, 4, 4), the tool placements.
+        x: (13 + nq + 2 nv,) the state vector (see :func:`evaluate_system`).
+        arm_ints: (n, 1 + 2k) the arm table.
+        v_starts: (n,) int first joint of each arm in ``v``.
+        ints: (K, CONTACT_INTS) contact table.
+        floats: (K, CONTACT_FLOATS) contact table.
+        params: (N_PARAMS,) the parameter vector.
+        dims: (DIMS_SIZE,) ``(k, m, nv, n)``.
+        N: (n,) int constraint rows per arm.
+        step: also solve (object-first) into the buffer.
+        buf: output, the flat buffer.
+
+    Returns:
+        The status of :func:`object_first` (``SOLVE_OK`` when not solving), or
+        ``SOLVE_NOT_FINITE`` if ``x`` holds NaN or infinity.
+    """
+    nv = dims[DIMS_NV]
+    q0 = OBJECT_STATE_SIZE
+    nq = x.shape[0] - q0 - 2 * nv
+    rigid_body_pass(model_ints, model_floats, x[q0:q0 + nq], x[q0 + nq:q0 + nq + nv], J_world,
+                    dJ_world, M_full, nle_full, H)
+    if step:
+        return step_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, ints,
+                           floats, params, dims, N, buf)
+    if evaluate_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, ints,
+                       floats, params, dims, buf):
+        return SOLVE_OK
+    return SOLVE_NOT_FINITE
+
+
+__all__ = ["SOLVE_NOT_FINITE", "arm_views", "block_views", "evaluate_state",
            "evaluate_system", "finish_system", "group_arm_terms", "quaternion_rotation",
            "solution_views", "solve_buffer", "solve_views", "step_system"]

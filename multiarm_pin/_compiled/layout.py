@@ -27,7 +27,8 @@ these arrays as a literal.
 - **Parameter slots** (``P_*``): object, gravity, Baumgarte and solver thresholds.
 - **Controller vectors** (``OX_*``, ``REF_*``, ``PD_*``, ``GAIN_*``): the object pose
   and the reference, gains of :mod:`multiarm_pin._compiled.controller_kernels`; the
-  trajectory table (``TR_*``) of :mod:`multiarm_pin._compiled.trajectory`.
+  trajectory table (``TR_*``) of :mod:`multiarm_pin._compiled.trajectory`; the external
+  wrench intervals (``WE_*``) of :mod:`multiarm_pin._compiled.closed_loop`.
 
 Units are SI; spatial vectors ``[linear; angular]`` in world axes (``docs/ARCHITECTURE.md``).
 """
@@ -333,6 +334,15 @@ TR_ROTATION = _TR["rotation"]
 TR_DISPLACEMENT = _TR["displacement"]
 TR_LOG = _TR["log"]
 TR_AXIS = _TR["axis"]
+
+
+WRENCH_FIELDS = (("from", 1), ("to", 1), ("wrench", 6))
+"""One external wrench interval of a :class:`~multiarm_pin.sim.disturbances.WrenchSchedule`:
+it acts for ``from <= t < to`` [s], ``[f; m]`` at the object's COM, world axes [N, N m]."""
+_WE, WRENCH_WIDTH = _starts(WRENCH_FIELDS)
+WE_FROM = _WE["from"]
+WE_TO = _WE["to"]
+WE_WRENCH = _WE["wrench"]
 
 
 PD_GAIN_FIELDS = (("kp", 6), ("kd", 6))

@@ -3,8 +3,10 @@
 :class:`CompiledSystem` holds the constant inputs of the compiled kernels of
 :mod:`multiarm_pin._compiled.evaluate` for one system (arm table, contact tables, parameter
 vector, dims, all laid out in :mod:`multiarm_pin._compiled.layout`) and runs them: one
-Pinocchio pass, then one compiled call that writes the arm terms, constraint rows, blocks and
-(for a step) the object-first solution into one fresh flat buffer. The results are handed
+compiled call that computes the arms' terms (the compiled rigid-body pass, Pinocchio's
+algorithms on the arms' tables; a Pinocchio pass instead when an arm has a joint that pass does
+not support) and writes the arm terms, constraint rows, blocks and (for a step) the
+object-first solution into one fresh flat buffer. The results are handed
 out as views of that buffer, made on first access (a step that only needs the solution
 builds none): :class:`BufferBlocks`, :class:`BufferArmTerms` and
 :class:`BufferConstraintTerms` are the :class:`~multiarm_pin.dynamics.SystemBlocks`,
@@ -347,6 +349,9 @@ class CompiledSystem:
         dims: (DIMS_SIZE,) int64 ``(k, m, nv, n)``.
         N: (n,) int64 constraint rows per arm.
         nv_arm: (n,) int64 joints per arm.
+        model: the arms' :class:`~multiarm_pin.model.compiled_model.CompiledModel` (the
+            tables of the compiled rigid-body pass, which then replaces Pinocchio's pass), or
+            None when an arm has a joint it does not support.
     """
 
     def __init__(self, arm_set: ArmSet, constraint_set: ConstraintSet, obj: RigidObject,
@@ -377,6 +382,12 @@ class CompiledSystem:
         self._zero_tau.setflags(write=False)
         self._check_state = check_state
         self._baumgarte_key = self._baumgarte_params = None  # see _params_with
+        # the arms' tables of the compiled rigid-body pass (None: a joint it does not support,
+        # then Pinocchio's pass), and its work arrays (M stays zero off the arms' blocks)
+        self.model = aset.compiled_model
+        self._arm_work = (np.zeros((6, self.nv)), np.zeros((6, self.nv)),
+                          np.zeros((self.nv, self.nv)) if self.model is not None else None,
+                          np.zeros(self.nv), np.zeros((n, 4, 4)))
 
     def evaluate(self, state, tau, baumgarte, step: bool
                  ) -> tuple[BufferEvaluation, Solution | None]:
@@ -421,9 +432,18 @@ class CompiledSystem:
                                     np.asarray(o.quaternion, float),
                                     np.asarray(o.twist, float), q, v, t)
         params = self.params if baumgarte is None else self._params_with(baumgarte)
-        H = self.arm_set.pinocchio_pass(q, v)
         buf = np.empty(self.layout.size)
-        finite, status = self.kernel_pass(H, x, params, buf, step)
+        model = self.model
+        if model is not None:  # arm terms, blocks (and solve) in one compiled call
+            J, dJ, M, nle, H = self._arm_work
+            tables = self.contact_tables
+            status = kernels.evaluate_state(model.ints, model.floats, J, dJ, M, nle, H, x,
+                                            self.arm_table, self.v_starts, tables.ints,
+                                            tables.floats, params, self.dims, self.N, step, buf)
+            finite = status != kernels.SOLVE_NOT_FINITE
+        else:
+            H = self.arm_set.pinocchio_pass(q, v)
+            finite, status = self.kernel_pass(H, x, params, buf, step)
         if not finite:
             self._check_state_and_tau(state, t)  # raises naming the field
             raise DynamicsError("state or torques contain NaN or infinity")

@@ -187,6 +187,20 @@ class ArmSet:
                                else None)
         self._compiled_out: tuple = ()
 
+    def set_gravity(self, gravity: np.ndarray) -> None:
+        """Set the gravity (3,) [m/s²] of every model of the set and of the compiled tables.
+
+        The combined model, the groups' models and :attr:`compiled_model` (whose universe row
+        carries the gravity) all change together.
+        """
+        g = pin.Motion(as_array(gravity, (3,), "gravity [m/s^2]"), np.zeros(3))
+        for model in {id(m): m for m in [self.model] + [gr.model for gr in self.groups]
+                      }.values():
+            model.gravity = g
+        if self.compiled_model is not None:
+            self.compiled_model = CompiledModel.build(self.model, self._tool_ids)
+            self._compiled_out = ()
+
     @property
     def data(self) -> pin.Data:
         """``Data`` of the combined model of all arms (created on first use if grouped)."""

@@ -57,6 +57,20 @@ class WrenchSchedule:
                 out = out + w
         return out
 
+    def table(self) -> np.ndarray:
+        """(K, WRENCH_WIDTH) the intervals as the compiled closed loop reads them.
+
+        Columns :data:`multiarm_pin._compiled.layout.WRENCH_FIELDS` (``from``, ``to``, the
+        wrench); K = 0 for an empty schedule.
+        """
+        from multiarm_pin._compiled import layout
+
+        out = np.zeros((len(self.intervals), layout.WRENCH_WIDTH))
+        for k, (a, b, w) in enumerate(self.intervals):
+            out[k, layout.WE_FROM], out[k, layout.WE_TO] = a, b
+            out[k, layout.WE_WRENCH:layout.WE_WRENCH + 6] = w
+        return out
+
     @property
     def switch_times(self) -> list[float]:
         """Sorted times [s] at which the wrench changes."""

@@ -184,6 +184,16 @@ class Recorder:
         self._singular = singular
         self.count = k + 1
 
+    def mark_recorded(self, count: int) -> None:
+        """Samples up to ``count`` were recorded by the compiled loop.
+
+        (:mod:`multiarm_pin.sim.compiled_loop`: every row pushing, solver ``object_first``, so
+        no multiplier is negative and no solver switch is pending.)
+        """
+        self._negative[:] = False
+        self._singular = False
+        self.count = int(count)
+
     def result(self, integrator, dt, baumgarte, wall, stepper: Stepper,
                n: int | None = None) -> SimulationResult:
         """The record as a :class:`SimulationResult`, its first ``n`` samples (all: None)."""

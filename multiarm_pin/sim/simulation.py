@@ -44,11 +44,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from multiarm_pin._compiled.closed_loop import STAGE_OK
 from multiarm_pin._registry import lookup
 from multiarm_pin.constraints.joint import INITIAL_GAP_TOLERANCE
 from multiarm_pin.dynamics import solver_entry
 from multiarm_pin.exceptions import DynamicsError, InputError
 from multiarm_pin.model.rigid_object import ObjectState
+from multiarm_pin.sim.compiled_loop import CompiledLoop
 from multiarm_pin.sim.contact_events import ContactEvent
 from multiarm_pin.sim.controllers.base import ControllerFunction
 from multiarm_pin.sim.disturbances import WrenchSchedule
@@ -226,7 +228,18 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
         _run_rk45(stepper, rec, state, times, rtol, atol, report)
     else:
         every = max(1, n_steps // 100)
-        for k in range(n_steps + 1):
+        loop = CompiledLoop.for_run(stepper, integrator)
+        k = 0
+        while True:
+            if loop is not None and loop.ready():
+                # a stretch of steps in one compiled call; the step it hands back, if any, is
+                # taken below by the stepper
+                k, state = loop.run(rec, state, times, k, min(n_steps + 1, k + every))
+                report(k / n_steps)
+                if k > n_steps:
+                    break
+                if loop.last_status == STAGE_OK:
+                    continue
             t = times[k]
             sol, ev, tau, rows = stepper.evaluate(t, state)
             if stepper.separations(t, sol, rows):
@@ -238,6 +251,7 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
                                                 t_end=times[k + 1])
             if k % every == 0:
                 report((k + 1) / n_steps)
+            k += 1
 
 
 def _normalised(q) -> np.ndarray:

@@ -387,6 +387,39 @@ class ObjectPD(Controller):
         self.holding = False  # every contact touches and the grasp is controllable again
         return s.unpad(tau), solved
 
+    def kernel_inputs(self) -> tuple | None:
+        """The controller's inputs of the compiled closed loop, or None before they exist.
+
+        :func:`multiarm_pin._compiled.closed_loop.run_rk4` runs this controller inside its
+        RK4 steps on the same state as :meth:`closed_loop` (the same arrays: the force QP's
+        warm start it updates is this controller's). They exist once a call of the compiled
+        path has fixed them (reference configuration, held points, trajectory, warm start);
+        never with ``compiled=False``.
+
+        Returns:
+            ``(trajectory table, pd gains, (null_kp, null_kd), hold_points_in_tool,
+            hold_points_in_object, held points per arm, hold gains, warm start, unilateral,
+            q_ref)`` (see :func:`~multiarm_pin._compiled.closed_loop.closed_loop_stage`), or
+            None.
+        """
+        if not self.compiled or self._forces is None or self.trajectory is None:
+            return None
+        return (self.trajectory.table(), self._pd_gains,
+                np.array([self.null_kp, self.null_kd]), self.hold_points_in_tool,
+                self.hold_points_in_object, self._hold_n, self._gains, self._forces.active,
+                self._unilateral, self.q_ref)
+
+    def kernel_planned(self, tau: np.ndarray, mu: np.ndarray, qdd: np.ndarray,
+                       a_pts: np.ndarray, a_d: np.ndarray) -> None:
+        """Take the plan of the compiled closed loop's last evaluation as :attr:`last`.
+
+        Args: as :class:`ObjectPDPlan` (copied), ``a_pts`` the desired point accelerations.
+        """
+        self.last_point_acceleration = a_pts.copy()
+        self.last = ObjectPDPlan(tau.copy(), mu.copy(), qdd.copy(), a_d.copy())
+        self.margin_kept = True
+        self.holding = False
+
     def reference(self, t: float, state: SystemState, evaluation: Evaluation) -> np.ndarray:
         """(nv,) torques [N m] by the numpy reference (SVD basis, NNLS, batched numpy).
 

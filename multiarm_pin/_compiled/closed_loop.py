@@ -1,0 +1,461 @@
+"""Compiled closed loop: ``object_pd`` and the forward dynamics, stage by stage and step by step.
+
+Mirrors :func:`multiarm_pin.sim.closed_loop.closed_loop_evaluation` (one evaluation: blocks at
+zero torque, the compiled ``object_pd`` torques, the object-first solution with them) and the
+RK4 step of :class:`multiarm_pin.sim.stepper.Stepper` (its ``derivative``, ``advance`` and
+``step``), so that a whole run of a system of arms and bilateral (or all-pushing unilateral)
+rows under ``object_pd`` is one compiled call per stretch of samples instead of a few dozen
+Python calls per evaluation:
+
+- :func:`closed_loop_stage`: one evaluation at a state whose arm terms are given (Pinocchio's
+  arrays or :func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass`'s), and its tangent;
+- :func:`run_rk4`: RK4 steps over a stretch of the time grid, the arm terms computed by
+  :func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass`, every sample recorded into the
+  run's record arrays.
+
+Whatever these kernels cannot decide exactly as the Python path would, they hand back (a
+status and the sample where they stopped, the state left at that sample): a doubtful
+controller or solver case (the numpy reference decides), NaN, a unilateral row whose
+multiplier is not positive (the mixed LCP decides) or that separates at a sample (the event
+machinery of :mod:`multiarm_pin.sim.contact_events` runs). The caller,
+:mod:`multiarm_pin.sim.compiled_loop`, then runs that step in Python and resumes.
+
+State vector ``x``: the kernels' (:func:`~multiarm_pin._compiled.layout.state_vector`), object
+state, ``q``, ``v`` and ``τ`` (zero here: the blocks are made at zero torque). Tangent ``d``
+(2 nv + 13,): ``[q̇; v̇; ṗ; q̇uat; ȧ]`` as ``Stepper.derivative``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from multiarm_pin._compiled.controller_kernels import PD_OK, object_pd_step, solve_with_torques
+from multiarm_pin._compiled.evaluate import _finish, _group_arms, arm_views, block_views
+from multiarm_pin._compiled.layout import (
+    DIMS_K,
+    DIMS_M,
+    DIMS_N,
+    DIMS_NV,
+    OBJECT_STATE_SIZE,
+    REFERENCE_SIZE,
+    ROW_NORMAL,
+    ROW_PHI,
+    ROW_PHI_DOT,
+    ROW_POINT,
+    SEG_A_O,
+    SEG_H_O,
+    SEG_MU,
+    SEG_QDD,
+    SEG_ROWS,
+    WE_FROM,
+    WE_TO,
+    WE_WRENCH,
+    X_POSITION,
+    X_QUATERNION,
+    X_TWIST,
+    offsets,
+    view1,
+    view2,
+    view3,
+)
+from multiarm_pin._compiled.object_first import SOLVE_OK
+from multiarm_pin._compiled.rigid_body import difference, integrate, rigid_body_pass
+from multiarm_pin._compiled.trajectory import reference_motion
+
+STAGE_OK = 0
+"""Status of the kernels: every evaluation decided here."""
+STAGE_NOT_FINITE = 1
+"""Status: NaN or infinity in a state (the Python path raises, naming the field)."""
+STAGE_CONTROLLER = 2
+"""Status: the compiled ``object_pd`` reported a doubtful case (its reference decides)."""
+STAGE_SOLVE = 3
+"""Status: the object-first solve reported a singular or badly conditioned case."""
+STAGE_RELEASE = 4
+"""Status: a unilateral row's multiplier is not positive (the mixed LCP decides)."""
+STAGE_SEPARATION = 5
+"""Status: at a sample, a unilateral row's gap or gap rate is past the separation thresholds
+of :mod:`multiarm_pin.sim.contact_events` (the event machinery decides)."""
+
+NULL_KP = 0
+"""``null_gains[NULL_KP]``: ``object_pd``'s joint-space stiffness ``null_kp`` [1/s²]."""
+NULL_KD = 1
+"""``null_gains[NULL_KD]``: its damping ``null_kd`` [1/s]."""
+
+
+@njit(cache=True, error_model="numpy")
+def wrench_at(t, wrenches, a):  # pragma: no cover - compiled
+    """Component ``a`` of the external wrench at ``t`` [s] (``WrenchSchedule.__call__``).
+
+    The sum over the intervals ``from <= t < to`` of the table (``WRENCH_FIELDS``).
+    """
+    out = 0.0
+    for e in range(wrenches.shape[0]):
+        if wrenches[e, WE_FROM] <= t < wrenches[e, WE_TO]:
+            out = out + wrenches[e, WE_WRENCH + a]
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def closed_loop_stage(t, x, err, J, dJ, M, nle, H, arm_ints, v_starts, ints, floats, params,
+                      dims, N, nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
+                      hold_obj, hold_n, gains, active, wrenches, buf, tau, mu, qdd, a_pts, a_d,
+                      ref, E, z, d):  # pragma: no cover - compiled
+    """One closed-loop evaluation at ``(t, x)`` and its tangent ``d``.
+
+    The blocks of the state at zero torque (:func:`~.evaluate._group_arms`,
+    :func:`~.evaluate._finish`), the reference motion at ``t``, the joint-space PD
+    ``z = pad(null_kp (q_ref ⊖ q) - null_kd v)``, then
+    :func:`~.controller_kernels.object_pd_step` (torques and forward dynamics on the buffer).
+
+    Args:
+        t: time [s].
+        x: (13 + nq + 2 nv,) the state vector, ``τ`` part zero.
+        err: (nv,) ``q_ref ⊖ q`` (``pin.difference(model, q, q_ref)``).
+        J: (6, nv) world Jacobian columns at the origin (``data.J``).
+        dJ: (6, nv) their time derivative (``data.dJ``).
+        M: (nv, nv) joint-space mass matrix (``data.M``; arm blocks read).
+        nle: (nv,) nonlinear effects [N m].
+        H: (n, 4, 4) tool placements.
+        arm_ints: (n, 1 + 2k) the arm table.
+        v_starts: (n,) int first joint of each arm in ``v``.
+        ints: (K, CONTACT_INTS) contact table.
+        floats: (K, CONTACT_FLOATS) contact table.
+        params: (N_PARAMS,) parameter vector (Baumgarte as the run uses it).
+        dims: (DIMS_SIZE,) ``(k, m, nv, n)``.
+        N: (n,) int rows per arm.
+        nv_arm: (n,) int joints per arm.
+        unilateral: (n, m) bool unilateral rows.
+        traj: (K_w, TRAJECTORY_WIDTH) the reference trajectory's table.
+        pd_gains: (PD_GAINS_SIZE,) object PD gains.
+        null_gains: (2,) ``null_kp``, ``null_kd`` (``NULL_KP``, ``NULL_KD``).
+        hold_tool: (n, h, 3) held points in the tool frames [m].
+        hold_obj: (n, h, 3) their places in the object frame [m].
+        hold_n: (n,) int held points per arm.
+        gains: (HOLD_GAINS_SIZE,) held-point gains, damping, margin.
+        active: (n, m) uint8 the force QP's warm start (updated).
+        wrenches: (K_e, WRENCH_WIDTH) external wrench intervals (:func:`wrench_at`; K_e = 0:
+            none), added to ``h_o`` for the forward dynamics only: ``object_pd`` does not
+            know them (as ``MultiArmSystem.contact_blocks`` adds them after the controller).
+        buf: output, the flat buffer (blocks at zero torque, solution with the torques).
+        tau: output (n, k) torques [N m].
+        mu: output (n, m) planned multipliers [N].
+        qdd: output (n, k) planned joint accelerations.
+        a_pts: output (n, h, 3) desired point accelerations.
+        a_d: output (6,) desired object acceleration.
+        ref: workspace (REFERENCE_SIZE,), the reference at ``t`` on return.
+        E: workspace (3, 3).
+        z: workspace (n, k).
+        d: output (2 nv + 13,) the tangent.
+
+    Returns:
+        ``STAGE_OK`` or the reason to hand the evaluation to the Python path.
+    """
+    k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
+    off = offsets(n, k, m)
+    arms = arm_views(buf, off, n, k, m)
+    _group_arms(J, dJ, M, nle, H, x, arm_ints, nv, 0, 0, arms)
+    if not _finish(x, arm_ints, v_starts, ints, floats, params, nv, arms,
+                   block_views(buf, off, n, k, m)):
+        return STAGE_NOT_FINITE
+    reference_motion(t, traj, E, ref)
+    v0 = x.shape[0] - 2 * nv
+    kp, kd = null_gains[NULL_KP], null_gains[NULL_KD]
+    for i in range(n):
+        for a in range(k):
+            if a < nv_arm[i]:
+                j = v_starts[i] + a
+                z[i, a] = kp * err[j] - kd * x[v0 + j]
+            else:
+                z[i, a] = 0.0
+    status, _ = object_pd_step(buf, dims, N, nv_arm, unilateral, x[:OBJECT_STATE_SIZE], ref,
+                               pd_gains, z, hold_tool, hold_obj, hold_n, gains, params, active,
+                               tau, mu, qdd, a_pts, a_d, False)
+    if status != PD_OK:
+        return STAGE_CONTROLLER
+    if wrenches.shape[0]:
+        h_o = view1(buf, off, SEG_H_O)
+        for a in range(6):
+            h_o[a] += wrench_at(t, wrenches, a)
+    solved = solve_with_torques(buf, dims, N, params, tau)
+    if solved != SOLVE_OK:
+        return STAGE_SOLVE
+    mu_s = view2(buf, off, SEG_MU, n, k, m)
+    for i in range(n):
+        for r in range(m):
+            if unilateral[i, r] and not mu_s[i, r] > 0.0:
+                return STAGE_RELEASE
+    qdd_s = view2(buf, off, SEG_QDD, n, k, m)
+    a_o = view1(buf, off, SEG_A_O)
+    for j in range(nv):
+        d[j] = x[v0 + j]
+    for i in range(n):
+        for a in range(nv_arm[i]):
+            d[nv + v_starts[i] + a] = qdd_s[i, a]
+    tw = x[X_TWIST:X_TWIST + 6]
+    qx, qy, qz, qw = x[X_QUATERNION], x[X_QUATERNION + 1], x[X_QUATERNION + 2], x[X_QUATERNION + 3]
+    wx, wy, wz = tw[3], tw[4], tw[5]
+    b = 2 * nv
+    d[b], d[b + 1], d[b + 2] = tw[0], tw[1], tw[2]
+    d[b + 3] = 0.5 * (qw * wx + wy * qz - wz * qy)
+    d[b + 4] = 0.5 * (qw * wy + wz * qx - wx * qz)
+    d[b + 5] = 0.5 * (qw * wz + wx * qy - wy * qx)
+    d[b + 6] = 0.5 * -(wx * qx + wy * qy + wz * qz)
+    for a in range(6):
+        d[b + 7 + a] = a_o[a]
+    return STAGE_OK
+
+
+@njit(cache=True, error_model="numpy")
+def _advance(model_ints, x, d, h, hd, out):  # pragma: no cover - compiled
+    """The state ``h`` [s] along the tangent ``d`` into ``out`` (``Stepper.advance``)."""
+    nv = (d.shape[0] - OBJECT_STATE_SIZE) // 2
+    nq = x.shape[0] - OBJECT_STATE_SIZE - 2 * nv
+    for a in range(d.shape[0]):
+        hd[a] = h * d[a]
+    q0 = OBJECT_STATE_SIZE
+    integrate(model_ints, x[q0:q0 + nq], hd[:nv], out[q0:q0 + nq])
+    v0 = q0 + nq
+    for j in range(nv):
+        out[v0 + j] = x[v0 + j] + hd[nv + j]
+        out[v0 + nv + j] = 0.0  # τ
+    b = 2 * nv
+    for a in range(3):
+        out[a] = x[a] + hd[b + a]
+    s = 0.0
+    for a in range(4):
+        out[X_QUATERNION + a] = x[X_QUATERNION + a] + hd[b + 3 + a]
+    for a in range(4):
+        s += out[X_QUATERNION + a] * out[X_QUATERNION + a]
+    s = math.sqrt(s)
+    for a in range(4):
+        out[X_QUATERNION + a] /= s
+    for a in range(6):
+        out[X_TWIST + a] = x[X_TWIST + a] + hd[b + 7 + a]
+
+
+@njit(cache=True, error_model="numpy")
+def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_starts, ints,
+            floats, params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
+            hold_obj, hold_n, gains, active, wrenches, separation, work_J, work_dJ, work_M,
+            work_nle, work_H, buf, tau, mu, qdd, a_pts, a_d, r_q, r_v, r_p, r_quat, r_tw, r_tau,
+            r_mu, r_phi, r_phi_dot, r_points, r_normals, r_a_o, r_qdd, r_violation, r_wrench,
+            r_kinetic):  # pragma: no cover - compiled
+    """RK4 steps from sample ``k0``, recording samples ``k0 .. k1 - 1``.
+
+    Sample ``k`` is evaluated (stage 1), recorded, and unless it is the grid's last, the state
+    advances to sample ``k + 1`` by RK4 with ``h = times[k + 1] - times[k]`` (stages at
+    ``t + h/2``, ``t + h/2``, ``t + h``), exactly as ``Stepper.step``.
+
+    Args:
+        k0: first sample.
+        k1: one past the last sample to record (at most ``len(times)``).
+        times: (T,) the time grid [s].
+        x: (13 + nq + 2 nv,) the state vector at sample ``k0`` (``τ`` part zero); on return,
+            the state at the sample returned.
+        model_ints: the arms' model table (:mod:`multiarm_pin.model.compiled_model`).
+        model_floats: its float table.
+        q_ref: (nq,) ``object_pd``'s joint-space reference.
+        arm_ints: (n, 1 + 2k) the arm table.
+        v_starts: (n,) int first joint of each arm in ``v``.
+        ints: (K, CONTACT_INTS) contact table.
+        floats: (K, CONTACT_FLOATS) contact table.
+        params: (N_PARAMS,) parameter vector.
+        dims: (DIMS_SIZE,) ``(k, m, nv, n)``.
+        N: (n,) int rows per arm.
+        nv_arm: (n,) int joints per arm.
+        unilateral: (n, m) bool unilateral rows.
+        traj: (K_w, TRAJECTORY_WIDTH) the reference trajectory's table.
+        pd_gains: (PD_GAINS_SIZE,) object PD gains.
+        null_gains: (2,) ``null_kp``, ``null_kd``.
+        hold_tool: (n, h, 3) held points in the tool frames [m].
+        hold_obj: (n, h, 3) their places in the object frame [m].
+        hold_n: (n,) int held points per arm.
+        gains: (HOLD_GAINS_SIZE,) held-point gains, damping, margin.
+        active: (n, m) uint8 the force QP's warm start (updated).
+        wrenches: (K_e, WRENCH_WIDTH) external wrench intervals (see
+            :func:`closed_loop_stage`).
+        separation: (2,) the separation gap [m] and gap rate [m/s] of unilateral rows.
+        work_J: (6, nv) workspace.
+        work_dJ: (6, nv) workspace.
+        work_M: (nv, nv) workspace, zero off the arms' blocks.
+        work_nle: (nv,) workspace.
+        work_H: (n, 4, 4) workspace.
+        buf: (buffer size,) workspace, the last evaluation's buffer on return.
+        tau: (n, k) the last evaluation's torques [N m].
+        mu: (n, m) its planned multipliers [N].
+        qdd: (n, k) its planned joint accelerations.
+        a_pts: (n, h, 3) its desired point accelerations [m/s²].
+        a_d: (6,) its desired object acceleration.
+        r_q: (T, nq) record of ``q``.
+        r_v: (T, nv) record of ``v``.
+        r_p: (T, 3) object position [m].
+        r_quat: (T, 4) object quaternion ``[x, y, z, w]``.
+        r_tw: (T, 6) object twist.
+        r_tau: (T, nv) torques [N m].
+        r_mu: (T, n, m) multipliers of the solution [N].
+        r_phi: (T, n, m) gaps [m].
+        r_phi_dot: (T, n, m) gap rates [m/s].
+        r_points: (T, n, m, 3) contact points [m].
+        r_normals: (T, n, m, 3) push directions.
+        r_a_o: (T, 6) object acceleration.
+        r_qdd: (T, nv) joint accelerations.
+        r_violation: (T,) ``max |φ|`` of the real rows [m].
+        r_wrench: (T, 6) the external wrench [N, N m].
+        r_kinetic: (T,) the arms' ``½ vᵀ M v`` [J].
+
+    Returns:
+        ``(status, k)``: ``STAGE_OK`` and ``k1`` when every sample was done, else the reason
+        and the sample ``k`` whose step the Python path must take (``x`` is that sample's
+        state; it may already be recorded). A unilateral row that lets go at a sample's own
+        evaluation (``STAGE_RELEASE`` at stage 1) sends back the previous sample, restored
+        from the record: the separation happened inside the step from there.
+    """
+    k, nv, n = dims[DIMS_K], dims[DIMS_NV], dims[DIMS_N]
+    nq = q_ref.shape[0]
+    nx = x.shape[0]
+    nd = 2 * nv + OBJECT_STATE_SIZE
+    d1, d2, d3, d4 = np.empty(nd), np.empty(nd), np.empty(nd), np.empty(nd)
+    hd = np.empty(nd)
+    xs = np.empty(nx)
+    err = np.empty(nv)
+    ref = np.empty(REFERENCE_SIZE)
+    E = np.empty((3, 3))
+    z = np.empty((n, k))
+    q0, v0 = OBJECT_STATE_SIZE, OBJECT_STATE_SIZE + nq
+    ds = (d1, d2, d3, d4)
+    for s in range(k0, k1):
+        t = times[s]
+        h = times[s + 1] - t if s + 1 < times.shape[0] else 0.0
+        for stage in range(4):
+            if stage == 0:
+                ts, xe = t, x
+            else:  # RK4: from x along the previous stage's tangent, h/2, h/2, h
+                ts = t + h if stage == 3 else t + 0.5 * h
+                _advance(model_ints, x, ds[stage - 1], h if stage == 3 else 0.5 * h, hd, xs)
+                xe = xs
+            st = closed_loop_evaluate(
+                ts, xe, nq, model_ints, model_floats, q_ref, err, arm_ints, v_starts, ints,
+                floats, params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains,
+                hold_tool, hold_obj, hold_n, gains, active, wrenches, work_J, work_dJ, work_M,
+                work_nle, work_H, buf, tau, mu, qdd, a_pts, a_d, ref, E, z, ds[stage])
+            if st == STAGE_RELEASE and stage == 0 and s > 0:
+                # a row lets go at this sample: it did inside the step that led here, which
+                # the event machinery locates, from the previous sample (recorded)
+                for j in range(nq):
+                    x[q0 + j] = r_q[s - 1, j]
+                for j in range(nv):
+                    x[v0 + j] = r_v[s - 1, j]
+                for a in range(3):
+                    x[X_POSITION + a] = r_p[s - 1, a]
+                for a in range(4):
+                    x[X_QUATERNION + a] = r_quat[s - 1, a]
+                for a in range(6):
+                    x[X_TWIST + a] = r_tw[s - 1, a]
+                return st, s - 1
+            if st != STAGE_OK:
+                return st, s
+            if stage > 0:
+                continue
+            if not _record(s, t, x, nq, nv, N, nv_arm, v_starts, unilateral, wrenches,
+                           separation, buf, tau, work_M, r_q, r_v, r_p, r_quat, r_tw, r_tau,
+                           r_mu, r_phi, r_phi_dot, r_points, r_normals, r_a_o, r_qdd,
+                           r_violation, r_wrench, r_kinetic):
+                return STAGE_SEPARATION, s
+            if s == times.shape[0] - 1:
+                return STAGE_OK, s + 1
+        for a in range(nd):  # (d1 + 2 d2 + 2 d3 + d4) / 6, numpy's order of operations
+            d1[a] = (((d1[a] + 2.0 * d2[a]) + 2.0 * d3[a]) + d4[a]) / 6.0
+        _advance(model_ints, x, d1, h, hd, xs)
+        for a in range(nx):
+            x[a] = xs[a]
+    return STAGE_OK, k1
+
+
+@njit(cache=True, error_model="numpy")
+def _record(s, t, x, nq, nv, N, nv_arm, v_starts, unilateral, wrenches, separation, buf, tau,
+            M, r_q, r_v, r_p, r_quat, r_tw, r_tau, r_mu, r_phi, r_phi_dot, r_points, r_normals,
+            r_a_o, r_qdd, r_violation, r_wrench, r_kinetic):  # pragma: no cover - compiled
+    """Record sample ``s`` from its evaluation (arguments as :func:`run_rk4`'s).
+
+    Returns False, recording nothing, if a unilateral row's gap or gap rate is past
+    ``separation`` (the event machinery decides that sample).
+    """
+    n, k = tau.shape
+    m = r_mu.shape[2]
+    off = offsets(n, k, m)
+    rows = view3(buf, off, SEG_ROWS, n, k, m)
+    mu_s = view2(buf, off, SEG_MU, n, k, m)
+    qdd_s = view2(buf, off, SEG_QDD, n, k, m)
+    a_o = view1(buf, off, SEG_A_O)
+    viol = 0.0
+    for i in range(n):
+        for r in range(N[i]):
+            ph = rows[i, r, ROW_PHI]
+            viol = max(viol, abs(ph))
+            if unilateral[i, r] and (ph > separation[0] or rows[i, r, ROW_PHI_DOT] > separation[1]):
+                return False
+    q0 = OBJECT_STATE_SIZE
+    v0 = q0 + nq
+    for j in range(nq):
+        r_q[s, j] = x[q0 + j]
+    for j in range(nv):
+        r_v[s, j] = x[v0 + j]
+    for a in range(3):
+        r_p[s, a] = x[X_POSITION + a]
+    for a in range(4):
+        r_quat[s, a] = x[X_QUATERNION + a]
+    for a in range(6):
+        r_tw[s, a] = x[X_TWIST + a]
+        r_a_o[s, a] = a_o[a]
+        r_wrench[s, a] = wrench_at(t, wrenches, a)
+    for i in range(n):
+        for a in range(nv_arm[i]):
+            j = v_starts[i] + a
+            r_tau[s, j] = tau[i, a]
+            r_qdd[s, j] = qdd_s[i, a]
+        for r in range(m):
+            r_mu[s, i, r] = mu_s[i, r]
+            r_phi[s, i, r] = rows[i, r, ROW_PHI]
+            r_phi_dot[s, i, r] = rows[i, r, ROW_PHI_DOT]
+            for a in range(3):
+                r_points[s, i, r, a] = rows[i, r, ROW_POINT + a]
+                r_normals[s, i, r, a] = rows[i, r, ROW_NORMAL + a]
+    r_violation[s] = viol
+    ke = 0.0
+    for i in range(nv):
+        acc = 0.0
+        for j in range(nv):
+            acc += M[i, j] * x[v0 + j]
+        ke += x[v0 + i] * acc
+    r_kinetic[s] = 0.5 * ke
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def closed_loop_evaluate(t, x, nq, model_ints, model_floats, q_ref, err, arm_ints, v_starts,
+                         ints, floats, params, dims, N, nv_arm, unilateral, traj, pd_gains,
+                         null_gains, hold_tool, hold_obj, hold_n, gains, active, wrenches, J,
+                         dJ, M, nle, H, buf, tau, mu, qdd, a_pts, a_d, ref, E, z,
+                         d):  # pragma: no cover - compiled
+    """One closed-loop evaluation with its arm terms (arguments as :func:`run_rk4`'s).
+
+    :func:`closed_loop_stage` after :func:`rigid_body_pass` (into ``J``, ``dJ``, ``M``,
+    ``nle``, ``H``) and ``err = q_ref ⊖ q`` at ``x`` (``nq`` configuration entries).
+    """
+    nv = err.shape[0]
+    q0 = OBJECT_STATE_SIZE
+    q = x[q0:q0 + nq]
+    rigid_body_pass(model_ints, model_floats, q, x[q0 + nq:q0 + nq + nv], J, dJ, M, nle, H)
+    difference(model_ints, q, q_ref, err)
+    return closed_loop_stage(t, x, err, J, dJ, M, nle, H, arm_ints, v_starts, ints, floats,
+                             params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains,
+                             hold_tool, hold_obj, hold_n, gains, active, wrenches, buf, tau, mu,
+                             qdd, a_pts, a_d, ref, E, z, d)
+
+
+__all__ = ["NULL_KD", "NULL_KP", "STAGE_CONTROLLER", "STAGE_NOT_FINITE", "STAGE_OK",
+           "STAGE_RELEASE", "STAGE_SEPARATION", "STAGE_SOLVE", "closed_loop_evaluate",
+           "closed_loop_stage", "run_rk4"]

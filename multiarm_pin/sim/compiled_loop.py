@@ -1,0 +1,199 @@
+"""The compiled closed loop of :func:`~multiarm_pin.sim.simulation.simulate`: RK4 in one call.
+
+When a run is a system of arms whose rows are bilateral, or unilateral and all touching, with
+no supports (an external wrench schedule may act), under ``object_pd`` with a compiled solver
+and RK4, every evaluation of a step is the same compiled sequence (arm terms, blocks, controller,
+object-first solve) and the Python around it (the stepper's state objects, the record) is
+most of the cost. :class:`CompiledLoop` then runs stretches of steps in one call of
+:func:`multiarm_pin._compiled.closed_loop.run_rk4`, which computes the arm terms itself
+(:func:`multiarm_pin._compiled.rigid_body.rigid_body_pass`, Pinocchio's algorithms in numba,
+tested against Pinocchio) and records every sample straight into the run's
+:class:`~multiarm_pin.sim.result.Recorder`.
+
+Whatever the kernel cannot decide as the Python path would (a doubtful controller or solver
+case, NaN, a unilateral row that stops pushing or separates) it hands back with the sample
+where it stopped; :func:`~multiarm_pin.sim.simulation.simulate` takes that step with the
+:class:`~multiarm_pin.sim.stepper.Stepper` (which raises, falls back or locates the event
+exactly as before) and hands the next stretch to the kernel again. The results equal the
+Python path's to round-off (tests: ``tests/sim/test_compiled_loop.py``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multiarm_pin._compiled import closed_loop as kernels
+from multiarm_pin._compiled import layout
+from multiarm_pin.model.rigid_object import ObjectState
+from multiarm_pin.sim import contact_events as ce
+from multiarm_pin.sim.closed_loop import FUSED_SOLVERS
+from multiarm_pin.sim.result import Recorder
+from multiarm_pin.system import SystemState
+
+SOLVER_NAMES = {False: "object_first", True: "bilateral"}
+"""The solver recorded at the kernel's samples (the result's ``solver``), as the Python path
+names it: ``object_first`` for bilateral rows; with unilateral rows, all pushing, the mixed
+LCP's fast path, ``bilateral`` (the same object-first solve)."""
+
+
+class CompiledLoop:
+    """Stretches of RK4 steps of one run in single compiled calls (see the module).
+
+    Use :meth:`for_run`, which returns None when the run is not of the kind the kernel does.
+
+    Args:
+        stepper: the run's stepper (its system, controller, solver, Baumgarte gains).
+    """
+
+    def __init__(self, stepper):
+        s = stepper.system
+        self.stepper = stepper
+        self.system = s
+        path = s.compiled
+        self.path = path
+        self.model = s.arm_set.compiled_model
+        params = path.params if stepper.baumgarte is None else layout.with_baumgarte(
+            path.params, *stepper.baumgarte)
+        self.params = params
+        n, k, m = s.n_arms, s.arm_set.nv_max, s.N_max
+        nv = s.nv
+        self.work = (np.zeros((6, nv)), np.zeros((6, nv)), np.zeros((nv, nv)), np.zeros(nv),
+                     np.zeros((n, 4, 4)), np.zeros(path.layout.size), np.zeros((n, k)),
+                     np.zeros((n, m)), np.zeros((n, k)))
+        self.separation = np.array([ce.SEPARATION_GAP, ce.SEPARATION_SPEED])
+        self.wrenches = (np.zeros((0, layout.WRENCH_WIDTH)) if stepper.wrench is None
+                         else stepper.wrench.table())
+        self.kinetic = None  # (T,) arms' kinetic energy, allocated with the record
+        self.last_status = kernels.STAGE_OK
+
+    @classmethod
+    def for_run(cls, stepper, integrator: str) -> CompiledLoop | None:
+        """The compiled loop of a run, or None when the run is not of the kind it does.
+
+        It does: RK4, a compiled solver (:data:`~multiarm_pin.sim.closed_loop.FUSED_SOLVERS`),
+        arms whose every joint the compiled rigid-body pass supports, no supports, and an
+        :class:`~multiarm_pin.sim.controllers.ObjectPD` controller on its compiled path.
+        """
+        from multiarm_pin.sim.controllers.object_pd import ObjectPD
+
+        s = stepper.system
+        if (integrator != "rk4" or stepper.solver not in FUSED_SOLVERS or not s.n_arms
+                or s.supports.n_rows
+                or type(stepper.controller) is not ObjectPD or not stepper.controller.compiled
+                or s.arm_set.compiled_model is None):
+            return None
+        return cls(stepper)
+
+    def ready(self) -> bool:
+        """True when the kernel can take the next steps.
+
+        The controller's state is fixed (its first call ran on the Python path) and every
+        row touches (the active set is the whole contact mask).
+        """
+        s = self.system
+        return (self.stepper.controller.kernel_inputs() is not None
+                and bool(np.array_equal(self.stepper.active, s.contact_mask)))
+
+    def run(self, rec: Recorder, state: SystemState, times: np.ndarray, k0: int, k1: int
+            ) -> tuple[int, SystemState]:
+        """Samples ``k0 .. k1 - 1`` by the kernel, from ``state`` at sample ``k0``.
+
+        Args:
+            rec: the run's recorder (filled in place).
+            state: the state at sample ``k0``.
+            times: the run's time grid [s].
+            k0: first sample.
+            k1: one past the last sample.
+
+        Returns:
+            ``(k, state)``: the sample reached and its state. ``k == k1`` when every sample
+            was done (:attr:`last_status` is ``STAGE_OK``); otherwise the Python path takes
+            the step from sample ``k`` (:attr:`last_status` says why).
+        """
+        s = self.system
+        path = self.path
+        ctrl = self.stepper.controller
+        (traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, active, unilateral,
+         q_ref) = ctrl.kernel_inputs()
+        if self.kinetic is None:
+            self.kinetic = np.zeros(len(times))
+        o = state.obj
+        x = layout.state_vector(o.position, o.quaternion, o.twist, state.q, state.v,
+                                np.zeros(s.nv))
+        J, dJ, M, nle, H, buf, tau, mu, qdd = self.work
+        a_pts = np.zeros(hold_tool.shape)
+        a_d = np.zeros(6)
+        status, k = kernels.run_rk4(
+            k0, k1, times, x, self.model.ints, self.model.floats, q_ref, path.arm_table,
+            path.v_starts, path.contact_tables.ints, path.contact_tables.floats, self.params,
+            path.dims, path.N, path.nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
+            hold_obj, hold_n, gains, active, self.wrenches, self.separation, J, dJ, M, nle, H,
+            buf, tau, mu, qdd, a_pts, a_d, rec.q, rec.v, rec.p, rec.quat, rec.twist, rec.tau,
+            rec.mu, rec.phi, rec.phi_dot, rec.points, rec.normals, rec.a_o, rec.qdd,
+            rec.violation, rec.wrench, self.kinetic)
+        self.last_status = int(status)
+        k = int(k)
+        done = slice(k0, k)
+        if k > k0:
+            self._finish_record(rec, times, done)
+            ctrl.kernel_planned(tau, mu, qdd, a_pts, a_d)
+        nq, nv = s.nq, s.nv
+        q0 = layout.OBJECT_STATE_SIZE
+        new = SystemState(x[q0:q0 + nq].copy(), x[q0 + nq:q0 + nq + nv].copy(),
+                          ObjectState(x[layout.X_POSITION:layout.X_POSITION + 3].copy(),
+                                      x[layout.X_QUATERNION:layout.X_QUATERNION + 4].copy(),
+                                      x[layout.X_TWIST:layout.X_TWIST + 6].copy()))
+        return k, new
+
+    def evaluate(self, t: float, state: SystemState) -> tuple[int, np.ndarray, np.ndarray]:
+        """One closed-loop evaluation by the kernel of the loop's stages (no record).
+
+        The compiled rigid-body pass, the blocks, ``object_pd`` and the forward dynamics at
+        ``(t, state)``, as :func:`~multiarm_pin.sim.closed_loop.closed_loop_evaluation`
+        computes them with Pinocchio (see :func:`~multiarm_pin._compiled.closed_loop.
+        closed_loop_evaluate`). The controller must be :meth:`ready`.
+
+        Returns:
+            ``(status, tangent (2 nv + 13,), tau (nv,) [N m])``: ``STAGE_OK`` or why the
+            Python path must decide; the tangent ``[q̇; v̇; ṗ; q̇uat; ȧ]`` as
+            ``Stepper.derivative``.
+        """
+        s = self.system
+        path = self.path
+        (traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, active, unilateral,
+         q_ref) = self.stepper.controller.kernel_inputs()
+        o = state.obj
+        x = layout.state_vector(o.position, o.quaternion, o.twist, state.q, state.v,
+                                np.zeros(s.nv))
+        J, dJ, M, nle, H, buf, tau, mu, qdd = self.work
+        n, k = tau.shape
+        d = np.empty(2 * s.nv + layout.OBJECT_STATE_SIZE)
+        status = kernels.closed_loop_evaluate(
+            float(t), x, s.nq, self.model.ints, self.model.floats, q_ref, np.empty(s.nv),
+            path.arm_table, path.v_starts, path.contact_tables.ints, path.contact_tables.floats,
+            self.params, path.dims, path.N, path.nv_arm, unilateral, traj, pd_gains,
+            null_gains, hold_tool, hold_obj, hold_n, gains, active, self.wrenches, J, dJ, M, nle,
+            H, buf, tau, mu, qdd, np.empty(hold_tool.shape), np.empty(6),
+            np.empty(layout.REFERENCE_SIZE), np.empty((3, 3)), np.empty((n, k)), d)
+        return int(status), d, s.unpad(tau)
+
+    def _finish_record(self, rec: Recorder, times: np.ndarray, done: slice) -> None:
+        """What the kernel does not record at samples ``done``: energies, momentum, labels."""
+        s = self.system
+        rec.t[done] = times[done]
+        rec.active[done] = self.stepper.active
+        rec.solver[done] = SOLVER_NAMES[self.stepper.unilateral]
+        for k in range(done.start, done.stop):
+            st = rec_state(rec, k)
+            rec.ke[k] = self.kinetic[k] + s.obj.kinetic_energy(st.obj)
+            rec.pe[k] = s.potential_energy(st)
+            rec.momentum[k] = s.momentum(st)
+        rec.mark_recorded(done.stop)
+
+
+def rec_state(rec: Recorder, k: int) -> SystemState:
+    """The state recorded at sample ``k`` (views of the record)."""
+    return SystemState(rec.q[k], rec.v[k], ObjectState(rec.p[k], rec.quat[k], rec.twist[k]))
+
+
+__all__ = ["SOLVER_NAMES", "CompiledLoop"]
