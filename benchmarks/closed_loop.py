@@ -112,7 +112,7 @@ def measure(system, states, taus, make_ctrl, timer: Timer, peer=None, baumgarte=
     api = [lambda k: closed_loop_evaluation(system, ctrl, 0.1, states[k], "object_first",
                                             baumgarte)]
     loop = CompiledLoop.for_run(Stepper(system, ctrl, "object_first", baumgarte), "rk4")
-    if loop is not None and loop.ready():  # the evaluation of simulate's compiled loop
+    if loop is not None and loop.ready(states[0]):  # the evaluation of simulate's compiled loop
         api.insert(0, lambda k: loop.evaluate(0.1, states[k]))
     fns = [api[0], lambda k: system.forward_dynamics(states[k], taus[k], "object_first",
                                                      baumgarte)]

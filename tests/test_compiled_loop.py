@@ -133,6 +133,15 @@ def run(name, duration, compiled, monkeypatch, **kw):
 FIELDS = ("q", "v", "object_position", "object_quaternion", "object_twist", "tau", "mu", "phi",
           "phi_dot", "contact_points", "normals", "object_acceleration", "qdd",
           "kinetic_energy", "potential_energy", "momentum", "constraint_violation")
+PLANNED = ("tau", "mu", "object_acceleration", "qdd")
+"""Fields that carry a Panda's rank-deficient hold task's round-off noise (relative
+``TOL_RANK_DEFICIENT_HOLD``, see ``closed_loop_cases``): the two runs fix the controller's
+held points from evaluations equal to round-off, not bit for bit."""
+
+
+def tolerance(field: str) -> float:
+    """Agreement of the compiled and the Python loop on a recorded field."""
+    return TOL_RANK_DEFICIENT_HOLD if field in PLANNED else 1e-9
 
 
 @pytest.mark.parametrize("name", ["two_ur5_box", "three_ur5_box", "revolute_handle",
@@ -142,7 +151,7 @@ def test_runs_equal_the_python_loop(name, monkeypatch):
     ref, _ = run(name, 0.1, False, monkeypatch)
     assert calls, "the compiled loop did not run"
     for field in FIELDS:
-        assert rel_err(getattr(fast, field), getattr(ref, field)) <= 1e-9, field
+        assert rel_err(getattr(fast, field), getattr(ref, field)) <= tolerance(field), field
     np.testing.assert_array_equal(fast.t, ref.t)
     np.testing.assert_array_equal(fast.active, ref.active)
     assert list(fast.solver) == list(ref.solver)
@@ -155,6 +164,7 @@ def test_steps_handed_back_keep_the_events(monkeypatch):
     stepper locates the same separations."""
     fast, calls = run("grasp_failure", 0.6, True, monkeypatch)
     ref, _ = run("grasp_failure", 0.6, False, monkeypatch)
+    assert calls, "the compiled loop did not run"
     assert ref.events, "the scenario should separate"
     assert [(e.kind, e.block, e.row) for e in fast.events] == \
         [(e.kind, e.block, e.row) for e in ref.events]

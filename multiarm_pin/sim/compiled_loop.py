@@ -84,15 +84,20 @@ class CompiledLoop:
             return None
         return cls(stepper)
 
-    def ready(self) -> bool:
-        """True when the kernel can take the next steps.
+    def ready(self, state: SystemState) -> bool:
+        """True when the kernel can take the steps from ``state``: every row touches.
 
-        The controller's state is fixed (its first call ran on the Python path) and every
-        row touches (the active set is the whole contact mask).
+        The first time, the controller fixes its state (reference configuration, held
+        points...) from a reference (numpy) evaluation of ``state``
+        (:meth:`ObjectPD.prepare`), so that a run compiles no kernel but the loop's.
         """
         s = self.system
-        return (self.stepper.controller.kernel_inputs() is not None
-                and bool(np.array_equal(self.stepper.active, s.contact_mask)))
+        if not np.array_equal(self.stepper.active, s.contact_mask):
+            return False
+        ctrl = self.stepper.controller
+        if ctrl.kernel_inputs() is None:
+            ctrl.prepare(state, s.blocks(state, None, self.stepper.baumgarte, reference=True))
+        return ctrl.kernel_inputs() is not None
 
     def run(self, rec: Recorder, state: SystemState, times: np.ndarray, k0: int, k1: int
             ) -> tuple[int, SystemState]:
@@ -151,7 +156,7 @@ class CompiledLoop:
         The compiled rigid-body pass, the blocks, ``object_pd`` and the forward dynamics at
         ``(t, state)``, as :func:`~multiarm_pin.sim.closed_loop.closed_loop_evaluation`
         computes them with Pinocchio (see :func:`~multiarm_pin._compiled.closed_loop.
-        closed_loop_evaluate`). The controller must be :meth:`ready`.
+        closed_loop_evaluate`). The loop must be :meth:`ready` at ``state``.
 
         Returns:
             ``(status, tangent (2 nv + 13,), tau (nv,) [N m])``: ``STAGE_OK`` or why the

@@ -231,7 +231,7 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
         loop = CompiledLoop.for_run(stepper, integrator)
         k = 0
         while True:
-            if loop is not None and loop.ready():
+            if loop is not None and loop.ready(state):
                 # a stretch of steps in one compiled call; the step it hands back, if any, is
                 # taken below by the stepper
                 k, state = loop.run(rec, state, times, k, min(n_steps + 1, k + every))

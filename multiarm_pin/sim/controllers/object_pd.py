@@ -338,23 +338,10 @@ class ObjectPD(Controller):
         active = getattr(evaluation, "active", None)
         if active is not None and not np.all(np.asarray(active)[evaluation.blocks.constraint_mask]):
             return None  # some contacts are separated: the reference plans on the touching ones
-        if self.q_ref is None:
-            self.q_ref = np.array(state.q, dtype=float)
-        if self.hold_mask is None:
-            self._init_hold(state, evaluation)
+        self.prepare(state, evaluation)
         s = self.system
         path = s.compiled
-        if self._forces is None:
-            self._forces = WarmForceDistribution(path.N, s.unilateral)
-            self._hold_n = self.hold_mask.sum(axis=1).astype(np.int64)
-            self._gains = layout.hold_gain_vector(self.hold_kp, self.hold_kd, JACOBIAN_DAMPING,
-                                                  self.margin)
-            self._pd_gains = layout.pd_gain_vector(self.kp, self.kd)
-            self._unilateral = np.ascontiguousarray(s.unilateral)
-            self._shapes = ((s.n_arms, s.arm_set.nv_max), (s.n_arms, s.N_max))
         o = state.obj
-        if self.trajectory is None:
-            self.trajectory = self._start_trajectory(o)
         t = float(t)
         ref = self._motion_cache.get(t)  # RK4 samples t + dt/2 twice, t + dt again next step
         if ref is None or ref[0] is not self.trajectory:
@@ -387,14 +374,43 @@ class ObjectPD(Controller):
         self.holding = False  # every contact touches and the grasp is controllable again
         return s.unpad(tau), solved
 
+    def prepare(self, state: SystemState, evaluation: Evaluation) -> None:
+        """Fix what the first call fixes, without computing torques.
+
+        The reference configuration, the held points (from the tools' placements in
+        ``evaluation``, compiled or reference), the trajectory from the first pose when it
+        starts from there, the force QP's warm start and the kernels' gain vectors; calls
+        after the first change nothing. The compiled closed loop calls it on a reference
+        evaluation of the initial state, so that a run needs no other compiled code.
+
+        Args:
+            state: the state of the first call.
+            evaluation: its evaluation (only the tools' placements are read).
+        """
+        if self.q_ref is None:
+            self.q_ref = np.array(state.q, dtype=float)
+        if self.hold_mask is None:
+            self._init_hold(state, evaluation)
+        if self.trajectory is None:
+            self.trajectory = self._start_trajectory(state.obj)
+        if self._forces is None:
+            s = self.system
+            self._forces = WarmForceDistribution(s.compiled.N, s.unilateral)
+            self._hold_n = self.hold_mask.sum(axis=1).astype(np.int64)
+            self._gains = layout.hold_gain_vector(self.hold_kp, self.hold_kd, JACOBIAN_DAMPING,
+                                                  self.margin)
+            self._pd_gains = layout.pd_gain_vector(self.kp, self.kd)
+            self._unilateral = np.ascontiguousarray(s.unilateral)
+            self._shapes = ((s.n_arms, s.arm_set.nv_max), (s.n_arms, s.N_max))
+
     def kernel_inputs(self) -> tuple | None:
         """The controller's inputs of the compiled closed loop, or None before they exist.
 
         :func:`multiarm_pin._compiled.closed_loop.run_rk4` runs this controller inside its
         RK4 steps on the same state as :meth:`closed_loop` (the same arrays: the force QP's
-        warm start it updates is this controller's). They exist once a call of the compiled
-        path has fixed them (reference configuration, held points, trajectory, warm start);
-        never with ``compiled=False``.
+        warm start it updates is this controller's). They exist once the first call or
+        :meth:`prepare` has fixed them (reference configuration, held points, trajectory, warm
+        start); never with ``compiled=False``.
 
         Returns:
             ``(trajectory table, pd gains, (null_kp, null_kd), hold_points_in_tool,
