@@ -10,9 +10,12 @@ rounds of ``--calls`` calls each (median of the rounds' per-call times):
 - ``kernel``: :func:`multiarm_pin._compiled.rigid_body.rigid_body_pass` called directly on
   preallocated arrays (what another kernel pays, plus one dispatch from Python).
 
+Times are the thread's CPU time (``time.thread_time``), robust to other processes' load.
+
 Then the cold compile time of the three kernels of the module (a fresh process with an empty
-``NUMBA_CACHE_DIR``: first call minus a warm call). Prints a Markdown table; ``--out FILE``
-also writes it.
+``NUMBA_CACHE_DIR``: first call minus a warm call, CPU time of the process, after a trivial
+kernel has paid numba's one-off start-up). Prints a Markdown table; ``--out FILE`` also
+writes it.
 
 Usage::
 
@@ -45,8 +48,9 @@ from multiarm_pin.model.arm_set import ArmSet  # noqa: E402
 
 _COLD = """
 import time
-t0 = time.perf_counter()
+import numba
 import numpy as np
+numba.njit(lambda x: x + 1)(1)  # numba's one-off start-up, paid by any first kernel
 from multiarm_pin._compiled.rigid_body import difference, integrate, rigid_body_pass
 from multiarm_pin.model.arm import load_arm
 from multiarm_pin.model.compiled_model import CompiledModel
@@ -58,8 +62,8 @@ res = []
 for f, args in ((rigid_body_pass, (cm.ints, cm.floats, q, v) + out),
                 (integrate, (cm.ints, q, v, np.empty(cm.nq))),
                 (difference, (cm.ints, q, q, np.empty(cm.nv)))):
-    t = time.perf_counter(); f(*args); first = time.perf_counter() - t
-    t = time.perf_counter(); f(*args); warm = time.perf_counter() - t
+    t = time.process_time(); f(*args); first = time.process_time() - t
+    t = time.process_time(); f(*args); warm = time.process_time() - t
     res.append(first - warm)
 print(" ".join(f"{x:.4f}" for x in res))
 """
@@ -77,7 +81,11 @@ def ur5_set(n: int) -> ArmSet:
 
 
 def time_pass(n: int, repeat: int, calls: int, rng) -> dict[str, float]:
-    """Median per-call times [µs] of the three ways, interleaved."""
+    """Median per-call CPU times of this thread [µs] of the three ways, interleaved.
+
+    CPU time of the thread (``time.thread_time``) rather than wall time: the machine is
+    shared, and a round during which the process waits for a core would otherwise count.
+    """
     arm_set = ur5_set(n)
     cm = arm_set.compiled_model
     q = pin.randomConfiguration(arm_set.model)
@@ -93,10 +101,10 @@ def time_pass(n: int, repeat: int, calls: int, rng) -> dict[str, float]:
     samples = {k: [] for k in ways}
     for _ in range(repeat):
         for k, f in ways.items():
-            t = time.perf_counter()
+            t = time.thread_time()
             for _ in range(calls):
                 f()
-            samples[k].append((time.perf_counter() - t) / calls * 1e6)
+            samples[k].append((time.thread_time() - t) / calls * 1e6)
     return {k: statistics.median(s) for k, s in samples.items()}
 
 
@@ -132,7 +140,7 @@ def main(argv=None) -> None:
         print(lines[-1], flush=True)
     if not args.no_cold:
         c = cold_compile()
-        lines += ["", f"Cold compile (empty NUMBA_CACHE_DIR): rigid_body_pass {c[0]:.2f} s, "
+        lines += ["", f"Cold compile (empty NUMBA_CACHE_DIR, CPU): rigid_body_pass {c[0]:.2f} s, "
                   f"integrate {c[1]:.2f} s, difference {c[2]:.2f} s."]
     report = "\n".join(lines) + "\n"
     print(report)

@@ -36,8 +36,7 @@ from multiarm_pin._compiled.layout import (
     MF_INERTIA,
     MF_LEVER,
     MF_MASS,
-    MF_ROTATION,
-    MF_TRANSLATION,
+    MF_PLACEMENT,
     MI_IDX_Q,
     MI_IDX_V,
     MI_KIND,
@@ -49,6 +48,24 @@ _EPS[0, 1, 2] = _EPS[1, 2, 0] = _EPS[2, 0, 1] = 1.0
 _EPS[0, 2, 1] = _EPS[2, 1, 0] = _EPS[1, 0, 2] = -1.0
 """Levi-Civita symbol: ``(a × b)_r = Σ ε_rst a_s b_t``, ``[a]ₓ[r, c] = Σ ε_rtc a_t``."""
 
+# columns of the work array of rigid_body_pass, one row per joint or tool frame (private)
+_T = 0  # world placement [R | p] (3x4, row-major)
+_V = 12  # spatial velocity at the world origin (6)
+_A = 18  # bias acceleration at the world origin, q̈ = 0, gravity included (6)
+_F = 24  # Newton-Euler force, then with the subtree's (6)
+_I = 30  # spatial inertia at the world origin (6x6), then composite; ends the F + I span
+_WIDTH = 68
+# first scratch row (index rows): joint motion and local placement (4x4, last row 0 0 0 1), V×
+_JM = 0
+_LOC = 16
+_X = 32
+# second scratch row (rows + 1): S, 6-vector y, world axis or COM, [c]ₓ, R I_c
+_S = 0
+_Y = 6
+_U = 12
+_CX = 15
+_RI = 24
+
 
 @njit(cache=True, error_model="numpy")
 def rigid_body_pass(model_ints, model_floats, q, v, J, dJ, M, nle,
@@ -59,9 +76,9 @@ def rigid_body_pass(model_ints, model_floats, q, v, J, dJ, M, nle,
     after ``computeJointJacobiansTimeVariation(q, v)``, ``crba(q)``, ``nonLinearEffects(q, v)``
     and the tools' ``updateFramePlacement``.
 
-    Written with few source operations in small loops, 6x6 spatial matrices and the
-    Levi-Civita symbol rather than unrolled scalar algebra: numba's compile time grows with the
-    number of operations written, not with the iterations run.
+    Written with few source operations in small loops over one work array, 6x6 spatial
+    matrices and the Levi-Civita symbol rather than unrolled scalar algebra: numba's compile
+    time grows with the operations written, not with the iterations run.
 
     Args:
         model_ints: (njoints + n_tools, MODEL_INTS) int64, columns ``MI_*``: rows ``0..njoints-1``
@@ -82,151 +99,154 @@ def rigid_body_pass(model_ints, model_floats, q, v, J, dJ, M, nle,
     """
     rows = model_ints.shape[0]
     nj = rows - H.shape[0]
-    T = np.zeros((rows, 4, 4))  # world placement of each joint frame and tool frame
-    V = np.zeros((nj, 6))  # spatial velocity at the world origin
-    A = np.zeros((nj, 6))  # bias acceleration at the world origin (q̈ = 0, gravity)
-    F = np.zeros((nj, 6))  # Newton-Euler force, then with the subtree's
-    Ic = np.zeros((nj, 6, 6))  # spatial inertia at the world origin, then composite
-    X = np.zeros((3, 6, 6))  # local placement, V×, scratch
-    y = np.zeros((2, 6))  # S (or I V), then I_c S
-    for r in range(4):
-        T[0, r, r] = 1.0
+    W = np.empty((rows + 2, _WIDTH))
+    s1, s2 = rows, rows + 1
+    for k in range(16):  # identities: the universe's placement, the scratch 4x4s' last rows
+        e = 1.0 if k % 5 == 0 else 0.0
+        W[s1, _JM + k] = e
+        W[s1, _LOC + k] = e
+        W[0, _T + k % 12] = 1.0 if k % 12 % 5 == 0 else 0.0
     for a in range(6):
-        A[0, a] = -model_floats[0, MF_GRAVITY + a]
+        W[0, _V + a] = 0.0
+        W[0, _A + a] = -model_floats[0, MF_GRAVITY + a]
     # ---------------------------------------------------------------- forward pass
     for i in range(1, rows):
         par = model_ints[i, MI_PARENT]
         kind = model_ints[i, MI_KIND]
         iq = model_ints[i, MI_IDX_Q]
-        ax = model_floats[i, MF_AXIS:MF_AXIS + 3]  # zero for a tool frame
-        ca, sa, x = 1.0, 0.0, 0.0
+        ca, sa, x = 1.0, 0.0, 0.0  # a tool frame or a prismatic joint: no rotation
         if kind == KIND_REVOLUTE:
             ca, sa = math.cos(q[iq]), math.sin(q[iq])
         elif kind == KIND_REVOLUTE_UNBOUNDED:  # [cos, sin] as stored, like Pinocchio
             ca, sa = q[iq], q[iq + 1]
         elif kind == KIND_PRISMATIC:
             x = q[iq]
-        # the joint's motion [rj, a x] (rj by Pinocchio's toRotationMatrix:
-        # (1 - cos) a aᵀ + cos 1 + sin [a]ₓ), then the placement times it, then the parent's
-        for r in range(3):
-            for c in range(4):
-                s = ax[r] * x if c == 3 else (1.0 - ca) * ax[r] * ax[c] + (ca if r == c else 0.0)
+        # joint motion [(1 - cos) a aᵀ + cos 1 + sin [a]ₓ | a x] (Pinocchio's toRotationMatrix),
+        # then local = placement · motion and the world placement parent · local
+        for k in range(3):
+            W[s1, _JM + 4 * k + 3] = model_floats[i, MF_AXIS + k] * x
+            for c in range(3):
+                s = ((1.0 - ca) * model_floats[i, MF_AXIS + k] * model_floats[i, MF_AXIS + c]
+                     + (ca if k == c else 0.0))
                 for t in range(3):
-                    s += sa * _EPS[r, t, c % 3] * ax[t] if c < 3 else 0.0
-                X[2, r, c] = s
+                    s += sa * _EPS[k, t, c] * model_floats[i, MF_AXIS + t]
+                W[s1, _JM + 4 * k + c] = s
         for r in range(3):
             for c in range(4):
-                s = model_floats[i, MF_TRANSLATION + r] if c == 3 else 0.0
-                for k in range(3):
-                    s += model_floats[i, MF_ROTATION + 3 * r + k] * X[2, k, c]
-                X[0, r, c] = s
+                s = 0.0
+                for k in range(4):
+                    s += model_floats[i, MF_PLACEMENT + 4 * r + k] * W[s1, _JM + 4 * k + c]
+                W[s1, _LOC + 4 * r + c] = s
         for r in range(3):
             for c in range(4):
-                s = T[par, r, 3] if c == 3 else 0.0
-                for k in range(3):
-                    s += T[par, r, k] * X[0, k, c]
-                T[i, r, c] = s
-        T[i, 3, 3] = 1.0
+                s = 0.0
+                for k in range(4):
+                    s += W[par, _T + 4 * r + k] * W[s1, _LOC + 4 * k + c]
+                W[i, _T + 4 * r + c] = s
         if i >= nj:  # a tool frame
-            for r in range(4):
-                for c in range(4):
-                    H[i - nj, r, c] = T[i, r, c]
+            for k in range(16):
+                H[i - nj, k // 4, k % 4] = W[i, _T + k] if k < 12 else W[s1, _JM + k]
             continue
         iv = model_ints[i, MI_IDX_V]
         # S = [u; 0] (prismatic) or [p × u; u] with u = R a the world axis
+        rev = 0.0 if kind == KIND_PRISMATIC else 1.0
         for r in range(3):
-            u = T[i, r, 0] * ax[0] + T[i, r, 1] * ax[1] + T[i, r, 2] * ax[2]
-            y[0, r + 3] = u
-            y[0, r] = u
+            s = 0.0
+            for k in range(3):
+                s += W[i, _T + 4 * r + k] * model_floats[i, MF_AXIS + k]
+            W[s2, _U + r] = s
         for r in range(3):
             s = 0.0
             for k in range(3):
                 for t in range(3):
-                    s += _EPS[r, k, t] * T[i, k, 3] * y[0, 3 + t]
-            y[0, r] = y[0, r] if kind == KIND_PRISMATIC else s
-            y[0, r + 3] = 0.0 if kind == KIND_PRISMATIC else y[0, r + 3]
+                    s += _EPS[r, k, t] * W[i, _T + 4 * k + 3] * W[s2, _U + t]
+            W[s2, _S + r] = rev * s + (1.0 - rev) * W[s2, _U + r]
+            W[s2, _S + 3 + r] = rev * W[s2, _U + r]
         qd = v[iv]
         for a in range(6):
-            J[a, iv] = y[0, a]
-            V[i, a] = V[par, a] + y[0, a] * qd
-        # X[1] = V× = [[ω×, v×], [0, ω×]]; dS = V× S; a = a_parent + dS q̇
-        for r in range(6):
-            for c in range(6):
-                s = 0.0
+            J[a, iv] = W[s2, _S + a]
+            W[i, _V + a] = W[par, _V + a] + W[s2, _S + a] * qd
+        # V× = [[ω×, v×], [0, ω×]]; dS = V× S; a = a_parent + dS q̇
+        for r in range(3):
+            for c in range(3):
+                wx, vx = 0.0, 0.0
                 for t in range(3):
-                    s += _EPS[r % 3, t, c % 3] * V[i, t + (0 if r < 3 <= c else 3)]
-                X[1, r, c] = 0.0 if c < 3 <= r else s
+                    wx += _EPS[r, t, c] * W[i, _V + 3 + t]
+                    vx += _EPS[r, t, c] * W[i, _V + t]
+                W[s1, _X + 6 * r + c] = wx
+                W[s1, _X + 6 * r + 3 + c] = vx
+                W[s1, _X + 6 * (3 + r) + c] = 0.0
+                W[s1, _X + 6 * (3 + r) + 3 + c] = wx
         for r in range(6):
             s = 0.0
             for c in range(6):
-                s += X[1, r, c] * y[0, c]
+                s += W[s1, _X + 6 * r + c] * W[s2, _S + c]
             dJ[r, iv] = s
-            A[i, r] = A[par, r] + s * qd
+            W[i, _A + r] = W[par, _A + r] + s * qd
         # spatial inertia at the world origin: [[m 1, -m [c]ₓ], [m [c]ₓ, R I_c Rᵀ - m [c]ₓ²]]
         m = model_floats[i, MF_MASS]
-        for r in range(3):  # X[2, 0] = com, X[2, 1:4, :3] = R I_c
-            s = T[i, r, 3]
+        for r in range(3):
+            s = W[i, _T + 4 * r + 3]
             for k in range(3):
-                s += T[i, r, k] * model_floats[i, MF_LEVER + k]
-            X[2, 0, r] = s
+                s += W[i, _T + 4 * r + k] * model_floats[i, MF_LEVER + k]
+            W[s2, _U + r] = s
             for c in range(3):
                 s = 0.0
                 for k in range(3):
-                    s += T[i, r, k] * model_floats[i, MF_INERTIA + 3 * k + c]
-                X[2, 1 + r, c] = s
-        for r in range(3):  # X[0, :3, :3] = [c]ₓ
+                    s += W[i, _T + 4 * r + k] * model_floats[i, MF_INERTIA + 3 * k + c]
+                W[s2, _RI + 3 * r + c] = s
+        for r in range(3):
             for c in range(3):
                 s = 0.0
                 for t in range(3):
-                    s += _EPS[r, t, c] * X[2, 0, t]
-                X[0, r, c] = s
+                    s += _EPS[r, t, c] * W[s2, _U + t]
+                W[s2, _CX + 3 * r + c] = s
         for r in range(3):
             for c in range(3):
                 s = 0.0
                 for k in range(3):
-                    s += X[2, 1 + r, k] * T[i, c, k] - m * X[0, r, k] * X[0, k, c]
-                Ic[i, 3 + r, 3 + c] = s
-                Ic[i, r, c] = m if r == c else 0.0
-                Ic[i, 3 + r, c] = m * X[0, r, c]
-                Ic[i, r, 3 + c] = -m * X[0, r, c]
+                    s += (W[s2, _RI + 3 * r + k] * W[i, _T + 4 * c + k]
+                          - m * W[s2, _CX + 3 * r + k] * W[s2, _CX + 3 * k + c])
+                W[i, _I + 6 * (3 + r) + 3 + c] = s
+                W[i, _I + 6 * r + c] = m if r == c else 0.0
+                W[i, _I + 6 * (3 + r) + c] = m * W[s2, _CX + 3 * r + c]
+                W[i, _I + 6 * r + 3 + c] = -m * W[s2, _CX + 3 * r + c]
         # f = I a + V ×* (I V), with V ×* = -(V×)ᵀ
         for r in range(6):
             s = 0.0
             for c in range(6):
-                s += Ic[i, r, c] * V[i, c]
-            y[1, r] = s
+                s += W[i, _I + 6 * r + c] * W[i, _V + c]
+            W[s2, _Y + r] = s
         for r in range(6):
             s = 0.0
             for c in range(6):
-                s += Ic[i, r, c] * A[i, c] - X[1, c, r] * y[1, c]
-            F[i, r] = s
+                s += W[i, _I + 6 * r + c] * W[i, _A + c] - W[s1, _X + 6 * c + r] * W[s2, _Y + c]
+            W[i, _F + r] = s
     # ---------------------------------------------------------------- backward pass
     for i in range(nj - 1, 0, -1):
         par = model_ints[i, MI_PARENT]
         iv = model_ints[i, MI_IDX_V]
         s = 0.0
         for a in range(6):
-            s += J[a, iv] * F[i, a]
+            s += J[a, iv] * W[i, _F + a]
         nle[iv] = s
         for r in range(6):  # I_c S, the composite inertia of the subtree times S
             s = 0.0
             for c in range(6):
-                s += Ic[i, r, c] * J[c, iv]
-            y[1, r] = s
+                s += W[i, _I + 6 * r + c] * J[c, iv]
+            W[s2, _Y + r] = s
         j = i
         while j > 0:  # M[j, i] = S_jᵀ I_c S_i for i and each of its ancestors j
             jv = model_ints[j, MI_IDX_V]
             s = model_floats[i, MF_ARMATURE] if j == i else 0.0
             for a in range(6):
-                s += J[a, jv] * y[1, a]
+                s += J[a, jv] * W[s2, _Y + a]
             M[jv, iv] = s
             M[iv, jv] = s
             j = model_ints[j, MI_PARENT]
-        if par > 0:
-            for r in range(6):
-                F[par, r] += F[i, r]
-                for c in range(6):
-                    Ic[par, r, c] += Ic[i, r, c]
+        if par > 0:  # the subtree's force and composite inertia into the parent's
+            for a in range(_F, _I + 36):
+                W[par, a] += W[i, a]
 
 
 @njit(cache=True, error_model="numpy")
