@@ -4,6 +4,8 @@ Each kernel mirrors a numpy reference in the thesis layers and is tested against
 module per reference: :mod:`.linalg` (Cholesky, LAPACK), :mod:`.arm_terms`
 (``ArmSet.evaluate``), :mod:`.constraint_rows` (``ConstraintSet.evaluate``), :mod:`.assembly`
 (the reference blocks), :mod:`.object_first` (``solve_object_first_numpy``), :mod:`.evaluate`
-(all of them fused on one buffer) and :mod:`.controller_kernels` (``ObjectPD.reference``).
+(all of them fused on one buffer), :mod:`.controller_kernels` (``ObjectPD.reference``) and
+:mod:`.rigid_body` (Pinocchio's pass of ``ArmSet.pinocchio_pass``: ``J``, ``dJ``, ``M``,
+``nle``, tool placements; ``integrate``, ``difference``).
 The layout of every array they exchange with Python is defined once in :mod:`.layout`.
 """

@@ -179,17 +179,16 @@ MI_KIND = _MI["kind"]
 MI_IDX_Q = _MI["idx_q"]
 MI_IDX_V = _MI["idx_v"]
 
-MODEL_FLOAT_FIELDS = (("rotation", 9), ("translation", 3), ("axis", 3), ("mass", 1),
-                      ("lever", 3), ("inertia", 9), ("armature", 1), ("gravity", 6))
+MODEL_FLOAT_FIELDS = (("placement", 12), ("axis", 3), ("mass", 1), ("lever", 3),
+                      ("inertia", 9), ("armature", 1), ("gravity", 6))
 """Float columns per row of the model tables: placement in the parent joint's frame (a
-joint's ``jointPlacements``, a frame's ``placement``): rotation (row-major) and translation
-[m]; the joint's unit axis in its own frame; the body inertia attached to the joint (mass
+joint's ``jointPlacements``, a frame's ``placement``) as the 3x4 matrix ``[R | t]``, row-major
+(``t`` in m); the joint's unit axis in its own frame; the body inertia attached to the joint (mass
 [kg], COM lever in the joint frame [m], rotational inertia about the COM in the joint axes,
 row-major [kg m²]); the joint's armature [kg m² or kg]; the model's gravity
 ``[linear; angular]`` [m/s²] (row 0 only)."""
 _MF, MODEL_FLOATS = _starts(MODEL_FLOAT_FIELDS)
-MF_ROTATION = _MF["rotation"]
-MF_TRANSLATION = _MF["translation"]
+MF_PLACEMENT = _MF["placement"]
 MF_AXIS = _MF["axis"]
 MF_MASS = _MF["mass"]
 MF_LEVER = _MF["lever"]

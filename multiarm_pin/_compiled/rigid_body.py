@@ -36,24 +36,35 @@ from multiarm_pin._compiled.layout import (
     MF_INERTIA,
     MF_LEVER,
     MF_MASS,
-    MF_ROTATION,
-    MF_TRANSLATION,
+    MF_PLACEMENT,
     MI_IDX_Q,
     MI_IDX_V,
     MI_KIND,
     MI_PARENT,
 )
 
-# per-joint work columns of rigid_body_pass (private to this kernel)
-_W_R = 0  # world rotation of the joint frame (9, row-major)
-_W_P = 9  # world position of the joint origin (3)
-_W_V = 12  # spatial velocity at the world origin (6)
-_W_A = 18  # bias spatial acceleration at the world origin, q̈ = 0, gravity included (6)
-_W_F = 24  # Newton-Euler force at the world origin, then with the subtree's (6)
-_W_M = 30  # mass of the body, then of the subtree (composite)
-_W_H = 31  # first moment m c about the world origin (3)
-_W_I = 34  # rotational inertia about the world origin (9, row-major)
-_W_SIZE = 43
+_EPS = np.zeros((3, 3, 3))
+_EPS[0, 1, 2] = _EPS[1, 2, 0] = _EPS[2, 0, 1] = 1.0
+_EPS[0, 2, 1] = _EPS[2, 1, 0] = _EPS[1, 0, 2] = -1.0
+"""Levi-Civita symbol: ``(a × b)_r = Σ ε_rst a_s b_t``, ``[a]ₓ[r, c] = Σ ε_rtc a_t``."""
+
+# columns of the work array of rigid_body_pass, one row per joint or tool frame (private)
+_T = 0  # world placement [R | p] (3x4, row-major)
+_V = 12  # spatial velocity at the world origin (6)
+_A = 18  # bias acceleration at the world origin, q̈ = 0, gravity included (6)
+_F = 24  # Newton-Euler force, then with the subtree's (6)
+_I = 30  # spatial inertia at the world origin (6x6), then composite; ends the F + I span
+_WIDTH = 68
+# first scratch row (index rows): joint motion and local placement (4x4, last row 0 0 0 1), V×
+_JM = 0
+_LOC = 16
+_X = 32
+# second scratch row (rows + 1): S, 6-vector y, world axis or COM, [c]ₓ, R I_c
+_S = 0
+_Y = 6
+_U = 12
+_CX = 15
+_RI = 24
 
 
 @njit(cache=True, error_model="numpy")
@@ -64,6 +75,10 @@ def rigid_body_pass(model_ints, model_floats, q, v, J, dJ, M, nle,
     Equals, for the model the tables were built from, what Pinocchio leaves in its ``Data``
     after ``computeJointJacobiansTimeVariation(q, v)``, ``crba(q)``, ``nonLinearEffects(q, v)``
     and the tools' ``updateFramePlacement``.
+
+    Written with few source operations in small loops over one work array, 6x6 spatial
+    matrices and the Levi-Civita symbol rather than unrolled scalar algebra: numba's compile
+    time grows with the operations written, not with the iterations run.
 
     Args:
         model_ints: (njoints + n_tools, MODEL_INTS) int64, columns ``MI_*``: rows ``0..njoints-1``
@@ -82,194 +97,156 @@ def rigid_body_pass(model_ints, model_floats, q, v, J, dJ, M, nle,
         H: output (n_tools, 4, 4) world placements of the tool frames [m]; ``n_tools`` is
             read from its first axis.
     """
-    n_tools = H.shape[0]
-    nj = model_ints.shape[0] - n_tools
-    w = np.zeros((nj, _W_SIZE))
-    rot = np.empty((3, 3))  # joint placement rotation times the joint's own rotation
-    rj = np.empty((3, 3))  # the joint's own rotation
-    S = np.empty(6)
-    F = np.empty(6)
-    com = np.empty(3)
-    w[0, _W_R] = w[0, _W_R + 4] = w[0, _W_R + 8] = 1.0
+    rows = model_ints.shape[0]
+    nj = rows - H.shape[0]
+    W = np.empty((rows + 2, _WIDTH))
+    s1, s2 = rows, rows + 1
+    for k in range(16):  # identities: the universe's placement, the scratch 4x4s' last rows
+        e = 1.0 if k % 5 == 0 else 0.0
+        W[s1, _JM + k] = e
+        W[s1, _LOC + k] = e
+        W[0, _T + k % 12] = 1.0 if k % 12 % 5 == 0 else 0.0
     for a in range(6):
-        w[0, _W_A + a] = -model_floats[0, MF_GRAVITY + a]
+        W[0, _V + a] = 0.0
+        W[0, _A + a] = -model_floats[0, MF_GRAVITY + a]
     # ---------------------------------------------------------------- forward pass
-    for i in range(1, nj):
+    for i in range(1, rows):
         par = model_ints[i, MI_PARENT]
         kind = model_ints[i, MI_KIND]
         iq = model_ints[i, MI_IDX_Q]
-        iv = model_ints[i, MI_IDX_V]
-        wi = w[i]
-        wp = w[par]
-        fl = model_floats[i]
-        ax, ay, az = fl[MF_AXIS], fl[MF_AXIS + 1], fl[MF_AXIS + 2]
-        # the joint's own rotation (Pinocchio's toRotationMatrix for revolute joints)
-        if kind == KIND_PRISMATIC:
-            for r in range(3):
-                for c in range(3):
-                    rj[r, c] = 1.0 if r == c else 0.0
-        else:
-            if kind == KIND_REVOLUTE:
-                ca, sa = math.cos(q[iq]), math.sin(q[iq])
-            else:  # KIND_REVOLUTE_UNBOUNDED: [cos, sin] as stored, like Pinocchio
-                ca, sa = q[iq], q[iq + 1]
-            t = 1.0 - ca
-            rj[0, 0] = t * ax * ax + ca
-            rj[1, 1] = t * ay * ay + ca
-            rj[2, 2] = t * az * az + ca
-            rj[0, 1] = t * ax * ay - sa * az
-            rj[1, 0] = t * ax * ay + sa * az
-            rj[0, 2] = t * ax * az + sa * ay
-            rj[2, 0] = t * ax * az - sa * ay
-            rj[1, 2] = t * ay * az - sa * ax
-            rj[2, 1] = t * ay * az + sa * ax
-        for r in range(3):
-            for c in range(3):
-                rot[r, c] = (fl[MF_ROTATION + 3 * r] * rj[0, c]
-                             + fl[MF_ROTATION + 3 * r + 1] * rj[1, c]
-                             + fl[MF_ROTATION + 3 * r + 2] * rj[2, c])
-        for r in range(3):
-            for c in range(3):
-                wi[_W_R + 3 * r + c] = (wp[_W_R + 3 * r] * rot[0, c]
-                                        + wp[_W_R + 3 * r + 1] * rot[1, c]
-                                        + wp[_W_R + 3 * r + 2] * rot[2, c])
-            wi[_W_P + r] = wp[_W_P + r] + (wp[_W_R + 3 * r] * fl[MF_TRANSLATION]
-                                           + wp[_W_R + 3 * r + 1] * fl[MF_TRANSLATION + 1]
-                                           + wp[_W_R + 3 * r + 2] * fl[MF_TRANSLATION + 2])
-        # world axis (the joint's rotation leaves its axis unchanged)
-        ux = wi[_W_R] * ax + wi[_W_R + 1] * ay + wi[_W_R + 2] * az
-        uy = wi[_W_R + 3] * ax + wi[_W_R + 4] * ay + wi[_W_R + 5] * az
-        uz = wi[_W_R + 6] * ax + wi[_W_R + 7] * ay + wi[_W_R + 8] * az
-        if kind == KIND_PRISMATIC:
+        ca, sa, x = 1.0, 0.0, 0.0  # a tool frame or a prismatic joint: no rotation
+        if kind == KIND_REVOLUTE:
+            ca, sa = math.cos(q[iq]), math.sin(q[iq])
+        elif kind == KIND_REVOLUTE_UNBOUNDED:  # [cos, sin] as stored, like Pinocchio
+            ca, sa = q[iq], q[iq + 1]
+        elif kind == KIND_PRISMATIC:
             x = q[iq]
-            wi[_W_P] += ux * x
-            wi[_W_P + 1] += uy * x
-            wi[_W_P + 2] += uz * x
-            S[0], S[1], S[2], S[3], S[4], S[5] = ux, uy, uz, 0.0, 0.0, 0.0
-        else:  # rotation about the axis through the joint origin p: [p × u; u]
-            px, py, pz = wi[_W_P], wi[_W_P + 1], wi[_W_P + 2]
-            S[0], S[1], S[2] = py * uz - pz * uy, pz * ux - px * uz, px * uy - py * ux
-            S[3], S[4], S[5] = ux, uy, uz
+        # joint motion [(1 - cos) a aᵀ + cos 1 + sin [a]ₓ | a x] (Pinocchio's toRotationMatrix),
+        # then local = placement · motion and the world placement parent · local
+        for k in range(3):
+            W[s1, _JM + 4 * k + 3] = model_floats[i, MF_AXIS + k] * x
+            for c in range(3):
+                s = ((1.0 - ca) * model_floats[i, MF_AXIS + k] * model_floats[i, MF_AXIS + c]
+                     + (ca if k == c else 0.0))
+                for t in range(3):
+                    s += sa * _EPS[k, t, c] * model_floats[i, MF_AXIS + t]
+                W[s1, _JM + 4 * k + c] = s
+        for r in range(3):
+            for c in range(4):
+                s = 0.0
+                for k in range(4):
+                    s += model_floats[i, MF_PLACEMENT + 4 * r + k] * W[s1, _JM + 4 * k + c]
+                W[s1, _LOC + 4 * r + c] = s
+        for r in range(3):
+            for c in range(4):
+                s = 0.0
+                for k in range(4):
+                    s += W[par, _T + 4 * r + k] * W[s1, _LOC + 4 * k + c]
+                W[i, _T + 4 * r + c] = s
+        if i >= nj:  # a tool frame
+            for k in range(16):
+                H[i - nj, k // 4, k % 4] = W[i, _T + k] if k < 12 else W[s1, _JM + k]
+            continue
+        iv = model_ints[i, MI_IDX_V]
+        # S = [u; 0] (prismatic) or [p × u; u] with u = R a the world axis
+        rev = 0.0 if kind == KIND_PRISMATIC else 1.0
+        for r in range(3):
+            s = 0.0
+            for k in range(3):
+                s += W[i, _T + 4 * r + k] * model_floats[i, MF_AXIS + k]
+            W[s2, _U + r] = s
+        for r in range(3):
+            s = 0.0
+            for k in range(3):
+                for t in range(3):
+                    s += _EPS[r, k, t] * W[i, _T + 4 * k + 3] * W[s2, _U + t]
+            W[s2, _S + r] = rev * s + (1.0 - rev) * W[s2, _U + r]
+            W[s2, _S + 3 + r] = rev * W[s2, _U + r]
         qd = v[iv]
         for a in range(6):
-            J[a, iv] = S[a]
-            wi[_W_V + a] = wp[_W_V + a] + S[a] * qd
-        # dS = V × S (motion cross product), and the bias acceleration a = a_parent + dS q̇
-        vx, vy, vz = wi[_W_V], wi[_W_V + 1], wi[_W_V + 2]
-        ox, oy, oz = wi[_W_V + 3], wi[_W_V + 4], wi[_W_V + 5]
-        d0 = oy * S[2] - oz * S[1] + vy * S[5] - vz * S[4]
-        d1 = oz * S[0] - ox * S[2] + vz * S[3] - vx * S[5]
-        d2 = ox * S[1] - oy * S[0] + vx * S[4] - vy * S[3]
-        d3 = oy * S[5] - oz * S[4]
-        d4 = oz * S[3] - ox * S[5]
-        d5 = ox * S[4] - oy * S[3]
-        dJ[0, iv], dJ[1, iv], dJ[2, iv] = d0, d1, d2
-        dJ[3, iv], dJ[4, iv], dJ[5, iv] = d3, d4, d5
-        wi[_W_A] = wp[_W_A] + d0 * qd
-        wi[_W_A + 1] = wp[_W_A + 1] + d1 * qd
-        wi[_W_A + 2] = wp[_W_A + 2] + d2 * qd
-        wi[_W_A + 3] = wp[_W_A + 3] + d3 * qd
-        wi[_W_A + 4] = wp[_W_A + 4] + d4 * qd
-        wi[_W_A + 5] = wp[_W_A + 5] + d5 * qd
-        # the body's spatial inertia at the world origin: m, h = m c, I_O = R I_c Rᵀ + m [c]ₓᵀ[c]ₓ
-        m = fl[MF_MASS]
-        for r in range(3):
-            com[r] = wi[_W_P + r] + (wi[_W_R + 3 * r] * fl[MF_LEVER]
-                                     + wi[_W_R + 3 * r + 1] * fl[MF_LEVER + 1]
-                                     + wi[_W_R + 3 * r + 2] * fl[MF_LEVER + 2])
-            for c in range(3):  # rot <- R I_c
-                rot[r, c] = (wi[_W_R + 3 * r] * fl[MF_INERTIA + c]
-                             + wi[_W_R + 3 * r + 1] * fl[MF_INERTIA + 3 + c]
-                             + wi[_W_R + 3 * r + 2] * fl[MF_INERTIA + 6 + c])
-        c2 = com[0] * com[0] + com[1] * com[1] + com[2] * com[2]
+            J[a, iv] = W[s2, _S + a]
+            W[i, _V + a] = W[par, _V + a] + W[s2, _S + a] * qd
+        # V× = [[ω×, v×], [0, ω×]]; dS = V× S; a = a_parent + dS q̇
         for r in range(3):
             for c in range(3):
-                wi[_W_I + 3 * r + c] = (rot[r, 0] * wi[_W_R + 3 * c]
-                                        + rot[r, 1] * wi[_W_R + 3 * c + 1]
-                                        + rot[r, 2] * wi[_W_R + 3 * c + 2]
-                                        - m * com[r] * com[c])
-            wi[_W_I + 4 * r] += m * c2
-        wi[_W_M] = m
-        hx, hy, hz = m * com[0], m * com[1], m * com[2]
-        wi[_W_H], wi[_W_H + 1], wi[_W_H + 2] = hx, hy, hz
-        # f = I a + V ×* (I V)
-        for pass_ in range(2):
-            base = _W_A if pass_ == 0 else _W_V
-            lx, ly, lz = wi[base], wi[base + 1], wi[base + 2]
-            gx, gy, gz = wi[base + 3], wi[base + 4], wi[base + 5]
-            f0 = m * lx - (hy * gz - hz * gy)
-            f1 = m * ly - (hz * gx - hx * gz)
-            f2 = m * lz - (hx * gy - hy * gx)
-            n0 = hy * lz - hz * ly + wi[_W_I] * gx + wi[_W_I + 1] * gy + wi[_W_I + 2] * gz
-            n1 = hz * lx - hx * lz + wi[_W_I + 3] * gx + wi[_W_I + 4] * gy + wi[_W_I + 5] * gz
-            n2 = hx * ly - hy * lx + wi[_W_I + 6] * gx + wi[_W_I + 7] * gy + wi[_W_I + 8] * gz
-            if pass_ == 0:
-                wi[_W_F], wi[_W_F + 1], wi[_W_F + 2] = f0, f1, f2
-                wi[_W_F + 3], wi[_W_F + 4], wi[_W_F + 5] = n0, n1, n2
-            else:  # [v; ω] ×* [f; n] = [ω × f; v × f + ω × n]
-                wi[_W_F] += oy * f2 - oz * f1
-                wi[_W_F + 1] += oz * f0 - ox * f2
-                wi[_W_F + 2] += ox * f1 - oy * f0
-                wi[_W_F + 3] += vy * f2 - vz * f1 + oy * n2 - oz * n1
-                wi[_W_F + 4] += vz * f0 - vx * f2 + oz * n0 - ox * n2
-                wi[_W_F + 5] += vx * f1 - vy * f0 + ox * n1 - oy * n0
+                wx, vx = 0.0, 0.0
+                for t in range(3):
+                    wx += _EPS[r, t, c] * W[i, _V + 3 + t]
+                    vx += _EPS[r, t, c] * W[i, _V + t]
+                W[s1, _X + 6 * r + c] = wx
+                W[s1, _X + 6 * r + 3 + c] = vx
+                W[s1, _X + 6 * (3 + r) + c] = 0.0
+                W[s1, _X + 6 * (3 + r) + 3 + c] = wx
+        for r in range(6):
+            s = 0.0
+            for c in range(6):
+                s += W[s1, _X + 6 * r + c] * W[s2, _S + c]
+            dJ[r, iv] = s
+            W[i, _A + r] = W[par, _A + r] + s * qd
+        # spatial inertia at the world origin: [[m 1, -m [c]ₓ], [m [c]ₓ, R I_c Rᵀ - m [c]ₓ²]]
+        m = model_floats[i, MF_MASS]
+        for r in range(3):
+            s = W[i, _T + 4 * r + 3]
+            for k in range(3):
+                s += W[i, _T + 4 * r + k] * model_floats[i, MF_LEVER + k]
+            W[s2, _U + r] = s
+            for c in range(3):
+                s = 0.0
+                for k in range(3):
+                    s += W[i, _T + 4 * r + k] * model_floats[i, MF_INERTIA + 3 * k + c]
+                W[s2, _RI + 3 * r + c] = s
+        for r in range(3):
+            for c in range(3):
+                s = 0.0
+                for t in range(3):
+                    s += _EPS[r, t, c] * W[s2, _U + t]
+                W[s2, _CX + 3 * r + c] = s
+        for r in range(3):
+            for c in range(3):
+                s = 0.0
+                for k in range(3):
+                    s += (W[s2, _RI + 3 * r + k] * W[i, _T + 4 * c + k]
+                          - m * W[s2, _CX + 3 * r + k] * W[s2, _CX + 3 * k + c])
+                W[i, _I + 6 * (3 + r) + 3 + c] = s
+                W[i, _I + 6 * r + c] = m if r == c else 0.0
+                W[i, _I + 6 * (3 + r) + c] = m * W[s2, _CX + 3 * r + c]
+                W[i, _I + 6 * r + 3 + c] = -m * W[s2, _CX + 3 * r + c]
+        # f = I a + V ×* (I V), with V ×* = -(V×)ᵀ
+        for r in range(6):
+            s = 0.0
+            for c in range(6):
+                s += W[i, _I + 6 * r + c] * W[i, _V + c]
+            W[s2, _Y + r] = s
+        for r in range(6):
+            s = 0.0
+            for c in range(6):
+                s += W[i, _I + 6 * r + c] * W[i, _A + c] - W[s1, _X + 6 * c + r] * W[s2, _Y + c]
+            W[i, _F + r] = s
     # ---------------------------------------------------------------- backward pass
     for i in range(nj - 1, 0, -1):
         par = model_ints[i, MI_PARENT]
         iv = model_ints[i, MI_IDX_V]
-        wi = w[i]
+        s = 0.0
         for a in range(6):
-            S[a] = J[a, iv]
-        tau = 0.0
-        for a in range(6):
-            tau += S[a] * wi[_W_F + a]
-        nle[iv] = tau
-        # F = I_c S (composite inertia of the subtree of i)
-        m = wi[_W_M]
-        hx, hy, hz = wi[_W_H], wi[_W_H + 1], wi[_W_H + 2]
-        F[0] = m * S[0] - (hy * S[5] - hz * S[4])
-        F[1] = m * S[1] - (hz * S[3] - hx * S[5])
-        F[2] = m * S[2] - (hx * S[4] - hy * S[3])
-        for r in range(3):
-            F[3 + r] = (wi[_W_I + 3 * r] * S[3] + wi[_W_I + 3 * r + 1] * S[4]
-                        + wi[_W_I + 3 * r + 2] * S[5])
-        F[3] += hy * S[2] - hz * S[1]
-        F[4] += hz * S[0] - hx * S[2]
-        F[5] += hx * S[1] - hy * S[0]
-        mii = model_floats[i, MF_ARMATURE]
-        for a in range(6):
-            mii += S[a] * F[a]
-        M[iv, iv] = mii
-        j = par
-        while j > 0:
+            s += J[a, iv] * W[i, _F + a]
+        nle[iv] = s
+        for r in range(6):  # I_c S, the composite inertia of the subtree times S
+            s = 0.0
+            for c in range(6):
+                s += W[i, _I + 6 * r + c] * J[c, iv]
+            W[s2, _Y + r] = s
+        j = i
+        while j > 0:  # M[j, i] = S_jᵀ I_c S_i for i and each of its ancestors j
             jv = model_ints[j, MI_IDX_V]
-            mji = 0.0
+            s = model_floats[i, MF_ARMATURE] if j == i else 0.0
             for a in range(6):
-                mji += J[a, jv] * F[a]
-            M[jv, iv] = mji
-            M[iv, jv] = mji
+                s += J[a, jv] * W[s2, _Y + a]
+            M[jv, iv] = s
+            M[iv, jv] = s
             j = model_ints[j, MI_PARENT]
-        if par > 0:
-            wp = w[par]
-            for a in range(6):
-                wp[_W_F + a] += wi[_W_F + a]
-            for a in range(13):
-                wp[_W_M + a] += wi[_W_M + a]
-    # ---------------------------------------------------------------- tool frames
-    for t in range(n_tools):
-        row = nj + t
-        wp = w[model_ints[row, MI_PARENT]]
-        fl = model_floats[row]
-        for r in range(3):
-            for c in range(3):
-                H[t, r, c] = (wp[_W_R + 3 * r] * fl[MF_ROTATION + c]
-                              + wp[_W_R + 3 * r + 1] * fl[MF_ROTATION + 3 + c]
-                              + wp[_W_R + 3 * r + 2] * fl[MF_ROTATION + 6 + c])
-            H[t, r, 3] = wp[_W_P + r] + (wp[_W_R + 3 * r] * fl[MF_TRANSLATION]
-                                         + wp[_W_R + 3 * r + 1] * fl[MF_TRANSLATION + 1]
-                                         + wp[_W_R + 3 * r + 2] * fl[MF_TRANSLATION + 2])
-            H[t, 3, r] = 0.0
-        H[t, 3, 3] = 1.0
+        if par > 0:  # the subtree's force and composite inertia into the parent's
+            for a in range(_F, _I + 36):
+                W[par, a] += W[i, a]
 
 
 @njit(cache=True, error_model="numpy")

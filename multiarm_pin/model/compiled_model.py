@@ -30,8 +30,7 @@ from multiarm_pin._compiled.layout import (
     MF_INERTIA,
     MF_LEVER,
     MF_MASS,
-    MF_ROTATION,
-    MF_TRANSLATION,
+    MF_PLACEMENT,
     MI_IDX_Q,
     MI_IDX_V,
     MI_KIND,
@@ -99,7 +98,7 @@ class CompiledModel:
         ints[0, MI_PARENT] = -1
         ints[0, MI_KIND] = KIND_UNIVERSE
         ints[0, MI_IDX_Q] = ints[0, MI_IDX_V] = -1
-        floats[0, MF_ROTATION:MF_ROTATION + 9] = np.eye(3).ravel()
+        _placement(floats[0], pin.SE3.Identity())
         floats[0, MF_GRAVITY:MF_GRAVITY + 6] = model.gravity.vector
         for j in range(1, nj):
             jm = model.joints[j]
@@ -148,9 +147,8 @@ def is_supported(model: pin.Model) -> bool:
 
 
 def _placement(row: np.ndarray, placement: pin.SE3) -> None:
-    """Write an SE3 into the rotation and translation columns of a float table row."""
-    row[MF_ROTATION:MF_ROTATION + 9] = placement.rotation.ravel()
-    row[MF_TRANSLATION:MF_TRANSLATION + 3] = placement.translation
+    """Write an SE3 into the placement columns (``[R | t]``, 3x4 row-major) of a table row."""
+    row[MF_PLACEMENT:MF_PLACEMENT + 12] = placement.homogeneous[:3].ravel()
 
 
 def _axis(joint, kind: int) -> np.ndarray:
