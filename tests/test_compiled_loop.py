@@ -1,37 +1,34 @@
 """The compiled closed loop (``_compiled.closed_loop``, ``sim.compiled_loop``) against the
 Python path: one evaluation (with Pinocchio's arm terms, and with the compiled rigid-body
-pass), and whole runs sample by sample, including the steps it hands back."""
+pass) and a few steps of two runs (also run without JIT, bounds-checked; the long runs are in
+``test_compiled_loop_runs.py``)."""
 
 from __future__ import annotations
-
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
 from closed_loop_cases import (
     EPS,
+    RUN_FIELDS,
     TOL,
     TOL_RANK_DEFICIENT_HOLD,
     hold_task_conditions,
     object_pd,
     random_case,
     rel_err,
+    run_scenario,
+    run_tolerance,
 )
 
 from multiarm_pin._compiled import closed_loop as kernels
 from multiarm_pin._compiled import layout
-from multiarm_pin.app.runner import make_controller, simulate_built
-from multiarm_pin.app.scenario import build_scenario, load_scenario
-from multiarm_pin.exceptions import DynamicsError
-from multiarm_pin.sim import compiled_loop
+from multiarm_pin.exceptions import MultiArmError
 from multiarm_pin.sim.closed_loop import closed_loop_evaluation
 from multiarm_pin.sim.compiled_loop import CompiledLoop
 from multiarm_pin.sim.controllers.object_pd import ObjectPDPlan
-from multiarm_pin.sim.simulation import partial_result
 from multiarm_pin.sim.stepper import Stepper
 
-SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 CASES = [(seed, 1 + seed % 6) for seed in range(12)]
 BAUMGARTE = (5.0, 5.0)
 
@@ -50,7 +47,7 @@ def fused_case(seed, n_arms):
         inputs = ctrl.kernel_inputs()
         warm = None if inputs is None else inputs[7].copy()
         out = closed_loop_evaluation(system, ctrl, 0.4, off, "object_first", stepper.baumgarte)
-    except DynamicsError:
+    except MultiArmError:  # singular here, or no inverse dynamics: other tests' business
         return None
     if warm is None or not isinstance(ctrl.last, ObjectPDPlan):
         return None  # the reference planned it: nothing compiled to compare
@@ -109,82 +106,13 @@ def test_cases_are_mostly_compared():
     assert sum(fused_case(seed, n) is not None for seed, n in CASES) >= len(CASES) // 2
 
 
-def run(name, duration, compiled, monkeypatch, **kw):
-    """A run of a shipped scenario, with or without the compiled loop; (result, loop runs)."""
-    sc = load_scenario(SCENARIOS / f"{name}.yaml")
-    built = build_scenario(sc, load_visuals=False)
-    sim = sc.simulation
-    calls = []
-    original = CompiledLoop.run
-
-    def counted(self, *args):
-        calls.append(args[3:5])
-        return original(self, *args)
-
-    with monkeypatch.context() as mp:
-        mp.setattr(CompiledLoop, "run", counted)
-        if not compiled:
-            mp.setattr(CompiledLoop, "for_run", classmethod(lambda cls, *a: None))
-        result = simulate_built(built, make_controller(built), duration, sim.dt, sim.solver,
-                                **kw)
-    return result, calls
-
-
-FIELDS = ("q", "v", "object_position", "object_quaternion", "object_twist", "tau", "mu", "phi",
-          "phi_dot", "contact_points", "normals", "object_acceleration", "qdd",
-          "kinetic_energy", "potential_energy", "momentum", "constraint_violation")
-PLANNED = ("tau", "mu", "object_acceleration", "qdd")
-"""Fields that carry a Panda's rank-deficient hold task's round-off noise (relative
-``TOL_RANK_DEFICIENT_HOLD``, see ``closed_loop_cases``): the two runs fix the controller's
-held points from evaluations equal to round-off, not bit for bit."""
-
-
-def tolerance(field: str) -> float:
-    """Agreement of the compiled and the Python loop on a recorded field."""
-    return TOL_RANK_DEFICIENT_HOLD if field in PLANNED else 1e-9
-
-
-@pytest.mark.parametrize("name", ["two_ur5_box", "three_ur5_box", "revolute_handle",
-                                  "ur5_panda_box", "mp6_pair_box", "fingertips_form_closure"])
-def test_runs_equal_the_python_loop(name, monkeypatch):
-    fast, calls = run(name, 0.1, True, monkeypatch)
-    ref, _ = run(name, 0.1, False, monkeypatch)
-    assert calls, "the compiled loop did not run"
-    for field in FIELDS:
-        assert rel_err(getattr(fast, field), getattr(ref, field)) <= tolerance(field), field
-    np.testing.assert_array_equal(fast.t, ref.t)
-    np.testing.assert_array_equal(fast.active, ref.active)
+@pytest.mark.parametrize("name", ["two_ur5_box", "fingertips_form_closure"])
+def test_a_few_steps_equal_the_python_loop(name, monkeypatch):
+    fast, calls = run_scenario(name, 0.006, True, monkeypatch)
+    ref, _ = run_scenario(name, 0.006, False, monkeypatch)
+    assert calls == [(k, k + 1) for k in range(4)]  # every sample by the kernel (stretches
+    # of n_steps // 100 steps, at least 1, for the progress reports)
+    for field in RUN_FIELDS:
+        assert rel_err(getattr(fast, field), getattr(ref, field)) <= run_tolerance(field), field
     assert list(fast.solver) == list(ref.solver)
-    assert fast.warnings == ref.warnings
-    assert np.abs(ref.object_twist).max() > 1e-3  # it moved
 
-
-def test_steps_handed_back_keep_the_events(monkeypatch):
-    """Fingertips that let go (grasp_failure): the kernel hands those steps back, the
-    stepper locates the same separations."""
-    fast, calls = run("grasp_failure", 0.6, True, monkeypatch)
-    ref, _ = run("grasp_failure", 0.6, False, monkeypatch)
-    assert calls, "the compiled loop did not run"
-    assert ref.events, "the scenario should separate"
-    assert [(e.kind, e.block, e.row) for e in fast.events] == \
-        [(e.kind, e.block, e.row) for e in ref.events]
-    for a, b in zip(fast.events, ref.events, strict=True):
-        assert abs(a.t - b.t) <= 1e-9
-    for field in FIELDS:
-        assert rel_err(getattr(fast, field), getattr(ref, field)) <= 1e-7, field
-
-
-def test_an_interrupt_keeps_the_samples_so_far(monkeypatch):
-    def progress(frac):
-        if frac > 0.5:
-            raise KeyboardInterrupt
-
-    full, _ = run("two_ur5_box", 0.2, True, monkeypatch)
-    with pytest.raises(KeyboardInterrupt) as info:
-        run("two_ur5_box", 0.2, True, monkeypatch, progress=progress)
-    part = partial_result(info.value)
-    n = len(part.t)
-    assert 0 < n < len(full.t)
-    for field in FIELDS:
-        np.testing.assert_array_equal(getattr(part, field), getattr(full, field)[:n])
-    assert (part.solver == compiled_loop.SOLVER_NAMES[False]).all()

@@ -4,8 +4,16 @@ Each kernel mirrors a numpy reference in the thesis layers and is tested against
 module per reference: :mod:`.linalg` (Cholesky, LAPACK), :mod:`.arm_terms`
 (``ArmSet.evaluate``), :mod:`.constraint_rows` (``ConstraintSet.evaluate``), :mod:`.assembly`
 (the reference blocks), :mod:`.object_first` (``solve_object_first_numpy``), :mod:`.evaluate`
-(all of them fused on one buffer), :mod:`.controller_kernels` (``ObjectPD.reference``) and
+(all of them fused on one buffer), :mod:`.controller_kernels` (``ObjectPD.reference``),
 :mod:`.rigid_body` (Pinocchio's pass of ``ArmSet.pinocchio_pass``: ``J``, ``dJ``, ``M``,
-``nle``, tool placements; ``integrate``, ``difference``).
+``nle``, tool placements; ``integrate``, ``difference``), :mod:`.trajectory`
+(``MinimumJerkTrajectory.motion``) and :mod:`.closed_loop` (the closed-loop evaluation and
+RK4 steps of ``simulate``).
 The layout of every array they exchange with Python is defined once in :mod:`.layout`.
+The kernels' on-disk cache is stamped with the contents of all kernel sources
+(:mod:`.cache`), so that editing a kernel recompiles the kernels that call it.
 """
+
+from multiarm_pin._compiled import cache as _cache
+
+_cache.install()

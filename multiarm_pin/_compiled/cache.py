@@ -1,0 +1,99 @@
+"""numba's on-disk cache of the kernels, made safe against edits of the kernels they call.
+
+numba keeps a compiled kernel (``cache=True``) in an index stamped with its own source file
+only. A kernel that calls kernels of other files (the compiled closed loop calls nearly all
+of them) is compiled with their code inside, so after an edit of a callee, or of the layout
+constants it reads, the caller's cache entry stays "fresh" and runs the old code: wrong
+numbers, silently (seen here: a table layout changed under a cached caller). This module
+stamps every kernel's cache entry with one digest of the contents of all the kernel source
+files (:data:`KERNEL_FILES`) instead, so any edit of any of them recompiles every kernel once,
+whichever cache folder numba uses (``NUMBA_CACHE_DIR``, ``__pycache__``, or the user-wide one
+when the package folder is read-only). Content, not
+modification time, so a fresh checkout with the same sources reuses a cache.
+
+It plugs into numba's cache locators (``numba.core.caching``: the classes numba tries in turn
+to place a function's cache), the extension point numba has for this; on a numba without that
+point it does nothing and numba's own stamps apply.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parent.parent
+"""The ``multiarm_pin`` package folder."""
+
+KERNEL_FILES = tuple(sorted(
+    [p.relative_to(PACKAGE).as_posix() for p in (PACKAGE / "_compiled").glob("*.py")]
+    + ["dynamics/force_qp.py", "dynamics/delassus.py", "dynamics/mlcp.py"]))
+"""Package-relative paths of every file that defines or feeds compiled kernels: the
+``_compiled`` package and the three dynamics modules with kernels of their own (a test checks
+that no other file of the package uses numba)."""
+
+_digest: str | None = None
+
+
+def kernel_sources_digest() -> str:
+    """SHA-256 of the names and contents of :data:`KERNEL_FILES` (computed once per process)."""
+    global _digest
+    if _digest is None:
+        h = hashlib.sha256()
+        for rel in KERNEL_FILES:
+            h.update(rel.encode())
+            h.update(b"\0")
+            h.update((PACKAGE / rel).read_bytes())
+            h.update(b"\0")
+        _digest = h.hexdigest()
+    return _digest
+
+
+def is_kernel_file(py_file: str) -> bool:
+    """True if ``py_file`` is one of :data:`KERNEL_FILES`."""
+    try:
+        rel = Path(py_file).resolve().relative_to(PACKAGE).as_posix()
+    except (ValueError, OSError):
+        return False
+    return rel in KERNEL_FILES
+
+
+def install() -> bool:
+    """Put the kernels' locators first in numba's list (once); False if numba has no such list.
+
+    Must run before the kernels are decorated (``multiarm_pin._compiled`` runs it on import).
+    """
+    try:
+        from numba.core import caching
+    except ImportError:  # pragma: no cover - numba is a dependency
+        return False
+    impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
+    bases = [getattr(caching, name, None) or getattr(caching, "_" + name, None)
+             for name in ("UserProvidedCacheLocator", "InTreeCacheLocator",
+                          "UserWideCacheLocator")]
+    classes = getattr(impl, "_locator_classes", None)
+    if not isinstance(classes, list) or None in bases:  # pragma: no cover - other numba
+        return False
+    if any(getattr(c, "_multiarm_pin", False) for c in classes):
+        return True
+    mine = [type(f"Kernel{base.__name__.lstrip('_')}", (_KernelStamp, base),
+                 {"_multiarm_pin": True}) for base in bases]
+    classes[:0] = mine
+    return True
+
+
+class _KernelStamp:
+    """Locator mixin: only for kernel files, stamped with :func:`kernel_sources_digest`."""
+
+    def get_source_stamp(self):
+        """The digest of all the kernel sources (numba compares it with the index's)."""
+        return kernel_sources_digest()
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        """The locator of a kernel, or None for any other function (numba tries the next)."""
+        if not is_kernel_file(py_file):
+            return None
+        return super().from_function(py_func, py_file)
+
+
+__all__ = ["KERNEL_FILES", "install", "is_kernel_file", "kernel_sources_digest"]
