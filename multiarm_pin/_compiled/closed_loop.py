@@ -33,13 +33,25 @@ import numpy as np
 from numba import njit
 
 from multiarm_pin._compiled.controller_kernels import PD_OK, object_pd_step, solve_with_torques
-from multiarm_pin._compiled.evaluate import _finish, _group_arms, arm_views, block_views
+from multiarm_pin._compiled.evaluate import (
+    _finish,
+    _group_arms,
+    arm_views,
+    block_views,
+    quaternion_rotation,
+)
 from multiarm_pin._compiled.layout import (
     DIMS_K,
     DIMS_M,
     DIMS_N,
     DIMS_NV,
+    EN_KINETIC,
+    EN_MOMENTUM,
+    EN_POTENTIAL,
     OBJECT_STATE_SIZE,
+    P_GRAVITY,
+    P_INERTIA,
+    P_MASS,
     REFERENCE_SIZE,
     ROW_NORMAL,
     ROW_PHI,
@@ -240,9 +252,9 @@ def _advance(model_ints, x, d, h, hd, out):  # pragma: no cover - compiled
 def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_starts, ints,
             floats, params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
             hold_obj, hold_n, gains, active, wrenches, separation, work_J, work_dJ, work_M,
-            work_nle, work_H, buf, tau, mu, qdd, a_pts, a_d, r_q, r_v, r_p, r_quat, r_tw, r_tau,
-            r_mu, r_phi, r_phi_dot, r_points, r_normals, r_a_o, r_qdd, r_violation, r_wrench,
-            r_kinetic):  # pragma: no cover - compiled
+            work_nle, work_H, work_energy, buf, tau, mu, qdd, a_pts, a_d, r_q, r_v, r_p, r_quat,
+            r_tw, r_tau, r_mu, r_phi, r_phi_dot, r_points, r_normals, r_a_o, r_qdd, r_violation,
+            r_wrench, r_kinetic, r_potential, r_momentum):  # pragma: no cover - compiled
     """RK4 steps from sample ``k0``, recording samples ``k0 .. k1 - 1``.
 
     Sample ``k`` is evaluated (stage 1), recorded, and unless it is the grid's last, the state
@@ -283,6 +295,7 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
         work_M: (nv, nv) workspace, zero off the arms' blocks.
         work_nle: (nv,) workspace.
         work_H: (n, 4, 4) workspace.
+        work_energy: (ENERGY_SIZE,) workspace.
         buf: (buffer size,) workspace, the last evaluation's buffer on return.
         tau: (n, k) the last evaluation's torques [N m].
         mu: (n, m) its planned multipliers [N].
@@ -304,7 +317,10 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
         r_qdd: (T, nv) joint accelerations.
         r_violation: (T,) ``max |φ|`` of the real rows [m].
         r_wrench: (T, 6) the external wrench [N, N m].
-        r_kinetic: (T,) the arms' ``½ vᵀ M v`` [J].
+        r_kinetic: (T,) kinetic energy of arms and object [J].
+        r_potential: (T,) their potential energy ``-Σ m g·c`` [J] (zero at the origin).
+        r_momentum: (T, 6) their total momentum ``[linear; angular about the world
+            origin]`` [kg m/s, kg m²/s].
 
     Returns:
         ``(status, k)``: ``STAGE_OK`` and ``k1`` when every sample was done, else the reason
@@ -340,7 +356,8 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
                 ts, xe, nq, model_ints, model_floats, q_ref, err, arm_ints, v_starts, ints,
                 floats, params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains,
                 hold_tool, hold_obj, hold_n, gains, active, wrenches, work_J, work_dJ, work_M,
-                work_nle, work_H, buf, tau, mu, qdd, a_pts, a_d, ref, E, z, ds[stage])
+                work_nle, work_H, work_energy, buf, tau, mu, qdd, a_pts, a_d, ref, E, z,
+                ds[stage])
             if st == STAGE_RELEASE and stage == 0 and s > 0:
                 # a row lets go at this sample: it did inside the step that led here, which
                 # the event machinery locates, from the previous sample (recorded)
@@ -360,9 +377,9 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
             if stage > 0:
                 continue
             if not _record(s, t, x, nq, nv, N, nv_arm, v_starts, unilateral, wrenches,
-                           separation, buf, tau, work_M, r_q, r_v, r_p, r_quat, r_tw, r_tau,
-                           r_mu, r_phi, r_phi_dot, r_points, r_normals, r_a_o, r_qdd,
-                           r_violation, r_wrench, r_kinetic):
+                           separation, params, buf, tau, work_energy, r_q, r_v, r_p, r_quat,
+                           r_tw, r_tau, r_mu, r_phi, r_phi_dot, r_points, r_normals, r_a_o,
+                           r_qdd, r_violation, r_wrench, r_kinetic, r_potential, r_momentum):
                 return STAGE_SEPARATION, s
             if s == times.shape[0] - 1:
                 return STAGE_OK, s + 1
@@ -375,9 +392,10 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
 
 
 @njit(cache=True, error_model="numpy")
-def _record(s, t, x, nq, nv, N, nv_arm, v_starts, unilateral, wrenches, separation, buf, tau,
-            M, r_q, r_v, r_p, r_quat, r_tw, r_tau, r_mu, r_phi, r_phi_dot, r_points, r_normals,
-            r_a_o, r_qdd, r_violation, r_wrench, r_kinetic):  # pragma: no cover - compiled
+def _record(s, t, x, nq, nv, N, nv_arm, v_starts, unilateral, wrenches, separation, params,
+            buf, tau, energy, r_q, r_v, r_p, r_quat, r_tw, r_tau, r_mu, r_phi, r_phi_dot,
+            r_points, r_normals, r_a_o, r_qdd, r_violation, r_wrench, r_kinetic, r_potential,
+            r_momentum):  # pragma: no cover - compiled
     """Record sample ``s`` from its evaluation (arguments as :func:`run_rk4`'s).
 
     Returns False, recording nothing, if a unilateral row's gap or gap rate is past
@@ -424,13 +442,34 @@ def _record(s, t, x, nq, nv, N, nv_arm, v_starts, unilateral, wrenches, separati
                 r_points[s, i, r, a] = rows[i, r, ROW_POINT + a]
                 r_normals[s, i, r, a] = rows[i, r, ROW_NORMAL + a]
     r_violation[s] = viol
-    ke = 0.0
-    for i in range(nv):
+    # the object's: ½ m |ẋ|² + ½ ωᵀ I_w ω, -m g·x, [m ẋ; I_w ω + x × m ẋ] (I_w = R I_c Rᵀ)
+    R = np.empty((3, 3))
+    quaternion_rotation(x[X_QUATERNION:X_QUATERNION + 4], R)
+    mass = params[P_MASS]
+    L = np.zeros(3)  # I_w ω = R (I_c (Rᵀ ω))
+    b = np.zeros(3)
+    for a in range(3):
+        for c in range(3):
+            b[a] += R[c, a] * x[X_TWIST + 3 + c]
+    for a in range(3):
         acc = 0.0
-        for j in range(nv):
-            acc += M[i, j] * x[v0 + j]
-        ke += x[v0 + i] * acc
-    r_kinetic[s] = 0.5 * ke
+        for c in range(3):
+            acc += params[P_INERTIA + 3 * a + c] * b[c]
+        for r in range(3):
+            L[r] += R[r, a] * acc
+    ke, pe = energy[EN_KINETIC], energy[EN_POTENTIAL]
+    p_lin = np.empty(3)
+    for a in range(3):
+        ke += 0.5 * (mass * x[X_TWIST + a] * x[X_TWIST + a] + x[X_TWIST + 3 + a] * L[a])
+        pe -= mass * params[P_GRAVITY + a] * x[X_POSITION + a]
+        p_lin[a] = mass * x[X_TWIST + a]
+    for a in range(3):
+        r_momentum[s, a] = energy[EN_MOMENTUM + a] + p_lin[a]
+        c1, c2 = (a + 1) % 3, (a + 2) % 3
+        r_momentum[s, 3 + a] = (energy[EN_MOMENTUM + 3 + a] + L[a]
+                                + x[X_POSITION + c1] * p_lin[c2] - x[X_POSITION + c2] * p_lin[c1])
+    r_kinetic[s] = ke
+    r_potential[s] = pe
     return True
 
 
@@ -438,17 +477,18 @@ def _record(s, t, x, nq, nv, N, nv_arm, v_starts, unilateral, wrenches, separati
 def closed_loop_evaluate(t, x, nq, model_ints, model_floats, q_ref, err, arm_ints, v_starts,
                          ints, floats, params, dims, N, nv_arm, unilateral, traj, pd_gains,
                          null_gains, hold_tool, hold_obj, hold_n, gains, active, wrenches, J,
-                         dJ, M, nle, H, buf, tau, mu, qdd, a_pts, a_d, ref, E, z,
+                         dJ, M, nle, H, energy, buf, tau, mu, qdd, a_pts, a_d, ref, E, z,
                          d):  # pragma: no cover - compiled
     """One closed-loop evaluation with its arm terms (arguments as :func:`run_rk4`'s).
 
     :func:`closed_loop_stage` after :func:`rigid_body_pass` (into ``J``, ``dJ``, ``M``,
-    ``nle``, ``H``) and ``err = q_ref ⊖ q`` at ``x`` (``nq`` configuration entries).
+    ``nle``, ``H``, ``energy``) and ``err = q_ref ⊖ q`` at ``x`` (``nq`` configuration entries).
     """
     nv = err.shape[0]
     q0 = OBJECT_STATE_SIZE
     q = x[q0:q0 + nq]
-    rigid_body_pass(model_ints, model_floats, q, x[q0 + nq:q0 + nq + nv], J, dJ, M, nle, H)
+    rigid_body_pass(model_ints, model_floats, q, x[q0 + nq:q0 + nq + nv], J, dJ, M, nle, H,
+                    energy)
     difference(model_ints, q, q_ref, err)
     return closed_loop_stage(t, x, err, J, dJ, M, nle, H, arm_ints, v_starts, ints, floats,
                              params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains,

@@ -308,8 +308,8 @@ def step_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, i
 
 
 @njit(cache=True, error_model="numpy")
-def evaluate_state(model_ints, model_floats, J_world, dJ_world, M_full, nle_full, H, x, arm_ints,
-                   v_starts, ints, floats, params, dims, N, step,
+def evaluate_state(model_ints, model_floats, J_world, dJ_world, M_full, nle_full, H, energy, x,
+                   arm_ints, v_starts, ints, floats, params, dims, N, step,
                    buf):  # pragma: no cover - compiled
     """:func:`evaluate_system` (``step``: :func:`step_system`) with the arm terms computed here.
 
@@ -327,6 +327,7 @@ def evaluate_state(model_ints, model_floats, J_world, dJ_world, M_full, nle_full
         M_full: workspace (nv, nv), the mass matrix (arm blocks; zero elsewhere).
         nle_full: workspace (nv,), the nonlinear effects.
         H: workspace (n, 4, 4), the tool placements.
+        energy: workspace (ENERGY_SIZE,), the arms' energies and momentum.
         x: (13 + nq + 2 nv,) the state vector (see :func:`evaluate_system`).
         arm_ints: (n, 1 + 2k) the arm table.
         v_starts: (n,) int first joint of each arm in ``v``.
@@ -346,7 +347,7 @@ def evaluate_state(model_ints, model_floats, J_world, dJ_world, M_full, nle_full
     q0 = OBJECT_STATE_SIZE
     nq = x.shape[0] - q0 - 2 * nv
     rigid_body_pass(model_ints, model_floats, x[q0:q0 + nq], x[q0 + nq:q0 + nq + nv], J_world,
-                    dJ_world, M_full, nle_full, H)
+                    dJ_world, M_full, nle_full, H, energy)
     if step:
         return step_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, ints,
                            floats, params, dims, N, buf)

@@ -179,6 +179,15 @@ MI_KIND = _MI["kind"]
 MI_IDX_Q = _MI["idx_q"]
 MI_IDX_V = _MI["idx_v"]
 
+ENERGY_FIELDS = (("kinetic", 1), ("potential", 1), ("momentum", 6))
+"""Energies and momentum of the arms' bodies (``rigid_body_pass``'s ``energy``): kinetic and
+gravitational potential energy [J], total momentum ``[linear; angular about the world
+origin]`` [kg m/s, kg m²/s], world axes."""
+_EN, ENERGY_SIZE = _starts(ENERGY_FIELDS)
+EN_KINETIC = _EN["kinetic"]
+EN_POTENTIAL = _EN["potential"]
+EN_MOMENTUM = _EN["momentum"]
+
 MODEL_FLOAT_FIELDS = (("placement", 12), ("axis", 3), ("mass", 1), ("lever", 3),
                       ("inertia", 9), ("armature", 1), ("gravity", 6))
 """Float columns per row of the model tables: placement in the parent joint's frame (a

@@ -27,6 +27,10 @@ import numpy as np
 from numba import njit
 
 from multiarm_pin._compiled.layout import (
+    EN_KINETIC,
+    EN_MOMENTUM,
+    EN_POTENTIAL,
+    ENERGY_SIZE,
     KIND_PRISMATIC,
     KIND_REVOLUTE,
     KIND_REVOLUTE_UNBOUNDED,
@@ -68,8 +72,8 @@ _RI = 24
 
 
 @njit(cache=True, error_model="numpy")
-def rigid_body_pass(model_ints, model_floats, q, v, J, dJ, M, nle,
-                    H):  # pragma: no cover - compiled
+def rigid_body_pass(model_ints, model_floats, q, v, J, dJ, M, nle, H,
+                    energy):  # pragma: no cover - compiled
     """Joint Jacobians and their derivative, mass matrix, nonlinear effects, tool placements.
 
     Equals, for the model the tables were built from, what Pinocchio leaves in its ``Data``
@@ -96,6 +100,10 @@ def rigid_body_pass(model_ints, model_floats, q, v, J, dJ, M, nle,
         nle: output (nv,) nonlinear effects ``C(q, v) v + g(q)`` [N m, N] (``data.nle``).
         H: output (n_tools, 4, 4) world placements of the tool frames [m]; ``n_tools`` is
             read from its first axis.
+        energy: output (ENERGY_SIZE,) (``ENERGY_FIELDS``): kinetic energy ``½ Σ Vᵀ I V``
+            and potential energy ``-Σ m g·c`` of all bodies [J] (Pinocchio's
+            ``computeKineticEnergy``, ``computePotentialEnergy``), and their total momentum
+            ``Σ I V`` ``[linear; angular about the world origin]`` [kg m/s, kg m²/s].
     """
     rows = model_ints.shape[0]
     nj = rows - H.shape[0]
@@ -106,6 +114,8 @@ def rigid_body_pass(model_ints, model_floats, q, v, J, dJ, M, nle,
         W[s1, _JM + k] = e
         W[s1, _LOC + k] = e
         W[0, _T + k % 12] = 1.0 if k % 12 % 5 == 0 else 0.0
+    for a in range(ENERGY_SIZE):
+        energy[a] = 0.0
     for a in range(6):
         W[0, _V + a] = 0.0
         W[0, _A + a] = -model_floats[0, MF_GRAVITY + a]
@@ -217,6 +227,12 @@ def rigid_body_pass(model_ints, model_floats, q, v, J, dJ, M, nle,
             for c in range(6):
                 s += W[i, _I + 6 * r + c] * W[i, _V + c]
             W[s2, _Y + r] = s
+        # the body's kinetic energy ½ Vᵀ I V, potential energy -m g·c, momentum I V
+        for r in range(6):
+            energy[EN_KINETIC] += 0.5 * W[i, _V + r] * W[s2, _Y + r]
+            energy[EN_MOMENTUM + r] += W[s2, _Y + r]
+        for r in range(3):
+            energy[EN_POTENTIAL] -= m * model_floats[0, MF_GRAVITY + r] * W[s2, _U + r]
         for r in range(6):
             s = 0.0
             for c in range(6):

@@ -385,9 +385,7 @@ class CompiledSystem:
         # the arms' tables of the compiled rigid-body pass (None: a joint it does not support,
         # then Pinocchio's pass), and its work arrays (M stays zero off the arms' blocks)
         self.model = aset.compiled_model
-        self._arm_work = (np.zeros((6, self.nv)), np.zeros((6, self.nv)),
-                          np.zeros((self.nv, self.nv)) if self.model is not None else None,
-                          np.zeros(self.nv), np.zeros((n, 4, 4)))
+        self._arm_work = None if self.model is None else self.model.outputs()
 
     def evaluate(self, state, tau, baumgarte, step: bool
                  ) -> tuple[BufferEvaluation, Solution | None]:
@@ -435,9 +433,8 @@ class CompiledSystem:
         buf = np.empty(self.layout.size)
         model = self.model
         if model is not None:  # arm terms, blocks (and solve) in one compiled call
-            J, dJ, M, nle, H = self._arm_work
             tables = self.contact_tables
-            status = kernels.evaluate_state(model.ints, model.floats, J, dJ, M, nle, H, x,
+            status = kernels.evaluate_state(model.ints, model.floats, *self._arm_work, x,
                                             self.arm_table, self.v_starts, tables.ints,
                                             tables.floats, params, self.dims, self.N, step, buf)
             finite = status != kernels.SOLVE_NOT_FINITE

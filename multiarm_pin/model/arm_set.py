@@ -329,7 +329,7 @@ class ArmSet:
         return np.array(H)
 
     def compiled_pass(self, q: np.ndarray, v: np.ndarray
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                      ) -> tuple[np.ndarray, ...]:
         """The compiled equivalent of :meth:`pinocchio_pass` followed by :meth:`data_arrays`.
 
         One call of :func:`multiarm_pin._compiled.rigid_body.rigid_body_pass` on the combined
@@ -341,10 +341,11 @@ class ArmSet:
             v: (nv,) combined velocity.
 
         Returns:
-            ``(J, dJ, M, nle, H)``: (6, nv) world Jacobian columns at the world origin and
-            (6, nv) their time derivative (as ``data.J``, ``data.dJ``), (nv, nv) mass matrix
-            (full symmetric, zero between arms), (nv,) nonlinear effects, (n, 4, 4) world
-            placements of the n tool frames.
+            ``(J, dJ, M, nle, H, energy)``: (6, nv) world Jacobian columns at the world
+            origin and (6, nv) their time derivative (as ``data.J``, ``data.dJ``), (nv, nv)
+            mass matrix (full symmetric, zero between arms), (nv,) nonlinear effects,
+            (n, 4, 4) world placements of the n tool frames, the arms' kinetic and potential
+            energy [J] and momentum (``ENERGY_FIELDS`` of :mod:`multiarm_pin._compiled.layout`).
 
         Raises:
             UnsupportedJointError: :attr:`compiled_model` is None (a joint type the compiled
@@ -356,9 +357,8 @@ class ArmSet:
             raise UnsupportedJointError(name, kind)
         if not self._compiled_out:
             self._compiled_out = cm.outputs()
-        J, dJ, M, nle, H = self._compiled_out
         rigid_body_pass(cm.ints, cm.floats, np.ascontiguousarray(q, dtype=float),
-                        np.ascontiguousarray(v, dtype=float), J, dJ, M, nle, H)
+                        np.ascontiguousarray(v, dtype=float), *self._compiled_out)
         return self._compiled_out
 
     def _full_pass(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -19,6 +19,7 @@ import numpy as np
 import pinocchio as pin
 
 from multiarm_pin._compiled.layout import (
+    ENERGY_SIZE,
     KIND_FRAME,
     KIND_PRISMATIC,
     KIND_REVOLUTE,
@@ -124,15 +125,15 @@ class CompiledModel:
         floats.setflags(write=False)
         return cls(ints, floats, nj, len(tools), model.nq, model.nv)
 
-    def outputs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Zeroed output arrays ``(J, dJ, M, nle, H)`` of the pass.
+    def outputs(self) -> tuple[np.ndarray, ...]:
+        """Zeroed output arrays ``(J, dJ, M, nle, H, energy)`` of the pass.
 
-        Shapes (6, nv), (6, nv), (nv, nv), (nv,), (n_tools, 4, 4); ``M`` must stay zero where
-        the pass does not write (joints of different arms or branches).
+        Shapes (6, nv), (6, nv), (nv, nv), (nv,), (n_tools, 4, 4), (ENERGY_SIZE,); ``M`` must
+        stay zero where the pass does not write (joints of different arms or branches).
         """
         nv = self.nv
         return (np.zeros((6, nv)), np.zeros((6, nv)), np.zeros((nv, nv)), np.zeros(nv),
-                np.zeros((self.n_tools, 4, 4)))
+                np.zeros((self.n_tools, 4, 4)), np.zeros(ENERGY_SIZE))
 
 
 def unsupported_joints(model: pin.Model) -> list[tuple[str, str]]:

@@ -56,14 +56,11 @@ class CompiledLoop:
             path.params, *stepper.baumgarte)
         self.params = params
         n, k, m = s.n_arms, s.arm_set.nv_max, s.N_max
-        nv = s.nv
-        self.work = (np.zeros((6, nv)), np.zeros((6, nv)), np.zeros((nv, nv)), np.zeros(nv),
-                     np.zeros((n, 4, 4)), np.zeros(path.layout.size), np.zeros((n, k)),
+        self.work = (*self.model.outputs(), np.zeros(path.layout.size), np.zeros((n, k)),
                      np.zeros((n, m)), np.zeros((n, k)))
         self.separation = np.array([ce.SEPARATION_GAP, ce.SEPARATION_SPEED])
         self.wrenches = (np.zeros((0, layout.WRENCH_WIDTH)) if stepper.wrench is None
                          else stepper.wrench.table())
-        self.kinetic = None  # (T,) arms' kinetic energy, allocated with the record
         self.last_status = kernels.STAGE_OK
 
     @classmethod
@@ -120,12 +117,10 @@ class CompiledLoop:
         ctrl = self.stepper.controller
         (traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, active, unilateral,
          q_ref) = ctrl.kernel_inputs()
-        if self.kinetic is None:
-            self.kinetic = np.zeros(len(times))
         o = state.obj
         x = layout.state_vector(o.position, o.quaternion, o.twist, state.q, state.v,
                                 np.zeros(s.nv))
-        J, dJ, M, nle, H, buf, tau, mu, qdd = self.work
+        J, dJ, M, nle, H, energy, buf, tau, mu, qdd = self.work
         a_pts = np.zeros(hold_tool.shape)
         a_d = np.zeros(6)
         status, k = kernels.run_rk4(
@@ -133,9 +128,9 @@ class CompiledLoop:
             path.v_starts, path.contact_tables.ints, path.contact_tables.floats, self.params,
             path.dims, path.N, path.nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
             hold_obj, hold_n, gains, active, self.wrenches, self.separation, J, dJ, M, nle, H,
-            buf, tau, mu, qdd, a_pts, a_d, rec.q, rec.v, rec.p, rec.quat, rec.twist, rec.tau,
-            rec.mu, rec.phi, rec.phi_dot, rec.points, rec.normals, rec.a_o, rec.qdd,
-            rec.violation, rec.wrench, self.kinetic)
+            energy, buf, tau, mu, qdd, a_pts, a_d, rec.q, rec.v, rec.p, rec.quat, rec.twist,
+            rec.tau, rec.mu, rec.phi, rec.phi_dot, rec.points, rec.normals, rec.a_o, rec.qdd,
+            rec.violation, rec.wrench, rec.ke, rec.pe, rec.momentum)
         self.last_status = int(status)
         k = int(k)
         done = slice(k0, k)
@@ -170,7 +165,7 @@ class CompiledLoop:
         o = state.obj
         x = layout.state_vector(o.position, o.quaternion, o.twist, state.q, state.v,
                                 np.zeros(s.nv))
-        J, dJ, M, nle, H, buf, tau, mu, qdd = self.work
+        J, dJ, M, nle, H, energy, buf, tau, mu, qdd = self.work
         n, k = tau.shape
         d = np.empty(2 * s.nv + layout.OBJECT_STATE_SIZE)
         status = kernels.closed_loop_evaluate(
@@ -178,27 +173,16 @@ class CompiledLoop:
             path.arm_table, path.v_starts, path.contact_tables.ints, path.contact_tables.floats,
             self.params, path.dims, path.N, path.nv_arm, unilateral, traj, pd_gains,
             null_gains, hold_tool, hold_obj, hold_n, gains, active, self.wrenches, J, dJ, M, nle,
-            H, buf, tau, mu, qdd, np.empty(hold_tool.shape), np.empty(6),
+            H, energy, buf, tau, mu, qdd, np.empty(hold_tool.shape), np.empty(6),
             np.empty(layout.REFERENCE_SIZE), np.empty((3, 3)), np.empty((n, k)), d)
         return int(status), d, s.unpad(tau)
 
     def _finish_record(self, rec: Recorder, times: np.ndarray, done: slice) -> None:
-        """What the kernel does not record at samples ``done``: energies, momentum, labels."""
-        s = self.system
+        """What the kernel does not record at samples ``done``: times, active set, solver."""
         rec.t[done] = times[done]
         rec.active[done] = self.stepper.active
         rec.solver[done] = SOLVER_NAMES[self.stepper.unilateral]
-        for k in range(done.start, done.stop):
-            st = rec_state(rec, k)
-            rec.ke[k] = self.kinetic[k] + s.obj.kinetic_energy(st.obj)
-            rec.pe[k] = s.potential_energy(st)
-            rec.momentum[k] = s.momentum(st)
         rec.mark_recorded(done.stop)
-
-
-def rec_state(rec: Recorder, k: int) -> SystemState:
-    """The state recorded at sample ``k`` (views of the record)."""
-    return SystemState(rec.q[k], rec.v[k], ObjectState(rec.p[k], rec.quat[k], rec.twist[k]))
 
 
 __all__ = ["SOLVER_NAMES", "CompiledLoop"]
