@@ -128,8 +128,11 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     rng = np.random.default_rng(0)
     cpu = platform.processor() or platform.machine()
-    lines = [f"# Compiled rigid-body pass vs ArmSet.pinocchio_pass ({cpu}, {os.cpu_count()} "
-             f"cores, pin {pin.__version__})", "",
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, text=True,
+                            capture_output=True).stdout.strip() or "unknown"
+    lines = [f"# Compiled rigid-body pass vs ArmSet.pinocchio_pass (commit {commit}, {cpu}, "
+             f"{os.cpu_count()} cores, pin {pin.__version__}, load {os.getloadavg()[0]:.1f})",
+             "",
              "| UR5s | pinocchio_pass [µs] | compiled_pass [µs] | kernel [µs] | "
              "pinocchio / compiled_pass | pinocchio / kernel |", "|---|---|---|---|---|---|"]
     for n in (int(x) for x in args.arms.split(",")):

@@ -13,10 +13,14 @@ world axes and at the world origin, each joint's placement, motion-subspace colu
 acceleration ``a`` (Newton-Euler with ``q̈ = 0``, the base accelerating at ``-g``), its spatial
 inertia and the force ``f = I a + V ×* I V``. One backward pass projects the forces
 (``nle = Sᵀ f``) and the composite inertias (CRBA: ``M[j, i] = S_jᵀ I_i^c S_i`` for every
-ancestor ``j`` of ``i``) and accumulates both into the parents. A spatial inertia at the world
-origin is stored as mass ``m``, first moment ``h = m c`` and rotational inertia about the
-origin ``I_O``; it maps a motion ``[v; ω]`` to ``[m v - h × ω; h × v + I_O ω]``. Spatial
-vectors are ``[linear; angular]`` as in Pinocchio.
+ancestor ``j`` of ``i``) and accumulates both into the parents; the tool frames' rows follow
+the joints' in the forward pass. A spatial inertia at the world origin is the 6x6 matrix
+``[[m 1, -m [c]ₓ], [m [c]ₓ, I_O]]`` (``c`` the COM, ``I_O`` the rotational inertia about the
+origin). Spatial vectors are ``[linear; angular]`` as in Pinocchio.
+
+Cost: one work array of ``(rows + 2, 68)`` floats allocated per call, ~0.35 µs per joint
+(median, this 2-core machine); cold compile ~4.3 s CPU for ``rigid_body_pass``
+(``benchmarks/rigid_body_pass.py``).
 """
 
 from __future__ import annotations
