@@ -36,22 +36,27 @@ BAUMGARTE = (5.0, 5.0)
 def fused_case(seed, n_arms):
     """A random case whose fused Python evaluation succeeds, with its controller fixed at rest.
 
-    Returns ``(system, off_state, controller, stepper, python (sol, ev, tau))`` or None when
-    the Python path raises at that state (those cases are the other tests' business).
+    Returns ``(system, off_state, controller, stepper, python (sol, ev, tau), warm start,
+    numpy reference (sol, ev, tau))`` or None when the Python path raises at that state
+    (those cases are the other tests' business).
     """
     system, state, off, trajectory = random_case(seed, n_arms)
     ctrl = object_pd(system, trajectory)
+    ref = object_pd(system, trajectory, compiled=False)
     stepper = Stepper(system, ctrl, "object_first", BAUMGARTE)
     try:
         closed_loop_evaluation(system, ctrl, 0.0, state, "object_first", stepper.baumgarte)
         inputs = ctrl.kernel_inputs()
         warm = None if inputs is None else inputs[7].copy()
         out = closed_loop_evaluation(system, ctrl, 0.4, off, "object_first", stepper.baumgarte)
+        ref(0.0, state, system.blocks(state, reference=True))
+        out_ref = closed_loop_evaluation(system, ref, 0.4, off, "object_first_numpy",
+                                         stepper.baumgarte, reference=True)
     except MultiArmError:  # singular here, or no inverse dynamics: other tests' business
         return None
     if warm is None or not isinstance(ctrl.last, ObjectPDPlan):
         return None  # the reference planned it: nothing compiled to compare
-    return system, off, ctrl, stepper, out, warm
+    return system, off, ctrl, stepper, out, warm, out_ref
 
 
 def stage_with_pinocchio(system, state, ctrl, t, params):
@@ -81,12 +86,14 @@ def stage_with_pinocchio(system, state, ctrl, t, params):
 @pytest.mark.parametrize("seed,n_arms", CASES)
 def test_one_evaluation_equals_the_python_path(seed, n_arms):
     """The stage on Pinocchio's terms, and with the compiled rigid-body pass, gives the
-    Python fused evaluation's torques and tangent."""
+    torques and tangent of the Python fused evaluation and of the numpy reference
+    (``ObjectPD.reference``, reference blocks, ``with_torques``, the numpy solver)."""
     case = fused_case(seed, n_arms)
     if case is None:
         pytest.skip("the Python path does not take the compiled controller here")
-    system, off, ctrl, stepper, (sol, ev, tau), warm = case
+    system, off, ctrl, stepper, (sol, ev, tau), warm, (sol_n, _, tau_n) = case
     d_ref = stepper.derivative(off, sol)
+    d_numpy = stepper.derivative(off, sol_n)
     cond = hold_task_conditions(ctrl, ev)  # the hold task's round-off grows as cond(A_i)²
     tol = max(TOL, 10 * EPS * cond.max() ** 2) if np.all(cond < 1e6) else \
         TOL_RANK_DEFICIENT_HOLD
@@ -100,6 +107,8 @@ def test_one_evaluation_equals_the_python_path(seed, n_arms):
         assert status == kernels.STAGE_OK
         assert rel_err(tau_k, tau) <= tol, compiled_pass
         assert rel_err(d, d_ref) <= tol, compiled_pass
+        assert rel_err(tau_k, tau_n) <= tol, compiled_pass
+        assert rel_err(d, d_numpy) <= tol, compiled_pass
 
 
 def test_cases_are_mostly_compared():

@@ -57,10 +57,16 @@ def test_matches_enumeration_and_admm(states):
         assert np.abs(Wt @ mu_flat[7:] - Wt @ lam[7:]).max() < 1e-9 * np.abs(lam).max()
 
 
-def test_all_touching_gives_the_bilateral_motion(states):
-    """Where no contact separates, the motion is the bilateral solve's (singular path)."""
+def test_all_touching_gives_the_bilateral_motion():
+    """Where no contact separates, the motion is the bilateral solve's (singular path).
+
+    Twelve states, of which those with no separating row are compared: a state whose
+    smallest fingertip force is near zero can change sides with round-off in its blocks
+    (one did when the arms' terms moved from Pinocchio to the compiled pass), so the test
+    does not rest on one such state.
+    """
     compared = 0
-    for b in states:
+    for b in two_gripper_table_states(12, seed=12):
         sol = solve_unilateral(b, b.constraint_mask)
         if sol.separating.any():
             continue
