@@ -325,9 +325,9 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
     Returns:
         ``(status, k)``: ``STAGE_OK`` and ``k1`` when every sample was done, else the reason
         and the sample ``k`` whose step the Python path must take (``x`` is that sample's
-        state; it may already be recorded). A unilateral row that lets go at a sample's own
-        evaluation (``STAGE_RELEASE`` at stage 1) sends back the previous sample, restored
-        from the record: the separation happened inside the step from there.
+        state; it may already be recorded). ``STAGE_RELEASE`` at a sample's own evaluation
+        (``x`` unchanged) means the row let go inside the step that led there: the caller
+        retakes that step if the kernel took it.
     """
     k, nv, n = dims[DIMS_K], dims[DIMS_NV], dims[DIMS_N]
     nq = q_ref.shape[0]
@@ -340,7 +340,6 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
     ref = np.empty(REFERENCE_SIZE)
     E = np.empty((3, 3))
     z = np.empty((n, k))
-    q0, v0 = OBJECT_STATE_SIZE, OBJECT_STATE_SIZE + nq
     ds = (d1, d2, d3, d4)
     for s in range(k0, k1):
         t = times[s]
@@ -358,20 +357,6 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
                 hold_tool, hold_obj, hold_n, gains, active, wrenches, work_J, work_dJ, work_M,
                 work_nle, work_H, work_energy, buf, tau, mu, qdd, a_pts, a_d, ref, E, z,
                 ds[stage])
-            if st == STAGE_RELEASE and stage == 0 and s > 0:
-                # a row lets go at this sample: it did inside the step that led here, which
-                # the event machinery locates, from the previous sample (recorded)
-                for j in range(nq):
-                    x[q0 + j] = r_q[s - 1, j]
-                for j in range(nv):
-                    x[v0 + j] = r_v[s - 1, j]
-                for a in range(3):
-                    x[X_POSITION + a] = r_p[s - 1, a]
-                for a in range(4):
-                    x[X_QUATERNION + a] = r_quat[s - 1, a]
-                for a in range(6):
-                    x[X_TWIST + a] = r_tw[s - 1, a]
-                return st, s - 1
             if st != STAGE_OK:
                 return st, s
             if stage > 0:

@@ -184,6 +184,12 @@ class Recorder:
         self._singular = singular
         self.count = k + 1
 
+    def state(self, k: int) -> SystemState:
+        """The state recorded at sample ``k`` (copies)."""
+        return SystemState(self.q[k].copy(), self.v[k].copy(),
+                           ObjectState(self.p[k].copy(), self.quat[k].copy(),
+                                       self.twist[k].copy()))
+
     def mark_recorded(self, count: int) -> None:
         """Samples up to ``count`` were recorded by the compiled loop.
 

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from multiarm_pin._compiled.closed_loop import STAGE_OK
+from multiarm_pin._compiled.closed_loop import STAGE_OK, STAGE_RELEASE
 from multiarm_pin._registry import lookup
 from multiarm_pin.constraints.joint import INITIAL_GAP_TOLERANCE
 from multiarm_pin.dynamics import solver_entry
@@ -229,7 +229,7 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
     else:
         every = max(1, n_steps // 100)
         loop = CompiledLoop.for_run(stepper, integrator)
-        k = 0
+        k, retaken = 0, -1  # the sample whose step the stepper took last
         while True:
             if loop is not None and loop.ready(state):
                 # a stretch of steps in one compiled call; the step it hands back, if any, is
@@ -240,6 +240,12 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
                     break
                 if loop.last_status == STAGE_OK:
                     continue
+                if loop.last_status == STAGE_RELEASE and 0 < k and retaken != k - 1:
+                    # a contact lets go at sample k: it did inside the step to k, which the
+                    # kernel took as bilateral; the stepper retakes it and locates the event
+                    k -= 1
+                    state = rec.state(k)
+                retaken = k
             t = times[k]
             sol, ev, tau, rows = stepper.evaluate(t, state)
             if stepper.separations(t, sol, rows):
