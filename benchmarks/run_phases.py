@@ -8,7 +8,10 @@ building the scenario, and writing each result file. Each round runs, in fresh p
 - a child process that does what :func:`multiarm_pin.app.runner.run_scenario` does, phase by
   phase, timing each one: importing the runner, loading and building the scenario (meshes
   included), the controller, the simulation, ``trajectory.npz``, the plots (their imports
-  included), the replay page (its imports included) and ``summary.json``;
+  included), the replay page (its imports included) and ``summary.json``, each alone;
+- a second child that writes all the result files as the runner does after the simulation
+  (``all result files (as run)``; ``around simulate (as run)`` adds the import, build and
+  controller phases);
 - the whole ``multiarm-pin run SCENARIO --out DIR --quiet`` (the figure the user sees).
 
 Times are medians over ``--repeat`` rounds (the numba cache warmed first by one run). To
@@ -41,8 +44,13 @@ PHASES = ("import", "build", "controller", "simulate", "trajectory", "plots", "r
 """Phases timed inside the child process, in order."""
 
 
-def child(scenario: str, out: str, duration: float | None) -> dict:
-    """Run the phases of ``run_scenario`` in this (fresh) process; wall time [s] of each."""
+def child(scenario: str, out: str, duration: float | None, as_run: bool = False) -> dict:
+    """Run the phases of ``run_scenario`` in this (fresh) process; wall time [s] of each.
+
+    ``as_run``: after the simulation, time the runner's own writing of every result file
+    (``runner._write_results``: the plots drawn meanwhile in a child process where it does
+    so) instead of each file alone.
+    """
     times = {}
     t = time.perf_counter()
     import numpy as np
@@ -70,6 +78,12 @@ def child(scenario: str, out: str, duration: float | None) -> dict:
     times["simulate"] = time.perf_counter() - t
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
+    if as_run:
+        t = time.perf_counter()
+        runner._write_results(folder, built, result, sc.simulation.solver, times["simulate"],
+                              T, sc, True, True, "complete", None, [])
+        times["all result files (as run)"] = time.perf_counter() - t
+        return times
     t = time.perf_counter()
     traj = trajectory_arrays(built, result)
     np.savez_compressed(folder / "trajectory.npz", **traj)
@@ -95,8 +109,18 @@ def child(scenario: str, out: str, duration: float | None) -> dict:
 
 def _wall(cmd: list[str], env: dict) -> float:
     t = time.perf_counter()
-    subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL)
+    subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL,
+                   cwd=env["RUN_PHASES_CWD"])
     return time.perf_counter() - t
+
+
+def _child(args, env: dict, out: str, as_run: bool) -> dict:
+    cmd = [sys.executable, __file__, "--scenario", args.scenario, "--child", out,
+           *([] if args.duration is None else ["--duration", str(args.duration)]),
+           *(["--as-run"] if as_run else [])]
+    text = subprocess.run(cmd, check=True, env=env, capture_output=True, text=True,
+                          cwd=env["RUN_PHASES_CWD"]).stdout
+    return json.loads(text.strip().splitlines()[-1])
 
 
 def main(argv=None) -> int:
@@ -108,14 +132,17 @@ def main(argv=None) -> int:
     p.add_argument("--src", default=None, help="folder holding the multiarm_pin to measure")
     p.add_argument("--out", default=None, help="folder for run_phases.json and .md")
     p.add_argument("--child", default=None, help=argparse.SUPPRESS)
+    p.add_argument("--as-run", action="store_true", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.child is not None:
-        print(json.dumps(child(args.scenario, args.child, args.duration)))
+        print(json.dumps(child(args.scenario, args.child, args.duration, args.as_run)))
         return 0
 
     env = dict(os.environ)
     py = sys.executable
+    args.scenario = str(Path(args.scenario).resolve())
     with tempfile.TemporaryDirectory() as tmp:
+        env["RUN_PHASES_CWD"] = tmp  # not the checkout: `python -c` would import from it
         if args.src:  # that package first; an editable install's finder would shadow it
             Path(tmp, "sitecustomize.py").write_text(_SHADOW_EDITABLE)
             env["PYTHONPATH"] = os.pathsep.join(
@@ -133,24 +160,23 @@ def _measure(args, env: dict, py: str, tmp: str) -> int:
     """Run the rounds in ``tmp``, print and write the table."""
     cli = str(Path(py).parent / "multiarm-pin")
     src = subprocess.run([py, "-c", "import multiarm_pin; print(multiarm_pin.__file__)"],
-                         env=env, check=True, capture_output=True, text=True).stdout.strip()
+                         env=env, check=True, capture_output=True, text=True,
+                         cwd=tmp).stdout.strip()
     dur = [] if args.duration is None else ["--duration", str(args.duration)]
     rows: dict[str, list[float]] = {}
     run_cmd = [cli, "run", args.scenario, "--quiet", "--overwrite", *dur]
-    subprocess.run([*run_cmd, "--out", f"{tmp}/warm"], check=True, env=env,
-                   stdout=subprocess.DEVNULL)  # fills the numba cache
+    _wall([*run_cmd, "--out", f"{tmp}/warm"], env)  # fills the numba cache
     for r in range(args.repeat):
         rows.setdefault("cli --help", []).append(_wall([cli, "--help"], env))
         rows.setdefault("import cli", []).append(
             _wall([py, "-c", "import multiarm_pin.app.cli"], env))
-        out = subprocess.run([py, __file__, "--scenario", args.scenario, "--child",
-                              f"{tmp}/child{r}", *dur], check=True, env=env,
-                             capture_output=True, text=True).stdout
-        for k, v in json.loads(out.strip().splitlines()[-1]).items():
+        for k, v in _child(args, env, f"{tmp}/child{r}", False).items():
             rows.setdefault(k, []).append(v)
-        rows.setdefault("around simulate", []).append(
-            sum(v for k, v in json.loads(out.strip().splitlines()[-1]).items()
-                if k != "simulate"))
+        as_run = _child(args, env, f"{tmp}/as_run{r}", True)
+        rows.setdefault("all result files (as run)", []).append(
+            as_run["all result files (as run)"])
+        rows.setdefault("around simulate (as run)", []).append(
+            sum(v for k, v in as_run.items() if k != "simulate"))
         rows.setdefault("run (whole command)", []).append(
             _wall([*run_cmd, "--out", f"{tmp}/run{r}"], env))
     med = {k: statistics.median(v) for k, v in rows.items()}
