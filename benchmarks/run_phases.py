@@ -22,6 +22,8 @@ Usage::
 
     .venv/bin/python benchmarks/run_phases.py                      # demo, 5 rounds, ~2 min
     .venv/bin/python benchmarks/run_phases.py --repeat 3 --src /tmp/base --out /tmp/before
+    .venv/bin/python benchmarks/run_phases.py --compare /tmp/before/run_phases.json \
+        /tmp/after/run_phases.json                                 # before / after ratios
 """
 
 from __future__ import annotations
@@ -123,6 +125,20 @@ def _child(args, env: dict, out: str, as_run: bool) -> dict:
     return json.loads(text.strip().splitlines()[-1])
 
 
+def compare_table(before: dict, after: dict) -> str:
+    """Markdown table of two ``run_phases.json`` medians: before, after, before / after."""
+    lines = [f"before: {before['package']}", f"after: {after['package']}", "",
+             "| phase | before [s] | after [s] | before / after |", "|---|---|---|---|"]
+    for k, a in after["median"].items():
+        b = before["median"].get(k)
+        if b is None:
+            lines.append(f"| {k} | - | {a:.3f} | - |")
+        else:
+            lines.append(f"| {k} | {b:.3f} | {a:.3f} | {b / a:.2f}x |" if a > 0 else
+                         f"| {k} | {b:.3f} | {a:.3f} | - |")
+    return "\n".join(lines) + "\n"
+
+
 def main(argv=None) -> int:
     """Measure, print a table and write ``run_phases.json`` / ``.md`` into ``--out``."""
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -131,9 +147,15 @@ def main(argv=None) -> int:
     p.add_argument("--repeat", type=int, default=5, help="rounds (medians)")
     p.add_argument("--src", default=None, help="folder holding the multiarm_pin to measure")
     p.add_argument("--out", default=None, help="folder for run_phases.json and .md")
+    p.add_argument("--compare", nargs=2, metavar=("BEFORE", "AFTER"), default=None,
+                   help="print the table of two run_phases.json files (no measurement)")
     p.add_argument("--child", default=None, help=argparse.SUPPRESS)
     p.add_argument("--as-run", action="store_true", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
+    if args.compare:
+        before, after = (json.loads(Path(f).read_text()) for f in args.compare)
+        print(compare_table(before, after), end="")
+        return 0
     if args.child is not None:
         print(json.dumps(child(args.scenario, args.child, args.duration, args.as_run)))
         return 0
