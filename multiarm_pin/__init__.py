@@ -17,18 +17,49 @@ IK), :mod:`multiarm_pin.grasp` (thesis ch. 2), :mod:`multiarm_pin.constraints` (
 frames, signs): ``docs/ARCHITECTURE.md``.
 """
 
-from multiarm_pin.app.replay import write_replay
-from multiarm_pin.app.scenario import build_scenario, load_scenario
-from multiarm_pin.constraints import make_joint
 from multiarm_pin.exceptions import DynamicsError, InputError, MultiArmError, UnreachableError
-from multiarm_pin.grasp import Grasp, contact_on_face, form_closure
-from multiarm_pin.model.arm import Arm, available_robots, load_arm
-from multiarm_pin.model.ik import ik_frame_points, ik_tool_placement
-from multiarm_pin.model.rigid_object import RigidObject
-from multiarm_pin.sim.controllers import make_controller
-from multiarm_pin.sim.simulation import SimulationResult, simulate
-from multiarm_pin.sim.trajectories import MinimumJerkTrajectory
-from multiarm_pin.system import MultiArmSystem, SystemState
+
+# The names above are imported at first use (PEP 562): ``import multiarm_pin`` (and every
+# ``import multiarm_pin.<module>``, the command line's included) then costs nothing for the
+# layers it does not use (the replay's meshcat, the compiled kernels, the grasp analysis).
+_LAZY = {
+    "write_replay": "multiarm_pin.app.replay",
+    "build_scenario": "multiarm_pin.app.scenario",
+    "load_scenario": "multiarm_pin.app.scenario",
+    "make_joint": "multiarm_pin.constraints",
+    "Grasp": "multiarm_pin.grasp",
+    "contact_on_face": "multiarm_pin.grasp",
+    "form_closure": "multiarm_pin.grasp",
+    "Arm": "multiarm_pin.model.arm",
+    "available_robots": "multiarm_pin.model.arm",
+    "load_arm": "multiarm_pin.model.arm",
+    "ik_frame_points": "multiarm_pin.model.ik",
+    "ik_tool_placement": "multiarm_pin.model.ik",
+    "RigidObject": "multiarm_pin.model.rigid_object",
+    "make_controller": "multiarm_pin.sim.controllers",
+    "SimulationResult": "multiarm_pin.sim.simulation",
+    "simulate": "multiarm_pin.sim.simulation",
+    "MinimumJerkTrajectory": "multiarm_pin.sim.trajectories",
+    "MultiArmSystem": "multiarm_pin.system",
+    "SystemState": "multiarm_pin.system",
+}
+
+
+def __getattr__(name: str):
+    """Import a top-level name of :data:`_LAZY` from its module at first use."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'multiarm_pin' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
+
 
 __version__ = "0.1.0"
 

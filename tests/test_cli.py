@@ -80,3 +80,37 @@ def test_exit_codes_and_no_tracebacks(tmp_path):
         p = run_cli(*args)
         assert p.returncode == 2, (args, p.stderr)
         assert p.stderr.startswith("error: ") and "Traceback" not in p.stderr, p.stderr
+
+
+def _imported_after(code: str) -> set[str]:
+    """Top-level packages (and a few submodules) in ``sys.modules`` after running ``code``."""
+    import subprocess
+    import sys
+
+    probe = (f"{code}\nimport sys\nprint(' '.join(sorted(m for m in sys.modules "
+             "if '.' not in m or m.startswith('pinocchio.'))))")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    return set(out.stdout.split("\n")[-2].split())
+
+
+def test_start_up_imports_only_what_the_subcommand_uses(tmp_path):
+    # `--help` (and any argument error) answers without the heavy layers
+    help_ = _imported_after("import contextlib, io\nfrom multiarm_pin.app.cli import main\n"
+                            "with contextlib.redirect_stdout(io.StringIO()):\n"
+                            "    try:\n        main(['--help'])\n"
+                            "    except SystemExit:\n        pass")
+    heavy = {"meshcat", "numba", "matplotlib", "dask", "distributed", "scipy", "pinocchio",
+             "pyarrow", "collada", "trimesh"}
+    assert "multiarm_pin" in help_
+    assert not heavy & help_, sorted(heavy & help_)
+    # a run with its plots and replay page: no Dask, no Pinocchio visualizer (trimesh)
+    sc = write(tmp_path / "s.yaml", one_arm_scenario(duration=0.02))
+    run = _imported_after(f"from multiarm_pin.app.cli import main\n"
+                          f"assert main(['run', {str(sc)!r}, '--out', "
+                          f"{str(tmp_path / 'out')!r}, '--quiet']) == 0")
+    assert {"meshcat", "matplotlib", "numba"} <= run
+    unused = {"dask", "distributed", "pyarrow", "trimesh", "pinocchio.visualize"}
+    assert not unused & run, sorted(unused & run)
+    assert (tmp_path / "out" / "replay.html").stat().st_size > 0

@@ -297,3 +297,19 @@ def test_an_unreadable_or_mismatched_collada_file_falls_back_to_mesh_color(tmp_p
         mesh = visual_mesh(_geometry(moved, geometry_file=plain), None, {})
     assert mesh.colors == ((0.9, 0.9, 0.9, 1.0),)
     np.testing.assert_allclose(mesh.vertices.min(axis=0), [0, 0, 0])
+
+
+def test_unique_rows_is_numpys_unique_of_rows():
+    from multiarm_pin.app.replay_meshes import unique_rows
+
+    rng = np.random.default_rng(5)
+    # few distinct values per column: many duplicate rows and ties on x and on (x, y)
+    a = rng.integers(-3, 4, size=(5000, 3)).astype(np.float32) * np.float32(0.37)
+    a[1::2] = a[::2]  # every row twice
+    unique, inverse = unique_rows(a)
+    ref_unique, ref_inverse = np.unique(a, axis=0, return_inverse=True)
+    np.testing.assert_array_equal(unique, ref_unique)
+    np.testing.assert_array_equal(inverse, ref_inverse.reshape(-1))
+    np.testing.assert_array_equal(unique[inverse], a)
+    one, idx = unique_rows(np.ones((1, 3), dtype=np.float32))
+    assert one.shape == (1, 3) and list(idx) == [0]

@@ -1,1 +1,4 @@
-"""The application shell: scenario files, runs and their results, plots, replay, the CLI."""
+"""The shell around the library: scenario files, runs and their results, plots, replay, CLI."""
+
+REPLAY_FPS = 30
+"""Frames per second of the replay page (and the default of ``multiarm-pin replay --fps``)."""

@@ -25,16 +25,17 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-import numpy as np
-
-from multiarm_pin.app.run_results import REPLAY_FPS, load_run, run_status
-from multiarm_pin.app.runner import http_status, run_scenario, serve_run
+from multiarm_pin.app import REPLAY_FPS
 from multiarm_pin.data import DEMO_SCENARIO, data_path, shipped_files
 from multiarm_pin.exceptions import MultiArmError, RunFailedError, RunInterrupted
+
+# The work of each subcommand (numpy, Pinocchio, the compiled kernels, meshcat, Dask...) is
+# imported by the subcommand, so `multiarm-pin --help` or a bad argument answers at once.
 
 
 def _info(args: argparse.Namespace) -> int:
     """Load two arms and an object and print their key quantities."""
+    import numpy as np
     import pinocchio as pin
 
     from multiarm_pin.model.arm import Arm
@@ -78,7 +79,19 @@ def _version() -> str:
     return __version__
 
 
-def _build_parser() -> argparse.ArgumentParser:
+def _command(argv: Sequence[str]) -> str:
+    """The subcommand named in ``argv`` (its first positional argument), or ``""``."""
+    return next((a for a in argv if not a.startswith("-")), "")
+
+
+def _build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of ``multiarm-pin``.
+
+    Args:
+        command: the subcommand about to run: the ``grasp`` and ``sweep`` arguments (whose
+            modules import the grasp analysis and the study packages) are added only for it;
+            None adds every subcommand's arguments.
+    """
     parser = argparse.ArgumentParser(
         prog="multiarm-pin",
         description="Multi-arm manipulation of large objects: grasp analysis, dynamics, replay.",
@@ -89,11 +102,12 @@ def _build_parser() -> argparse.ArgumentParser:
                         version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    from multiarm_pin.grasp import cli as grasp_cli
-
     p = sub.add_parser("grasp", help="grasp analysis of a YAML grasp file")
-    grasp_cli.configure_parser(p)
-    p.set_defaults(func=grasp_cli.run)
+    if command in (None, "grasp"):
+        from multiarm_pin.grasp import cli as grasp_cli
+
+        grasp_cli.configure_parser(p)
+        p.set_defaults(func=grasp_cli.run)
 
     p = sub.add_parser("run", help="simulate a scenario file")
     configure_run_parser(p)
@@ -101,11 +115,12 @@ def _build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("replay", help="serve the replay of a finished run")
     configure_replay_parser(p)
     p.set_defaults(func=replay_command)
-    from multiarm_pin.study import cli as study_cli
-
     p = sub.add_parser("sweep", help="run a study (sweep / Monte Carlo) on Dask")
-    study_cli.configure_parser(p)
-    p.set_defaults(func=study_cli.run)
+    if command in (None, "sweep"):
+        from multiarm_pin.study import cli as study_cli
+
+        study_cli.configure_parser(p)
+        p.set_defaults(func=study_cli.run)
     p = sub.add_parser("demo", help=f"run the shipped default scenario ({DEMO_SCENARIO})")
     p.add_argument("--out", default="results/demo", help="output folder (default results/demo)")
     p.add_argument("--duration", type=float, default=None, help="override the duration [s]")
@@ -171,6 +186,8 @@ def run_command(args: argparse.Namespace) -> int:
         0 for a complete run, 1 for a run that failed after its simulation started, 130 for
         an interrupted run (Ctrl-C, SIGTERM); partial results are written in both cases.
     """
+    from multiarm_pin.app.runner import run_scenario
+
     html = getattr(args, "html", True)
     try:
         res = run_scenario(args.scenario, args.out, args.solver, args.duration,
@@ -232,6 +249,8 @@ def configure_replay_parser(p: argparse.ArgumentParser) -> None:
 def replay_command(args: argparse.Namespace) -> int:
     """``multiarm-pin replay DIR``: serve the run and print its URL until Ctrl-C."""
     from multiarm_pin.app.replay import close_visualizer
+    from multiarm_pin.app.run_results import load_run, run_status
+    from multiarm_pin.app.runner import http_status, serve_run
 
     summary = load_run(args.dir)[2]
     if summary.get("status", "complete") != "complete":
@@ -262,7 +281,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     0 done; 1 a run failed after its simulation started; 2 bad input (the message names the
     file, the key path and what was expected); 130 interrupted (Ctrl-C).
     """
-    parser = _build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = _build_parser(_command(argv))
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)

@@ -40,6 +40,7 @@ import numpy as np
 import pinocchio as pin
 
 from multiarm_pin.app.replay_meshes import lambert_material, mesh_object, visual_mesh
+from multiarm_pin.app.replay_page import page_visualizer
 from multiarm_pin.app.replay_scene import (
     ReplayArm,
     ReplayContacts,
@@ -105,6 +106,49 @@ def _rotation_y_to(direction: np.ndarray) -> np.ndarray:
     return np.column_stack([x, y, z])
 
 
+def _norms(vectors: np.ndarray) -> np.ndarray:
+    """(N,) ``np.linalg.norm`` of each row of ``vectors`` (N, 3), the same bits as row by row.
+
+    (A batched norm sums the squares in another order than the 1-D norm's dot product, which
+    can change the last bit; N is a few hundred here, so the rows are taken one by one.)
+    """
+    return np.array([np.linalg.norm(v) for v in vectors]).reshape(len(vectors))
+
+
+def _rotations_y_to(directions: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) :func:`_rotation_y_to` of each unit row of ``directions`` (N, 3), batched."""
+    y = directions
+    helper = np.where((np.abs(y[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0])
+    x = np.cross(y, helper)
+    x /= _norms(x)[:, None]
+    z = np.cross(x, y)
+    return np.stack([x, y, z], axis=2)
+
+
+def _js_quaternions(R: np.ndarray) -> np.ndarray:
+    """(N, 4) ``[x, y, z, w]`` of rotations (N, 3, 3) as Meshcat's animation stores them.
+
+    ``meshcat.animation.js_quaternion`` (``transformations.quaternion_from_matrix`` with
+    ``isprecise=False``) batched: the eigenvector of the largest eigenvalue of Bar-Itzhack's
+    symmetric matrix K, sign chosen so that w >= 0, reordered from ``[w, x, y, z]``. The same
+    arithmetic on each matrix, so the same values as the per-matrix call.
+    """
+    m00, m01, m02 = R[:, 0, 0], R[:, 0, 1], R[:, 0, 2]
+    m10, m11, m12 = R[:, 1, 0], R[:, 1, 1], R[:, 1, 2]
+    m20, m21, m22 = R[:, 2, 0], R[:, 2, 1], R[:, 2, 2]
+    K = np.zeros((len(R), 4, 4))
+    K[:, 0, 0] = m00 - m11 - m22
+    K[:, 1, 0], K[:, 1, 1] = m01 + m10, m11 - m00 - m22
+    K[:, 2, 0], K[:, 2, 1], K[:, 2, 2] = m02 + m20, m12 + m21, m22 - m00 - m11
+    K[:, 3, 0], K[:, 3, 1], K[:, 3, 2] = m21 - m12, m02 - m20, m10 - m01
+    K[:, 3, 3] = m00 + m11 + m22
+    K /= 3.0
+    w, V = np.linalg.eigh(K)
+    q = V[np.arange(len(R)), :, np.argmax(w, axis=1)][:, [3, 0, 1, 2]]  # [w, x, y, z]
+    q[q[:, 0] < 0.0] *= -1.0
+    return q[:, [1, 2, 3, 0]]
+
+
 class _ArmDrawer:
     """Loads one arm's geometry into Meshcat and computes its node poses for a q."""
 
@@ -114,23 +158,20 @@ class _ArmDrawer:
         self.data = arm.model.createData()
         self.base = arm.base_placement.homogeneous
         if arm.visual_model is not None:
-            from pinocchio.visualize import MeshcatVisualizer
-
             self.geom = arm.visual_model
             self.geom_data = pin.GeometryData(self.geom)
-            viz = MeshcatVisualizer(arm.model, None, self.geom)
-            viz.initViewer(viewer=vis)
-            viz.viewerRootNodeName = self.root
-            viz.viewerVisualGroupName = f"{self.root}/visuals"
+            viz = None  # Pinocchio's MeshcatVisualizer, imported only for a primitive (~1 s)
             self.nodes = []
             self.scales = []
             for g in self.geom.geometryObjects:
-                node = viz.getViewerNodeName(g, pin.GeometryType.VISUAL)
+                # the node MeshcatVisualizer.getViewerNodeName gives a VISUAL geometry
+                node = f"{self.root}/visuals/{g.name}"
                 mesh = visual_mesh(g, arm.color, mesh_cache)
                 if mesh is not None:  # scale already applied to the vertices
                     vis[node].set_object(mesh_object(mesh))
                     self.scales.append(np.ones(3))
                 else:  # primitives and other formats: Pinocchio's own loader
+                    viz = viz or self._pinocchio_visualizer(vis)
                     viz.loadViewerGeometryObject(g, pin.GeometryType.VISUAL, arm.color)
                     self.scales.append(np.asarray(g.meshScale, dtype=float))
                 self.nodes.append(node)
@@ -143,14 +184,39 @@ class _ArmDrawer:
             for node in self.nodes:
                 vis[node].set_object(mg.Sphere(0.04), lambert_material(rgba))
 
-    def poses(self, q: np.ndarray) -> list[np.ndarray]:
-        """World poses (4, 4), pure rotation + translation, of this arm's nodes at ``q``."""
+    def _pinocchio_visualizer(self, vis: meshcat.Visualizer):
+        from pinocchio.visualize import MeshcatVisualizer
+
+        viz = MeshcatVisualizer(self.arm.model, None, self.geom)
+        viz.initViewer(viewer=vis)
+        viz.viewerRootNodeName = self.root
+        viz.viewerVisualGroupName = f"{self.root}/visuals"
+        return viz
+
+    def _placements(self, q: np.ndarray):
+        """The nodes' placements relative to the arm's base at ``q`` (``pin.SE3`` each)."""
         model = self.arm.model
         pin.forwardKinematics(model, self.data, q)
         if self.geom is None:
-            return [self.base @ self.data.oMi[j].homogeneous for j in range(1, model.njoints)]
+            return [self.data.oMi[j] for j in range(1, model.njoints)]
         pin.updateGeometryPlacements(model, self.data, self.geom, self.geom_data)
-        return [self.base @ M.homogeneous for M in self.geom_data.oMg]
+        return self.geom_data.oMg
+
+    def poses(self, q: np.ndarray) -> list[np.ndarray]:
+        """World poses (4, 4), pure rotation + translation, of this arm's nodes at ``q``."""
+        return [self.base @ M.homogeneous for M in self._placements(q)]
+
+    def pose_stack(self, qs: np.ndarray) -> np.ndarray:
+        """(F, nodes, 4, 4) world poses of the nodes at each row of ``qs`` (F, nq).
+
+        Equal to :meth:`poses` row by row (one Pinocchio pass per row, one batched product
+        with the base placement).
+        """
+        H = np.empty((len(qs), len(self.nodes), 4, 4))
+        for f, q in enumerate(qs):
+            for g, M in enumerate(self._placements(q)):
+                H[f, g] = M.homogeneous
+        return np.matmul(self.base, H)
 
 
 def _scaled(T: np.ndarray, scale: np.ndarray) -> np.ndarray:
@@ -306,28 +372,49 @@ def build_animation(
         R = _rotation_y_to(f / norm) if norm > 0 else np.eye(3)
         return _pose(R, contacts.points[i, k]), max(norm * force_scale, _MIN_SCALE)
 
-    for frame, i in enumerate(indices):
-        at = anim.at_frame(vis, frame)
-        for d in drawers:
-            for node, T, s in zip(d.nodes, d.poses(d.arm.q[i]), d.scales, strict=True):
-                at[node].set_transform(T)
-                if not np.allclose(s, 1.0):
-                    at[node].set_property("scale", "vector3", s.tolist())
-        if obj is not None:
-            R = quaternion_to_rotation(obj.quaternion[i])
-            at["object"].set_transform(_pose(R, obj.position[i]))
-        for k in range(n_contacts):
-            at[f"contacts/point_{k}"].set_transform(_pose(np.eye(3), contacts.points[i, k]))
-            if contacts.touching is not None:
-                on = bool(contacts.touching[i, k])
-                at[f"contacts/free_{k}"].set_transform(_pose(np.eye(3), contacts.points[i, k]))
-                at[f"contacts/point_{k}"].set_property(
-                    "scale", "vector3", [1.0] * 3 if on else [_MIN_SCALE] * 3)
-                at[f"contacts/free_{k}"].set_property(
-                    "scale", "vector3", [_MIN_SCALE] * 3 if on else [1.0] * 3)
-            T, length = contact_pose(i, k)
-            at[f"contacts/force_{k}"].set_transform(T)
-            at[f"contacts/force_{k}"].set_property("scale", "vector3", [1.0, length, 1.0])
+    # The timeline, one track per node and property, every frame at once (the content of
+    # ``anim.at_frame(vis, frame)[node].set_transform(T)`` frame by frame, in its order).
+    frames = list(range(len(indices)))
+
+    def track(node: str, prop: str, jstype: str, values: list) -> None:
+        key = vis.path.append(node)
+        clip = anim.clips.get(key)
+        if clip is None:
+            clip = anim.clips[key] = meshcat.animation.AnimationClip(fps=anim.default_framerate)
+        clip.tracks[prop] = meshcat.animation.AnimationTrack(prop, jstype, list(frames), values)
+
+    def transform_tracks(node: str, R: np.ndarray, p: np.ndarray) -> None:
+        track(node, "position", "vector3", p.tolist())
+        track(node, "quaternion", "quaternion", _js_quaternions(R).tolist())
+
+    for d in drawers:
+        H = d.pose_stack(d.arm.q[indices])
+        for g, (node, s) in enumerate(zip(d.nodes, d.scales, strict=True)):
+            transform_tracks(node, H[:, g, :3, :3], H[:, g, :3, 3])
+            if not np.allclose(s, 1.0):
+                track(node, "scale", "vector3", [s.tolist() for _ in frames])
+    if obj is not None:
+        R = np.array([quaternion_to_rotation(q) for q in obj.quaternion[indices]])
+        transform_tracks("object", R.reshape(-1, 3, 3), obj.position[indices])
+    if n_contacts:
+        eye = np.broadcast_to(np.eye(3), (len(indices), 3, 3))
+        one, hidden = [1.0] * 3, [_MIN_SCALE] * 3
+    for k in range(n_contacts):
+        points = contacts.points[indices, k]
+        transform_tracks(f"contacts/point_{k}", eye, points)
+        if contacts.touching is not None:
+            on = contacts.touching[indices, k].tolist()
+            transform_tracks(f"contacts/free_{k}", eye, points)
+            track(f"contacts/point_{k}", "scale", "vector3", [one if o else hidden for o in on])
+            track(f"contacts/free_{k}", "scale", "vector3", [hidden if o else one for o in on])
+        f = contacts.forces[indices, k]
+        norm = _norms(f)
+        pushing = norm > 0
+        R = np.array(eye)
+        R[pushing] = _rotations_y_to(f[pushing] / norm[pushing, None])
+        transform_tracks(f"contacts/force_{k}", R, points)
+        track(f"contacts/force_{k}", "scale", "vector3",
+              [[1.0, max(float(n) * force_scale, _MIN_SCALE), 1.0] for n in norm])
 
     # Static pose at the first frame, for viewers before (or without) the animation.
     i0 = int(indices[0])
@@ -382,8 +469,9 @@ def write_replay_html(
 ) -> Path:
     """Write a self-contained HTML page that replays the motion offline.
 
-    A temporary Meshcat server builds the scene and is stopped afterwards. The page
-    inlines three.js and all meshes; it needs no network.
+    The scene is built in this process (:mod:`multiarm_pin.app.replay_page`: the page a
+    Meshcat server would write, without starting one). The page inlines three.js and all
+    meshes; it needs no network.
 
     Args:
         path: output file (``.html``); its folder must exist.
@@ -403,14 +491,10 @@ def write_replay_html(
     if not path.parent.is_dir():
         raise InputError(f"write_replay_html: folder {path.parent} does not exist")
     t = check_replay_inputs(arms, obj, contacts, t, fps)
-    vis = _new_visualizer()
-    try:
-        anim = build_animation(vis, arms, obj, contacts, t, fps=fps)
-        vis.set_animation(anim, play=True, repetitions=1)
-        html = vis.static_html()
-    finally:
-        close_visualizer(vis)
-    path.write_text(html, encoding="utf-8")
+    vis = page_visualizer()
+    anim = build_animation(vis, arms, obj, contacts, t, fps=fps)
+    vis.set_animation(anim, play=True, repetitions=1)
+    path.write_text(vis.static_html(), encoding="utf-8")
     return path
 
 

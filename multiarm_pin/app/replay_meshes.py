@@ -165,6 +165,26 @@ def _triangle_parts(doc, path) -> list[tuple[np.ndarray, np.ndarray, RGBA | None
     return parts
 
 
+def unique_rows(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(a, axis=0, return_inverse=True)`` of a (N, 3) array, by one ``lexsort``.
+
+    The same sorted rows and indices (rows compared by value, x then y then z), several times
+    faster than ``np.unique``'s sort of a structured view. Only where equal values have
+    different bits (``-0.0`` and ``0.0``) may the row kept differ.
+
+    Returns:
+        ``(unique (U, 3), inverse (N,))`` with ``unique[inverse] == a``.
+    """
+    order = np.lexsort((a[:, 2], a[:, 1], a[:, 0]))
+    rows = a[order]
+    first = np.empty(len(a), dtype=bool)
+    first[:1] = True
+    first[1:] = np.any(rows[1:] != rows[:-1], axis=1)
+    inverse = np.empty(len(a), dtype=np.intp)
+    inverse[order] = np.cumsum(first) - 1
+    return rows[first], inverse
+
+
 def _grouped(vertices: np.ndarray, faces: np.ndarray, face_group: np.ndarray,
              palette: list[RGBA]) -> VisualMesh:
     """Merge identical float32 vertices, drop unused ones, sort faces by colour group.
@@ -175,7 +195,7 @@ def _grouped(vertices: np.ndarray, faces: np.ndarray, face_group: np.ndarray,
         face_group: (F,) index into ``palette`` of each face.
         palette: the distinct RGBA colours.
     """
-    unique, inverse = np.unique(vertices.astype(np.float32), axis=0, return_inverse=True)
+    unique, inverse = unique_rows(vertices.astype(np.float32))
     faces = inverse.reshape(-1)[faces]
     used, faces = np.unique(faces, return_inverse=True)
     faces = faces.reshape(-1, 3).astype(np.uint32)

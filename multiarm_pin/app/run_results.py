@@ -38,11 +38,9 @@ import numpy as np
 import pinocchio as pin
 import yaml
 
+from multiarm_pin.app import REPLAY_FPS
 from multiarm_pin.app.scenario import BuiltScenario, Scenario, load_scenario
 from multiarm_pin.exceptions import InputError
-
-REPLAY_FPS = 30
-"""Frames per second of the replay page."""
 
 
 # ----------------------------------------------------------------------------- writing

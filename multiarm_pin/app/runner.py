@@ -147,7 +147,7 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
         solver: overrides ``simulation.solver``.
         duration: overrides ``simulation.duration`` [s] (not shorter than ``simulation.dt``).
         quiet: no progress bar and no messages on stderr (warnings are still printed).
-        html: write ``replay.html`` (starts a temporary Meshcat server, a few seconds).
+        html: write ``replay.html`` (built in this process, about a second for two UR5s).
         plots: write the PNG plots.
         overwrite: replace a folder holding the results of another scenario file.
 
