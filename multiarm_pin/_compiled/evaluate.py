@@ -18,7 +18,11 @@ the parameter vector (``P_*``), ``dims`` (``DIMS_*``) and the flat output buffer
 object quantities at the COM, ``μ > 0`` pushing.
 
 Compilation is cached on disk (``cache=True``, in ``__pycache__``): the first call in a fresh
-checkout compiles every kernel (a few seconds), later processes load them.
+checkout compiles every kernel (about 30 s of CPU for the demo's kernels, see
+``benchmarks/compile_times.py``), later processes load them. Compile time grows with every
+jitted function on a kernel's call path (each is compiled, and its LLVM code optimised again
+inside each caller), so the kernels here call the leaf kernels directly, with their views
+taken by inlined helpers.
 """
 
 from __future__ import annotations
