@@ -28,11 +28,10 @@ import numpy as np
 from numba import njit
 
 from multiarm_pin._compiled.evaluate import (
-    arm_views,
-    block_views,
+    _arm_segments,
+    _block_segments,
+    _solution_segments,
     quaternion_rotation,
-    solution_views,
-    solve_views,
 )
 from multiarm_pin._compiled.layout import (
     DIMS_K,
@@ -45,20 +44,21 @@ from multiarm_pin._compiled.layout import (
     OX_POSITION,
     OX_ROTATION,
     OX_TWIST,
+    P_OBJECT_RCOND_TOL,
+    P_RCOND_TOL,
     PD_KD,
     PD_KP,
     REF_ACCELERATION,
     REF_POSITION,
     REF_ROTATION,
     REF_TWIST,
-    SEG_M,
     X_POSITION,
     X_QUATERNION,
     X_TWIST,
     offsets,
-    view3,
 )
 from multiarm_pin._compiled.linalg import cholesky, cholesky_solve
+from multiarm_pin._compiled.object_first import object_first
 from multiarm_pin.dynamics.force_qp import QP_OK, least_norm_forces
 
 PD_OK = 0
@@ -149,11 +149,14 @@ def min_norm_rows(W, ncols, nrows, g, x, Q, beta):  # pragma: no cover - compile
 
 
 @njit(cache=True, error_model="numpy")
-def _torques(arms, blocks, N, nv_arm, unilateral, obj_x, a_d, z, hold_tool, hold_obj,
-             hold_n, gains, active, tau, mu, qdd, a_pts):  # pragma: no cover - compiled
-    """:func:`object_pd_torques` on the buffer views."""
-    M, nle, J, Jdq, tp, tR, ttw, vp = arms
-    rows, h, W, W_o, c, M_o, h_o = blocks
+def _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilateral, obj_x,
+             a_d, z, hold_tool, hold_obj, hold_n, gains, active, tau, mu, qdd,
+             a_pts):  # pragma: no cover - compiled
+    """:func:`object_pd_torques` on the buffer views.
+
+    Not inlined (``inline="always"``): numba deep-copies the IR of an inlined function, which
+    for this one cost more than the separate compile (1.6 s CPU).
+    """
     n, k, m = W.shape
     hold_kp, hold_kd = gains[GAIN_HOLD_KP], gains[GAIN_HOLD_KD]
     damping, margin = gains[GAIN_DAMPING], gains[GAIN_MARGIN]
@@ -327,9 +330,11 @@ def object_pd_torques(buf, dims, N, nv_arm, unilateral, obj_x, a_d, z, hold_tool
     """
     k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
     off = offsets(n, k, m)
-    return _torques(arm_views(buf, off, n, k, m), block_views(buf, off, n, k, m), N, nv_arm,
-                    unilateral, obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains, active,
-                    tau, mu, qdd, a_pts)
+    M, _, J, Jdq, tp, tR, ttw, _ = _arm_segments(buf, off, n, k, m)
+    _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
+    return _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilateral,
+                    obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains, active, tau, mu, qdd,
+                    a_pts)
 
 
 @njit(cache=True, error_model="numpy")
@@ -421,12 +426,18 @@ def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold
                   + pd_gains[PD_KP + a] * e)
     k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
     off = offsets(n, k, m)
-    status = _torques(arm_views(buf, off, n, k, m), block_views(buf, off, n, k, m), N, nv_arm,
-                      unilateral, obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains, active,
-                      tau, mu, qdd, a_pts)
+    M, _, J, Jdq, tp, tR, ttw, _ = _arm_segments(buf, off, n, k, m)
+    _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
+    status = _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilateral,
+                      obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains, active, tau, mu, qdd,
+                      a_pts)
     if status != PD_OK or not solve:
         return status, -1
-    return status, solve_with_torques(buf, dims, N, params, tau)
+    # solve_with_torques, written out: calling it would compile it and optimise object_first
+    # once more inside it
+    a_o, qdd_s, mu_s = _solution_segments(buf, off, n, k, m)
+    return status, object_first(M, h + tau, W, W_o, c, M_o, h_o, N, params[P_RCOND_TOL],
+                                params[P_OBJECT_RCOND_TOL], a_o, qdd_s, mu_s)
 
 
 @njit(cache=True, error_model="numpy")
@@ -448,9 +459,11 @@ def solve_with_torques(buf, dims, N, params, tau):  # pragma: no cover - compile
     """
     k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
     off = offsets(n, k, m)
-    blocks = block_views(buf, off, n, k, m)
-    return solve_views(N, params, view3(buf, off, SEG_M, n, k, m), blocks[1] + tau, blocks,
-                       solution_views(buf, off, n, k, m))
+    M = _arm_segments(buf, off, n, k, m)[0]
+    _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
+    a_o, qdd, mu = _solution_segments(buf, off, n, k, m)
+    return object_first(M, h + tau, W, W_o, c, M_o, h_o, N, params[P_RCOND_TOL],
+                        params[P_OBJECT_RCOND_TOL], a_o, qdd, mu)
 
 
 __all__ = ["PD_ARM_RANK", "PD_FORCES_FAILED", "PD_LARGE_ROTATION", "PD_NOT_FINITE", "PD_OK",

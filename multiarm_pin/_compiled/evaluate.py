@@ -18,7 +18,11 @@ the parameter vector (``P_*``), ``dims`` (``DIMS_*``) and the flat output buffer
 object quantities at the COM, ``μ > 0`` pushing.
 
 Compilation is cached on disk (``cache=True``, in ``__pycache__``): the first call in a fresh
-checkout compiles every kernel (a few seconds), later processes load them.
+checkout compiles every kernel (about 30 s of CPU for the demo's kernels, see
+``benchmarks/compile_times.py``), later processes load them. Compile time grows with every
+jitted function on a kernel's call path (each is compiled, and its LLVM code optimised again
+inside each caller), so the kernels here call the leaf kernels directly, with their views
+taken by inlined helpers.
 """
 
 from __future__ import annotations
@@ -41,6 +45,7 @@ from multiarm_pin._compiled.layout import (
     OBJECT_STATE_SIZE,
     P_OBJECT_RCOND_TOL,
     P_RCOND_TOL,
+    ROW_WIDTH,
     SEG_A_O,
     SEG_C,
     SEG_H,
@@ -63,9 +68,6 @@ from multiarm_pin._compiled.layout import (
     X_QUATERNION,
     X_TWIST,
     offsets,
-    view1,
-    view2,
-    view3,
 )
 from multiarm_pin._compiled.object_first import SOLVE_OK, object_first
 from multiarm_pin._compiled.rigid_body import rigid_body_pass
@@ -90,36 +92,68 @@ def quaternion_rotation(quat, R):  # pragma: no cover - compiled
     R[2, 2] = 1 - 2 * (x * x + y * y)
 
 
+# The segment views are taken by the three inlined helpers below, with the shapes of
+# SEGMENT_TABLE written out (tests/test_kernels.py checks them against it): every other
+# compiled function, or a call to a jitted helper, on the path of a kernel is one more
+# numba compile and one more LLVM optimisation of everything it calls (issue 14), so the
+# kernels take their views and call the leaf kernels themselves, with no glue in between.
+@njit(cache=True, error_model="numpy", inline="always")
+def _arm_segments(buf, off, n, k, m):  # pragma: no cover - compiled
+    """Views of the arm segments (inlined): M, nle, J, Jdot_qdot, position, rotation, twist, v."""
+    three, six = np.int64(3), np.int64(6)
+    return (buf[off[SEG_M]:off[SEG_M + 1]].reshape((n, k, k)),
+            buf[off[SEG_NLE]:off[SEG_NLE + 1]].reshape((n, k)),
+            buf[off[SEG_J]:off[SEG_J + 1]].reshape((n, six, k)),
+            buf[off[SEG_JDOT_QDOT]:off[SEG_JDOT_QDOT + 1]].reshape((n, six)),
+            buf[off[SEG_POSITION]:off[SEG_POSITION + 1]].reshape((n, three)),
+            buf[off[SEG_ROTATION]:off[SEG_ROTATION + 1]].reshape((n, three, three)),
+            buf[off[SEG_TWIST]:off[SEG_TWIST + 1]].reshape((n, six)),
+            buf[off[SEG_V]:off[SEG_V + 1]].reshape((n, k)))
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _block_segments(buf, off, n, k, m):  # pragma: no cover - compiled
+    """Views of the rows and block segments (inlined): rows, h, W, W_o, c, M_o, h_o."""
+    six = np.int64(6)
+    return (buf[off[SEG_ROWS]:off[SEG_ROWS + 1]].reshape((n, m, np.int64(ROW_WIDTH))),
+            buf[off[SEG_H]:off[SEG_H + 1]].reshape((n, k)),
+            buf[off[SEG_W]:off[SEG_W + 1]].reshape((n, k, m)),
+            buf[off[SEG_W_O]:off[SEG_W_O + 1]].reshape((n, six, m)),
+            buf[off[SEG_C]:off[SEG_C + 1]].reshape((n, m)),
+            buf[off[SEG_M_O]:off[SEG_M_O + 1]].reshape((six, six)),
+            buf[off[SEG_H_O]:off[SEG_H_O + 1]])
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _solution_segments(buf, off, n, k, m):  # pragma: no cover - compiled
+    """Views of the solution segments (inlined): a_o, qdd, mu."""
+    return (buf[off[SEG_A_O]:off[SEG_A_O + 1]],
+            buf[off[SEG_QDD]:off[SEG_QDD + 1]].reshape((n, k)),
+            buf[off[SEG_MU]:off[SEG_MU + 1]].reshape((n, m)))
+
+
 @njit(cache=True, error_model="numpy")
 def arm_views(buf, off, n, k, m):  # pragma: no cover - compiled
     """Views of the arm segments: M, nle, J, Jdot_qdot, position, rotation, twist, v."""
-    return (view3(buf, off, SEG_M, n, k, m), view2(buf, off, SEG_NLE, n, k, m),
-            view3(buf, off, SEG_J, n, k, m), view2(buf, off, SEG_JDOT_QDOT, n, k, m),
-            view2(buf, off, SEG_POSITION, n, k, m), view3(buf, off, SEG_ROTATION, n, k, m),
-            view2(buf, off, SEG_TWIST, n, k, m), view2(buf, off, SEG_V, n, k, m))
+    return _arm_segments(buf, off, n, k, m)
 
 
 @njit(cache=True, error_model="numpy")
 def block_views(buf, off, n, k, m):  # pragma: no cover - compiled
     """Views of the constraint rows and block segments: rows, h, W, W_o, c, M_o, h_o."""
-    return (view3(buf, off, SEG_ROWS, n, k, m), view2(buf, off, SEG_H, n, k, m),
-            view3(buf, off, SEG_W, n, k, m), view3(buf, off, SEG_W_O, n, k, m),
-            view2(buf, off, SEG_C, n, k, m), view2(buf, off, SEG_M_O, n, k, m),
-            view1(buf, off, SEG_H_O))
+    return _block_segments(buf, off, n, k, m)
 
 
 @njit(cache=True, error_model="numpy")
 def solution_views(buf, off, n, k, m):  # pragma: no cover - compiled
     """Views of the solution segments: a_o, qdd, mu."""
-    return (view1(buf, off, SEG_A_O), view2(buf, off, SEG_QDD, n, k, m),
-            view2(buf, off, SEG_MU, n, k, m))
+    return _solution_segments(buf, off, n, k, m)
 
 
-@njit(cache=True, error_model="numpy")
-def _group_arms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_offset, lo, arms
-                ):  # pragma: no cover - compiled
-    """:func:`arm_terms` of the group of arms ``lo..lo + len(H)`` into the arm views."""
-    M, nle, J, Jdq, p, R, tw, vp = arms
+@njit(cache=True, error_model="numpy", inline="always")
+def _group_arms_into(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_offset, lo,
+                     M, nle, J, Jdq, p, R, tw, vp):  # pragma: no cover - compiled
+    """:func:`_group_arms` on the arm views themselves (inlined)."""
     k = M.shape[1]
     hi = lo + H.shape[0]
     start = x.shape[0] - 2 * nv + v_offset
@@ -130,14 +164,21 @@ def _group_arms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_offse
 
 
 @njit(cache=True, error_model="numpy")
-def _finish(x, arm_ints, v_starts, ints, floats, params, nv, arms,
-            blocks):  # pragma: no cover - compiled
-    """Constraint rows and blocks from the arm views; False if ``x`` is not finite."""
+def _group_arms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_offset, lo, arms
+                ):  # pragma: no cover - compiled
+    """:func:`arm_terms` of the group of arms ``lo..lo + len(H)`` into the arm views."""
+    M, nle, J, Jdq, p, R, tw, vp = arms
+    _group_arms_into(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_offset, lo,
+                     M, nle, J, Jdq, p, R, tw, vp)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _finish_into(x, arm_ints, v_starts, ints, floats, params, nv, nle, J, Jdq, p, R, tw,
+                 rows, h, W, W_o, c, M_o, h_o):  # pragma: no cover - compiled
+    """:func:`_finish` on the views themselves (inlined)."""
     for a in range(x.shape[0]):
         if not math.isfinite(x[a]):
             return False
-    M, nle, J, Jdq, p, R, tw, vp = arms
-    rows, h, W, W_o, c, M_o, h_o = blocks
     n, k = nle.shape
     obj_R = np.empty((3, 3))
     quaternion_rotation(x[X_QUATERNION:X_QUATERNION + 4], obj_R)
@@ -150,6 +191,16 @@ def _finish(x, arm_ints, v_starts, ints, floats, params, nv, arms,
             tau_p[i, a] = tau[v_starts[i] + a]
     assemble(J, Jdq, nle, tau_p, rows, params, obj_R, obj_tw, h, W, W_o, c, M_o, h_o)
     return True
+
+
+@njit(cache=True, error_model="numpy")
+def _finish(x, arm_ints, v_starts, ints, floats, params, nv, arms,
+            blocks):  # pragma: no cover - compiled
+    """Constraint rows and blocks from the arm views; False if ``x`` is not finite."""
+    _, nle, J, Jdq, p, R, tw, _ = arms
+    rows, h, W, W_o, c, M_o, h_o = blocks
+    return _finish_into(x, arm_ints, v_starts, ints, floats, params, nv, nle, J, Jdq, p, R, tw,
+                        rows, h, W, W_o, c, M_o, h_o)
 
 
 @njit(cache=True, error_model="numpy")
@@ -181,9 +232,9 @@ def group_arm_terms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, dims, v
         buf: the flat output buffer.
     """
     k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
-    arms = arm_views(buf, offsets(n, k, m), n, k, m)
-    _group_arms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_offset, first_arm,
-                arms)
+    M, nle, J, Jdq, p, R, tw, vp = _arm_segments(buf, offsets(n, k, m), n, k, m)
+    _group_arms_into(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_offset,
+                     first_arm, M, nle, J, Jdq, p, R, tw, vp)
 
 
 @njit(cache=True, error_model="numpy")
@@ -207,8 +258,10 @@ def finish_system(x, arm_ints, v_starts, ints, floats, params, dims,
     """
     k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
     off = offsets(n, k, m)
-    return _finish(x, arm_ints, v_starts, ints, floats, params, nv,
-                   arm_views(buf, off, n, k, m), block_views(buf, off, n, k, m))
+    _, nle, J, Jdq, p, R, tw, _ = _arm_segments(buf, off, n, k, m)
+    rows, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
+    return _finish_into(x, arm_ints, v_starts, ints, floats, params, nv, nle, J, Jdq, p, R, tw,
+                        rows, h, W, W_o, c, M_o, h_o)
 
 
 @njit(cache=True, error_model="numpy")
@@ -226,9 +279,11 @@ def solve_buffer(N, params, dims, buf):  # pragma: no cover - compiled
     """
     k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
     off = offsets(n, k, m)
-    blocks = block_views(buf, off, n, k, m)
-    return solve_views(N, params, view3(buf, off, SEG_M, n, k, m), blocks[1], blocks,
-                       solution_views(buf, off, n, k, m))
+    M = _arm_segments(buf, off, n, k, m)[0]
+    _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
+    a_o, qdd, mu = _solution_segments(buf, off, n, k, m)
+    return object_first(M, h, W, W_o, c, M_o, h_o, N, params[P_RCOND_TOL],
+                        params[P_OBJECT_RCOND_TOL], a_o, qdd, mu)
 
 
 @njit(cache=True, error_model="numpy")
@@ -265,10 +320,12 @@ def evaluate_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_start
     """
     k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
     off = offsets(n, k, m)
-    arms = arm_views(buf, off, n, k, m)
-    _group_arms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, 0, 0, arms)
-    return _finish(x, arm_ints, v_starts, ints, floats, params, nv, arms,
-                   block_views(buf, off, n, k, m))
+    M, nle, J, Jdq, p, R, tw, vp = _arm_segments(buf, off, n, k, m)
+    rows, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
+    _group_arms_into(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, 0, 0,
+                     M, nle, J, Jdq, p, R, tw, vp)
+    return _finish_into(x, arm_ints, v_starts, ints, floats, params, nv, nle, J, Jdq, p, R, tw,
+                        rows, h, W, W_o, c, M_o, h_o)
 
 
 @njit(cache=True, error_model="numpy")
@@ -298,13 +355,16 @@ def step_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, i
     """
     k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
     off = offsets(n, k, m)
-    arms = arm_views(buf, off, n, k, m)
-    blocks = block_views(buf, off, n, k, m)
-    _group_arms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, 0, 0, arms)
-    if not _finish(x, arm_ints, v_starts, ints, floats, params, nv, arms, blocks):
+    M, nle, J, Jdq, p, R, tw, vp = _arm_segments(buf, off, n, k, m)
+    rows, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
+    _group_arms_into(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, 0, 0,
+                     M, nle, J, Jdq, p, R, tw, vp)
+    if not _finish_into(x, arm_ints, v_starts, ints, floats, params, nv, nle, J, Jdq, p, R,
+                        tw, rows, h, W, W_o, c, M_o, h_o):
         return SOLVE_NOT_FINITE
-    return solve_views(N, params, arms[0], blocks[1], blocks,
-                       solution_views(buf, off, n, k, m))
+    a_o, qdd, mu = _solution_segments(buf, off, n, k, m)
+    return object_first(M, h, W, W_o, c, M_o, h_o, N, params[P_RCOND_TOL],
+                        params[P_OBJECT_RCOND_TOL], a_o, qdd, mu)
 
 
 @njit(cache=True, error_model="numpy")

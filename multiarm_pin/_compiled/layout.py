@@ -14,6 +14,10 @@ these arrays as a literal.
   :func:`segment_slices`.
   The three view helpers are inlined into their callers (``inline="always"``): called as
   separate functions, numba compiled one specialisation per ``SEG_*`` constant (a literal).
+  The kernels of :mod:`~multiarm_pin._compiled.evaluate` and
+  :mod:`~multiarm_pin._compiled.controller_kernels` take their views through the inlined
+  ``_arm_segments`` / ``_block_segments`` / ``_solution_segments`` of ``evaluate``, the
+  shapes written out (no ``_dim`` call per axis: cheaper to compile, issue 14).
 - **Row fields** (``ROW_*``): the ``ROW_WIDTH`` values of one packed constraint row, the
   layout of :meth:`multiarm_pin.constraints.ConstraintSet.evaluate` and of the ``rows``
   segment.
