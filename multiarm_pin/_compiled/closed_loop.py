@@ -33,13 +33,7 @@ import numpy as np
 from numba import njit
 
 from multiarm_pin._compiled.controller_kernels import PD_OK, object_pd_step, solve_with_torques
-from multiarm_pin._compiled.evaluate import (
-    _finish,
-    _group_arms,
-    arm_views,
-    block_views,
-    quaternion_rotation,
-)
+from multiarm_pin._compiled.evaluate import evaluate_system, quaternion_rotation
 from multiarm_pin._compiled.layout import (
     DIMS_K,
     DIMS_M,
@@ -117,8 +111,8 @@ def closed_loop_stage(t, x, err, J, dJ, M, nle, H, arm_ints, v_starts, ints, flo
                       ref, E, z, d):  # pragma: no cover - compiled
     """One closed-loop evaluation at ``(t, x)`` and its tangent ``d``.
 
-    The blocks of the state at zero torque (:func:`~.evaluate._group_arms`,
-    :func:`~.evaluate._finish`), the reference motion at ``t``, the joint-space PD
+    The blocks of the state at zero torque (:func:`~.evaluate.evaluate_system`), the
+    reference motion at ``t``, the joint-space PD
     ``z = pad(null_kp (q_ref ⊖ q) - null_kd v)``, then
     :func:`~.controller_kernels.object_pd_step` (torques and forward dynamics on the buffer).
 
@@ -167,10 +161,8 @@ def closed_loop_stage(t, x, err, J, dJ, M, nle, H, arm_ints, v_starts, ints, flo
     """
     k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
     off = offsets(n, k, m)
-    arms = arm_views(buf, off, n, k, m)
-    _group_arms(J, dJ, M, nle, H, x, arm_ints, nv, 0, 0, arms)
-    if not _finish(x, arm_ints, v_starts, ints, floats, params, nv, arms,
-                   block_views(buf, off, n, k, m)):
+    if not evaluate_system(J, dJ, M, nle, H, x, arm_ints, v_starts, ints, floats, params, dims,
+                           buf):
         return STAGE_NOT_FINITE
     reference_motion(t, traj, E, ref)
     v0 = x.shape[0] - 2 * nv
