@@ -73,7 +73,9 @@ def stage_with_pinocchio(system, state, ctrl, t, params):
     tau = np.zeros((n, k))
     d = np.zeros(2 * system.nv + layout.OBJECT_STATE_SIZE)
     status = kernels.closed_loop_stage(
-        t, x, pin.difference(aset.model, state.q, q_ref), J, dJ, M, nle, H, path.arm_table,
+        t, x, False, aset.compiled_model.ints, aset.compiled_model.floats, q_ref,
+        pin.difference(aset.model, state.q, q_ref), J, dJ, M, nle, H,
+        np.zeros(layout.ENERGY_SIZE), path.arm_table,
         path.v_starts, path.contact_tables.ints, path.contact_tables.floats, params, path.dims,
         path.N, path.nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool, hold_obj,
         hold_n, gains, active, np.zeros((0, layout.WRENCH_WIDTH)), np.zeros(path.layout.size),

@@ -7,8 +7,9 @@ RK4 step of :class:`multiarm_pin.sim.stepper.Stepper` (its ``derivative``, ``adv
 rows under ``object_pd`` is one compiled call per stretch of samples instead of a few dozen
 Python calls per evaluation:
 
-- :func:`closed_loop_stage`: one evaluation at a state whose arm terms are given (Pinocchio's
-  arrays or :func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass`'s), and its tangent;
+- :func:`closed_loop_stage`: one evaluation at a state, its arm terms computed by
+  :func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass` or given (Pinocchio's), and its
+  tangent;
 - :func:`run_rk4`: RK4 steps over a stretch of the time grid, the arm terms computed by
   :func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass`, every sample recorded into the
   run's record arrays.
@@ -32,7 +33,7 @@ import math
 import numpy as np
 from numba import njit
 
-from multiarm_pin._compiled.controller_kernels import PD_OK, object_pd_step, solve_with_torques
+from multiarm_pin._compiled.controller_kernels import PD_OK, object_pd_step
 from multiarm_pin._compiled.evaluate import evaluate_system, quaternion_rotation
 from multiarm_pin._compiled.layout import (
     DIMS_K,
@@ -52,7 +53,6 @@ from multiarm_pin._compiled.layout import (
     ROW_PHI_DOT,
     ROW_POINT,
     SEG_A_O,
-    SEG_H_O,
     SEG_MU,
     SEG_QDD,
     SEG_ROWS,
@@ -81,6 +81,9 @@ STAGE_SOLVE = 3
 """Status: the object-first solve reported a singular or badly conditioned case."""
 STAGE_RELEASE = 4
 """Status: a unilateral row's multiplier is not positive (the mixed LCP decides)."""
+STAGE_RELEASE_IN_STEP = 6
+"""Status: a unilateral row's multiplier is not positive at a later stage of a step (the
+stepper takes that step from its start)."""
 STAGE_SEPARATION = 5
 """Status: at a sample, a unilateral row's gap or gap rate is past the separation thresholds
 of :mod:`multiarm_pin.sim.contact_events` (the event machinery decides)."""
@@ -105,26 +108,35 @@ def wrench_at(t, wrenches, a):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def closed_loop_stage(t, x, err, J, dJ, M, nle, H, arm_ints, v_starts, ints, floats, params,
-                      dims, N, nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
-                      hold_obj, hold_n, gains, active, wrenches, buf, tau, mu, qdd, a_pts, a_d,
-                      ref, E, z, d):  # pragma: no cover - compiled
+def closed_loop_stage(t, x, arm_pass, model_ints, model_floats, q_ref, err, J, dJ, M, nle, H,
+                      energy, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
+                      unilateral, traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains,
+                      active, wrenches, buf, tau, mu, qdd, a_pts, a_d, ref, E, z,
+                      d):  # pragma: no cover - compiled
     """One closed-loop evaluation at ``(t, x)`` and its tangent ``d``.
 
-    The blocks of the state at zero torque (:func:`~.evaluate.evaluate_system`), the
-    reference motion at ``t``, the joint-space PD
+    With ``arm_pass``, first the arms' terms at ``x`` by
+    :func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass` (into ``J``, ``dJ``, ``M``,
+    ``nle``, ``H``, ``energy``) and ``err = q_ref ⊖ q``; otherwise they are given (e.g.
+    Pinocchio's). Then the blocks of the state at zero torque
+    (:func:`~.evaluate.evaluate_system`), the reference motion at ``t``, the joint-space PD
     ``z = pad(null_kp (q_ref ⊖ q) - null_kd v)``, then
     :func:`~.controller_kernels.object_pd_step` (torques and forward dynamics on the buffer).
 
     Args:
         t: time [s].
         x: (13 + nq + 2 nv,) the state vector, ``τ`` part zero.
-        err: (nv,) ``q_ref ⊖ q`` (``pin.difference(model, q, q_ref)``).
+        arm_pass: compute the arms' terms and ``err`` here.
+        model_ints: the arms' model table (read with ``arm_pass``).
+        model_floats: its float table.
+        q_ref: (nq,) ``object_pd``'s joint-space reference (read with ``arm_pass``).
+        err: (nv,) ``q_ref ⊖ q`` (``pin.difference(model, q, q_ref)``), in or out.
         J: (6, nv) world Jacobian columns at the origin (``data.J``).
         dJ: (6, nv) their time derivative (``data.dJ``).
         M: (nv, nv) joint-space mass matrix (``data.M``; arm blocks read).
         nle: (nv,) nonlinear effects [N m].
         H: (n, 4, 4) tool placements.
+        energy: (ENERGY_SIZE,) the arms' energies and momentum (out with ``arm_pass``).
         arm_ints: (n, 1 + 2k) the arm table.
         v_starts: (n,) int first joint of each arm in ``v``.
         ints: (K, CONTACT_INTS) contact table.
@@ -161,6 +173,13 @@ def closed_loop_stage(t, x, err, J, dJ, M, nle, H, arm_ints, v_starts, ints, flo
     """
     k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
     off = offsets(n, k, m)
+    if arm_pass:
+        q0 = OBJECT_STATE_SIZE
+        nq = q_ref.shape[0]
+        q = x[q0:q0 + nq]
+        rigid_body_pass(model_ints, model_floats, q, x[q0 + nq:q0 + nq + nv], J, dJ, M, nle, H,
+                        energy)
+        difference(model_ints, q, q_ref, err)
     if not evaluate_system(J, dJ, M, nle, H, x, arm_ints, v_starts, ints, floats, params, dims,
                            buf):
         return STAGE_NOT_FINITE
@@ -174,16 +193,14 @@ def closed_loop_stage(t, x, err, J, dJ, M, nle, H, arm_ints, v_starts, ints, flo
                 z[i, a] = kp * err[j] - kd * x[v0 + j]
             else:
                 z[i, a] = 0.0
-    status, _ = object_pd_step(buf, dims, N, nv_arm, unilateral, x[:OBJECT_STATE_SIZE], ref,
-                               pd_gains, z, hold_tool, hold_obj, hold_n, gains, params, active,
-                               tau, mu, qdd, a_pts, a_d, False)
+    w = np.empty(6)
+    for a in range(6):
+        w[a] = wrench_at(t, wrenches, a)
+    status, solved = object_pd_step(buf, dims, N, nv_arm, unilateral, x[:OBJECT_STATE_SIZE],
+                                    ref, pd_gains, z, hold_tool, hold_obj, hold_n, gains, params,
+                                    active, tau, mu, qdd, a_pts, a_d, True, w)
     if status != PD_OK:
         return STAGE_CONTROLLER
-    if wrenches.shape[0]:
-        h_o = view1(buf, off, SEG_H_O)
-        for a in range(6):
-            h_o[a] += wrench_at(t, wrenches, a)
-    solved = solve_with_torques(buf, dims, N, params, tau)
     if solved != SOLVE_OK:
         return STAGE_SOLVE
     mu_s = view2(buf, off, SEG_MU, n, k, m)
@@ -317,9 +334,10 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
     Returns:
         ``(status, k)``: ``STAGE_OK`` and ``k1`` when every sample was done, else the reason
         and the sample ``k`` whose step the Python path must take (``x`` is that sample's
-        state; it may already be recorded). ``STAGE_RELEASE`` at a sample's own evaluation
-        (``x`` unchanged) means the row let go inside the step that led there: the caller
-        retakes that step if the kernel took it.
+        state; it may already be recorded). ``STAGE_RELEASE`` (at a sample's own
+        evaluation) means the row let go inside the step that led there: the caller retakes
+        that step if the kernel took it; ``STAGE_RELEASE_IN_STEP``, at a later stage of the
+        step from ``k``.
     """
     k, nv, n = dims[DIMS_K], dims[DIMS_NV], dims[DIMS_N]
     nq = q_ref.shape[0]
@@ -343,12 +361,13 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
                 ts = t + h if stage == 3 else t + 0.5 * h
                 _advance(model_ints, x, ds[stage - 1], h if stage == 3 else 0.5 * h, hd, xs)
                 xe = xs
-            st = closed_loop_evaluate(
-                ts, xe, nq, model_ints, model_floats, q_ref, err, arm_ints, v_starts, ints,
-                floats, params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains,
-                hold_tool, hold_obj, hold_n, gains, active, wrenches, work_J, work_dJ, work_M,
-                work_nle, work_H, work_energy, buf, tau, mu, qdd, a_pts, a_d, ref, E, z,
-                ds[stage])
+            st = closed_loop_stage(
+                ts, xe, True, model_ints, model_floats, q_ref, err, work_J, work_dJ, work_M,
+                work_nle, work_H, work_energy, arm_ints, v_starts, ints, floats, params, dims,
+                N, nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n,
+                gains, active, wrenches, buf, tau, mu, qdd, a_pts, a_d, ref, E, z, ds[stage])
+            if st == STAGE_RELEASE and stage > 0:
+                return STAGE_RELEASE_IN_STEP, s
             if st != STAGE_OK:
                 return st, s
             if stage > 0:
@@ -450,29 +469,6 @@ def _record(s, t, x, nq, nv, N, nv_arm, v_starts, unilateral, wrenches, separati
     return True
 
 
-@njit(cache=True, error_model="numpy")
-def closed_loop_evaluate(t, x, nq, model_ints, model_floats, q_ref, err, arm_ints, v_starts,
-                         ints, floats, params, dims, N, nv_arm, unilateral, traj, pd_gains,
-                         null_gains, hold_tool, hold_obj, hold_n, gains, active, wrenches, J,
-                         dJ, M, nle, H, energy, buf, tau, mu, qdd, a_pts, a_d, ref, E, z,
-                         d):  # pragma: no cover - compiled
-    """One closed-loop evaluation with its arm terms (arguments as :func:`run_rk4`'s).
-
-    :func:`closed_loop_stage` after :func:`rigid_body_pass` (into ``J``, ``dJ``, ``M``,
-    ``nle``, ``H``, ``energy``) and ``err = q_ref ⊖ q`` at ``x`` (``nq`` configuration entries).
-    """
-    nv = err.shape[0]
-    q0 = OBJECT_STATE_SIZE
-    q = x[q0:q0 + nq]
-    rigid_body_pass(model_ints, model_floats, q, x[q0 + nq:q0 + nq + nv], J, dJ, M, nle, H,
-                    energy)
-    difference(model_ints, q, q_ref, err)
-    return closed_loop_stage(t, x, err, J, dJ, M, nle, H, arm_ints, v_starts, ints, floats,
-                             params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains,
-                             hold_tool, hold_obj, hold_n, gains, active, wrenches, buf, tau, mu,
-                             qdd, a_pts, a_d, ref, E, z, d)
-
-
 __all__ = ["NULL_KD", "NULL_KP", "STAGE_CONTROLLER", "STAGE_NOT_FINITE", "STAGE_OK",
-           "STAGE_RELEASE", "STAGE_SEPARATION", "STAGE_SOLVE", "closed_loop_evaluate",
+           "STAGE_RELEASE", "STAGE_RELEASE_IN_STEP", "STAGE_SEPARATION", "STAGE_SOLVE",
            "closed_loop_stage", "run_rk4"]

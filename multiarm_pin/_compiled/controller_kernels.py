@@ -61,6 +61,10 @@ from multiarm_pin._compiled.linalg import cholesky, cholesky_solve
 from multiarm_pin._compiled.object_first import object_first
 from multiarm_pin.dynamics.force_qp import QP_OK, least_norm_forces
 
+NO_WRENCH = np.zeros(6)
+"""The ``wrench`` of :func:`object_pd_step` when no external wrench acts."""
+NO_WRENCH.setflags(write=False)
+
 PD_OK = 0
 """Status of :func:`object_pd_torques`: torques computed."""
 PD_FORCES_FAILED = 1
@@ -361,8 +365,8 @@ def log3(R, out):  # pragma: no cover - compiled
 
 @njit(cache=True, error_model="numpy")
 def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold_tool,
-                   hold_obj, hold_n, gains, params, active, tau, mu, qdd, a_pts, a_d,
-                   solve):  # pragma: no cover - compiled
+                   hold_obj, hold_n, gains, params, active, tau, mu, qdd, a_pts, a_d, solve,
+                   wrench):  # pragma: no cover - compiled
     """``ObjectPD`` (desired acceleration, torques) and, if ``solve``, the forward dynamics.
 
     One compiled call per closed-loop evaluation: the PD on the object pose
@@ -393,6 +397,9 @@ def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold
         a_pts: output (n, h, 3) desired point accelerations [m/s²].
         a_d: output (6,) desired object acceleration.
         solve: also solve the forward dynamics into the buffer's solution segments.
+        wrench: (6,) external wrench ``[f; m]`` at the COM, world axes [N, N m], added to
+            ``h_o`` for the forward dynamics only (the controller does not know it;
+            :data:`NO_WRENCH` for none).
 
     Returns:
         ``(pd_status, solve_status)``: :data:`PD_OK` or the reason to use the reference;
@@ -436,8 +443,9 @@ def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold
     # solve_with_torques, written out: calling it would compile it and optimise object_first
     # once more inside it
     a_o, qdd_s, mu_s = _solution_segments(buf, off, n, k, m)
-    return status, object_first(M, h + tau, W, W_o, c, M_o, h_o, N, params[P_RCOND_TOL],
-                                params[P_OBJECT_RCOND_TOL], a_o, qdd_s, mu_s)
+    return status, object_first(M, h + tau, W, W_o, c, M_o, h_o + wrench, N,
+                                params[P_RCOND_TOL], params[P_OBJECT_RCOND_TOL], a_o, qdd_s,
+                                mu_s)
 
 
 @njit(cache=True, error_model="numpy")
@@ -466,6 +474,7 @@ def solve_with_torques(buf, dims, N, params, tau):  # pragma: no cover - compile
                         params[P_OBJECT_RCOND_TOL], a_o, qdd, mu)
 
 
-__all__ = ["PD_ARM_RANK", "PD_FORCES_FAILED", "PD_LARGE_ROTATION", "PD_NOT_FINITE", "PD_OK",
+__all__ = ["NO_WRENCH", "PD_ARM_RANK", "PD_FORCES_FAILED", "PD_LARGE_ROTATION", "PD_NOT_FINITE",
+           "PD_OK",
            "log3", "min_norm_rows", "object_pd_step", "object_pd_torques",
            "solve_with_torques"]

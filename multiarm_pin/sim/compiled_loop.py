@@ -151,7 +151,7 @@ class CompiledLoop:
         The compiled rigid-body pass, the blocks, ``object_pd`` and the forward dynamics at
         ``(t, state)``, as :func:`~multiarm_pin.sim.closed_loop.closed_loop_evaluation`
         computes them with Pinocchio (see :func:`~multiarm_pin._compiled.closed_loop.
-        closed_loop_evaluate`). The loop must be :meth:`ready` at ``state``.
+        closed_loop_stage`). The loop must be :meth:`ready` at ``state``.
 
         Returns:
             ``(status, tangent (2 nv + 13,), tau (nv,) [N m])``: ``STAGE_OK`` or why the
@@ -168,13 +168,14 @@ class CompiledLoop:
         J, dJ, M, nle, H, energy, buf, tau, mu, qdd = self.work
         n, k = tau.shape
         d = np.empty(2 * s.nv + layout.OBJECT_STATE_SIZE)
-        status = kernels.closed_loop_evaluate(
-            float(t), x, s.nq, self.model.ints, self.model.floats, q_ref, np.empty(s.nv),
-            path.arm_table, path.v_starts, path.contact_tables.ints, path.contact_tables.floats,
-            self.params, path.dims, path.N, path.nv_arm, unilateral, traj, pd_gains,
-            null_gains, hold_tool, hold_obj, hold_n, gains, active, self.wrenches, J, dJ, M, nle,
-            H, energy, buf, tau, mu, qdd, np.empty(hold_tool.shape), np.empty(6),
+        status = kernels.closed_loop_stage(
+            float(t), x, True, self.model.ints, self.model.floats, q_ref, np.empty(s.nv), J,
+            dJ, M, nle, H, energy, path.arm_table, path.v_starts, path.contact_tables.ints,
+            path.contact_tables.floats, self.params, path.dims, path.N, path.nv_arm,
+            unilateral, traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, active,
+            self.wrenches, buf, tau, mu, qdd, np.empty(hold_tool.shape), np.empty(6),
             np.empty(layout.REFERENCE_SIZE), np.empty((3, 3)), np.empty((n, k)), d)
+
         return int(status), d, s.unpad(tau)
 
     def _finish_record(self, rec: Recorder, times: np.ndarray, done: slice) -> None:

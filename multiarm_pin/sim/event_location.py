@@ -24,6 +24,10 @@ from multiarm_pin.system import SystemState
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from multiarm_pin.sim.stepper import Stepper
 
+RESTING_RELEASE = 1e-300
+"""Value of :func:`release` for a group whose rows carry no force and none lifts: positive
+(not released), the smallest there is, so that it guides the secant as a zero force would."""
+
 MAX_ITERATIONS = 200
 """Iterations of :func:`illinois` at the most (a safety cap; the bracket halves far sooner)."""
 
@@ -103,12 +107,16 @@ def release(sol, rows: np.ndarray) -> float:
     [N] (> 0). For an active unilateral row the LCP gives either ``μ > 0, φ̈ = 0`` or
     ``μ = 0, φ̈ >= 0``, so the sign changes exactly when the first row of the group lets
     go; the total force (unique even when the rows are redundant, e.g. one edge of a box
-    on two vertices, where a single row's ``μ`` is not) only guides the secant.
+    on two vertices, where a single row's ``μ`` is not) only guides the secant. A group that
+    carries no force and does not lift (a contact resting with zero force) is not released:
+    the value is then :data:`RESTING_RELEASE` > 0.
     """
     lift = rows & (sol.mu <= 0.0) & (sol.phi_dd > ce.LIFT_ACCELERATION)
     if lift.any():
         return -float(sol.phi_dd[lift].max())
-    return float(sol.mu[rows].sum())
+    # > 0 even when the group's forces vanish (a row with no planned force, resting): only
+    # a lift releases; a zero here would read as "released" and stop the search early
+    return max(float(sol.mu[rows].sum()), RESTING_RELEASE)
 
 
 def locate_separation(stepper: Stepper, integrator: str, t: float, state: SystemState, sol,

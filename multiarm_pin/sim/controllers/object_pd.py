@@ -363,7 +363,8 @@ class ObjectPD(Controller):
             layout.object_state_vector(o.position, o.quaternion, o.twist), ref[1],
             self._pd_gains, z,
             self.hold_points_in_tool, self.hold_points_in_object, self._hold_n, self._gains,
-            path.params, self._forces.active, tau, mu, qdd, a_pts, a_d, solve)
+            path.params, self._forces.active, tau, mu, qdd, a_pts, a_d, solve,
+            controller_kernels.NO_WRENCH)
         if status != controller_kernels.PD_OK:
             if status == controller_kernels.PD_FORCES_FAILED:
                 self._forces.cold_solves += 1
