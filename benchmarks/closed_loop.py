@@ -86,6 +86,7 @@ class Row:
     t_pin_s: float
     t_closed_ref_s: float
     t_closed_api_s: float
+    t_closed_run_s: float
     closed_over_open: float
     open_over_pin: float
     closed_per_arm_s: float
@@ -164,10 +165,11 @@ def weld_rows(arms: Sequence[int], timer: Timer, n_states: int, sim_s: float) ->
         rest = s.project_velocities(s.state(bench.states[0].q, None,
                                             bench.states[0].obj.position,
                                             bench.states[0].obj.quaternion))
+        simulate(s, rest, make(), 0.004, 0.002, integrator="rk4", solver="object_first")
         sim, wall = run_rtf(s, rest, make(), sim_s, 0.002, integrator="rk4",
-                            solver="object_first")
-        rows.append(Row("weld_ur5", n, s.nv, tc, to, tp, tr, ta, tc / to, to / tp, tc / n,
-                        sim, wall, sim / wall, rounds))
+                            solver="object_first")  # (after a run that loads the kernels)
+        rows.append(Row("weld_ur5", n, s.nv, tc, to, tp, tr, ta, wall / (4 * sim / 0.002),
+                        tc / to, to / tp, tc / n, sim, wall, sim / wall, rounds))
         print(f"weld n={n:3d}: closed {tc * 1e6:8.1f} us, open {to * 1e6:8.1f} us, "
               f"pin {tp * 1e6:8.1f} us, RTF {sim / wall:6.2f}", flush=True)
     return rows
@@ -202,8 +204,9 @@ def scenario_rows(names: Sequence[str], timer: Timer, duration: float | None) ->
         (tc, to, _, tr, ta), rounds = measure(s, states, taus,
                                               lambda b=built: make_controller(b), timer, None,
                                               sim.baumgarte)
-        rows.append(Row(name, s.n_arms, s.nv, tc, to, math.nan, tr, ta, tc / to, math.nan,
-                        tc / s.n_arms, simt, wall, simt / wall, rounds, note))
+        rows.append(Row(name, s.n_arms, s.nv, tc, to, math.nan, tr, ta,
+                        wall / (4 * simt / sim.dt), tc / to, math.nan, tc / s.n_arms, simt,
+                        wall, simt / wall, rounds, note))
         print(f"{name:26s}: closed {tc * 1e6:8.1f} us, open {to * 1e6:8.1f} us, "
               f"RTF {simt / wall:6.2f} ({simt:g} s in {wall:.2f} s)", flush=True)
     return rows
@@ -249,7 +252,8 @@ def targets(weld: Sequence[Row], scen: Sequence[Row], cold: dict | None) -> list
     if weld:
         worst = max(r.closed_over_open for r in weld)
         line(worst <= 1.5, f"closed-loop evaluation <= 1.5x the open-loop step at every n "
-             f"(worst {worst:.2f}x)")
+             f"(worst {worst:.2f}x; per evaluation of a whole run, worst "
+             f"{max(r.t_closed_run_s / r.t_open_s for r in weld):.2f}x)")
         by_n = {r.n_arms: r for r in weld}
         if 2 in by_n:
             line(by_n[2].open_over_pin <= 1.5, f"open-loop step within 1.5x of "
@@ -282,29 +286,34 @@ def write_report(path: Path, weld: Sequence[Row], scen: Sequence[Row], cold: dic
               "`closed` = one closed-loop evaluation as `simulate` runs it (the compiled "
               "loop's: arm terms, blocks, object_pd and forward dynamics in one compiled call, "
               "`CompiledLoop.evaluate`), `closed API` = the same through the Python API "
-              "(`closed_loop_evaluation`, which returns the blocks' views), `open` = the "
-              "open-loop full step "
+              "(`closed_loop_evaluation`, which returns the blocks' views), `in run` = the "
+              "wall time of the whole `simulate` run divided by its evaluations (4 per RK4 "
+              "step: everything a run does, per evaluation), `open` = the open-loop full step "
               "(`forward_dynamics`) at the same states with the same torques, `pin` = "
               "`pin.constraintDynamics` on one combined model (weld systems), `closed ref` = "
               "the numpy reference closed loop. RTF = simulated time / wall time of a whole "
               f"`simulate` run. Command: `{' '.join(sys.argv)}`; wall {wall:.0f} s.", "",
               "## n UR5s welded to one box", "",
-              "| n | nv | closed [us] | closed API [us] | open [us] | pin [us] | closed ref [us] "
-              "| closed/open | open/pin | closed per arm [us] | RTF |",
-              "|---|---|---|---|---|---|---|---|---|---|---|"]
+              "| n | nv | closed [us] | closed API [us] | in run [us] | open [us] | pin [us] | "
+              "closed ref [us] | closed/open | in run/open | open/pin | closed per arm [us] | "
+              "RTF |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in weld:
         lines.append(f"| {r.n_arms} | {r.nv} | {_us(r.t_closed_s)} | {_us(r.t_closed_api_s)} "
-                     f"| {_us(r.t_open_s)} | {_us(r.t_pin_s)} | {_us(r.t_closed_ref_s)} | "
-                     f"{_x(r.closed_over_open)} "
+                     f"| {_us(r.t_closed_run_s)} | {_us(r.t_open_s)} | {_us(r.t_pin_s)} | "
+                     f"{_us(r.t_closed_ref_s)} | {_x(r.closed_over_open)} | "
+                     f"{_x(r.t_closed_run_s / r.t_open_s)} "
                      f"| {_x(r.open_over_pin)} | {_us(r.closed_per_arm_s)} | {_x(r.rtf)} |")
     lines += ["", "## Shipped scenarios", "",
-              "| scenario | arms | closed [us] | closed API [us] | open [us] | closed ref [us] | "
-              "closed/open | simulated [s] | wall [s] | RTF | note |",
-              "|---|---|---|---|---|---|---|---|---|---|---|"]
+              "| scenario | arms | closed [us] | closed API [us] | in run [us] | open [us] | "
+              "closed ref [us] | closed/open | in run/open | simulated [s] | wall [s] | RTF | "
+              "note |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in scen:
         lines.append(f"| {r.case} | {r.n_arms} | {_us(r.t_closed_s)} | "
-                     f"{_us(r.t_closed_api_s)} | {_us(r.t_open_s)} | "
-                     f"{_us(r.t_closed_ref_s)} | {_x(r.closed_over_open)} | {r.sim_time_s:g} | "
+                     f"{_us(r.t_closed_api_s)} | {_us(r.t_closed_run_s)} | {_us(r.t_open_s)} | "
+                     f"{_us(r.t_closed_ref_s)} | {_x(r.closed_over_open)} | "
+                     f"{_x(r.t_closed_run_s / r.t_open_s)} | {r.sim_time_s:g} | "
                      f"{r.wall_s:.2f} | {_x(r.rtf)} | {r.note} |")
     lines += ["", "## Cold start", ""]
     if cold is None:

@@ -59,6 +59,8 @@ class CompiledLoop:
         self.work = (*self.model.outputs(), np.zeros(path.layout.size), np.zeros((n, k)),
                      np.zeros((n, m)), np.zeros((n, k)))
         self.separation = np.array([ce.SEPARATION_GAP, ce.SEPARATION_SPEED])
+        self._stage_args = None  # evaluate()'s kernel arguments, made once per controller
+        self._zero = np.zeros(s.nv)
         self.wrenches = (np.zeros((0, layout.WRENCH_WIDTH)) if stepper.wrench is None
                          else stepper.wrench.table())
         self.last_status = kernels.STAGE_OK
@@ -159,24 +161,28 @@ class CompiledLoop:
             ``Stepper.derivative``.
         """
         s = self.system
-        path = self.path
-        (traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, active, unilateral,
-         q_ref) = self.stepper.controller.kernel_inputs()
+        ctrl = self.stepper.controller.kernel_inputs()
+        key = tuple(id(a) for a in ctrl)  # the controller's own arrays, kept while they are
+        if self._stage_args is None or self._stage_args[1] != key:
+            path = self.path
+            (traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, active,
+             unilateral, q_ref) = ctrl
+            J, dJ, M, nle, H, energy, buf, tau, mu, qdd = self.work
+            n, k = tau.shape
+            self._stage_args = ((self.model.ints, self.model.floats, q_ref, np.empty(s.nv), J,
+                                 dJ, M, nle, H, energy, path.arm_table, path.v_starts,
+                                 path.contact_tables.ints, path.contact_tables.floats,
+                                 self.params, path.dims, path.N, path.nv_arm, unilateral, traj,
+                                 pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains,
+                                 active, self.wrenches, buf, tau, mu, qdd,
+                                 np.empty(hold_tool.shape), np.empty(6),
+                                 np.empty(layout.REFERENCE_SIZE), np.empty((3, 3)),
+                                 np.empty((n, k))), key)
         o = state.obj
-        x = layout.state_vector(o.position, o.quaternion, o.twist, state.q, state.v,
-                                np.zeros(s.nv))
-        J, dJ, M, nle, H, energy, buf, tau, mu, qdd = self.work
-        n, k = tau.shape
+        x = layout.state_vector(o.position, o.quaternion, o.twist, state.q, state.v, self._zero)
         d = np.empty(2 * s.nv + layout.OBJECT_STATE_SIZE)
-        status = kernels.closed_loop_stage(
-            float(t), x, True, self.model.ints, self.model.floats, q_ref, np.empty(s.nv), J,
-            dJ, M, nle, H, energy, path.arm_table, path.v_starts, path.contact_tables.ints,
-            path.contact_tables.floats, self.params, path.dims, path.N, path.nv_arm,
-            unilateral, traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, active,
-            self.wrenches, buf, tau, mu, qdd, np.empty(hold_tool.shape), np.empty(6),
-            np.empty(layout.REFERENCE_SIZE), np.empty((3, 3)), np.empty((n, k)), d)
-
-        return int(status), d, s.unpad(tau)
+        status = kernels.closed_loop_stage(float(t), x, True, *self._stage_args[0], d)
+        return int(status), d, s.unpad(self.work[7])
 
     def _finish_record(self, rec: Recorder, times: np.ndarray, done: slice) -> None:
         """What the kernel does not record at samples ``done``: times, active set, solver."""
