@@ -196,8 +196,7 @@ class MultiArmSystem:
                                  "one of them")
             self._init_without_arms(obj)
             return
-        self.arm_set = ArmSet(list(arms))
-        self.arm_set.set_gravity(self.gravity)
+        self.arm_set = ArmSet(list(arms), gravity=self.gravity)
         self.constraint_set = ConstraintSet(joints)
         self.obj = obj
         self.joints = list(joints)

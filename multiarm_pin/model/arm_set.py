@@ -93,6 +93,8 @@ class ArmSet:
         arms: the arms; their names must be unique.
         group_size: most arms per combined Pinocchio model of the hot path (None:
             :data:`GROUP_SIZE`); with more arms, :meth:`pinocchio_pass` runs on groups.
+        gravity: (3,) gravity [m/s²] of every model and of the compiled tables (None: the
+            first arm's model's).
 
     Attributes:
         model: the combined model of all arms.
@@ -106,7 +108,8 @@ class ArmSet:
             supported there (then only Pinocchio's path is available).
     """
 
-    def __init__(self, arms: list[Arm], group_size: int | None = None):
+    def __init__(self, arms: list[Arm], group_size: int | None = None,
+                 gravity: np.ndarray | None = None):
         if not arms:
             raise InputError("an ArmSet needs at least one arm")
         names = [a.name for a in arms]
@@ -183,23 +186,13 @@ class ArmSet:
             self.groups.append(ArmGroup(gm, gd, slice(a0, a1), qs, vs, ids,
                                         (gd.J, gd.dJ, gd.M, gd.nle)))
         self.v_starts = np.array(v_starts, dtype=np.int64)
+        if gravity is not None:  # before the compiled tables, whose universe row carries it
+            g = pin.Motion(as_array(gravity, (3,), "gravity [m/s^2]"), np.zeros(3))
+            for m in {id(m): m for m in [model] + [gr.model for gr in self.groups]}.values():
+                m.gravity = g
         self.compiled_model = (CompiledModel.build(model, self._tool_ids) if is_supported(model)
                                else None)
         self._compiled_out: tuple = ()
-
-    def set_gravity(self, gravity: np.ndarray) -> None:
-        """Set the gravity (3,) [m/s²] of every model of the set and of the compiled tables.
-
-        The combined model, the groups' models and :attr:`compiled_model` (whose universe row
-        carries the gravity) all change together.
-        """
-        g = pin.Motion(as_array(gravity, (3,), "gravity [m/s^2]"), np.zeros(3))
-        for model in {id(m): m for m in [self.model] + [gr.model for gr in self.groups]
-                      }.values():
-            model.gravity = g
-        if self.compiled_model is not None:
-            self.compiled_model = CompiledModel.build(self.model, self._tool_ids)
-            self._compiled_out = ()
 
     @property
     def data(self) -> pin.Data:

@@ -301,8 +301,8 @@ def test_arm_set_of_an_unsupported_arm_keeps_pinocchio_only(rng):
 def test_energies_and_momentum_equal_pinocchios(n, rng):
     """``energy``: Pinocchio's kinetic and potential energy, and the total momentum about the
     world origin (centroidal momentum shifted there), with a tilted gravity."""
-    arm_set = ArmSet([_arm(MIXED[k], f"arm{k}", k) for k in range(n)])
-    arm_set.set_gravity(np.array([0.4, -1.1, -9.7]))
+    arm_set = ArmSet([_arm(MIXED[k], f"arm{k}", k) for k in range(n)],
+                     gravity=np.array([0.4, -1.1, -9.7]))
     model, data = arm_set.model, arm_set.model.createData()
     for speed in (0.0, 1.0):
         q, v = random_state(model, rng, speed=speed)
