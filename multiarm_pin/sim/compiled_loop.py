@@ -120,8 +120,7 @@ class CompiledLoop:
         (traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, active, unilateral,
          q_ref) = ctrl.kernel_inputs()
         o = state.obj
-        x = layout.state_vector(o.position, o.quaternion, o.twist, state.q, state.v,
-                                np.zeros(s.nv))
+        x = layout.state_vector(o.position, o.quaternion, o.twist, state.q, state.v, self._zero)
         J, dJ, M, nle, H, energy, buf, tau, mu, qdd = self.work
         a_pts = np.zeros(hold_tool.shape)
         a_d = np.zeros(6)

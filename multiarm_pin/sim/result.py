@@ -99,10 +99,8 @@ class SimulationResult:
 
     def state(self, k: int) -> SystemState:
         """The :class:`SystemState` of sample ``k``."""
-        return SystemState(self.q[k].copy(), self.v[k].copy(),
-                           ObjectState(self.object_position[k].copy(),
-                                       self.object_quaternion[k].copy(),
-                                       self.object_twist[k].copy()))
+        return _sample_state(self.q, self.v, self.object_position, self.object_quaternion,
+                             self.object_twist, k)
 
 class Recorder:
     """Preallocated arrays of T samples, filled one sample at a time by :meth:`record`."""
@@ -186,9 +184,7 @@ class Recorder:
 
     def state(self, k: int) -> SystemState:
         """The state recorded at sample ``k`` (copies)."""
-        return SystemState(self.q[k].copy(), self.v[k].copy(),
-                           ObjectState(self.p[k].copy(), self.quat[k].copy(),
-                                       self.twist[k].copy()))
+        return _sample_state(self.q, self.v, self.p, self.quat, self.twist, k)
 
     def mark_recorded(self, count: int) -> None:
         """Samples up to ``count`` were recorded by the compiled loop.
@@ -229,6 +225,12 @@ class Recorder:
             contact_labels=list(self.system.contact_labels),
         )
 
+
+
+def _sample_state(q, v, position, quaternion, twist, k: int) -> SystemState:
+    """Sample ``k`` of recorded arrays ``(T, ...)`` as a :class:`SystemState` (copies)."""
+    return SystemState(q[k].copy(), v[k].copy(),
+                       ObjectState(position[k].copy(), quaternion[k].copy(), twist[k].copy()))
 
 
 def partial_result(exc: BaseException) -> SimulationResult | None:
