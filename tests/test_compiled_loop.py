@@ -138,3 +138,28 @@ def test_a_few_steps_equal_the_python_loop(name, monkeypatch):
         assert rel_err(getattr(fast, field), getattr(ref, field)) <= run_tolerance(field), field
     assert list(fast.solver) == list(ref.solver)
 
+
+
+def test_evaluate_keeps_its_arguments_and_follows_a_changed_gain():
+    """The controller hands the loop the same inputs while they hold (so ``evaluate`` does not
+    rebuild its kernel arguments every call), and a changed null-space gain reaches the
+    kernel: the torques change, and equal the Python path's with the new gain."""
+    case = next(c for c in (fused_case(seed, n) for seed, n in CASES) if c is not None)
+    system, off, ctrl, stepper, _, warm, _ = case
+    assert ctrl.kernel_inputs() is ctrl.kernel_inputs()
+    loop = CompiledLoop(stepper)
+    ctrl.kernel_inputs()[7][:] = warm
+    status, _, tau_before = loop.evaluate(0.4, off)
+    kept = loop._stage_args
+    ctrl.kernel_inputs()[7][:] = warm
+    loop.evaluate(0.4, off)
+    assert loop._stage_args is kept
+    ctrl.null_kp *= 3.0
+    ctrl.kernel_inputs()[7][:] = warm
+    status_k, _, tau_k = loop.evaluate(0.4, off)
+    ctrl.kernel_inputs()[7][:] = warm
+    _, _, tau_py = closed_loop_evaluation(system, ctrl, 0.4, off, "object_first",
+                                          stepper.baumgarte)
+    assert status == status_k == kernels.STAGE_OK
+    assert rel_err(tau_k, tau_before) > 1e-6
+    assert rel_err(tau_k, tau_py) <= TOL_RANK_DEFICIENT_HOLD

@@ -61,6 +61,8 @@ class CompiledLoop:
         self.separation = np.array([ce.SEPARATION_GAP, ce.SEPARATION_SPEED])
         self._stage_args = None  # evaluate()'s kernel arguments, made once per controller
         self._zero = np.zeros(s.nv)
+        self._tangent_size = 2 * s.nv + layout.OBJECT_STATE_SIZE
+        self._dofs = np.flatnonzero(s.arm_set.dof_mask)  # (nv,) of the flat (n, nv_max) torques
         self.wrenches = (np.zeros((0, layout.WRENCH_WIDTH)) if stepper.wrench is None
                          else stepper.wrench.table())
         self.last_status = kernels.STAGE_OK
@@ -160,9 +162,9 @@ class CompiledLoop:
             ``Stepper.derivative``.
         """
         s = self.system
-        ctrl = self.stepper.controller.kernel_inputs()
-        key = tuple(id(a) for a in ctrl)  # the controller's own arrays, kept while they are
-        if self._stage_args is None or self._stage_args[1] != key:
+        ctrl = self.stepper.controller.kernel_inputs()  # the same tuple while it holds
+        kept = self._stage_args
+        if kept is None or kept[1] is not ctrl:
             path = self.path
             (traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, active,
              unilateral, q_ref) = ctrl
@@ -176,12 +178,13 @@ class CompiledLoop:
                                  active, self.wrenches, buf, tau, mu, qdd,
                                  np.empty(hold_tool.shape), np.empty(6),
                                  np.empty(layout.REFERENCE_SIZE), np.empty((3, 3)),
-                                 np.empty((n, k))), key)
+                                 np.empty((n, k))), ctrl)
+            kept = self._stage_args
         o = state.obj
         x = layout.state_vector(o.position, o.quaternion, o.twist, state.q, state.v, self._zero)
-        d = np.empty(2 * s.nv + layout.OBJECT_STATE_SIZE)
-        status = kernels.closed_loop_stage(float(t), x, True, *self._stage_args[0], d)
-        return int(status), d, s.unpad(self.work[7])
+        d = np.empty(self._tangent_size)
+        status = kernels.closed_loop_stage(float(t), x, True, *kept[0], d)
+        return int(status), d, self.work[7].take(self._dofs)
 
     def _finish_record(self, rec: Recorder, times: np.ndarray, done: slice) -> None:
         """What the kernel does not record at samples ``done``: times, active set, solver."""

@@ -206,6 +206,8 @@ class ObjectPD(Controller):
         self.compiled = bool(compiled)
         self._forces: WarmForceDistribution | None = None
         self._motion_cache: dict = {}
+        self._null_gains = np.zeros(2)  # kernel_inputs()' (null_kp, null_kd), kept while equal
+        self._kernel_inputs: tuple | None = None  # the same tuple while its arrays are
 
     def _hold_still(self, t: float, state: SystemState, blocks: SystemBlocks,
                     reason: str) -> np.ndarray:
@@ -411,7 +413,9 @@ class ObjectPD(Controller):
         RK4 steps on the same state as :meth:`closed_loop` (the same arrays: the force QP's
         warm start it updates is this controller's). They exist once the first call or
         :meth:`prepare` has fixed them (reference configuration, held points, trajectory, warm
-        start); never with ``compiled=False``.
+        start); never with ``compiled=False``. The arrays are the same objects from call to
+        call, in the same tuple, while the controller's values are the same (callers key on the
+        tuple's identity).
 
         Returns:
             ``(trajectory table, pd gains, (null_kp, null_kd), hold_points_in_tool,
@@ -421,10 +425,16 @@ class ObjectPD(Controller):
         """
         if not self.compiled or self._forces is None or self.trajectory is None:
             return None
-        return (self.trajectory.table(), self._pd_gains,
-                np.array([self.null_kp, self.null_kd]), self.hold_points_in_tool,
-                self.hold_points_in_object, self._hold_n, self._gains, self._forces.active,
-                self._unilateral, self.q_ref)
+        null = self._null_gains
+        if null[0] != self.null_kp or null[1] != self.null_kd:  # gains changed: a new array
+            self._null_gains = null = np.array([self.null_kp, self.null_kd])
+        parts = (self.trajectory.table(), self._pd_gains, null, self.hold_points_in_tool,
+                 self.hold_points_in_object, self._hold_n, self._gains, self._forces.active,
+                 self._unilateral, self.q_ref)
+        kept = self._kernel_inputs
+        if kept is None or any(a is not b for a, b in zip(parts, kept, strict=True)):
+            self._kernel_inputs = kept = parts
+        return kept
 
     def kernel_planned(self, tau: np.ndarray, mu: np.ndarray, qdd: np.ndarray,
                        a_pts: np.ndarray, a_d: np.ndarray) -> None:
