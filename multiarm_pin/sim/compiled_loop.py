@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from multiarm_pin._compiled import closed_loop as kernels
-from multiarm_pin._compiled import layout
+from multiarm_pin._compiled import layout, precompiled
 from multiarm_pin.model.rigid_object import ObjectState
 from multiarm_pin.sim import contact_events as ce
 from multiarm_pin.sim.closed_loop import FUSED_SOLVERS
@@ -64,7 +64,7 @@ class CompiledLoop:
         self._tangent_size = 2 * s.nv + layout.OBJECT_STATE_SIZE
         self._dofs = np.flatnonzero(s.arm_set.dof_mask)  # (nv,) of the flat (n, nv_max) torques
         self.wrenches = (np.zeros((0, layout.WRENCH_WIDTH)) if stepper.wrench is None
-                         else stepper.wrench.table())
+                         else np.array(stepper.wrench.table(), dtype=float))  # one array type
         self.last_status = kernels.STAGE_OK
 
     @classmethod
@@ -117,23 +117,14 @@ class CompiledLoop:
             the step from sample ``k`` (:attr:`last_status` says why).
         """
         s = self.system
-        path = self.path
         ctrl = self.stepper.controller
-        (traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, active, unilateral,
-         q_ref) = ctrl.kernel_inputs()
         o = state.obj
         x = layout.state_vector(o.position, o.quaternion, o.twist, state.q, state.v, self._zero)
-        J, dJ, M, nle, H, energy, buf, tau, mu, qdd = self.work
-        a_pts = np.zeros(hold_tool.shape)
+        a_pts = np.zeros(ctrl.hold_points_in_tool.shape)
         a_d = np.zeros(6)
-        status, k = kernels.run_rk4(
-            k0, k1, times, x, self.model.ints, self.model.floats, q_ref, path.arm_table,
-            path.v_starts, path.contact_tables.ints, path.contact_tables.floats, self.params,
-            path.dims, path.N, path.nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
-            hold_obj, hold_n, gains, active, self.wrenches, self.separation, J, dJ, M, nle, H,
-            energy, buf, tau, mu, qdd, a_pts, a_d, rec.q, rec.v, rec.p, rec.quat, rec.twist,
-            rec.tau, rec.mu, rec.phi, rec.phi_dot, rec.points, rec.normals, rec.a_o, rec.qdd,
-            rec.violation, rec.wrench, rec.ke, rec.pe, rec.momentum)
+        args = self._arguments(rec, x, times, k0, k1, a_pts, a_d)
+        status, k = precompiled.run_rk4_for(args)(*args)
+        tau, mu, qdd = self.work[7:]
         self.last_status = int(status)
         k = int(k)
         done = slice(k0, k)
@@ -147,6 +138,35 @@ class CompiledLoop:
                                       x[layout.X_QUATERNION:layout.X_QUATERNION + 4].copy(),
                                       x[layout.X_TWIST:layout.X_TWIST + 6].copy()))
         return k, new
+
+    def _arguments(self, rec: Recorder, x: np.ndarray, times: np.ndarray, k0: int, k1: int,
+                   a_pts: np.ndarray, a_d: np.ndarray) -> tuple:
+        """The arguments of :func:`~multiarm_pin._compiled.closed_loop.run_rk4` (its order)."""
+        path = self.path
+        (traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, active, unilateral,
+         q_ref) = self.stepper.controller.kernel_inputs()
+        J, dJ, M, nle, H, energy, buf, tau, mu, qdd = self.work
+        return (k0, k1, times, x, self.model.ints, self.model.floats, q_ref, path.arm_table,
+                path.v_starts, path.contact_tables.ints, path.contact_tables.floats,
+                self.params, path.dims, path.N, path.nv_arm, unilateral, traj, pd_gains,
+                null_gains, hold_tool, hold_obj, hold_n, gains, active, self.wrenches,
+                self.separation, J, dJ, M, nle, H, energy, buf, tau, mu, qdd,
+                a_pts, a_d, rec.q, rec.v, rec.p, rec.quat,
+                rec.twist, rec.tau, rec.mu, rec.phi, rec.phi_dot, rec.points, rec.normals,
+                rec.a_o, rec.qdd, rec.violation, rec.wrench, rec.ke, rec.pe, rec.momentum)
+
+    def example_arguments(self, state: SystemState, steps: int = 2) -> tuple:
+        """The arguments :meth:`run` would pass for ``steps`` steps of 1 ms from ``state``.
+
+        For :mod:`multiarm_pin._compiled.precompiled`, which compiles for their types.
+        """
+        times = np.arange(steps + 1) * 1e-3
+        rec = Recorder(self.system, len(times), self.stepper.solver, 1)
+        o = state.obj
+        x = layout.state_vector(o.position, o.quaternion, o.twist, state.q, state.v, self._zero)
+        return self._arguments(rec, x, times, 0, len(times),
+                               np.zeros(self.stepper.controller.hold_points_in_tool.shape),
+                               np.zeros(6))
 
     def evaluate(self, t: float, state: SystemState) -> tuple[int, np.ndarray, np.ndarray]:
         """One closed-loop evaluation by the kernel of the loop's stages (no record).

@@ -1,0 +1,249 @@
+"""The compiled closed loop built ahead of time, at install: a first run compiles nothing.
+
+numba compiles a kernel at its first call. The closed loop of ``simulate``
+(:func:`multiarm_pin._compiled.closed_loop.run_rk4`, with every kernel of an ``object_pd`` run
+inside it) takes about 50 s of that on a 2-core machine: most of the wait of a first run. The
+install (``make venv``, or ``python -m multiarm_pin._compiled.precompiled``) compiles it once
+with numba's ahead-of-time compiler (``numba.pycc``) into an extension module next to this
+file, for this machine's CPU; :class:`~multiarm_pin.sim.compiled_loop.CompiledLoop` calls it
+when it is there and fits the call (:func:`run_rk4_for`), and numba's JIT (cached on disk as
+before) otherwise. Same code, same results (tested: equal to the JIT kernel's to the bit).
+
+Safety, since ``numba.pycc``'s entry points trust their arguments:
+
+- the module's name carries the digest of all kernel sources
+  (:func:`~multiarm_pin._compiled.cache.kernel_sources_digest`): a module built from other
+  sources is never loaded;
+- its sidecar file records the numba version and the CPU it was built for (triple, name,
+  features: numba's own cache key) and the exact argument types, with their dispatch
+  fingerprints; on another CPU or numba it is not loaded, and a call whose arguments do not
+  have exactly those fingerprints (dtype, number of dimensions, layout, writability: what
+  numba's own dispatcher compares) goes to the JIT kernel;
+- it is not used when ``NUMBA_DISABLE_JIT`` is set (the kernels then run as Python,
+  bounds-checked, in ``make test``) or when ``MULTIARM_PIN_AOT=0``.
+
+A build writes both files atomically (a half-built module is never seen) and removes modules
+of older sources. Without a C compiler the build fails with a message and the JIT is used;
+the same if numba drops ``numba.pycc`` (pending deprecation since numba 0.57, with no
+successor yet).
+"""
+
+from __future__ import annotations
+
+import importlib.machinery
+import importlib.util
+import json
+import os
+import sys
+import tempfile
+import time
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+
+import numba
+from numba._dispatcher import compute_fingerprint as _fingerprint
+from numba.core import config
+from numba.core.errors import NumbaPendingDeprecationWarning
+
+from multiarm_pin._compiled import closed_loop as kernels
+from multiarm_pin._compiled.cache import kernel_sources_digest
+
+FOLDER = Path(__file__).resolve().parent
+"""Where the module and its sidecar are built: the ``_compiled`` package folder."""
+
+PREFIX = "_closed_loop_aot_"
+"""Module name prefix; the name is this plus the first 16 hex digits of the source digest."""
+
+ENV_SWITCH = "MULTIARM_PIN_AOT"
+"""Environment variable: ``0`` turns the precompiled module off (the JIT kernel is used)."""
+
+RETURN_TYPE = numba.types.UniTuple(numba.types.int64, 2)
+"""``run_rk4``'s return type, ``(status, sample)``."""
+
+_loaded: dict[Path, tuple | None] = {}  # folder -> (function, argument types) or None
+
+
+def module_name() -> str:
+    """The module's name for the current kernel sources."""
+    return PREFIX + kernel_sources_digest()[:16]
+
+
+def machine() -> list[str]:
+    """The key of this machine's code in numba's cache: ``[triple, CPU name, CPU features]``."""
+    from numba.core.registry import cpu_target
+
+    return [str(x) for x in cpu_target.target_context.codegen().magic_tuple()]
+
+
+def argument_types(args: Sequence) -> list[str]:
+    """The numba types of ``args``, as strings (what the module's entry expects, exactly)."""
+    return [str(numba.typeof(a)) for a in args]
+
+
+def fingerprints(args: Sequence) -> list[bytes]:
+    """Numba's dispatch fingerprints of ``args`` (dtype, dimensions, layout, writability).
+
+    What numba's own dispatcher compares to pick a compiled kernel, computed in C: 10 us for
+    the 56 arguments, where :func:`argument_types` takes 1 ms.
+    """
+    return [_fingerprint(a) for a in args]
+
+
+def _sidecar(folder: Path) -> Path:
+    return folder / f"{module_name()}.json"
+
+
+def load(folder: Path | None = None) -> tuple | None:
+    """``(run_rk4, argument fingerprints)`` of the module built in ``folder``, or None.
+
+    None when it is off (:data:`ENV_SWITCH`, ``NUMBA_DISABLE_JIT``), not built for these
+    sources, or built for another CPU or numba. Looked up once per process and folder
+    (default :data:`FOLDER`).
+    """
+    if os.environ.get(ENV_SWITCH, "1") == "0" or config.DISABLE_JIT:
+        return None
+    folder = FOLDER if folder is None else Path(folder)
+    if folder in _loaded:
+        return _loaded[folder]
+    found = None
+    try:
+        meta = json.loads(_sidecar(folder).read_text(encoding="utf-8"))
+        paths = [folder / (module_name() + s) for s in importlib.machinery.EXTENSION_SUFFIXES]
+        path = next((p for p in paths if p.exists()), None)
+        if (path is not None and meta.get("digest") == kernel_sources_digest()
+                and meta.get("numba") == numba.__version__ and meta.get("machine") == machine()):
+            spec = importlib.util.spec_from_file_location(module_name(), path)
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+            found = (module.run_rk4, [bytes.fromhex(f) for f in meta["fingerprints"]])
+    except (OSError, ValueError, KeyError, ImportError, AttributeError):
+        found = None
+    _loaded[folder] = found
+    return found
+
+
+def run_rk4_for(args: Sequence, folder: Path | None = None):
+    """The ``run_rk4`` to call with ``args``.
+
+    The precompiled one if it is there and ``args`` are exactly of its types, else the JIT
+    kernel :func:`multiarm_pin._compiled.closed_loop.run_rk4`.
+    """
+    found = load(folder)
+    if found is not None:
+        try:
+            if fingerprints(args) == found[1]:
+                return found[0]
+        except (TypeError, ValueError):  # an argument numba cannot fingerprint
+            pass
+    return kernels.run_rk4
+
+
+def _entry():
+    """A plain function calling ``run_rk4`` with its own parameters.
+
+    The AOT compiler compiles the function it exports with its default flags; exporting this
+    call keeps ``run_rk4`` compiled exactly as the JIT compiles it (``error_model="numpy"``).
+    """
+    names = list(kernels.run_rk4.py_func.__code__.co_varnames[
+        :kernels.run_rk4.py_func.__code__.co_argcount])
+    src = f"def entry({', '.join(names)}):\n    return run_rk4({', '.join(names)})\n"
+    scope = {"run_rk4": kernels.run_rk4}
+    exec(compile(src, "<precompiled entry>", "exec"), scope)  # noqa: S102 - our own names
+    return scope["entry"]
+
+
+def example_arguments() -> tuple:
+    """The arguments of ``run_rk4`` in a short run of the shipped demo scenario.
+
+    Every shipped scenario passes arguments of the same types (tested), so these fix the
+    module's signature.
+    """
+    from multiarm_pin.app.runner import make_controller
+    from multiarm_pin.app.scenario import build_scenario, load_scenario
+    from multiarm_pin.data import DEMO_SCENARIO, data_path
+    from multiarm_pin.sim.compiled_loop import CompiledLoop
+    from multiarm_pin.sim.stepper import Stepper
+
+    built = build_scenario(load_scenario(data_path("scenarios", DEMO_SCENARIO)),
+                           load_visuals=False)
+    sim = built.scenario.simulation
+    stepper = Stepper(built.system, make_controller(built), sim.solver, sim.baumgarte)
+    loop = CompiledLoop.for_run(stepper, "rk4")
+    if loop is None or not loop.ready(built.initial_state):
+        raise RuntimeError("the demo scenario does not run on the compiled closed loop")
+    return loop.example_arguments(built.initial_state)
+
+
+def build(folder: Path | None = None, verbose: bool = False) -> Path:
+    """Compile ``run_rk4`` ahead of time into ``folder``; returns the module's path.
+
+    Writes the module and its sidecar atomically and removes modules of other sources. Takes
+    about a minute (the same compile the first run would otherwise do).
+
+    Raises:
+        Exception: whatever numba's AOT compiler or the C toolchain raises (e.g. no compiler).
+    """
+    with warnings.catch_warnings():  # pending deprecation since numba 0.57, no successor yet:
+        warnings.simplefilter("ignore", NumbaPendingDeprecationWarning)  # when it goes, the
+        from numba.pycc import CC  # ImportError is a failed build, and the JIT is used
+
+    args = example_arguments()
+    types = [numba.typeof(a) for a in args]
+    signature = RETURN_TYPE(*types)
+    folder = FOLDER if folder is None else Path(folder)
+    name = module_name()
+    with tempfile.TemporaryDirectory(dir=folder, prefix=".aot-") as tmp:
+        cc = CC(name, __name__)
+        cc.output_dir = tmp
+        cc.target_cpu = "host"
+        cc.verbose = verbose
+        cc.export("run_rk4", signature)(_entry())
+        cc.compile()
+        built = Path(tmp) / cc.output_file
+        meta = {"digest": kernel_sources_digest(), "numba": numba.__version__,
+                "machine": machine(), "arguments": [str(t) for t in types],
+                "fingerprints": [f.hex() for f in fingerprints(args)],
+                "built": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+        side = Path(tmp) / "meta.json"
+        side.write_text(json.dumps(meta, indent=1), encoding="utf-8")
+        target = folder / cc.output_file
+        os.replace(side, _sidecar(folder))
+        os.replace(built, target)  # last: the module is seen only with its sidecar
+    for old in folder.glob(PREFIX + "*"):
+        if not old.name.startswith(name):
+            old.unlink(missing_ok=True)
+    _loaded.pop(folder, None)
+    return target
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Command line: build the module (``--if-stale``: only when none fits these sources)."""
+    import argparse
+
+    parser = argparse.ArgumentParser(description="Compile the closed loop ahead of time.")
+    parser.add_argument("--if-stale", action="store_true",
+                        help="do nothing if a module of these sources is built")
+    parser.add_argument("--folder", type=Path, default=None,
+                        help="where to build (default: the package's _compiled folder)")
+    opts = parser.parse_args(argv)
+    if opts.if_stale and load(opts.folder) is not None:
+        print(f"precompiled closed loop up to date ({module_name()})")
+        return 0
+    t0 = time.perf_counter()
+    try:
+        path = build(opts.folder)
+    except Exception as exc:  # noqa: BLE001 - any build failure: the JIT stays in use
+        print(f"precompiled closed loop not built ({type(exc).__name__}: {exc}); the kernels "
+              "will be compiled at first use instead", file=sys.stderr)
+        return 1
+    print(f"precompiled closed loop built in {time.perf_counter() - t0:.0f} s: {path.name}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+
+
+__all__ = ["ENV_SWITCH", "argument_types", "build", "example_arguments", "fingerprints", "load",
+           "machine", "module_name", "run_rk4_for"]
