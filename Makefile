@@ -23,7 +23,7 @@ KERNEL_SOURCES := $(wildcard multiarm_pin/_compiled/*.py) multiarm_pin/dynamics/
 
 $(AOT): $(STAMP) $(KERNEL_SOURCES)
 	@echo "compiling the closed loop ahead of time (about a minute, once)"
-	-$(VENV)/bin/python -m multiarm_pin._compiled.precompiled --if-stale
+	-$(VENV)/bin/multiarm-pin precompile --if-stale
 	touch $(AOT)
 
 venv: $(STAMP) $(AOT)

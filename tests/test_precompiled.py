@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 import shutil
+import sysconfig
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,8 +27,9 @@ def folder(tmp_path_factory):
     try:
         precompiled.build(out)
     except Exception as exc:  # noqa: BLE001
-        if shutil.which("cc") is None and shutil.which("gcc") is None:
-            pytest.skip(f"no C compiler on this machine: {exc}")
+        headers = Path(sysconfig.get_paths()["include"]) / "Python.h"
+        if (shutil.which("cc") is None and shutil.which("gcc") is None) or not headers.exists():
+            pytest.skip(f"no C compiler or no Python headers on this machine: {exc}")
         raise
     return out
 
@@ -128,3 +131,16 @@ def test_a_failed_build_says_so_and_keeps_the_jit(tmp_path, monkeypatch, capsys)
     err = capsys.readouterr().err
     assert "not built (OSError: no C compiler found)" in err and "Traceback" not in err
     assert not list(tmp_path.iterdir())
+
+
+def test_the_command_line_builds_only_when_stale(monkeypatch, capsys):
+    from multiarm_pin.app.cli import main
+
+    built = []
+    monkeypatch.setattr(precompiled, "build", lambda folder=None: built.append(folder) or
+                        precompiled.FOLDER / "x.so")
+    monkeypatch.setattr(precompiled, "load", lambda folder=None: ("run_rk4", []))
+    assert main(["precompile", "--if-stale"]) == 0
+    assert "up to date" in capsys.readouterr().out and not built
+    assert main(["precompile"]) == 0
+    assert built == [None] and "built in" in capsys.readouterr().out

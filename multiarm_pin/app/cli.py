@@ -133,7 +133,20 @@ def _build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
     p = sub.add_parser("info", help="print key quantities of two arms and an object")
     p.set_defaults(func=_info)
+    p = sub.add_parser("precompile", help="compile the closed loop ahead of time for this "
+                       "machine (about a minute; `make venv` does it): first runs then "
+                       "compile nothing")
+    p.add_argument("--if-stale", action="store_true",
+                   help="do nothing if it is built for the installed sources")
+    p.set_defaults(func=_precompile)
     return parser
+
+
+def _precompile(args: argparse.Namespace) -> int:
+    """``multiarm-pin precompile``: :mod:`multiarm_pin._compiled.precompiled`'s build."""
+    from multiarm_pin._compiled import precompiled
+
+    return precompiled.main(["--if-stale"] if args.if_stale else [])
 
 
 def _demo(args: argparse.Namespace) -> int:
