@@ -72,8 +72,8 @@ from multiarm_pin.sim.trajectories import MinimumJerkTrajectory  # noqa: E402
 DEFAULT_ARMS = (2, 4, 8, 16, 32, 64)
 QUICK_ARMS = (2, 4)
 REFERENCE_MAX_ARMS = 8
-SCENARIOS = ("two_ur5_box", "three_ur5_box", "revolute_handle", "ur5_panda_box",
-             "mp6_pair_box", "two_gripper_form_closure", "fingertips_form_closure")
+SCENARIOS = tuple(sorted(p.stem for p in (ROOT / "scenarios").glob("*.yaml")))
+"""Every shipped scenario."""
 
 
 @dataclass
@@ -138,11 +138,12 @@ def measure(system, states, taus, make_ctrl, timer: Timer, peer=None, baumgarte=
     return out, rounds
 
 
-def run_rtf(system, state, ctrl, duration: float, dt: float, **kw) -> tuple[float, float]:
-    """(simulated time, wall time) of one ``simulate`` run."""
+def run_rtf(system, state, ctrl, duration: float, dt: float, **kw
+            ) -> tuple[float, float, int]:
+    """(simulated time, wall time, contact events) of one ``simulate`` run."""
     t0 = time.perf_counter()
-    simulate(system, state, ctrl, duration, dt, **kw)
-    return duration, time.perf_counter() - t0
+    res = simulate(system, state, ctrl, duration, dt, **kw)
+    return duration, time.perf_counter() - t0, len(res.events)
 
 
 def weld_rows(arms: Sequence[int], timer: Timer, n_states: int, sim_s: float) -> list[Row]:
@@ -168,8 +169,8 @@ def weld_rows(arms: Sequence[int], timer: Timer, n_states: int, sim_s: float) ->
                                             bench.states[0].obj.position,
                                             bench.states[0].obj.quaternion))
         simulate(s, rest, make(), 0.004, 0.002, integrator="rk4", solver="object_first")
-        sim, wall = run_rtf(s, rest, make(), sim_s, 0.002, integrator="rk4",
-                            solver="object_first")  # (after a run that loads the kernels)
+        sim, wall, _ = run_rtf(s, rest, make(), sim_s, 0.002, integrator="rk4",
+                               solver="object_first")  # (after a run that loads the kernels)
         rows.append(Row("weld_ur5", n, s.nv, tc, to, tp, tr, ta, wall / (4 * sim / 0.002),
                         tc / to, to / tp, tc / n, sim, wall, sim / wall, rounds))
         print(f"weld n={n:3d}: closed {tc * 1e6:8.1f} us, open {to * 1e6:8.1f} us, "
@@ -185,12 +186,18 @@ def scenario_rows(names: Sequence[str], timer: Timer, duration: float | None) ->
         sim = sc.simulation
         T = sim.duration if duration is None else min(duration, sim.duration)
         s = built.system
-        kw = dict(integrator=sim.integrator, solver=sim.solver, baumgarte=sim.baumgarte)
-        simulate(s, built.initial_state, make_controller(built), 2 * sim.dt, sim.dt, **kw)
+        kw = dict(integrator=sim.integrator, solver=sim.solver, baumgarte=sim.baumgarte,
+                  external_wrench=sc.object.external_wrench or None)  # as simulate_built
+        try:  # a whole run first: every kernel it needs is loaded before the timed run
+            simulate(s, built.initial_state, make_controller(built), T, sim.dt, **kw)
+        except MultiArmError:
+            pass
         note = ""
         t0 = time.perf_counter()
+        events = 0
         try:
-            simt, wall = run_rtf(s, built.initial_state, make_controller(built), T, sim.dt, **kw)
+            simt, wall, events = run_rtf(s, built.initial_state, make_controller(built), T,
+                                         sim.dt, **kw)
         except MultiArmError as exc:  # the scenario itself fails: RTF of the part before
             wall = time.perf_counter() - t0
             part = partial_result(exc)
@@ -198,6 +205,17 @@ def scenario_rows(names: Sequence[str], timer: Timer, duration: float | None) ->
             note = (f"the run fails ({type(exc).__name__}: "
                     f"{str(exc).splitlines()[0][:90]}...); RTF of the {simt:g} s before")
             print(f"{name}: {note}", flush=True)
+        if not s.n_arms or s.supports.n_rows:  # no compiled loop: the whole run's RTF only
+            note = note or ("no arms" if not s.n_arms else "supports") + \
+                ": runs on the Python stepper (no compiled loop for it)"
+            rows.append(Row(name, s.n_arms, s.nv, *[math.nan] * 9, simt, wall, simt / wall, 0,
+                            note))
+            print(f"{name:26s}: RTF {simt / wall:6.2f} ({simt:g} s in {wall:.2f} s); {note}",
+                  flush=True)
+            continue
+        if events and not note:
+            note = (f"{events} contact events: steps with separated contacts and the events "
+                    "run on the Python stepper")
         # states and torques of a short run, for the per-call times
         res = simulate(s, built.initial_state, make_controller(built), 40 * sim.dt, sim.dt,
                        **kw)
