@@ -160,11 +160,11 @@ def _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilater
     """:func:`object_pd_torques` on the buffer views.
 
     An arm whose constraint rows fix its joint accelerations (``N_i = nv_i``: ``W_i`` square)
-    skips the hold task (steps 2b-3): its ``q̈_i = W_i⁻ᵀ (c_i - W_o,iᵀ a_d)`` whatever
-    ``q̈_des`` is, as the reference's projection of step 4 gives it. Its status then depends
-    on ``W_i`` alone (:data:`PD_ARM_RANK` when not of full rank with margin), not on the
-    hold task's matrix ``AᵀA + ε I``, which the reference factors but whose solution drops
-    out.
+    skips the hold task (step 2's task rows, step 3): its ``q̈_i = W_i⁻ᵀ (c_i - W_o,iᵀ a_d)``
+    whatever ``q̈_des`` is, as the reference's projection of step 4 gives it. Its status then
+    depends on ``W_i`` alone (:data:`PD_ARM_RANK` when not of full rank with margin), not on
+    the hold task's matrix ``AᵀA + ε I``, which the reference factors but whose solution
+    drops out.
 
     Not inlined (``inline="always"``): numba deep-copies the IR of an inlined function, which
     for this one cost more than the separate compile (1.6 s CPU).
