@@ -33,6 +33,9 @@ from multiarm_pin.spatial import rotation_to_quaternion
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 
 CASES = [(seed, 1 + seed % 6) for seed in range(12)]
+WELD_CASES = [(2, 3), (6, 4)]
+"""Welds only: Pandas (6 rows, 7 joints: the hold task decides their null motion) next to
+UR5s (6 rows, 6 joints: square ``W_i``, the rows alone fix ``q̈_i``)."""
 
 
 def hold_task_full_rank(ctrl, ev) -> np.ndarray:
@@ -55,10 +58,11 @@ def evaluate_both(system, state, off, trajectory, t, baumgarte):
     return out
 
 
-@pytest.mark.parametrize("seed,n_arms", CASES)
+@pytest.mark.parametrize("seed,n_arms,kinds", [(s, n, None) for s, n in CASES]
+                         + [(s, n, ["weld"] * n) for s, n in WELD_CASES])
 @pytest.mark.parametrize("baumgarte", [None, (5.0, 5.0)])
-def test_fused_closed_loop_equals_reference(seed, n_arms, baumgarte):
-    system, state, off, trajectory = random_case(seed, n_arms)
+def test_fused_closed_loop_equals_reference(seed, n_arms, kinds, baumgarte):
+    system, state, off, trajectory = random_case(seed, n_arms, kinds)
     fused, ref = evaluate_both(system, state, off, trajectory, 0.4, baumgarte)
     if isinstance(ref, Exception):  # e.g. fingertips alone cannot hold the margin
         assert isinstance(fused, DynamicsError) and str(fused) == str(ref)
@@ -108,6 +112,71 @@ def test_hold_rank_test_sees_both_kinds():
         full = hold_task_full_rank(ctrl, ev)
         kinds.update(zip([a.nv for a in system.arms], full.tolist(), strict=True))
     assert (6, True) in kinds and (7, False) in kinds
+
+
+def record_statuses(monkeypatch) -> list[int]:
+    """The statuses of every compiled ``object_pd_step`` call from here on (in call order)."""
+    statuses = []
+    step = controller_kernels.object_pd_step
+
+    def recording(*args):
+        out = step(*args)
+        statuses.append(int(out[0]))
+        return out
+
+    monkeypatch.setattr(controller_kernels, "object_pd_step", recording)
+    return statuses
+
+
+def square_arms(system) -> np.ndarray:
+    """(n,) bool: the arm has as many constraint rows as joints (``W_i`` square)."""
+    return np.array([system.compiled.N[i] == arm.nv for i, arm in enumerate(system.arms)])
+
+
+def test_weld_cases_mix_square_and_task_arms():
+    for seed, n in WELD_CASES:
+        square = square_arms(random_case(seed, n, ["weld"] * n)[0])
+        assert square.any() and not square.all(), (seed, square)
+
+
+def test_square_rows_fix_the_arm_without_its_hold_task(monkeypatch):
+    """A square full-rank ``W_i`` gives ``q̈_i = W_i⁻ᵀ (c_i - W_o,iᵀ a_d)`` (solved here by
+    numpy), and neither the answer nor the status depends on the arm's hold task: without
+    held points its ``AᵀA + ε I`` is zero, yet the kernel plans the same torques."""
+    system, state, off, trajectory = random_case(2, 3, ["weld"] * 3)
+    square = square_arms(system)
+    ctrl = object_pd(system, trajectory)
+    ev = system.blocks(off)
+    statuses = record_statuses(monkeypatch)
+    tau = ctrl(0.4, off, ev)
+    plan = ctrl.last
+    b = ev.blocks
+    for i in np.flatnonzero(square):
+        nv = system.arms[i].nv
+        expected = np.linalg.solve(b.W[i, :nv, :nv].T, b.c[i, :nv] - b.W_o[i, :, :nv].T @ plan.a_o)
+        assert rel_err(plan.qdd[i, :nv], expected) <= TOL, i
+    ctrl._hold_n[square] = 0  # the square arms' hold tasks are empty from now on
+    np.testing.assert_array_equal(ctrl(0.4, off, ev), tau)
+    assert statuses == [controller_kernels.PD_OK] * 2
+
+
+def test_square_rank_deficient_rows_hand_back_to_the_reference(monkeypatch):
+    """A square ``W_i`` with one constraint row twice (structurally singular: its last QR
+    pivot is round-off, far below the rank margin on any CPU): the kernel reports
+    ``PD_ARM_RANK`` and the reference's pseudo-inverse plans the torques."""
+    system, state, off, trajectory = random_case(2, 3, ["weld"] * 3)
+    i = int(np.flatnonzero(square_arms(system))[0])
+    ev = system.blocks(off)
+    b = ev.blocks
+    for block in (b.W[i], b.W_o[i]):  # views of the evaluation's buffer
+        block[:, 5] = block[:, 4]
+    b.c[i, 5] = b.c[i, 4]
+    fused, ref = object_pd(system, trajectory), object_pd(system, trajectory, compiled=False)
+    statuses = record_statuses(monkeypatch)
+    tau = fused(0.4, off, ev)
+    assert statuses == [controller_kernels.PD_ARM_RANK]
+    assert isinstance(fused.last, InverseDynamicsResult)  # the reference planned it
+    np.testing.assert_array_equal(tau, ref(0.4, off, ev))
 
 
 @pytest.mark.parametrize("name", ["two_ur5_box", "fingertips_form_closure"])

@@ -70,8 +70,9 @@ PD_OK = 0
 PD_FORCES_FAILED = 1
 """Status: the warm-started force QP failed (the caller solves it cold)."""
 PD_ARM_RANK = 2
-"""Status: some ``W_i`` is not of full column rank with margin (the caller uses the
-reference, whose pseudo-inverse decides)."""
+"""Status: some ``W_i`` is not of full column rank with margin, or the hold task's
+``AᵀA + ε I`` of an arm with fewer rows than joints is not positive definite (the caller
+uses the reference, whose pseudo-inverse decides)."""
 PD_NOT_FINITE = 3
 """Status: NaN or infinity in the result."""
 PD_LARGE_ROTATION = 4
@@ -94,12 +95,14 @@ def min_norm_rows(W, ncols, nrows, g, x, Q, beta):  # pragma: no cover - compile
         ncols: constraint rows ``N_i`` (columns of ``W_i``).
         nrows: joints ``k`` (rows).
         g: (ncols,) right-hand side.
-        x: output (nrows,).
+        x: output (nrows,) (also the scratch of the factorisation: nothing is allocated).
         Q: scratch (k, m) (the Householder vectors and ``R``).
         beta: scratch (m,).
 
     Returns:
-        False if ``W`` is not of full column rank with the margin :data:`RANK_MARGIN`.
+        False if ``W`` is not of full column rank with the margin :data:`RANK_MARGIN`
+        (``x`` then meaningless). With ``ncols == nrows`` the solution is the only one,
+        ``W⁻ᵀ g``.
     """
     for a in range(nrows):
         for s in range(ncols):
@@ -131,17 +134,15 @@ def min_norm_rows(W, ncols, nrows, g, x, Q, beta):  # pragma: no cover - compile
         rmin = min(rmin, abs(alpha))
     if not (ncols == 0 or rmin > RANK_MARGIN * rmax):
         return False
-    # Wᵀ x = Rᵀ Qᵀ x = g: y = R⁻ᵀ g (forward substitution), x = H_0 ... H_{N-1} [y; 0]
-    y = np.empty(ncols)
+    # Wᵀ x = Rᵀ Qᵀ x = g: y = R⁻ᵀ g (forward substitution, y[j] over R[j, j] in x[j]),
+    # x = H_0 ... H_{N-1} [y; 0]
     for j in range(ncols):
         acc = g[j]
         for p in range(j):
-            acc -= Q[p, j] * y[p]  # R[p, j] (p < j) is stored above the diagonal
-        y[j] = acc / x[j]
-    for a in range(nrows):
+            acc -= Q[p, j] * x[p]  # R[p, j] (p < j) is stored above the diagonal
+        x[j] = acc / x[j]
+    for a in range(ncols, nrows):
         x[a] = 0.0
-    for j in range(ncols):
-        x[j] = y[j]
     for j in range(ncols - 1, -1, -1):
         dot = 0.0
         for a in range(j, nrows):
@@ -157,6 +158,13 @@ def _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilater
              a_d, z, hold_tool, hold_obj, hold_n, gains, active, tau, mu, qdd,
              a_pts):  # pragma: no cover - compiled
     """:func:`object_pd_torques` on the buffer views.
+
+    An arm whose constraint rows fix its joint accelerations (``N_i = nv_i``: ``W_i`` square)
+    skips the hold task (step 2's task rows, step 3): its ``q̈_i = W_i⁻ᵀ (c_i - W_o,iᵀ a_d)``
+    whatever ``q̈_des`` is, as the reference's projection of step 4 gives it. Its status then
+    depends on ``W_i`` alone (:data:`PD_ARM_RANK` when not of full rank with margin), not on
+    the hold task's matrix ``AᵀA + ε I``, which the reference factors but whose solution
+    drops out.
 
     Not inlined (``inline="always"``): numba deep-copies the IR of an inlined function, which
     for this one cost more than the separate compile (1.6 s CPU).
@@ -199,6 +207,9 @@ def _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilater
         R = tR[i]
         wt = ttw[i, 3:6]
         nh = hold_n[i]
+        Ni = N[i]
+        nvi = nv_arm[i]
+        task = Ni != nvi  # else W_i square: the rows alone fix q̈_i (see the docstring)
         for p in range(nh):
             for a in range(3):
                 d[a] = (R[a, 0] * hold_tool[i, p, 0] + R[a, 1] * hold_tool[i, p, 1]
@@ -226,8 +237,10 @@ def _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilater
             a_pts[i, p, 0] = apt0
             a_pts[i, p, 1] = apt1
             a_pts[i, p, 2] = apt2
+            if not task:
+                continue
             # task rows A = J_v + J_ω × d; a0 = J̇q̇_v + J̇q̇_ω × d + ω_t × (ω_t × d)
-            for j in range(k):
+            for j in range(nvi):
                 A[3 * p + 0, j] = J[i, 0, j] + J[i, 4, j] * d[2] - J[i, 5, j] * d[1]
                 A[3 * p + 1, j] = J[i, 1, j] + J[i, 5, j] * d[0] - J[i, 3, j] * d[2]
                 A[3 * p + 2, j] = J[i, 2, j] + J[i, 3, j] * d[1] - J[i, 4, j] * d[0]
@@ -240,47 +253,53 @@ def _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilater
                                      + wt[2] * t1[0] - wt[0] * t1[2])
             rhs[3 * p + 2] = apt2 - (Jdq[i, 2] + Jdq[i, 3] * d[1] - Jdq[i, 4] * d[0]
                                      + wt[0] * t1[1] - wt[1] * t1[0])
-        # 3. q̈_des = z + (AᵀA + ε s I)⁻¹ Aᵀ (rhs - A z), s = trace(AᵀA) / nv_i
-        nr = 3 * nh
-        for p in range(nr):
-            acc = rhs[p]
-            for j in range(k):
-                acc -= A[p, j] * z[i, j]
-            rhs[p] = acc
-        tr = 0.0
-        for a in range(k):
-            for b in range(a + 1):
-                acc = 0.0
-                for p in range(nr):
-                    acc += A[p, a] * A[p, b]
-                K[a, b] = acc
-                K[b, a] = acc
-            tr += K[a, a]
-            acc = 0.0
-            for p in range(nr):
-                acc += A[p, a] * rhs[p]
-            sol[a, 0] = acc
-        eps = damping * tr / nv_arm[i]
-        for a in range(k):
-            K[a, a] += eps
-        if not cholesky(K, L, k):
-            return PD_ARM_RANK
-        cholesky_solve(L, sol, k, np.int64(1))
-        # 4. inverse dynamics: the q̈_i closest to q̈_des with W_iᵀ q̈_i = c_i - W_o,iᵀ a_d
-        Ni = N[i]
-        nvi = nv_arm[i]
-        for j in range(k):
-            qdd[i, j] = (z[i, j] + sol[j, 0]) if j < nvi else 0.0
+        # the right-hand side of the arm's rows W_iᵀ q̈_i = c_i - W_o,iᵀ a_d
         for s in range(Ni):
             acc = c[i, s]
             for a in range(6):
                 acc -= W_o[i, a, s] * a_d[a]
-            for j in range(k):
-                acc -= W[i, j, s] * qdd[i, j]
             gap[s] = acc
-        if Ni > k or not min_norm_rows(W[i], Ni, k, gap, x, QR, beta):
-            return PD_ARM_RANK
         for j in range(k):
+            qdd[i, j] = 0.0
+        if task:
+            # 3. q̈_des = z + (AᵀA + ε s I)⁻¹ Aᵀ (rhs - A z), s = trace(AᵀA) / nv_i
+            nr = 3 * nh
+            for p in range(nr):
+                acc = rhs[p]
+                for j in range(nvi):
+                    acc -= A[p, j] * z[i, j]
+                rhs[p] = acc
+            tr = 0.0
+            for a in range(nvi):
+                for b in range(a + 1):
+                    acc = 0.0
+                    for p in range(nr):
+                        acc += A[p, a] * A[p, b]
+                    K[a, b] = acc
+                    K[b, a] = acc
+                tr += K[a, a]
+                acc = 0.0
+                for p in range(nr):
+                    acc += A[p, a] * rhs[p]
+                sol[a, 0] = acc
+            eps = damping * tr / nvi
+            for a in range(nvi):
+                K[a, a] += eps
+            if not cholesky(K, L, nvi):
+                return PD_ARM_RANK
+            cholesky_solve(L, sol, nvi, np.int64(1))
+            for j in range(nvi):
+                qdd[i, j] = z[i, j] + sol[j, 0]
+            for s in range(Ni):
+                acc = gap[s]
+                for j in range(nvi):
+                    acc -= W[i, j, s] * qdd[i, j]
+                gap[s] = acc
+        # 4. inverse dynamics: the q̈_i closest to q̈_des (0 for a square W_i: it fixes q̈_i)
+        # with W_iᵀ q̈_i = c_i - W_o,iᵀ a_d
+        if Ni > nvi or not min_norm_rows(W[i], Ni, nvi, gap, x, QR, beta):
+            return PD_ARM_RANK
+        for j in range(nvi):
             qdd[i, j] += x[j]
         # 5. τ_i = M_i q̈_i - h_i - W_i μ_i (zero on padding)
         for j in range(k):
