@@ -15,8 +15,9 @@ For n = 2, 4, 8, 16, 32, 64 UR5s each welded to one large box (the systems of
   ``object_pd`` (RK4, dt = 2 ms; the scenario's own settings for scenarios).
 
 Per-call times are medians of interleaved single calls (``Timer`` of ``solver_vs_kkt.py``:
-one call of each function per round, so that load changes hit all alike); ratios within
-one run are what counts on a shared machine. The cold start (an empty ``NUMBA_CACHE_DIR``,
+one call of each function per round, so that load changes hit all alike), each ratio timed
+as its own pair (see :func:`measure`); ratios within one run are what counts on a shared
+machine. The cold start (an empty ``NUMBA_CACHE_DIR``,
 ``multiarm-pin run`` of the demo) is measured in a subprocess: its wall time minus that of
 the same command with the cache filled is the compile time; once as installed (the closed
 loop precompiled by the install, ``multiarm_pin._compiled.precompiled``; built first if it is
@@ -108,34 +109,42 @@ def lift_trajectory(state, seconds: float) -> MinimumJerkTrajectory:
 
 def measure(system, states, taus, make_ctrl, timer: Timer, peer=None, baumgarte=None,
             reference: bool = True) -> tuple[list[float], int]:
-    """Interleaved medians: closed loop as ``simulate`` runs it, open-loop step, [Pinocchio],
-    [reference closed loop], closed loop through the Python API."""
+    """Medians of interleaved pairs: ``[closed, open, pin, closed ref, closed API]`` and the
+    rounds of the first pair.
+
+    Each ratio is timed in its own interleaved pair, so that both of its calls run in the same
+    conditions: ``(closed, open)``, then ``(open, pin)`` (``pin`` is scaled by that pair's
+    ``open`` to the first pair's, so ``open / pin`` is the second pair's ratio), then the
+    reference closed loop and the Python API (absolute times only). In one round-robin of
+    all five, the call after the numpy reference (2 ms of other data) finds cold caches:
+    1.25-1.56x for the same two calls at 2 arms, depending only on the order.
+    """
     ctrl = make_ctrl()
     ctrl(0.0, states[0], system.blocks(states[0]))
-    api = [lambda k: closed_loop_evaluation(system, ctrl, 0.1, states[k], "object_first",
-                                            baumgarte)]
+    api = lambda k: closed_loop_evaluation(system, ctrl, 0.1, states[k],  # noqa: E731
+                                           "object_first", baumgarte)
     loop = CompiledLoop.for_run(Stepper(system, ctrl, "object_first", baumgarte), "rk4")
+    closed = api
     if loop is not None and loop.ready(states[0]):  # the evaluation of simulate's compiled loop
-        api.insert(0, lambda k: loop.evaluate(0.1, states[k]))
-    fns = [api[0], lambda k: system.forward_dynamics(states[k], taus[k], "object_first",
-                                                     baumgarte)]
+        closed = lambda k: loop.evaluate(0.1, states[k])  # noqa: E731
+    open_ = lambda k: system.forward_dynamics(states[k], taus[k],  # noqa: E731
+                                              "object_first", baumgarte)
+    n = len(states)
+    (tc, to), rounds = timer.medians([closed, open_], n)
+    tp = math.nan
     if peer is not None:
-        fns.append(peer.step)
+        (to2, tp2), _ = timer.medians([open_, peer.step], n)
+        tp = tp2 * to / to2
+    others = [api]
     if reference:
         ref = make_ctrl()
         ref.compiled = False
         ref(0.0, states[0], system.blocks(states[0]))
-        fns.append(lambda k: closed_loop_evaluation(system, ref, 0.1, states[k],
-                                                    "object_first_numpy", baumgarte,
-                                                    reference=True))
-    fns.append(api[-1])
-    times, rounds = timer.medians(fns, len(states))
-    out = [times[0], times[1], math.nan, math.nan, times[-1]]
-    if peer is not None:
-        out[2] = times[2]
-    if reference:
-        out[3] = times[-2]
-    return out, rounds
+        others.insert(0, lambda k: closed_loop_evaluation(system, ref, 0.1, states[k],
+                                                          "object_first_numpy", baumgarte,
+                                                          reference=True))
+    times, _ = timer.medians(others, n)
+    return [tc, to, tp, times[0] if reference else math.nan, times[-1]], rounds
 
 
 def run_rtf(system, state, ctrl, duration: float, dt: float, **kw
@@ -325,7 +334,12 @@ def write_report(path: Path, weld: Sequence[Row], scen: Sequence[Row], cold: dic
     lines += ["", "## Method", "",
               "Per-call times are medians of interleaved single calls (one call of each "
               "function per round, the same states), so their ratios hold within this run "
-              "even on a loaded machine; absolute times depend on the load (above). "
+              "even on a loaded machine; absolute times depend on the load (above). Each "
+              "ratio is timed as its own interleaved pair, both calls in the same conditions: "
+              "(closed, open), then (open, pin) (`pin` scaled to the first pair's `open`), then "
+              "the reference and the API alone (in one round-robin of all of them, the call "
+              "after the 2 ms numpy reference finds cold caches: 1.25-1.56x for the same two "
+              "calls at 2 arms, by order alone). "
               "`closed` = one closed-loop evaluation as `simulate` runs it (the compiled "
               "loop's: arm terms, blocks, object_pd and forward dynamics in one compiled call, "
               "`CompiledLoop.evaluate`), `closed API` = the same through the Python API "
