@@ -66,6 +66,11 @@ class SystemBlocks:
 
     def __post_init__(self) -> None:
         self._check_shapes()
+        self._derive()
+        check_object_inertia(self.M_o)
+
+    def _derive(self) -> None:
+        """Set ``nv``, ``N`` as int arrays and the fields derived from them (the masks)."""
         nv = np.asarray(self.nv, dtype=int)
         N = np.asarray(self.N, dtype=int)
         object.__setattr__(self, "nv", nv)
@@ -74,13 +79,29 @@ class SystemBlocks:
         object.__setattr__(self, "constraint_mask", np.arange(self.N_max)[None, :] < N[:, None])
         object.__setattr__(self, "has_constraint_padding", bool(np.any(N < self.N_max)))
         object.__setattr__(self, "padding_diagonal", (~self.constraint_mask).astype(float))
-        if lapack.dpotrf(self.M_o)[1] != 0:
-            if not np.isfinite(self.M_o).all():
-                raise InputError("SystemBlocks.M_o contains NaN or infinity")
-            raise InputError(
-                "SystemBlocks.M_o: the object spatial inertia must be symmetric positive "
-                f"definite, got eigenvalues {np.linalg.eigvalsh(self.M_o).round(12).tolist()}"
-            )
+
+    @classmethod
+    def assembled(cls, M: np.ndarray, h: np.ndarray, W: np.ndarray, W_o: np.ndarray,
+                  c: np.ndarray, M_o: np.ndarray, h_o: np.ndarray, nv: np.ndarray,
+                  N: np.ndarray) -> SystemBlocks:
+        """Blocks assembled inside the package from parts that are already valid.
+
+        For the hot paths that build blocks from validated ones (:func:`restrict_rows`,
+        :func:`~multiarm_pin.dynamics.contact_rows.stack_contact_blocks`): float64 arrays of
+        consistent shapes, padding as documented, ``M_o`` positive definite (the caller
+        checks it when it is new, :func:`check_object_inertia`). None of that is checked
+        again here (the shape checks cost more than the rest of such a call); the derived
+        masks are set as by the constructor. Anything from outside goes through the
+        constructor or :meth:`from_lists`, which check it.
+
+        Args: the fields, as for the constructor (``nv``, ``N`` integer arrays).
+        """
+        out = object.__new__(cls)
+        for name, value in (("M", M), ("h", h), ("W", W), ("W_o", W_o), ("c", c),
+                            ("M_o", M_o), ("h_o", h_o), ("nv", nv), ("N", N)):
+            object.__setattr__(out, name, value)
+        out._derive()
+        return out
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -336,22 +357,37 @@ def restrict_rows(blocks: SystemBlocks, active) -> tuple[SystemBlocks, np.ndarra
         raise InputError(f"active: expected a bool array of shape ({blocks.n}, "
                          f"{blocks.N_max}), got shape {active.shape}")
     keep = active & blocks.constraint_mask
-    n, m = blocks.n, blocks.N_max
-    index = np.full((n, m), -1, dtype=int)
-    W = np.zeros_like(blocks.W)
-    W_o = np.zeros_like(blocks.W_o)
-    c = np.zeros_like(blocks.c)
+    m = blocks.N_max
     N = keep.sum(axis=1).astype(blocks.N.dtype)
-    for i in range(n):
-        rows = np.flatnonzero(keep[i])
-        k = len(rows)
-        index[i, :k] = rows
-        W[i, :, :k] = blocks.W[i][:, rows]
-        W_o[i, :, :k] = blocks.W_o[i][:, rows]
-        c[i, :k] = blocks.c[i, rows]
-    out = SystemBlocks(np.array(blocks.M), np.array(blocks.h), W, W_o, c,
-                       np.array(blocks.M_o), np.array(blocks.h_o), np.array(blocks.nv), N)
+    kept = np.arange(m)[None, :] < N[:, None]  # (n, m) the restricted blocks' real rows
+    # each arm's kept rows first, in their order (a stable sort of "dropped")
+    order = np.argsort(~keep, axis=1, kind="stable")
+    index = np.where(kept, order, -1)
+    W = np.where(kept[:, None, :], np.take_along_axis(blocks.W, order[:, None, :], axis=2), 0.0)
+    W_o = np.where(kept[:, None, :], np.take_along_axis(blocks.W_o, order[:, None, :], axis=2),
+                   0.0)
+    c = np.where(kept, np.take_along_axis(blocks.c, order, axis=1), 0.0)
+    # parts of validated blocks: no new checks (this runs at every evaluation of a
+    # controller while a contact is separated)
+    out = SystemBlocks.assembled(np.array(blocks.M), np.array(blocks.h), W, W_o, c,
+                                 np.array(blocks.M_o), np.array(blocks.h_o),
+                                 np.array(blocks.nv), N)
     return out, index
+
+
+def check_object_inertia(M_o: np.ndarray) -> None:
+    """Raise :class:`InputError` unless ``M_o`` (6, 6) is symmetric positive definite (and finite).
+
+    Args:
+        M_o: (6, 6) float64 object spatial inertia at the COM, world axes.
+    """
+    if lapack.dpotrf(M_o)[1] != 0:
+        if not np.isfinite(M_o).all():
+            raise InputError("SystemBlocks.M_o contains NaN or infinity")
+        raise InputError(
+            "SystemBlocks.M_o: the object spatial inertia must be symmetric positive "
+            f"definite, got eigenvalues {np.linalg.eigvalsh(M_o).round(12).tolist()}"
+        )
 
 
 def expand_rows(values, index: np.ndarray) -> np.ndarray:

@@ -18,7 +18,7 @@ import numpy as np
 
 from multiarm_pin.constraints import ConstraintTerms
 from multiarm_pin.constraints.supports import SupportSet, SupportTerms
-from multiarm_pin.dynamics.blocks import SystemBlocks
+from multiarm_pin.dynamics.blocks import SystemBlocks, check_object_inertia
 from multiarm_pin.dynamics.evaluation import baumgarte_gains
 
 
@@ -159,8 +159,13 @@ def stack_contact_blocks(table: ContactRowTable, M_o: np.ndarray, h_o: np.ndarra
     phi_dot[n, :K] = support.phi_dot
     pts[n, :K] = support.contact_points
     nrm[n, :K] = support.normals
-    full = SystemBlocks(M, h, W, W_o, c, np.array(M_o, dtype=float), np.array(h_o, dtype=float),
-                        table.nv_blocks.copy(), table.N_blocks.copy())
+    M_o = np.array(M_o, dtype=float)
+    if blocks is None:  # new at this state (with arms it is the arms' blocks', checked)
+        check_object_inertia(M_o)
+    # the arms' validated blocks, the table's constant layout and the support rows: the
+    # shapes hold by construction and are not checked again (this runs at every evaluation)
+    full = SystemBlocks.assembled(M, h, W, W_o, c, M_o, np.array(h_o, dtype=float),
+                                  table.nv_blocks.copy(), table.N_blocks.copy())
     return full, ContactRows(phi, phi_dot, pts, nrm)
 
 
