@@ -83,24 +83,38 @@ class SystemBlocks:
     @classmethod
     def assembled(cls, M: np.ndarray, h: np.ndarray, W: np.ndarray, W_o: np.ndarray,
                   c: np.ndarray, M_o: np.ndarray, h_o: np.ndarray, nv: np.ndarray,
-                  N: np.ndarray) -> SystemBlocks:
+                  N: np.ndarray, masks: tuple | None = None) -> SystemBlocks:
         """Blocks assembled inside the package from parts that are already valid.
 
         For the hot paths that build blocks from validated ones (:func:`restrict_rows`,
         :func:`~multiarm_pin.dynamics.contact_rows.stack_contact_blocks`): float64 arrays of
         consistent shapes, padding as documented, ``M_o`` positive definite (the caller
         checks it when it is new, :func:`check_object_inertia`). None of that is checked
-        again here (the shape checks cost more than the rest of such a call); the derived
-        masks are set as by the constructor. Anything from outside goes through the
-        constructor or :meth:`from_lists`, which check it.
+        again here (the shape checks cost more than the rest of such a call). Anything from
+        outside goes through the constructor or :meth:`from_lists`, which check it.
 
-        Args: the fields, as for the constructor (``nv``, ``N`` integer arrays).
+        Args:
+            M: (n, nv_max, nv_max) mass matrices, identity on padding.
+            h: (n, nv_max) ``τ - nle``.
+            W: (n, nv_max, N_max) ``J_iᵀ G_tool,iᵀ``.
+            W_o: (n, 6, N_max) ``G_object,iᵀ``.
+            c: (n, N_max) constraint right-hand sides.
+            M_o: (6, 6) object inertia (positive definite).
+            h_o: (6,) object force terms.
+            nv: (n,) int joints per arm.
+            N: (n,) int rows per arm.
+            masks: ``(dof_mask, constraint_mask, has_constraint_padding,
+                padding_diagonal)`` of these ``nv``, ``N`` (arrays owned by the new
+                blocks), or None to derive them as the constructor does.
         """
         out = object.__new__(cls)
-        for name, value in (("M", M), ("h", h), ("W", W), ("W_o", W_o), ("c", c),
-                            ("M_o", M_o), ("h_o", h_o), ("nv", nv), ("N", N)):
-            object.__setattr__(out, name, value)
-        out._derive()
+        d = out.__dict__  # the frozen dataclass's fields, set once here
+        d.update(M=M, h=h, W=W, W_o=W_o, c=c, M_o=M_o, h_o=h_o, nv=nv, N=N)
+        if masks is None:
+            out._derive()
+        else:
+            d.update(dof_mask=masks[0], constraint_mask=masks[1],
+                     has_constraint_padding=masks[2], padding_diagonal=masks[3])
         return out
 
     # ------------------------------------------------------------------ sizes
@@ -357,21 +371,23 @@ def restrict_rows(blocks: SystemBlocks, active) -> tuple[SystemBlocks, np.ndarra
         raise InputError(f"active: expected a bool array of shape ({blocks.n}, "
                          f"{blocks.N_max}), got shape {active.shape}")
     keep = active & blocks.constraint_mask
-    m = blocks.N_max
+    n, k, m = blocks.W.shape
     N = keep.sum(axis=1).astype(blocks.N.dtype)
-    kept = np.arange(m)[None, :] < N[:, None]  # (n, m) the restricted blocks' real rows
-    # each arm's kept rows first, in their order (a stable sort of "dropped")
+    kept = np.arange(m) < N[:, None]  # (n, m) the restricted blocks' real rows
+    # each arm's kept rows first, in their order (a stable sort of "dropped"), gathered by
+    # one fancy index per array (C-contiguous, as the zero-filled arrays were)
     order = np.argsort(~keep, axis=1, kind="stable")
     index = np.where(kept, order, -1)
-    W = np.where(kept[:, None, :], np.take_along_axis(blocks.W, order[:, None, :], axis=2), 0.0)
-    W_o = np.where(kept[:, None, :], np.take_along_axis(blocks.W_o, order[:, None, :], axis=2),
-                   0.0)
-    c = np.where(kept, np.take_along_axis(blocks.c, order, axis=1), 0.0)
+    arm, col = np.arange(n)[:, None, None], order[:, None, :]
+    W = np.where(kept[:, None, :], blocks.W[arm, np.arange(k)[:, None], col], 0.0)
+    W_o = np.where(kept[:, None, :], blocks.W_o[arm, np.arange(6)[:, None], col], 0.0)
+    c = np.where(kept, blocks.c[arm[:, :, 0], order], 0.0)
     # parts of validated blocks: no new checks (this runs at every evaluation of a
     # controller while a contact is separated)
+    masks = (blocks.dof_mask.copy(), kept, bool(N.min() < m), (~kept).astype(float))
     out = SystemBlocks.assembled(np.array(blocks.M), np.array(blocks.h), W, W_o, c,
                                  np.array(blocks.M_o), np.array(blocks.h_o),
-                                 np.array(blocks.nv), N)
+                                 np.array(blocks.nv), N, masks)
     return out, index
 
 

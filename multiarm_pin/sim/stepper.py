@@ -111,7 +111,9 @@ class Stepper:
             blocks = ev.blocks
         else:
             tau = controller_torques(self.controller, t, state, ev, s.nv)
-            blocks = ev.blocks.with_torques(s.pad(tau))
+            # with_torques's sum without its input checks: tau is checked (shape, finite)
+            # and pad puts zeros on the padded dofs
+            blocks = ev.blocks.replaced(h=ev.blocks.h + s.pad(tau))
         full, rows = s.contact_blocks(state, blocks, ev.constraints, self.baumgarte, w)
         return self._solve(t, full), ev, tau, rows
 
