@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from itertools import accumulate
 
 import numpy as np
 
@@ -153,8 +154,8 @@ def stack_contact_blocks(table: ContactRowTable, M_o: np.ndarray, h_o: np.ndarra
     # every array a view of one zeroed buffer (C-contiguous), as separate np.zeros were
     sizes = (B * k * k, B * k, B * k * R, B * 6 * R, B * R, B * R, B * R, B * R * 3,
              B * R * 3)
-    buf = np.zeros(sum(sizes))
-    ends = np.cumsum(sizes).tolist()
+    ends = list(accumulate(sizes))
+    buf = np.zeros(ends[-1])
     M = buf[:ends[0]].reshape(B, k, k)
     h = buf[ends[0]:ends[1]].reshape(B, k)
     W = buf[ends[1]:ends[2]].reshape(B, k, R)
