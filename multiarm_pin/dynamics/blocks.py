@@ -372,22 +372,17 @@ def restrict_rows(blocks: SystemBlocks, active) -> tuple[SystemBlocks, np.ndarra
                          f"{blocks.N_max}), got shape {active.shape}")
     keep = active & blocks.constraint_mask
     n, k, m = blocks.W.shape
-    N = keep.sum(axis=1).astype(blocks.N.dtype)
-    kept = np.arange(m) < N[:, None]  # (n, m) the restricted blocks' real rows
-    # each arm's kept rows first, in their order (a stable sort of "dropped"), gathered by
-    # one fancy index per array (C-contiguous, as the zero-filled arrays were)
-    order = np.argsort(~keep, axis=1, kind="stable")
-    index = np.where(kept, order, -1)
-    arm, col = np.arange(n)[:, None, None], order[:, None, :]
-    W = np.where(kept[:, None, :], blocks.W[arm, np.arange(k)[:, None], col], 0.0)
-    W_o = np.where(kept[:, None, :], blocks.W_o[arm, np.arange(6)[:, None], col], 0.0)
-    c = np.where(kept, blocks.c[arm[:, :, 0], order], 0.0)
+    N, kept, index, at_W, at_W_o, at_c, has_padding, padding = _row_selection(keep, k)
+    W = np.where(kept[:, None, :], blocks.W[at_W], 0.0)
+    W_o = np.where(kept[:, None, :], blocks.W_o[at_W_o], 0.0)
+    c = np.where(kept, blocks.c[at_c], 0.0)
     # parts of validated blocks: no new checks (this runs at every evaluation of a
     # controller while a contact is separated)
-    masks = (blocks.dof_mask.copy(), kept, bool(N.min() < m), (~kept).astype(float))
+    masks = (blocks.dof_mask.copy(), kept.copy(), has_padding, padding.copy())
     out = SystemBlocks.assembled(np.array(blocks.M), np.array(blocks.h), W, W_o, c,
                                  np.array(blocks.M_o), np.array(blocks.h_o),
-                                 np.array(blocks.nv), N, masks)
+                                 np.array(blocks.nv), N.astype(blocks.N.dtype), masks)
+    index = index.copy()
     return out, index
 
 
@@ -404,6 +399,43 @@ def check_object_inertia(M_o: np.ndarray) -> None:
             "SystemBlocks.M_o: the object spatial inertia must be symmetric positive "
             f"definite, got eigenvalues {np.linalg.eigvalsh(M_o).round(12).tolist()}"
         )
+
+
+_SELECTIONS: dict = {}
+"""Index arrays of :func:`restrict_rows` by kept-row pattern (a few patterns recur in a run)."""
+
+_SELECTIONS_KEPT = 64
+
+
+def _row_selection(keep: np.ndarray, k: int) -> tuple:
+    """The index arrays of :func:`restrict_rows` for the (n, m) kept rows ``keep``, memoised.
+
+    Returns:
+        ``(N, kept, index, at_W, at_W_o, at_c, has_padding, padding)`` (read-only arrays):
+        ``N`` (n,) kept rows per arm; ``kept`` (n, m) the restricted real rows; ``index``
+        (n, m) source row of each (-1 on padding); ``at_W``, ``at_W_o``, ``at_c`` fancy
+        indices gathering each arm's kept rows first, in their order, from ``W`` (n, k, m),
+        ``W_o`` (n, 6, m) and ``c`` (n, m); ``has_padding`` and ``padding`` (n, m) float,
+        the derived fields of blocks with these rows.
+    """
+    key = (keep.shape, k, keep.tobytes())
+    sel = _SELECTIONS.get(key)
+    if sel is not None:
+        return sel
+    n, m = keep.shape
+    N = keep.sum(axis=1)
+    kept = np.arange(m) < N[:, None]
+    order = np.argsort(~keep, axis=1, kind="stable")  # kept rows first, stable
+    index = np.where(kept, order, -1)
+    arm, col = np.arange(n)[:, None, None], order[:, None, :]
+    sel = (N, kept, index, (arm, np.arange(k)[:, None], col), (arm, np.arange(6)[:, None], col),
+           (arm[:, :, 0], order), bool(N.min() < m) if n else False, (~kept).astype(float))
+    for x in (N, kept, index, order, arm, sel[-1]):
+        x.setflags(write=False)
+    if len(_SELECTIONS) >= _SELECTIONS_KEPT:
+        del _SELECTIONS[next(iter(_SELECTIONS))]
+    _SELECTIONS[key] = sel
+    return sel
 
 
 def expand_rows(values, index: np.ndarray) -> np.ndarray:

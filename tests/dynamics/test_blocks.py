@@ -81,3 +81,35 @@ def test_checked_constructor_still_rejects_bad_blocks():
         SystemBlocks(b.M, b.h, b.W, b.W_o[:, :5], b.c, b.M_o, b.h_o, b.nv, b.N)
     with pytest.raises(InputError, match="symmetric positive definite"):
         SystemBlocks(b.M, b.h, b.W, b.W_o, b.c, -b.M_o, b.h_o, b.nv, b.N)
+
+
+def test_restrict_rows_repeated_patterns_give_owned_equal_results():
+    """The memoised row selection: same pattern twice, other patterns between, equal results.
+
+    Reference: the first call's arrays (copied); every returned array is the caller's own
+    (writing into one changes no later result).
+    """
+    rng = np.random.default_rng(11)
+    b, _, _ = random_system(rng, [6, 7], [4, 3])
+    patterns = [rng.random((2, 4)) < 0.6 for _ in range(6)]
+    first = []
+    for active in patterns:
+        sub, index = restrict_rows(b, active)
+        first.append((index.copy(), sub.N.copy(), sub.W.copy(), sub.constraint_mask.copy(),
+                      sub.padding_diagonal.copy()))
+        index[:] = 7  # the caller's own arrays
+        sub.N[:] = 0
+        sub.constraint_mask[:] = True
+        sub.padding_diagonal[:] = 3.0
+    for active, ref in zip(patterns, first, strict=True):
+        sub, index = restrict_rows(b, active)
+        for got, want in zip((index, sub.N, sub.W, sub.constraint_mask, sub.padding_diagonal),
+                             ref, strict=True):
+            np.testing.assert_array_equal(got, want)
+        keep = active & b.constraint_mask
+        np.testing.assert_array_equal(sub.N, keep.sum(axis=1))
+        for i in range(b.n):
+            rows = np.flatnonzero(keep[i])
+            np.testing.assert_array_equal(index[i, :len(rows)], rows)
+            np.testing.assert_array_equal(sub.W[i, :, :len(rows)], b.W[i][:, rows])
+            assert not sub.W[i, :, len(rows):].any()
