@@ -180,4 +180,5 @@ class SupportSet:
         phi_dot = G @ twist
         return SupportTerms(phi, phi_dot, G, kappa, pts, n.copy())
 
+
 __all__ = ["Support", "SupportSet", "SupportTerms"]
