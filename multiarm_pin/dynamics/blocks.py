@@ -433,7 +433,7 @@ def _row_selection(keep: np.ndarray, k: int) -> tuple:
     for x in (N, kept, index, order, arm, sel[-1]):
         x.setflags(write=False)
     if len(_SELECTIONS) >= _SELECTIONS_KEPT:
-        del _SELECTIONS[next(iter(_SELECTIONS))]
+        _SELECTIONS.clear()  # one atomic call (runs in threads may share this module)
     _SELECTIONS[key] = sel
     return sel
 
