@@ -561,11 +561,12 @@ class MultiArmSystem:
         """
         n, K = self.n_arms, self.supports.n_rows
         o = state.obj
+        R = o.rotation if (K or not n) else None  # computed once (a property, not stored)
         if n:
             M_o, h_o = blocks.M_o, blocks.h_o
         else:
-            M_o = self.obj.mass_matrix(o.rotation)
-            h_o = self.obj.bias_wrench(o.rotation, o.twist, self.gravity)
+            M_o = self.obj.mass_matrix(R)
+            h_o = self.obj.bias_wrench(R, o.twist, self.gravity)
         if external_wrench is not None:
             h_o = h_o + np.asarray(external_wrench, dtype=float)
         if not K:
@@ -573,7 +574,8 @@ class MultiArmSystem:
                 blocks = blocks.replaced(h_o=h_o)
             ct = constraints
             return blocks, ContactRows(ct.phi, ct.phi_dot, ct.contact_points, ct.normals)
-        return stack_contact_blocks(self._contact_rows, M_o, h_o, self.support_terms(state),
+        return stack_contact_blocks(self._contact_rows, M_o, h_o,
+                                    self.supports.evaluate(o.position, R, o.twist),
                                     blocks, constraints, baumgarte)
 
     def check_supports(self, state: SystemState, tol: float = INITIAL_GAP_TOLERANCE) -> None:

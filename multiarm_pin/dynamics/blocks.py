@@ -66,6 +66,11 @@ class SystemBlocks:
 
     def __post_init__(self) -> None:
         self._check_shapes()
+        self._derive()
+        check_object_inertia(self.M_o)
+
+    def _derive(self) -> None:
+        """Set ``nv``, ``N`` as int arrays and the fields derived from them (the masks)."""
         nv = np.asarray(self.nv, dtype=int)
         N = np.asarray(self.N, dtype=int)
         object.__setattr__(self, "nv", nv)
@@ -74,13 +79,43 @@ class SystemBlocks:
         object.__setattr__(self, "constraint_mask", np.arange(self.N_max)[None, :] < N[:, None])
         object.__setattr__(self, "has_constraint_padding", bool(np.any(N < self.N_max)))
         object.__setattr__(self, "padding_diagonal", (~self.constraint_mask).astype(float))
-        if lapack.dpotrf(self.M_o)[1] != 0:
-            if not np.isfinite(self.M_o).all():
-                raise InputError("SystemBlocks.M_o contains NaN or infinity")
-            raise InputError(
-                "SystemBlocks.M_o: the object spatial inertia must be symmetric positive "
-                f"definite, got eigenvalues {np.linalg.eigvalsh(self.M_o).round(12).tolist()}"
-            )
+
+    @classmethod
+    def assembled(cls, M: np.ndarray, h: np.ndarray, W: np.ndarray, W_o: np.ndarray,
+                  c: np.ndarray, M_o: np.ndarray, h_o: np.ndarray, nv: np.ndarray,
+                  N: np.ndarray, masks: tuple | None = None) -> SystemBlocks:
+        """Blocks assembled inside the package from parts that are already valid.
+
+        For the hot paths that build blocks from validated ones (:func:`restrict_rows`,
+        :func:`~multiarm_pin.dynamics.contact_rows.stack_contact_blocks`): float64 arrays of
+        consistent shapes, padding as documented, ``M_o`` positive definite (the caller
+        checks it when it is new, :func:`check_object_inertia`). None of that is checked
+        again here (the shape checks cost more than the rest of such a call). Anything from
+        outside goes through the constructor or :meth:`from_lists`, which check it.
+
+        Args:
+            M: (n, nv_max, nv_max) mass matrices, identity on padding.
+            h: (n, nv_max) ``τ - nle``.
+            W: (n, nv_max, N_max) ``J_iᵀ G_tool,iᵀ``.
+            W_o: (n, 6, N_max) ``G_object,iᵀ``.
+            c: (n, N_max) constraint right-hand sides.
+            M_o: (6, 6) object inertia (positive definite).
+            h_o: (6,) object force terms.
+            nv: (n,) int joints per arm.
+            N: (n,) int rows per arm.
+            masks: ``(dof_mask, constraint_mask, has_constraint_padding,
+                padding_diagonal)`` of these ``nv``, ``N`` (arrays owned by the new
+                blocks), or None to derive them as the constructor does.
+        """
+        out = object.__new__(cls)
+        d = out.__dict__  # the frozen dataclass's fields, set once here
+        d.update(M=M, h=h, W=W, W_o=W_o, c=c, M_o=M_o, h_o=h_o, nv=nv, N=N)
+        if masks is None:
+            out._derive()
+        else:
+            d.update(dof_mask=masks[0], constraint_mask=masks[1],
+                     has_constraint_padding=masks[2], padding_diagonal=masks[3])
+        return out
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -336,22 +371,71 @@ def restrict_rows(blocks: SystemBlocks, active) -> tuple[SystemBlocks, np.ndarra
         raise InputError(f"active: expected a bool array of shape ({blocks.n}, "
                          f"{blocks.N_max}), got shape {active.shape}")
     keep = active & blocks.constraint_mask
-    n, m = blocks.n, blocks.N_max
-    index = np.full((n, m), -1, dtype=int)
-    W = np.zeros_like(blocks.W)
-    W_o = np.zeros_like(blocks.W_o)
-    c = np.zeros_like(blocks.c)
-    N = keep.sum(axis=1).astype(blocks.N.dtype)
-    for i in range(n):
-        rows = np.flatnonzero(keep[i])
-        k = len(rows)
-        index[i, :k] = rows
-        W[i, :, :k] = blocks.W[i][:, rows]
-        W_o[i, :, :k] = blocks.W_o[i][:, rows]
-        c[i, :k] = blocks.c[i, rows]
-    out = SystemBlocks(np.array(blocks.M), np.array(blocks.h), W, W_o, c,
-                       np.array(blocks.M_o), np.array(blocks.h_o), np.array(blocks.nv), N)
+    n, k, m = blocks.W.shape
+    N, kept, index, at_W, at_W_o, at_c, has_padding, padding = _row_selection(keep, k)
+    W = np.where(kept[:, None, :], blocks.W[at_W], 0.0)
+    W_o = np.where(kept[:, None, :], blocks.W_o[at_W_o], 0.0)
+    c = np.where(kept, blocks.c[at_c], 0.0)
+    # parts of validated blocks: no new checks (this runs at every evaluation of a
+    # controller while a contact is separated)
+    masks = (blocks.dof_mask.copy(), kept.copy(), has_padding, padding.copy())
+    out = SystemBlocks.assembled(np.array(blocks.M), np.array(blocks.h), W, W_o, c,
+                                 np.array(blocks.M_o), np.array(blocks.h_o),
+                                 np.array(blocks.nv), N.astype(blocks.N.dtype), masks)
+    index = index.copy()
     return out, index
+
+
+def check_object_inertia(M_o: np.ndarray) -> None:
+    """Raise :class:`InputError` unless ``M_o`` (6, 6) is symmetric positive definite (and finite).
+
+    Args:
+        M_o: (6, 6) float64 object spatial inertia at the COM, world axes.
+    """
+    if lapack.dpotrf(M_o)[1] != 0:
+        if not np.isfinite(M_o).all():
+            raise InputError("SystemBlocks.M_o contains NaN or infinity")
+        raise InputError(
+            "SystemBlocks.M_o: the object spatial inertia must be symmetric positive "
+            f"definite, got eigenvalues {np.linalg.eigvalsh(M_o).round(12).tolist()}"
+        )
+
+
+_SELECTIONS: dict = {}
+"""Index arrays of :func:`restrict_rows` by kept-row pattern (a few patterns recur in a run)."""
+
+_SELECTIONS_KEPT = 64
+
+
+def _row_selection(keep: np.ndarray, k: int) -> tuple:
+    """The index arrays of :func:`restrict_rows` for the (n, m) kept rows ``keep``, memoised.
+
+    Returns:
+        ``(N, kept, index, at_W, at_W_o, at_c, has_padding, padding)`` (read-only arrays):
+        ``N`` (n,) kept rows per arm; ``kept`` (n, m) the restricted real rows; ``index``
+        (n, m) source row of each (-1 on padding); ``at_W``, ``at_W_o``, ``at_c`` fancy
+        indices gathering each arm's kept rows first, in their order, from ``W`` (n, k, m),
+        ``W_o`` (n, 6, m) and ``c`` (n, m); ``has_padding`` and ``padding`` (n, m) float,
+        the derived fields of blocks with these rows.
+    """
+    key = (keep.shape, k, keep.tobytes())
+    sel = _SELECTIONS.get(key)
+    if sel is not None:
+        return sel
+    n, m = keep.shape
+    N = keep.sum(axis=1)
+    kept = np.arange(m) < N[:, None]
+    order = np.argsort(~keep, axis=1, kind="stable")  # kept rows first, stable
+    index = np.where(kept, order, -1)
+    arm, col = np.arange(n)[:, None, None], order[:, None, :]
+    sel = (N, kept, index, (arm, np.arange(k)[:, None], col), (arm, np.arange(6)[:, None], col),
+           (arm[:, :, 0], order), bool(N.min() < m) if n else False, (~kept).astype(float))
+    for x in (N, kept, index, order, arm, sel[-1]):
+        x.setflags(write=False)
+    if len(_SELECTIONS) >= _SELECTIONS_KEPT:
+        _SELECTIONS.clear()  # one atomic call (runs in threads may share this module)
+    _SELECTIONS[key] = sel
+    return sel
 
 
 def expand_rows(values, index: np.ndarray) -> np.ndarray:

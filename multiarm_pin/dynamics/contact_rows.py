@@ -12,13 +12,14 @@ blocks of one state. ``MultiArmSystem.contact_blocks`` is the public entry.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from itertools import accumulate
 
 import numpy as np
 
 from multiarm_pin.constraints import ConstraintTerms
 from multiarm_pin.constraints.supports import SupportSet, SupportTerms
-from multiarm_pin.dynamics.blocks import SystemBlocks
+from multiarm_pin.dynamics.blocks import SystemBlocks, check_object_inertia
 from multiarm_pin.dynamics.evaluation import baumgarte_gains
 
 
@@ -68,6 +69,23 @@ class ContactRowTable:
     nv_blocks: np.ndarray
     N_blocks: np.ndarray
     nv_max_blocks: int
+    _masks: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def block_masks(self, k: int) -> tuple:
+        """The derived masks of the stacked blocks padded to ``k`` joints (new arrays).
+
+        ``(dof_mask, constraint_mask, has_constraint_padding, padding_diagonal)`` as
+        :class:`SystemBlocks` derives them from ``nv_blocks``, ``N_blocks``: computed once
+        per ``k``, copied for each call (each blocks object owns its arrays).
+        """
+        m = self._masks.get(k)
+        if m is None:
+            probe = SystemBlocks.assembled(np.eye(k)[None].repeat(self.n_blocks, 0), None,
+                                           np.zeros((self.n_blocks, k, self.rows_max)), None,
+                                           None, None, None, self.nv_blocks, self.N_blocks)
+            m = self._masks[k] = (probe.dof_mask, probe.constraint_mask,
+                                  probe.has_constraint_padding, probe.padding_diagonal)
+        return m[0].copy(), m[1].copy(), m[2], m[3].copy()
 
     @classmethod
     def build(cls, nv_arm: np.ndarray, N: np.ndarray, unilateral: np.ndarray,
@@ -133,16 +151,21 @@ def stack_contact_blocks(table: ContactRowTable, M_o: np.ndarray, h_o: np.ndarra
         a, b = baumgarte_gains(baumgarte)
         c_s = c_s - 2.0 * a * support.phi_dot - b * b * support.phi
     k = blocks.nv_max if n else table.nv_max_blocks
-    M = np.zeros((B, k, k))
-    M[n] = np.eye(k)
-    h = np.zeros((B, k))
-    W = np.zeros((B, k, R))
-    W_o = np.zeros((B, 6, R))
-    c = np.zeros((B, R))
-    phi = np.zeros((B, R))
-    phi_dot = np.zeros((B, R))
-    pts = np.zeros((B, R, 3))
-    nrm = np.zeros((B, R, 3))
+    # every array a view of one zeroed buffer (C-contiguous), as separate np.zeros were
+    sizes = (B * k * k, B * k, B * k * R, B * 6 * R, B * R, B * R, B * R, B * R * 3,
+             B * R * 3)
+    ends = list(accumulate(sizes))
+    buf = np.zeros(ends[-1])
+    M = buf[:ends[0]].reshape(B, k, k)
+    h = buf[ends[0]:ends[1]].reshape(B, k)
+    W = buf[ends[1]:ends[2]].reshape(B, k, R)
+    W_o = buf[ends[2]:ends[3]].reshape(B, 6, R)
+    c = buf[ends[3]:ends[4]].reshape(B, R)
+    phi = buf[ends[4]:ends[5]].reshape(B, R)
+    phi_dot = buf[ends[5]:ends[6]].reshape(B, R)
+    pts = buf[ends[6]:ends[7]].reshape(B, R, 3)
+    nrm = buf[ends[7]:].reshape(B, R, 3)
+    buf[n * k * k:(n + 1) * k * k:k + 1] = 1.0  # M[n] = I (the support block has no joints)
     if n:
         M[:n] = blocks.M
         h[:n] = blocks.h
@@ -159,8 +182,14 @@ def stack_contact_blocks(table: ContactRowTable, M_o: np.ndarray, h_o: np.ndarra
     phi_dot[n, :K] = support.phi_dot
     pts[n, :K] = support.contact_points
     nrm[n, :K] = support.normals
-    full = SystemBlocks(M, h, W, W_o, c, np.array(M_o, dtype=float), np.array(h_o, dtype=float),
-                        table.nv_blocks.copy(), table.N_blocks.copy())
+    M_o = np.array(M_o, dtype=float)
+    if blocks is None:  # new at this state (with arms it is the arms' blocks', checked)
+        check_object_inertia(M_o)
+    # the arms' validated blocks, the table's constant layout and the support rows: the
+    # shapes hold by construction and are not checked again (this runs at every evaluation)
+    full = SystemBlocks.assembled(M, h, W, W_o, c, M_o, np.array(h_o, dtype=float),
+                                  table.nv_blocks.copy(), table.N_blocks.copy(),
+                                  table.block_masks(k))
     return full, ContactRows(phi, phi_dot, pts, nrm)
 
 

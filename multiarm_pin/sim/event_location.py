@@ -196,7 +196,7 @@ def locate_touchdown(stepper: Stepper, integrator: str, t: float, state: SystemS
     tol = ce.GAP_TOLERANCE
     target = -0.5 * tol
     lo, hi = 0.0, 1.0
-    _, rows0 = stepper.blocks_at(t, state)
+    rows0 = stepper.rows_at(t, state)
     f_lo, f_hi = float(rows0.phi[watch].min()) - target, g_hi - target
     if f_lo <= 0.5 * tol:  # a watched row starts within (or below) the band
         if np.any(watch & (rows0.phi <= 0.0) & (rows0.phi_dot < -ce.REBOUND_SPEED)):

@@ -29,6 +29,10 @@ from multiarm_pin.sim.event_location import locate_separation, locate_touchdown
 from multiarm_pin.spatial import integrate_quaternion
 from multiarm_pin.system import ContactRows, MultiArmSystem, SystemState
 
+ROWS_KEPT = 8
+"""States whose contact rows :class:`Stepper` keeps for :meth:`Stepper.gaps` (a step's start,
+its three stages, its end and a few event iterates)."""
+
 
 class Stepper:
     """Evaluates the closed-loop dynamics on the active set and handles contact events."""
@@ -47,6 +51,9 @@ class Stepper:
         self.active = system.contact_mask.copy()
         self.events: list[ContactEvent] = []
         self._cache = None  # (t, state, active, result) of the last evaluation
+        # id(state) -> (state, rows) of the last ROWS_KEPT states whose rows were evaluated
+        # (the state is kept so that its id is not reused while the entry lives)
+        self._rows: dict[int, tuple[SystemState, ContactRows]] = {}
         # _evaluate's fused branch, decided once: arms' bilateral rows only and no wrench
         self._fused = bool(system.n_arms and not self.unilateral and self.wrench is None
                            and not system.supports.n_rows)
@@ -62,6 +69,7 @@ class Stepper:
         try:
             out = self._evaluate(t, state)
             self._cache = (t, state, self.active.copy(), out)
+            self._remember(state, out[3])
             return out
         except MultiArmError as exc:
             _with_time(exc, t)
@@ -103,7 +111,9 @@ class Stepper:
             blocks = ev.blocks
         else:
             tau = controller_torques(self.controller, t, state, ev, s.nv)
-            blocks = ev.blocks.with_torques(s.pad(tau))
+            # with_torques's sum without its input checks: tau is checked (shape, finite)
+            # and pad puts zeros on the padded dofs
+            blocks = ev.blocks.replaced(h=ev.blocks.h + s.pad(tau))
         full, rows = s.contact_blocks(state, blocks, ev.constraints, self.baumgarte, w)
         return self._solve(t, full), ev, tau, rows
 
@@ -210,8 +220,31 @@ class Stepper:
         s = self.system
         return s.contact_mask & s.contact_unilateral & ~self.active
 
+    def _remember(self, state: SystemState, rows: ContactRows) -> None:
+        """Keep the rows evaluated at ``state`` (the last :data:`ROWS_KEPT` states)."""
+        memo = self._rows
+        memo[id(state)] = (state, rows)
+        if len(memo) > ROWS_KEPT:
+            del memo[next(iter(memo))]  # the oldest (dicts keep insertion order)
+
+    def _known_rows(self, state: SystemState) -> ContactRows | None:
+        """The rows of ``state`` (this very object) if they were evaluated, else None.
+
+        Rows depend on the state only (positions and velocities: not on the time, the
+        torques, the active set, the wrench or Baumgarte), so any evaluation of the same
+        state object gives them. States are never modified in place by the stepper.
+        """
+        hit = self._rows.get(id(state))
+        return hit[1] if hit is not None and hit[0] is state else None
+
     def gaps(self, state: SystemState) -> np.ndarray:
-        """(B, R) gaps [m] of every row at a state."""
+        """(B, R) gaps [m] of every row at a state (not to be modified: may be shared).
+
+        Those of a state the stepper evaluated already are reused.
+        """
+        known = self._known_rows(state)
+        if known is not None:
+            return known.phi
         s = self.system
         out = np.zeros((s.n_blocks, s.rows_max))
         if s.n_arms:
@@ -272,7 +305,7 @@ class Stepper:
         leaving = leaving & self.active
         if not leaving.any():
             return
-        rows = self.blocks_at(t, state)[1]
+        rows = self.rows_at(t, state)
         for b, r in zip(*np.nonzero(leaving), strict=True):
             self._event(t, "separation", b, r, phi_dot=float(rows.phi_dot[b, r]),
                         phi_dot_after=float(rows.phi_dot[b, r]))
@@ -328,9 +361,17 @@ class Stepper:
         s = self.system
         w = None if self.wrench is None else self.wrench(t)
         if not s.n_arms:
-            return s.contact_blocks(state, None, None, self.baumgarte, w)
-        ev = s.blocks(state, None, self.baumgarte)
-        return s.contact_blocks(state, ev.blocks, ev.constraints, self.baumgarte, w)
+            out = s.contact_blocks(state, None, None, self.baumgarte, w)
+        else:
+            ev = s.blocks(state, None, self.baumgarte)
+            out = s.contact_blocks(state, ev.blocks, ev.constraints, self.baumgarte, w)
+        self._remember(state, out[1])
+        return out
+
+    def rows_at(self, t: float, state: SystemState) -> ContactRows:
+        """The :class:`ContactRows` at a state: :meth:`blocks_at`'s, reused if known."""
+        known = self._known_rows(state)
+        return known if known is not None else self.blocks_at(t, state)[1]
 
 
 def _with_time(exc: MultiArmError, t: float) -> None:

@@ -60,3 +60,29 @@ def test_duplicate_support_names_raise():
     s = Support("t", [0, 0, 0], [0, 0, 1], [[0, 0, 0]])
     with pytest.raises(ConstraintError, match="duplicate"):
         SupportSet([s, s])
+
+
+def test_rows_equal_the_np_cross_formula(rng):
+    """The written-out cross products equal ``np.cross`` bit for bit (the same products).
+
+    Reference: ``G = [n, r × n]``, ``κ = n·(ω × (ω × r))``, ``φ = n·(x + r - a)``,
+    ``φ̇ = G·[ẋ; ω]`` with ``np.cross`` on random poses, twists and planes.
+    """
+    s = SupportSet([Support("a", rng.normal(size=3), rng.normal(size=3), rng.normal(size=(8, 3))),
+                    Support("b", rng.normal(size=3), rng.normal(size=3), rng.normal(size=(5, 3)))])
+    p = np.concatenate([sp.points for sp in s.supports])
+    n = s.supports_array("normal")
+    a = s.supports_array("point")
+    for _ in range(50):
+        rotation = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        x, twist = rng.normal(size=3), 3.0 * rng.normal(size=6)
+        r = p @ rotation.T
+        G = np.concatenate([n, np.cross(r, n)], axis=1)
+        kappa = np.einsum("ki,ki->k", n, np.cross(twist[3:], np.cross(twist[3:], r)))
+        st = s.evaluate(x, rotation, twist)
+        np.testing.assert_array_equal(st.G_object, G)
+        np.testing.assert_array_equal(st.kappa, kappa)
+        np.testing.assert_array_equal(st.phi, np.einsum("ki,ki->k", n, x + r - a))
+        np.testing.assert_array_equal(st.phi_dot, G @ twist)
+        np.testing.assert_array_equal(st.contact_points, x + r)
+        np.testing.assert_array_equal(st.normals, n)

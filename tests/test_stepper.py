@@ -1,0 +1,53 @@
+"""The stepper's reuse of evaluated rows: the gaps of a known state, and of a new one."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from multiarm_pin.app.runner import make_controller
+from multiarm_pin.app.scenario import build_scenario, load_scenario
+from multiarm_pin.sim.stepper import ROWS_KEPT, Stepper
+from multiarm_pin.system import SystemState
+
+SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+
+
+def _fresh_gaps(system, state: SystemState) -> np.ndarray:
+    """Reference: the (B, R) gaps from the system's own evaluations, nothing reused."""
+    out = np.zeros((system.n_blocks, system.rows_max))
+    out[:system.n_arms, :system.N_max] = system.blocks(state).constraints.phi
+    out[system.n_arms, :system.supports.n_rows] = system.support_terms(state).phi
+    return out
+
+
+def test_gaps_reuse_the_rows_of_evaluated_states_only():
+    """pick_from_table (arms' fingertips and table rows): gaps equal fresh ones bit for bit.
+
+    At an evaluated state (reused rows), at states the stepper only stepped to (computed),
+    and at the first state again after more than ``ROWS_KEPT`` others (forgotten, computed
+    again). A different state object at the same values is not mistaken for another one.
+    """
+    built = build_scenario(load_scenario(SCENARIOS / "pick_from_table.yaml"),
+                           load_visuals=False)
+    system, state = built.system, built.initial_state
+    sim = built.scenario.simulation
+    st = Stepper(system, make_controller(built), "auto", sim.baumgarte)
+    st.init_active(st.blocks_at(0.0, state)[1], 1e-6)
+    sol, _, _, rows = st.evaluate(0.0, state)
+    assert st._known_rows(state) is rows
+    np.testing.assert_array_equal(st.gaps(state), _fresh_gaps(system, state))
+    states = [state]
+    for k in range(ROWS_KEPT + 2):  # stepped states, not evaluated: computed
+        new = st.advance(state, st.derivative(state, sol), 1e-3 * (k + 1))
+        assert st._known_rows(new) is None
+        np.testing.assert_array_equal(st.gaps(new), _fresh_gaps(system, new))
+        st.evaluate(1e-3 * (k + 1), new)  # now known
+        assert st._known_rows(new) is not None
+        states.append(new)
+    assert st._known_rows(state) is None  # forgotten: the oldest of more than ROWS_KEPT
+    for s in states:
+        np.testing.assert_array_equal(st.gaps(s), _fresh_gaps(system, s))
+    copy = SystemState(state.q.copy(), state.v.copy(), state.obj)
+    assert st._known_rows(copy) is None
