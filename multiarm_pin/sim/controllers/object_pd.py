@@ -461,7 +461,8 @@ class ObjectPD(Controller):
             self.q_ref = np.array(state.q, dtype=float)
         if self.hold_mask is None:
             self._init_hold(state, evaluation)
-        a_d = self.desired_acceleration(t, state)
+        if self.trajectory is None:  # fixed at the first call's pose, holding or not
+            self.trajectory = self._start_trajectory(o)
         active = getattr(evaluation, "active", None)
         index = None
         unilateral = s.unilateral
@@ -475,6 +476,7 @@ class ObjectPD(Controller):
             if rank < 6:
                 return self._hold_still(t, state, full, "the touching contacts cannot make "
                                         f"every object wrench (rank {rank} < 6)")
+        a_d = self.desired_acceleration(t, state)  # (not needed to hold the arms still)
         try:
             fd = distribute_forces(b, b.M_o @ a_d - b.h_o, unilateral, self.margin)
             self.margin_kept = True
