@@ -42,6 +42,11 @@ from multiarm_pin._compiled.layout import (
     DIMS_M,
     DIMS_N,
     DIMS_NV,
+    KIND_PRISMATIC,
+    KIND_REVOLUTE,
+    KIND_REVOLUTE_UNBOUNDED,
+    MI_IDX_Q,
+    MI_KIND,
     OBJECT_STATE_SIZE,
     P_OBJECT_RCOND_TOL,
     P_RCOND_TOL,
@@ -75,6 +80,10 @@ from multiarm_pin._compiled.rigid_body import rigid_body_pass
 SOLVE_NOT_FINITE = 3
 """Status of :func:`step_system`: the state or the torques hold NaN or infinity (the other
 statuses are those of :func:`~multiarm_pin._compiled.object_first.object_first`)."""
+
+SOLVE_BAD_LENGTH = 4
+"""Status of :func:`evaluate_state`: a part of the state or the torques has the wrong length
+(nothing computed; the caller's checks then name it)."""
 
 
 @njit(cache=True, error_model="numpy")
@@ -368,15 +377,18 @@ def step_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, i
 
 
 @njit(cache=True, error_model="numpy")
-def evaluate_state(model_ints, model_floats, J_world, dJ_world, M_full, nle_full, H, energy, x,
-                   arm_ints, v_starts, ints, floats, params, dims, N, step,
-                   buf):  # pragma: no cover - compiled
+def evaluate_state(model_ints, model_floats, J_world, dJ_world, M_full, nle_full, H, energy,
+                   position, quaternion, twist, q, v, tau, arm_ints, v_starts, ints, floats,
+                   params, dims, N, step, buf):  # pragma: no cover - compiled
     """:func:`evaluate_system` (``step``: :func:`step_system`) with the arm terms computed here.
 
+    Packs the state vector ``x`` (see :func:`evaluate_system`) from its parts, checking their
+    lengths (in the kernel: one Python-side check or ``np.concatenate`` per part cost more
+    than the rest of the call's Python, issue 14), then
     :func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass` (Pinocchio's algorithms, on
     the arms' model tables) fills ``J_world``, ``dJ_world``, ``M_full`` (arm blocks only: keep
-    it zero elsewhere), ``nle_full`` and ``H`` at the ``q``, ``v`` of ``x``; then the blocks
-    (and the solve) as there. One compiled call for the whole evaluation.
+    it zero elsewhere), ``nle_full`` and ``H`` at ``q``, ``v``; then the blocks (and the
+    solve) as there. One compiled call for the whole evaluation.
 
     Args:
         model_ints: the arms' model table
@@ -388,7 +400,13 @@ def evaluate_state(model_ints, model_floats, J_world, dJ_world, M_full, nle_full
         nle_full: workspace (nv,), the nonlinear effects.
         H: workspace (n, 4, 4), the tool placements.
         energy: workspace (ENERGY_SIZE,), the arms' energies and momentum.
-        x: (13 + nq + 2 nv,) the state vector (see :func:`evaluate_system`).
+        position: (3,) the object's COM position [m].
+        quaternion: (4,) its orientation ``[x, y, z, w]``.
+        twist: (6,) its twist ``[ẋ; ω]`` (world axes).
+        q: (nq,) the arms' configuration; ``nq`` is the length ``rigid_body_pass`` reads
+            from the model table.
+        v: (nv,) the arms' velocity.
+        tau: (nv,) joint torques [N m].
         arm_ints: (n, 1 + 2k) the arm table.
         v_starts: (n,) int first joint of each arm in ``v``.
         ints: (K, CONTACT_INTS) contact table.
@@ -400,12 +418,29 @@ def evaluate_state(model_ints, model_floats, J_world, dJ_world, M_full, nle_full
         buf: output, the flat buffer.
 
     Returns:
-        The status of :func:`object_first` (``SOLVE_OK`` when not solving), or
-        ``SOLVE_NOT_FINITE`` if ``x`` holds NaN or infinity.
+        The status of :func:`object_first` (``SOLVE_OK`` when not solving),
+        ``SOLVE_NOT_FINITE`` if the state or the torques hold NaN or infinity, or
+        ``SOLVE_BAD_LENGTH`` if a part has the wrong length (nothing computed for either).
     """
     nv = dims[DIMS_NV]
+    nq = 0
+    for i in range(model_ints.shape[0]):  # the configuration's length, from the model table
+        kind = model_ints[i, MI_KIND]
+        if kind == KIND_REVOLUTE or kind == KIND_PRISMATIC:
+            nq = max(nq, model_ints[i, MI_IDX_Q] + 1)
+        elif kind == KIND_REVOLUTE_UNBOUNDED:
+            nq = max(nq, model_ints[i, MI_IDX_Q] + 2)
+    if (position.shape[0] != 3 or quaternion.shape[0] != 4 or twist.shape[0] != 6
+            or q.shape[0] != nq or v.shape[0] != nv or tau.shape[0] != nv):
+        return SOLVE_BAD_LENGTH
     q0 = OBJECT_STATE_SIZE
-    nq = x.shape[0] - q0 - 2 * nv
+    x = np.empty(q0 + nq + 2 * nv)
+    x[X_POSITION:X_POSITION + 3] = position
+    x[X_QUATERNION:X_QUATERNION + 4] = quaternion
+    x[X_TWIST:X_TWIST + 6] = twist
+    x[q0:q0 + nq] = q
+    x[q0 + nq:q0 + nq + nv] = v
+    x[q0 + nq + nv:] = tau
     rigid_body_pass(model_ints, model_floats, x[q0:q0 + nq], x[q0 + nq:q0 + nq + nv], J_world,
                     dJ_world, M_full, nle_full, H, energy)
     if step:
@@ -417,6 +452,6 @@ def evaluate_state(model_ints, model_floats, J_world, dJ_world, M_full, nle_full
     return SOLVE_NOT_FINITE
 
 
-__all__ = ["SOLVE_NOT_FINITE", "arm_views", "block_views", "evaluate_state",
+__all__ = ["SOLVE_BAD_LENGTH", "SOLVE_NOT_FINITE", "arm_views", "block_views", "evaluate_state",
            "evaluate_system", "finish_system", "group_arm_terms", "quaternion_rotation",
            "solution_views", "solve_buffer", "solve_views", "step_system"]
