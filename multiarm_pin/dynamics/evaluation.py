@@ -110,7 +110,9 @@ class BufferLayout:
             a validated build.
         N: (n,) constraints per arm (read-only, shared by the constraint terms).
         mask: (n, N_max) real constraint slots (read-only, shared).
-        solution_segments: the segments ``a_o``, ``qdd``, ``mu``.
+        solution_segments: the bounds of the segments ``a_o``, ``qdd``, ``mu`` as plain
+            ints and shapes: ``(a_start, a_stop, q_start, q_stop, q_shape, mu_start,
+            mu_stop, mu_shape)``.
     """
 
     segments: dict
@@ -122,9 +124,9 @@ class BufferLayout:
 
     def solution(self, buf: np.ndarray, blocks: SystemBlocks) -> Solution:
         """The object-first :class:`Solution` in the solution segments of ``buf``."""
-        a_o, qdd, mu = self.solution_segments  # sliced inline: this runs once per step
-        return Solution(buf[a_o.start:a_o.stop], buf[qdd.start:qdd.stop].reshape(qdd.shape),
-                        buf[mu.start:mu.stop].reshape(mu.shape), "object_first", (), blocks)
+        a0, a1, q0, q1, q_shape, m0, m1, m_shape = self.solution_segments  # runs once per step
+        return Solution(buf[a0:a1], buf[q0:q1].reshape(q_shape), buf[m0:m1].reshape(m_shape),
+                        "object_first", (), blocks)
 
     @classmethod
     def build(cls, nv_arm: np.ndarray, constraint_set: ConstraintSet, k: int) -> BufferLayout:
@@ -141,15 +143,18 @@ class BufferLayout:
                 arr.setflags(write=False)  # any SystemBlocks' (one compiled kernel variant)
             constant[name] = arr
         constant["has_constraint_padding"] = probe.has_constraint_padding
+        a_o, qdd, mu = segments["a_o"], segments["qdd"], segments["mu"]
         return cls(segments, segments[layout.SEGMENTS[-1]].stop, constant, constraint_set.N,
-                   constraint_set.mask, (segments["a_o"], segments["qdd"], segments["mu"]))
+                   constraint_set.mask, (a_o.start, a_o.stop, qdd.start, qdd.stop, qdd.shape,
+                                         mu.start, mu.stop, mu.shape))
 
 
 class _View:
     """Read-only property: a field made from the buffer on first access, then kept.
 
-    ``make(owner)`` builds the value; it is kept in the owner's ``_views`` dict. A data
-    descriptor, so the field can be neither assigned nor shadowed.
+    ``make(owner)`` builds the value; it is kept in the owner's instance dict under the
+    field's name (no dict of its own to make per evaluation). A data descriptor, so the
+    field can be neither assigned nor shadowed by that entry.
     """
 
     def __init__(self, make: Callable):
@@ -162,10 +167,10 @@ class _View:
     def __get__(self, obj, owner=None):
         if obj is None:
             return self
-        views = obj._views
-        value = views.get(self.name)
+        d = obj.__dict__
+        value = d.get(self.name)
         if value is None:
-            value = views[self.name] = self.make(obj)
+            value = d[self.name] = self.make(obj)
         return value
 
     def __set__(self, obj, value) -> None:
@@ -212,17 +217,15 @@ class BufferBlocks(SystemBlocks):
 
     def __init__(self, buf: np.ndarray, layout: BufferLayout, h: np.ndarray | None = None,
                  h_o: np.ndarray | None = None):
-        views = {}
-        if h is not None:
-            views["h"] = h
-        if h_o is not None:
-            views["h_o"] = h_o
         # into the instance dict: a __setattr__ in the class dict makes every assignment a
-        # Python-level call (1.2 µs for these three, 0.5 µs so, once per step)
+        # Python-level call (1.2 µs for three, 0.5 µs so, once per step)
         d = self.__dict__
         d["_buf"] = buf
         d["_layout"] = layout
-        d["_views"] = views
+        if h is not None:
+            d["h"] = h  # the field's kept value (see _View)
+        if h_o is not None:
+            d["h_o"] = h_o
 
     @property
     def buffer(self) -> np.ndarray:
@@ -237,7 +240,7 @@ class BufferBlocks(SystemBlocks):
     def replaced(self, *, h: np.ndarray | None = None,
                  h_o: np.ndarray | None = None) -> BufferBlocks:
         """The same views with another ``h`` and/or ``h_o`` (see :meth:`SystemBlocks.replaced`)."""
-        views = self._views
+        views = self.__dict__
         if h is not None:
             h = _replacement(h, self.h, "h")
         if h_o is not None:
@@ -269,7 +272,6 @@ class BufferArmTerms(ArmSetTerms):
     def __init__(self, buf: np.ndarray, layout: BufferLayout):
         self._buf = buf
         self._layout = layout
-        self._views = {}
 
 
 def _row_field(name: str) -> _View:
@@ -298,7 +300,6 @@ class BufferConstraintTerms(ConstraintTerms):
 
     def __init__(self, buf: np.ndarray, layout: BufferLayout):
         self._layout = layout
-        self._views = {}
         self._rows = layout.segments["rows"].view(buf)
 
 
