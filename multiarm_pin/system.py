@@ -46,7 +46,7 @@ from multiarm_pin.constraints import (
 )
 from multiarm_pin.constraints.joint import INITIAL_GAP_TOLERANCE
 from multiarm_pin.constraints.supports import Support, SupportSet
-from multiarm_pin.dynamics import Solution, SystemBlocks, solve, solver_entry
+from multiarm_pin.dynamics import SOLVERS, Solution, SystemBlocks, solve, solver_entry
 from multiarm_pin.dynamics.contact_rows import ContactRows, ContactRowTable, stack_contact_blocks
 from multiarm_pin.dynamics.evaluation import (
     CompiledSystem,
@@ -470,9 +470,11 @@ class MultiArmSystem:
             DynamicsError: NaN in the state, or no solution (inconsistent constraints).
             InputError: unknown solver (lists the known ones).
         """
-        entry = solver_entry(solver)
+        entry = SOLVERS.get(solver) if type(solver) is str else None
+        if entry is None:
+            entry = solver_entry(solver)  # raises, listing the known names
         if entry.compiled:  # blocks and solve in one compiled call
-            ev, sol = self._compiled(state, tau, baumgarte, True)
+            ev, sol = self.compiled.evaluate(state, tau, baumgarte, True)
             if sol is None:  # doubtful case: the numpy reference decides, falls back or raises
                 sol = entry.function(ev.blocks, compiled=False)
             return sol, ev

@@ -161,6 +161,53 @@ def test_nan_and_bad_arguments_are_clear_errors(rng):
         build_system(["ur5"], [{"type": "teleport"}], rng)
 
 
+def _read_only(a: np.ndarray) -> np.ndarray:
+    b = np.array(a)
+    b.setflags(write=False)
+    return b
+
+
+def _strided(a: np.ndarray) -> np.ndarray:
+    return np.repeat(a, 2)[::2]  # equal values, a non-contiguous view
+
+
+@pytest.mark.parametrize("make", [_read_only, _strided, list, lambda a: a.astype(np.float32)],
+                         ids=["read_only", "strided", "list", "float32"])
+def test_state_parts_of_other_types_give_the_same_step_and_compile_nothing(rng, make):
+    """The fast path hands the parts to the kernel as they are; an other type than the
+    kernel's (read-only, strided, list, float32) is converted by the checked path: same
+    results as float64 arrays, and no new specialisation of the kernel (a minute each)."""
+    from multiarm_pin._compiled import evaluate as kernels
+
+    system, state = build_system(["ur5", "ur5"], ["weld", "weld"], rng)
+    state = moving_state(system, state, rng)
+    o = state.obj
+    if make is not list:  # float32 must hold the values exactly for an exact comparison
+        state = SystemState(*(np.float32(a).astype(float) for a in (state.q, state.v)),
+                            ObjectState(*(np.float32(a).astype(float)
+                                          for a in (o.position, o.quaternion, o.twist))))
+        o = state.obj
+    tau = np.float32(rng.normal(size=system.nv)).astype(float)
+    sol, _ = system.forward_dynamics(state, tau)
+    compiled = getattr(kernels.evaluate_state, "signatures", [])
+    before = len(compiled)
+    other = SystemState(make(state.q), make(state.v),
+                        ObjectState(make(o.position), make(o.quaternion), make(o.twist)))
+    for st, t in ((other, tau), (state, make(tau)), (other, make(tau))):
+        got, ev = system.forward_dynamics(st, t)
+        for name in ("a_o", "qdd", "mu"):
+            assert np.array_equal(getattr(got, name), getattr(sol, name)), name
+        assert np.array_equal(ev.blocks.M, system.blocks(state).blocks.M)
+    assert len(getattr(kernels.evaluate_state, "signatures", [])) == before
+    zero, _ = system.forward_dynamics(state)
+    assert np.array_equal(zero.qdd, system.forward_dynamics(state, np.zeros(system.nv))[0].qdd)
+    with pytest.raises(InputError, match=r"object quaternion expected shape \(4,\)"):
+        system.forward_dynamics(SystemState(state.q, state.v, ObjectState(
+            o.position, o.quaternion[:3], o.twist)))
+    with pytest.raises(InputError, match=r"arms' q expected shape \(12,\)"):
+        system.forward_dynamics(SystemState(state.q[:11], state.v, o))
+
+
 def test_singular_system_without_solution_raises():
     """Two one-joint arms welded to the object: 8 DOF, 12 constraints. At rest it is
     consistent (the singular-arm solver finds the static answer); with velocities or a

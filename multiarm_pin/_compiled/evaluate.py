@@ -38,10 +38,21 @@ from multiarm_pin._compiled.constraint_rows import constraint_rows
 from multiarm_pin._compiled.layout import (
     ARM_JOINTS,
     ARM_NV,
+    CONTACT_FLOATS,
+    CONTACT_INTS,
     DIMS_K,
     DIMS_M,
     DIMS_N,
     DIMS_NV,
+    DIMS_SIZE,
+    KIND_FRAME,
+    KIND_PRISMATIC,
+    KIND_REVOLUTE,
+    KIND_REVOLUTE_UNBOUNDED,
+    MI_IDX_Q,
+    MI_KIND,
+    MODEL_FLOATS,
+    MODEL_INTS,
     OBJECT_STATE_SIZE,
     P_OBJECT_RCOND_TOL,
     P_RCOND_TOL,
@@ -75,6 +86,10 @@ from multiarm_pin._compiled.rigid_body import rigid_body_pass
 SOLVE_NOT_FINITE = 3
 """Status of :func:`step_system`: the state or the torques hold NaN or infinity (the other
 statuses are those of :func:`~multiarm_pin._compiled.object_first.object_first`)."""
+
+SOLVE_BAD_LENGTH = 4
+"""Status of :func:`evaluate_state`: a part of the state or the torques has the wrong length
+(nothing computed; the caller's checks then name it)."""
 
 
 @njit(cache=True, error_model="numpy")
@@ -367,47 +382,115 @@ def step_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, i
                         params[P_OBJECT_RCOND_TOL], a_o, qdd, mu)
 
 
+def state_tables(model_ints, model_floats, arm_ints, v_starts, ints, floats, dims, N
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The constant inputs of :func:`evaluate_state` packed in three flat arrays.
+
+    Each array argument of a kernel costs ~0.13 µs of dispatch per call (issue 14): eight
+    tables become three, grouped so that each unpacked table keeps its type (read-only or
+    writable) and the kernels called with them compile no other specialisation.
+
+    Args:
+        model_ints: (rows, MODEL_INTS) the arms' model table (read-only).
+        model_floats: (rows, MODEL_FLOATS) its float table (read-only).
+        arm_ints: (n, 1 + 2k) the arm table.
+        v_starts: (n,) int first joint of each arm in ``v``.
+        ints: (K, CONTACT_INTS) contact table (read-only).
+        floats: (K, CONTACT_FLOATS) contact table (read-only).
+        dims: (DIMS_SIZE,) ``(k, m, nv, n)``.
+        N: (n,) int constraint rows per arm.
+
+    Returns:
+        ``(tables_ro, tables, floats_ro)``: read-only int64 ``[model_ints, ints, N]``,
+        writable int64 ``[rows, K, dims, v_starts, arm_ints]``, read-only float64
+        ``[model_floats, floats]`` (each flattened, C order).
+    """
+    ro = np.concatenate((np.ravel(model_ints), np.ravel(ints), np.ravel(N))).astype(np.int64)
+    rw = np.concatenate(([len(model_ints), len(ints)], np.ravel(dims), np.ravel(v_starts),
+                         np.ravel(arm_ints))).astype(np.int64)
+    fl = np.concatenate((np.ravel(model_floats), np.ravel(floats))).astype(np.float64)
+    ro.setflags(write=False)
+    fl.setflags(write=False)
+    return ro, rw, fl
+
+
 @njit(cache=True, error_model="numpy")
-def evaluate_state(model_ints, model_floats, J_world, dJ_world, M_full, nle_full, H, energy, x,
-                   arm_ints, v_starts, ints, floats, params, dims, N, step,
-                   buf):  # pragma: no cover - compiled
+def evaluate_state(tables_ro, tables, floats_ro, M_full, position, quaternion, twist, q, v,
+                   tau, params, step, buf):  # pragma: no cover - compiled
     """:func:`evaluate_system` (``step``: :func:`step_system`) with the arm terms computed here.
 
-    :func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass` (Pinocchio's algorithms, on
-    the arms' model tables) fills ``J_world``, ``dJ_world``, ``M_full`` (arm blocks only: keep
-    it zero elsewhere), ``nle_full`` and ``H`` at the ``q``, ``v`` of ``x``; then the blocks
+    Unpacks the constant tables (:func:`state_tables`), packs the state vector ``x`` (see
+    :func:`evaluate_system`) from its parts, checking their lengths (in the kernel: one
+    Python-side check or ``np.concatenate`` per part cost more than the rest of the call's
+    Python, issue 14), then :func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass`
+    (Pinocchio's algorithms, on the arms' model tables) fills ``M_full`` (arm blocks only:
+    keep it zero elsewhere) and its other outputs, allocated here (an allocation costs less
+    than an array argument's dispatch), at ``q``, ``v``, without the energies; then the blocks
     (and the solve) as there. One compiled call for the whole evaluation.
 
     Args:
-        model_ints: the arms' model table
-            (:class:`~multiarm_pin.model.compiled_model.CompiledModel`).
-        model_floats: its float table.
-        J_world: workspace (6, nv), the world Jacobian columns on return.
-        dJ_world: workspace (6, nv), their time derivative.
+        tables_ro: the read-only int tables of :func:`state_tables` (model table, contact
+            table, constraint rows per arm).
+        tables: its writable int tables (sizes, ``dims``, ``v_starts``, arm table).
+        floats_ro: its read-only float tables (model and contact tables).
         M_full: workspace (nv, nv), the mass matrix (arm blocks; zero elsewhere).
-        nle_full: workspace (nv,), the nonlinear effects.
-        H: workspace (n, 4, 4), the tool placements.
-        energy: workspace (ENERGY_SIZE,), the arms' energies and momentum.
-        x: (13 + nq + 2 nv,) the state vector (see :func:`evaluate_system`).
-        arm_ints: (n, 1 + 2k) the arm table.
-        v_starts: (n,) int first joint of each arm in ``v``.
-        ints: (K, CONTACT_INTS) contact table.
-        floats: (K, CONTACT_FLOATS) contact table.
+        position: (3,) the object's COM position [m].
+        quaternion: (4,) its orientation ``[x, y, z, w]``.
+        twist: (6,) its twist ``[ẋ; ω]`` (world axes).
+        q: (nq,) the arms' configuration; ``nq`` is the length ``rigid_body_pass`` reads
+            from the model table.
+        v: (nv,) the arms' velocity.
+        tau: (nv,) joint torques [N m].
         params: (N_PARAMS,) the parameter vector.
-        dims: (DIMS_SIZE,) ``(k, m, nv, n)``.
-        N: (n,) int constraint rows per arm.
         step: also solve (object-first) into the buffer.
         buf: output, the flat buffer.
 
     Returns:
-        The status of :func:`object_first` (``SOLVE_OK`` when not solving), or
-        ``SOLVE_NOT_FINITE`` if ``x`` holds NaN or infinity.
+        The status of :func:`object_first` (``SOLVE_OK`` when not solving),
+        ``SOLVE_NOT_FINITE`` if the state or the torques hold NaN or infinity, or
+        ``SOLVE_BAD_LENGTH`` if a part has the wrong length (nothing computed for either).
     """
-    nv = dims[DIMS_NV]
+    rows, K = tables[0], tables[1]
+    at = 2 + DIMS_SIZE
+    dims = tables[2:at]
+    k, nv, n = dims[DIMS_K], dims[DIMS_NV], dims[DIMS_N]
+    v_starts = tables[at:at + n]
+    width = ARM_JOINTS + 2 * k
+    arm_ints = tables[at + n:at + n + n * width].reshape((n, width))
+    at = rows * MODEL_INTS
+    model_ints = tables_ro[:at].reshape((rows, MODEL_INTS))
+    ints = tables_ro[at:at + K * CONTACT_INTS].reshape((K, CONTACT_INTS))
+    N = tables_ro[at + K * CONTACT_INTS:at + K * CONTACT_INTS + n]
+    at = rows * MODEL_FLOATS
+    model_floats = floats_ro[:at].reshape((rows, MODEL_FLOATS))
+    floats = floats_ro[at:at + K * CONTACT_FLOATS].reshape((K, CONTACT_FLOATS))
+    nq = 0
+    n_tools = 0
+    for i in range(rows):  # the configuration's length and the tool frames
+        kind = model_ints[i, MI_KIND]
+        if kind == KIND_REVOLUTE or kind == KIND_PRISMATIC:
+            nq = max(nq, model_ints[i, MI_IDX_Q] + 1)
+        elif kind == KIND_REVOLUTE_UNBOUNDED:
+            nq = max(nq, model_ints[i, MI_IDX_Q] + 2)
+        elif kind == KIND_FRAME:
+            n_tools += 1
+    if (position.shape[0] != 3 or quaternion.shape[0] != 4 or twist.shape[0] != 6
+            or q.shape[0] != nq or v.shape[0] != nv or tau.shape[0] != nv):
+        return SOLVE_BAD_LENGTH
     q0 = OBJECT_STATE_SIZE
-    nq = x.shape[0] - q0 - 2 * nv
+    x = np.empty(q0 + nq + 2 * nv)
+    x[X_POSITION:X_POSITION + 3] = position
+    x[X_QUATERNION:X_QUATERNION + 4] = quaternion
+    x[X_TWIST:X_TWIST + 6] = twist
+    x[q0:q0 + nq] = q
+    x[q0 + nq:q0 + nq + nv] = v
+    x[q0 + nq + nv:] = tau
+    J_world = np.empty((6, nv))
+    dJ_world = np.empty((6, nv))
+    nle_full = np.empty(nv)
+    H = np.empty((n_tools, 4, 4))
     rigid_body_pass(model_ints, model_floats, x[q0:q0 + nq], x[q0 + nq:q0 + nq + nv], J_world,
-                    dJ_world, M_full, nle_full, H, energy)
+                    dJ_world, M_full, nle_full, H, np.empty(0))
     if step:
         return step_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, ints,
                            floats, params, dims, N, buf)
@@ -417,6 +500,6 @@ def evaluate_state(model_ints, model_floats, J_world, dJ_world, M_full, nle_full
     return SOLVE_NOT_FINITE
 
 
-__all__ = ["SOLVE_NOT_FINITE", "arm_views", "block_views", "evaluate_state",
+__all__ = ["SOLVE_BAD_LENGTH", "SOLVE_NOT_FINITE", "arm_views", "block_views", "evaluate_state",
            "evaluate_system", "finish_system", "group_arm_terms", "quaternion_rotation",
-           "solution_views", "solve_buffer", "solve_views", "step_system"]
+           "solution_views", "solve_buffer", "solve_views", "state_tables", "step_system"]

@@ -111,7 +111,9 @@ class BufferLayout:
             a validated build.
         N: (n,) constraints per arm (read-only, shared by the constraint terms).
         mask: (n, N_max) real constraint slots (read-only, shared).
-        solution_segments: the segments ``a_o``, ``qdd``, ``mu``.
+        solution_segments: the bounds of the segments ``a_o``, ``qdd``, ``mu`` as plain
+            ints and shapes: ``(a_start, a_stop, q_start, q_stop, q_shape, mu_start,
+            mu_stop, mu_shape)``.
     """
 
     segments: dict
@@ -123,9 +125,9 @@ class BufferLayout:
 
     def solution(self, buf: np.ndarray, blocks: SystemBlocks) -> Solution:
         """The object-first :class:`Solution` in the solution segments of ``buf``."""
-        a_o, qdd, mu = self.solution_segments  # sliced inline: this runs once per step
-        return Solution(buf[a_o.start:a_o.stop], buf[qdd.start:qdd.stop].reshape(qdd.shape),
-                        buf[mu.start:mu.stop].reshape(mu.shape), "object_first", (), blocks)
+        a0, a1, q0, q1, q_shape, m0, m1, m_shape = self.solution_segments  # runs once per step
+        return Solution(buf[a0:a1], buf[q0:q1].reshape(q_shape), buf[m0:m1].reshape(m_shape),
+                        "object_first", (), blocks)
 
     @classmethod
     def build(cls, nv_arm: np.ndarray, constraint_set: ConstraintSet, k: int) -> BufferLayout:
@@ -142,15 +144,18 @@ class BufferLayout:
                 arr.setflags(write=False)  # any SystemBlocks' (one compiled kernel variant)
             constant[name] = arr
         constant["has_constraint_padding"] = probe.has_constraint_padding
+        a_o, qdd, mu = segments["a_o"], segments["qdd"], segments["mu"]
         return cls(segments, segments[layout.SEGMENTS[-1]].stop, constant, constraint_set.N,
-                   constraint_set.mask, (segments["a_o"], segments["qdd"], segments["mu"]))
+                   constraint_set.mask, (a_o.start, a_o.stop, qdd.start, qdd.stop, qdd.shape,
+                                         mu.start, mu.stop, mu.shape))
 
 
 class _View:
     """Read-only property: a field made from the buffer on first access, then kept.
 
-    ``make(owner)`` builds the value; it is kept in the owner's ``_views`` dict. A data
-    descriptor, so the field can be neither assigned nor shadowed.
+    ``make(owner)`` builds the value; it is kept in the owner's instance dict under the
+    field's name (no dict of its own to make per evaluation). A data descriptor, so the
+    field can be neither assigned nor shadowed by that entry.
     """
 
     def __init__(self, make: Callable):
@@ -163,10 +168,10 @@ class _View:
     def __get__(self, obj, owner=None):
         if obj is None:
             return self
-        views = obj._views
-        value = views.get(self.name)
+        d = obj.__dict__
+        value = d.get(self.name)
         if value is None:
-            value = views[self.name] = self.make(obj)
+            value = d[self.name] = self.make(obj)
         return value
 
     def __set__(self, obj, value) -> None:
@@ -213,13 +218,15 @@ class BufferBlocks(SystemBlocks):
 
     def __init__(self, buf: np.ndarray, layout: BufferLayout, h: np.ndarray | None = None,
                  h_o: np.ndarray | None = None):
-        self._buf = buf
-        self._layout = layout
-        self._views = {}
+        # into the instance dict: a __setattr__ in the class dict makes every assignment a
+        # Python-level call (1.2 µs for three, 0.5 µs so, once per step)
+        d = self.__dict__
+        d["_buf"] = buf
+        d["_layout"] = layout
         if h is not None:
-            self._views["h"] = h
+            d["h"] = h  # the field's kept value (see _View)
         if h_o is not None:
-            self._views["h_o"] = h_o
+            d["h_o"] = h_o
 
     @property
     def buffer(self) -> np.ndarray:
@@ -234,7 +241,7 @@ class BufferBlocks(SystemBlocks):
     def replaced(self, *, h: np.ndarray | None = None,
                  h_o: np.ndarray | None = None) -> BufferBlocks:
         """The same views with another ``h`` and/or ``h_o`` (see :meth:`SystemBlocks.replaced`)."""
-        views = self._views
+        views = self.__dict__
         if h is not None:
             h = _replacement(h, self.h, "h")
         if h_o is not None:
@@ -266,7 +273,6 @@ class BufferArmTerms(ArmSetTerms):
     def __init__(self, buf: np.ndarray, layout: BufferLayout):
         self._buf = buf
         self._layout = layout
-        self._views = {}
 
 
 def _row_field(name: str) -> _View:
@@ -295,7 +301,6 @@ class BufferConstraintTerms(ConstraintTerms):
 
     def __init__(self, buf: np.ndarray, layout: BufferLayout):
         self._layout = layout
-        self._views = {}
         self._rows = layout.segments["rows"].view(buf)
 
 
@@ -331,6 +336,46 @@ class BufferEvaluation(Evaluation):
 
 
 # ------------------------------------------------------------------ the compiled path
+_REJECTED = -1
+"""Status of :meth:`CompiledSystem.evaluate`'s fast path: an input rejected (a type the
+kernel was not compiled for, a missing attribute): the checked path decides."""
+
+_guarded = False
+"""True once :func:`_guarded_call` has stopped ``evaluate_state``'s dispatcher from compiling
+new specialisations (never with ``NUMBA_DISABLE_JIT``)."""
+
+
+def _guarded_call(*args) -> int:
+    """``kernels.evaluate_state(*args)`` on checked arguments of the kernel's types.
+
+    The first call compiles (or loads) the specialisation; then the dispatcher is told to
+    compile no other one: an argument of another type (an int or read-only array, a list, a
+    strided view) in :meth:`CompiledSystem.evaluate`'s fast path then raises ``TypeError``
+    at once, instead of compiling a specialisation per type (a minute each), and the checked
+    path converts or rejects it. The type check is the dispatcher's own, so the fast path
+    checks nothing in Python. A system whose constant tables have other types than the
+    first one's (none known) compiles its specialisation here.
+    """
+    global _guarded
+    kernel = kernels.evaluate_state
+    if not hasattr(kernel, "disable_compile"):  # NUMBA_DISABLE_JIT: plain Python
+        return kernel(*args)
+    try:
+        return kernel(*args)
+    except TypeError:  # compiling disabled, and these constant tables' types are new
+        if not _guarded:
+            raise
+        kernel.disable_compile(False)
+        try:
+            return kernel(*args)
+        finally:
+            kernel.disable_compile(True)
+    finally:
+        if not _guarded and kernel.signatures:
+            kernel.disable_compile(True)
+            _guarded = True
+
+
 class CompiledSystem:
     """The compiled path of one system: constant kernel inputs and the calls that use them.
 
@@ -378,15 +423,20 @@ class CompiledSystem:
             joints = gi[:, layout.ARM_JOINTS:layout.ARM_JOINTS + k]
             joints[:] = np.maximum(joints - g.v.start, 0)
             self._group_tables.append(gi)
-        self._nx = layout.state_size(self.nq, self.nv)
         self._zero_tau = np.zeros(self.nv)
         self._zero_tau.setflags(write=False)
+        self._tau_zero = np.zeros(self.nv)  # the same, writable: the kernel's argument type
         self._check_state = check_state
         self._baumgarte_key = self._baumgarte_params = None  # see _params_with
         # the arms' tables of the compiled rigid-body pass (None: a joint it does not support,
-        # then Pinocchio's pass), and its work arrays (M stays zero off the arms' blocks)
+        # then Pinocchio's pass)
         self.model = aset.compiled_model
-        self._arm_work = None if self.model is None else self.model.outputs()
+        if self.model is not None:  # evaluate_state's constant arguments: the packed
+            # tables and the mass-matrix work array (zero off the arms' blocks)
+            self._head = (*kernels.state_tables(
+                self.model.ints, self.model.floats, self.arm_table, self.v_starts,
+                self.contact_tables.ints, self.contact_tables.floats, self.dims, self.N),
+                self.model.outputs()[2])
 
     def evaluate(self, state, tau, baumgarte, step: bool
                  ) -> tuple[BufferEvaluation, Solution | None]:
@@ -407,49 +457,70 @@ class CompiledSystem:
             InputError: wrong shapes (naming the field).
             DynamicsError: NaN or infinity in the state or the torques.
         """
+        buf = np.empty(self.layout.size)
+        model = self.model
+        status = _REJECTED
+        if model is not None and _guarded:  # the fast path: the kernel checks the parts
+            try:  # (lengths, finiteness) and its dispatcher their types: nothing in Python
+                o = state.obj
+                status = kernels.evaluate_state(
+                    *self._head, o.position, o.quaternion, o.twist, state.q, state.v,
+                    self._tau_zero if tau is None else tau,
+                    self.params if baumgarte is None else self._params_with(baumgarte),
+                    step, buf)
+            except (AttributeError, TypeError, InputError):  # then checked below, in order
+                status = _REJECTED
+        if not 0 <= status < kernels.SOLVE_NOT_FINITE:  # rejected, NaN or a wrong length
+            status = self._evaluate_checked(state, tau, baumgarte, step, buf)
+        blocks = BufferBlocks(buf, self.layout)
+        if step and status == SOLVE_OK:
+            return BufferEvaluation(blocks), self.layout.solution(buf, blocks)
+        return BufferEvaluation(blocks), None
+
+    def _evaluate_checked(self, state, tau, baumgarte, step: bool, buf: np.ndarray) -> int:
+        """Slow path of :meth:`evaluate`: every input checked, converted, evaluated into ``buf``.
+
+        Raises naming the field that is wrong; what is acceptable but not of the kernel's
+        types (lists, int or read-only arrays, strided views) is copied to them.
+
+        Returns:
+            The kernel's status (``SOLVE_OK`` or a doubtful case).
+        """
         if tau is None:
             t = self._zero_tau
         else:
             t = np.asarray(tau, dtype=float)
             if t.shape != (self.nv,):
                 raise InputError(f"tau: expected shape ({self.nv},), got {t.shape}")
-        try:  # cheap checks here: types and shapes (finiteness is checked by the kernel)
+        try:  # cheap checks first: types and shapes (finiteness is checked by the kernel)
             o = state.obj
             q, v = state.q, state.v
-            x = layout.state_vector(o.position, o.quaternion, o.twist, q, v, t)
-            ok = (q.shape == (self.nq,) and v.shape == (self.nv,) and x.shape[0] == self._nx
-                  and o.position.shape == (3,) and o.twist.shape == (6,)
-                  and x.dtype == np.float64)
+            ok = (q.shape == (self.nq,) and v.shape == (self.nv,)
+                  and o.position.shape == (3,) and o.quaternion.shape == (4,)
+                  and o.twist.shape == (6,))
         except (AttributeError, TypeError, ValueError):
             ok = False
         if not ok:
             self._check_state_and_tau(state, t)  # raises naming the field, or accepts
-            o = state.obj
-            q = np.ascontiguousarray(state.q, dtype=float)
-            v = np.ascontiguousarray(state.v, dtype=float)
-            x = layout.state_vector(np.asarray(o.position, float),
-                                    np.asarray(o.quaternion, float),
-                                    np.asarray(o.twist, float), q, v, t)
+        o = state.obj
+        parts = [np.array(a, dtype=np.float64, order="C")  # fresh, writable: the kernel's
+                 for a in (o.position, o.quaternion, o.twist, state.q, state.v, t)]  # types
         params = self.params if baumgarte is None else self._params_with(baumgarte)
-        buf = np.empty(self.layout.size)
         model = self.model
         if model is not None:  # arm terms, blocks (and solve) in one compiled call
-            tables = self.contact_tables
-            status = kernels.evaluate_state(model.ints, model.floats, *self._arm_work, x,
-                                            self.arm_table, self.v_starts, tables.ints,
-                                            tables.floats, params, self.dims, self.N, step, buf)
+            status = _guarded_call(*self._head, *parts, params, step, buf)
+            if status == kernels.SOLVE_BAD_LENGTH:  # cannot happen after the checks above
+                raise RuntimeError("evaluate_state: the state's lengths do not match the "
+                                   "system's compiled model tables")
             finite = status != kernels.SOLVE_NOT_FINITE
         else:
-            H = self.arm_set.pinocchio_pass(q, v)
+            x = layout.state_vector(*parts)
+            H = self.arm_set.pinocchio_pass(parts[3], parts[4])
             finite, status = self.kernel_pass(H, x, params, buf, step)
         if not finite:
             self._check_state_and_tau(state, t)  # raises naming the field
             raise DynamicsError("state or torques contain NaN or infinity")
-        blocks = BufferBlocks(buf, self.layout)
-        ev = BufferEvaluation(blocks)
-        if step and status == SOLVE_OK:
-            return ev, self.layout.solution(buf, blocks)
-        return ev, None
+        return status
 
     def _params_with(self, baumgarte) -> np.ndarray:
         """The parameter vector with Baumgarte ``(α, β)`` on, checked once per value.

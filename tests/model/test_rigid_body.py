@@ -320,3 +320,16 @@ def test_energies_and_momentum_equal_pinocchios(n, rng):
             M = arm_set.compiled_pass(q, v)[2]
             assert abs(energy[layout.EN_KINETIC] - 0.5 * v @ M @ v) <= TOL * scale
 
+
+
+def test_an_empty_energy_array_skips_the_energies_and_changes_no_other_output(rng):
+    """The open-loop step hands an empty ``energy``: no energies, the same bits elsewhere."""
+    arm_set = ArmSet([_arm(MIXED[k], f"arm{k}", k) for k in range(3)])
+    cm = arm_set.compiled_model
+    q, v = random_state(arm_set.model, rng, speed=1.0)
+    full, bare = cm.outputs(), cm.outputs()
+    rigid_body_pass(cm.ints, cm.floats, q, v, *full)
+    rigid_body_pass(cm.ints, cm.floats, q, v, *bare[:5], np.empty(0))
+    for name, a, b in zip(NAMES, full[:5], bare[:5], strict=True):
+        assert np.array_equal(a, b), name
+    assert full[5][layout.EN_KINETIC] > 0  # the full pass did compute them
