@@ -434,12 +434,12 @@ class ObjectPD(Controller):
             return kept
         if null[0] != self.null_kp or null[1] != self.null_kd:  # gains changed: a new array
             self._null_gains = null = np.array([self.null_kp, self.null_kd])
-        parts = (self.trajectory.table(), self._pd_gains, null, self.hold_points_in_tool,
-                 self.hold_points_in_object, self._hold_n, self._gains, self._forces.active,
-                 self._unilateral, self.q_ref)
-        if kept is None or any(a is not b for a, b in zip(parts, kept, strict=True)):
-            self._kernel_inputs = kept = parts
-        return kept
+        # here one of the checked arrays is new (or none is kept yet): a new tuple
+        self._kernel_inputs = (self.trajectory.table(), self._pd_gains, null,
+                               self.hold_points_in_tool, self.hold_points_in_object,
+                               self._hold_n, self._gains, self._forces.active,
+                               self._unilateral, self.q_ref)
+        return self._kernel_inputs
 
     def kernel_planned(self, tau: np.ndarray, mu: np.ndarray, qdd: np.ndarray,
                        a_pts: np.ndarray, a_d: np.ndarray) -> None:
