@@ -89,3 +89,20 @@ def one_dof_arm(name: str, angle: float) -> Arm:
     base = pin.SE3(pin.rpy.rpyToMatrix(0, 0, angle + np.pi),
                    np.array([0.9 * np.cos(angle), 0.9 * np.sin(angle), 0.0]))
     return Arm.from_model(reduced, tool, name=name, base_placement=base)
+
+
+def two_gripper_system():
+    """The two-gripper 7-contact form-closure grasp at rest ``(system, state)``.
+
+    ``scenarios/two_gripper_form_closure.yaml``: an MP6 with a four-finger gripper (arm 0,
+    fingertip rows 0-3) and one with a three-finger gripper (arm 1, rows 0-2) on a 4 kg box.
+    """
+    from pathlib import Path
+
+    import yaml
+
+    from multiarm_pin.app.scenario import build_scenario, parse_scenario
+
+    path = Path(__file__).resolve().parents[1] / "scenarios" / "two_gripper_form_closure.yaml"
+    built = build_scenario(parse_scenario(yaml.safe_load(path.read_text()), str(path)))
+    return built.system, built.initial_state

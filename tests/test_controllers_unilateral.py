@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+from system_builders import two_gripper_system
 
 from multiarm_pin.dynamics.force_distribution import distribute_forces
 from multiarm_pin.exceptions import DynamicsError
@@ -42,19 +43,6 @@ def test_infeasible_margin_falls_back_and_contacts_separate_instead_of_pulling()
     assert np.all(np.isfinite(r.q))
 
 
-def _two_gripper():
-    """The two-gripper 7-contact form-closure grasp at rest (system, state)."""
-    from pathlib import Path
-
-    import yaml
-
-    from multiarm_pin.app.scenario import build_scenario, parse_scenario
-
-    path = Path(__file__).resolve().parents[1] / "scenarios" / "two_gripper_form_closure.yaml"
-    built = build_scenario(parse_scenario(yaml.safe_load(path.read_text()), str(path)))
-    return built.system, built.initial_state
-
-
 def test_object_pd_plans_forces_on_the_touching_contacts_only():
     """With four_finger:tip[2] separated, its planned force is 0 and the rest realise a_d.
 
@@ -70,7 +58,7 @@ def test_object_pd_plans_forces_on_the_touching_contacts_only():
     from multiarm_pin.dynamics.unilateral import solve_unilateral
     from multiarm_pin.sim.controllers import grasp_rank
 
-    system, state = _two_gripper()
+    system, state = two_gripper_system()
     active = system.contact_mask.copy()
     active[0, 2] = False
     ev = system.blocks(state).with_active(active[:system.n_arms, :system.N_max])
@@ -103,7 +91,7 @@ def test_object_pd_holds_the_arms_still_when_the_touching_contacts_lose_the_gras
     """
     import pinocchio as pin
 
-    system, state = _two_gripper()
+    system, state = two_gripper_system()
     active = system.contact_mask[:system.n_arms, :system.N_max].copy()
     active[0] = False
     ev = system.blocks(state).with_active(active)

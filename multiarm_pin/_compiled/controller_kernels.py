@@ -79,6 +79,14 @@ PD_LARGE_ROTATION = 4
 """Status: the object's orientation error is within 1e-3 rad of π (the caller uses the
 reference's ``pin.log3``, which handles that case)."""
 
+PD_HOLD = 5
+"""Status of :func:`touching_torques`: the touching contacts cannot make every object wrench
+(grasp rank < 6): the controller holds the arms still (:func:`hold_still_torques`)."""
+
+GRASP_RANK_TOLERANCE = 1e-9
+"""Relative singular value below which the touching contacts' wrench map is rank deficient
+(``object_pd.grasp_rank`` and :func:`touching_rank`)."""
+
 RANK_MARGIN = 1e-7
 """``W_i`` counts as of full column rank when its smallest QR pivot is above this times the
 largest: three orders of magnitude above the reference's singular-value threshold
@@ -383,6 +391,54 @@ def log3(R, out):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
+def desired_acceleration(obj, ref, pd_gains, obj_x, a_d):  # pragma: no cover - compiled
+    """The PD on the object pose, ``a_d = a_ref + K_d (v_ref - v_o) + K_p e``.
+
+    ``e = [p_ref - p; log(R_ref Rᵀ)]``: the part of :func:`object_pd_step` and
+    :func:`touching_torques` before the torques.
+
+    Args:
+        obj: (OBJECT_STATE_SIZE,) object position [m], quaternion ``[x, y, z, w]``, twist
+            ``[ẋ; ω]`` (``OBJECT_STATE_FIELDS``).
+        ref: (REFERENCE_SIZE,) reference position [m], rotation (row-major), twist, classical
+            acceleration, world axes at the COM (``REFERENCE_FIELDS``).
+        pd_gains: (PD_GAINS_SIZE,) ``K_p`` (6) [1/s²], ``K_d`` (6) [1/s].
+        obj_x: output (OX_TWIST + 6,) the object's position, rotation (row-major) and twist
+            (``OBJECT_POSE_FIELDS``), as :func:`object_pd_torques` reads them.
+        a_d: output (6,) desired object acceleration ``[ẍ; ω̇]`` at the COM [m/s², rad/s²].
+
+    Returns:
+        False when the orientation error is within 1e-3 rad of π (``a_d`` then not written:
+        the caller reports :data:`PD_LARGE_ROTATION`).
+    """
+    Ro = np.empty((3, 3))
+    quaternion_rotation(obj[X_QUATERNION:X_QUATERNION + 4], Ro)
+    for a in range(3):
+        obj_x[OX_POSITION + a] = obj[X_POSITION + a]
+        for b in range(3):
+            obj_x[OX_ROTATION + 3 * a + b] = Ro[a, b]
+    for a in range(6):
+        obj_x[OX_TWIST + a] = obj[X_TWIST + a]
+    # pose error: [p_ref - p; log(R_ref Rᵀ)]
+    E = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            acc = 0.0
+            for p in range(3):
+                acc += ref[REF_ROTATION + 3 * a + p] * Ro[b, p]
+            E[a, b] = acc
+    rot = np.empty(3)
+    if not log3(E, rot):
+        return False
+    for a in range(6):
+        e = ref[REF_POSITION + a] - obj[X_POSITION + a] if a < 3 else rot[a - 3]
+        a_d[a] = (ref[REF_ACCELERATION + a]
+                  + pd_gains[PD_KD + a] * (ref[REF_TWIST + a] - obj[X_TWIST + a])
+                  + pd_gains[PD_KP + a] * e)
+    return True
+
+
+@njit(cache=True, error_model="numpy")
 def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold_tool,
                    hold_obj, hold_n, gains, params, active, tau, mu, qdd, a_pts, a_d, solve,
                    wrench):  # pragma: no cover - compiled
@@ -426,30 +482,8 @@ def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold
         solved).
     """
     obj_x = np.empty(OX_TWIST + 6)
-    Ro = np.empty((3, 3))
-    quaternion_rotation(obj[X_QUATERNION:X_QUATERNION + 4], Ro)
-    for a in range(3):
-        obj_x[OX_POSITION + a] = obj[X_POSITION + a]
-        for b in range(3):
-            obj_x[OX_ROTATION + 3 * a + b] = Ro[a, b]
-    for a in range(6):
-        obj_x[OX_TWIST + a] = obj[X_TWIST + a]
-    # pose error: [p_ref - p; log(R_ref Rᵀ)]
-    E = np.empty((3, 3))
-    for a in range(3):
-        for b in range(3):
-            acc = 0.0
-            for p in range(3):
-                acc += ref[REF_ROTATION + 3 * a + p] * Ro[b, p]
-            E[a, b] = acc
-    rot = np.empty(3)
-    if not log3(E, rot):
+    if not desired_acceleration(obj, ref, pd_gains, obj_x, a_d):
         return PD_LARGE_ROTATION, -1
-    for a in range(6):
-        e = ref[REF_POSITION + a] - obj[X_POSITION + a] if a < 3 else rot[a - 3]
-        a_d[a] = (ref[REF_ACCELERATION + a]
-                  + pd_gains[PD_KD + a] * (ref[REF_TWIST + a] - obj[X_TWIST + a])
-                  + pd_gains[PD_KP + a] * e)
     k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
     off = offsets(n, k, m)
     M, _, J, Jdq, tp, tR, ttw, _ = _arm_segments(buf, off, n, k, m)
@@ -465,6 +499,176 @@ def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold
     return status, object_first(M, h + tau, W, W_o, c, M_o, h_o + wrench, N,
                                 params[P_RCOND_TOL], params[P_OBJECT_RCOND_TOL], a_o, qdd_s,
                                 mu_s)
+
+
+@njit(cache=True, error_model="numpy")
+def touching_rank(W_o, N):  # pragma: no cover - compiled
+    """Rank of the stacked ``W_o`` of the first ``N[i]`` rows of each arm (``grasp_rank``).
+
+    The singular values of ``[W_o,1[:, :N_1] ... W_o,n[:, :N_n]]`` with every column scaled
+    to unit norm (zero columns dropped) above :data:`GRASP_RANK_TOLERANCE` times the
+    largest, as ``multiarm_pin.sim.controllers.object_pd.grasp_rank`` decides it.
+
+    Args:
+        W_o: (n, 6, m) the arms' object wrench columns (padding after ``N[i]``).
+        N: (n,) int rows per arm.
+
+    Returns:
+        The rank, 0..6.
+    """
+    n = W_o.shape[0]
+    norms = np.zeros(W_o.shape[0] * W_o.shape[2])
+    cols = 0
+    for i in range(n):
+        for s in range(N[i]):
+            acc = 0.0
+            for a in range(6):
+                acc += W_o[i, a, s] * W_o[i, a, s]
+            if acc > 0.0:
+                norms[cols] = math.sqrt(acc)
+                cols += 1
+    if cols == 0:
+        return 0
+    A = np.empty((6, cols))
+    p = 0
+    for i in range(n):
+        for s in range(N[i]):
+            acc = 0.0
+            for a in range(6):
+                acc += W_o[i, a, s] * W_o[i, a, s]
+            if acc > 0.0:
+                for a in range(6):
+                    A[a, p] = W_o[i, a, s] / norms[p]
+                p += 1
+    sv = np.linalg.svd(A, full_matrices=False)[1]
+    rank = 0
+    for a in range(sv.shape[0]):
+        if sv[a] > GRASP_RANK_TOLERANCE * sv[0]:
+            rank += 1
+    return rank
+
+
+@njit(cache=True, error_model="numpy")
+def touching_torques(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_gains, z,
+                     hold_tool, hold_obj, hold_n, gains, active_r, tau, mu, qdd, a_pts,
+                     a_d):  # pragma: no cover - compiled
+    """``ObjectPD`` torques planned on the touching contacts only (some have separated).
+
+    What ``ObjectPD.reference`` computes on an evaluation whose active set leaves some
+    unilateral contacts out: each arm's touching rows are compacted to the front (kept rows
+    in order, zero padding, as :func:`multiarm_pin.dynamics.blocks.restrict_rows` does); the
+    grasp rank of those rows is decided first (:func:`touching_rank`; :data:`PD_HOLD` below
+    6: the caller holds the arms still, :func:`hold_still_torques`); then the desired
+    acceleration (:func:`desired_acceleration`) and :func:`object_pd_torques`'s torques on
+    the restricted rows (``M``, ``J``, ``J̇q̇``, tools, ``h``, ``M_o``, ``h_o`` unchanged);
+    the planned multipliers are put back at their full rows (zero on separated rows).
+
+    The reference's fallbacks are not here: a force QP that fails (for instance a margin that
+    no internal force keeps: the reference then plans least-norm forces), an arm whose rows
+    or task are rank deficient, NaN, a large rotation error all return their status, and the
+    caller runs the reference, which decides.
+
+    Args:
+        buf: the flat buffer (blocks at zero torque).
+        dims: (DIMS_SIZE,) int ``(k, m, nv, n)``.
+        N: (n,) int constraint rows per arm (all of them, touching or not).
+        nv_arm: (n,) int joints per arm.
+        unilateral: (n, m) bool mask of the unilateral rows (all of them).
+        obj: (OBJECT_STATE_SIZE,) object position, quaternion, twist (as
+            :func:`object_pd_step`).
+        ref: (REFERENCE_SIZE,) the reference (as :func:`object_pd_step`).
+        pd_gains: (PD_GAINS_SIZE,) ``K_p``, ``K_d``.
+        z: (n, k) joint-space PD (see :func:`object_pd_torques`).
+        hold_tool: (n, h, 3) held points in the tool frame [m].
+        hold_obj: (n, h, 3) their places in the object frame [m].
+        hold_n: (n,) int held points per arm.
+        gains: (HOLD_GAINS_SIZE,) ``hold_kp``, ``hold_kd``, Jacobian damping, margin.
+        touching: (n, m) bool, True on the rows that touch (padding ignored).
+        active_r: (n, m) uint8 warm start of the force QP on the restricted rows (in and
+            out; its own array, not the full rows' one: a warm start only, the QP's answer
+            does not depend on it).
+        tau: output (n, k) torques [N m] to add to ``h`` (zero on padding).
+        mu: output (n, m) planned multipliers of the full rows [N] (zero on separated rows).
+        qdd: output (n, k) planned joint accelerations.
+        a_pts: output (n, h, 3) desired point accelerations [m/s²].
+        a_d: output (6,) desired object acceleration [m/s², rad/s²].
+
+    Returns:
+        ``(status, rank)``: :data:`PD_OK`, :data:`PD_HOLD` or the reason the caller must use
+        the reference (outputs then meaningless); the grasp rank of the touching rows (0..6).
+    """
+    k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
+    off = offsets(n, k, m)
+    M, _, J, Jdq, tp, tR, ttw, _ = _arm_segments(buf, off, n, k, m)
+    _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
+    W_r = np.zeros((n, k, m))
+    W_o_r = np.zeros((n, 6, m))
+    c_r = np.zeros((n, m))
+    unilateral_r = np.zeros((n, m), dtype=np.bool_)
+    N_r = np.zeros(n, dtype=np.int64)
+    index = np.empty((n, m), dtype=np.int64)
+    for i in range(n):
+        p = 0
+        for s in range(N[i]):
+            if not touching[i, s]:
+                continue
+            for j in range(k):
+                W_r[i, j, p] = W[i, j, s]
+            for a in range(6):
+                W_o_r[i, a, p] = W_o[i, a, s]
+            c_r[i, p] = c[i, s]
+            unilateral_r[i, p] = unilateral[i, s]
+            index[i, p] = s
+            p += 1
+        N_r[i] = p
+    rank = touching_rank(W_o_r, N_r)
+    if rank < 6:
+        return PD_HOLD, rank
+    obj_x = np.empty(OX_TWIST + 6)
+    if not desired_acceleration(obj, ref, pd_gains, obj_x, a_d):
+        return PD_LARGE_ROTATION, rank
+    mu_r = np.zeros((n, m))
+    status = _torques(M, J, Jdq, tp, tR, ttw, h, W_r, W_o_r, c_r, M_o, h_o, N_r, nv_arm,
+                      unilateral_r, obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains, active_r,
+                      tau, mu_r, qdd, a_pts)
+    if status != PD_OK:
+        return status, rank
+    for i in range(n):
+        for s in range(m):
+            mu[i, s] = 0.0
+        for p in range(N_r[i]):
+            mu[i, index[i, p]] = mu_r[i, p]
+    return PD_OK, rank
+
+
+@njit(cache=True, error_model="numpy")
+def hold_still_torques(buf, dims, nv_arm, z, tau):  # pragma: no cover - compiled
+    """Torques holding the arms still: ``τ_i = M_i z_i - h_i`` (``ObjectPD._hold_still``).
+
+    Computed-torque joint PD with the contact forces ignored; the caller computes
+    ``z = null_kp (q_hold ⊖ q) - null_kd v``.
+
+    Args:
+        buf: the flat buffer (blocks at zero torque, ``h = -nle``).
+        dims: (DIMS_SIZE,) int ``(k, m, nv, n)``.
+        nv_arm: (n,) int joints per arm.
+        z: (n, k) desired joint accelerations [rad/s²], zero on padding.
+        tau: output (n, k) torques [N m], zero on padding.
+    """
+    k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
+    off = offsets(n, k, m)
+    M = _arm_segments(buf, off, n, k, m)[0]
+    h = _block_segments(buf, off, n, k, m)[1]
+    for i in range(n):
+        nvi = nv_arm[i]
+        for j in range(k):
+            if j >= nvi:
+                tau[i, j] = 0.0
+                continue
+            acc = 0.0
+            for b in range(nvi):
+                acc += M[i, j, b] * z[i, b]
+            tau[i, j] = acc - h[i, j]
 
 
 @njit(cache=True, error_model="numpy")
@@ -493,7 +697,7 @@ def solve_with_torques(buf, dims, N, params, tau):  # pragma: no cover - compile
                         params[P_OBJECT_RCOND_TOL], a_o, qdd, mu)
 
 
-__all__ = ["NO_WRENCH", "PD_ARM_RANK", "PD_FORCES_FAILED", "PD_LARGE_ROTATION", "PD_NOT_FINITE",
-           "PD_OK",
-           "log3", "min_norm_rows", "object_pd_step", "object_pd_torques",
-           "solve_with_torques"]
+__all__ = ["GRASP_RANK_TOLERANCE", "NO_WRENCH", "PD_ARM_RANK", "PD_FORCES_FAILED", "PD_HOLD",
+           "PD_LARGE_ROTATION", "PD_NOT_FINITE", "PD_OK", "desired_acceleration",
+           "hold_still_torques", "log3", "min_norm_rows", "object_pd_step",
+           "object_pd_torques", "solve_with_torques", "touching_rank", "touching_torques"]

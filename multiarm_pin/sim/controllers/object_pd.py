@@ -15,6 +15,7 @@ import numpy as np
 import pinocchio as pin
 
 from multiarm_pin._compiled import controller_kernels, layout
+from multiarm_pin._compiled.controller_kernels import GRASP_RANK_TOLERANCE
 from multiarm_pin.dynamics.blocks import SystemBlocks, expand_rows, restrict_rows
 from multiarm_pin.dynamics.force_distribution import distribute_forces
 from multiarm_pin.dynamics.force_qp import WarmForceDistribution
@@ -31,10 +32,6 @@ JACOBIAN_DAMPING = 1e-8
 """Damping ``ε`` of ``object_pd``'s least-squares hold ``(AᵀA + ε I)⁻¹ Aᵀ``, relative to the
 mean diagonal of ``AᵀA`` (keeps it finite at singular poses; changes regular arms' solutions
 by about ``ε/σ²_min`` relative)."""
-
-
-GRASP_RANK_TOLERANCE = 1e-9
-"""Relative singular value below which the touching contacts' wrench map is rank deficient."""
 
 
 def grasp_rank(blocks: SystemBlocks) -> int:
@@ -61,6 +58,11 @@ def grasp_rank(blocks: SystemBlocks) -> int:
         return 0
     sv = np.linalg.svd(W_o, compute_uv=False)
     return int((sv > GRASP_RANK_TOLERANCE * sv[0]).sum())
+def _rank_reason(rank: int) -> str:
+    """The warning's reason when the touching contacts' grasp rank is below 6."""
+    return f"the touching contacts cannot make every object wrench (rank {rank} < 6)"
+
+
 @dataclass(frozen=True)
 class ObjectPDPlan:
     """What the compiled :class:`ObjectPD` planned at its last call.
@@ -213,15 +215,24 @@ class ObjectPD(Controller):
                     reason: str) -> np.ndarray:
         """(nv,) torques [N m] holding the arms at the onset's configuration (fallback)."""
         s = self.system
+        z = self._hold_acceleration(t, state, reason)
+        tau = (blocks.M @ z[:, :, None])[:, :, 0] - blocks.h
+        return s.unpad(np.where(blocks.dof_mask, tau, 0.0))
+
+    def _hold_acceleration(self, t: float, state: SystemState, reason: str) -> np.ndarray:
+        """Start holding (at the onset: ``q_h``, one warning) and return the hold's joint PD.
+
+        Returns:
+            (n, nv_max) ``z = null_kp (q_h ⊖ q) - null_kd v`` [rad/s²], zero on padding.
+        """
+        s = self.system
         if not self.holding:
             self.holding = True
             self._q_hold = np.array(state.q, dtype=float)
             self.warnings.append(f"t = {t:.6g} s: object_pd: {reason}; holding the arms still "
                                  "(gravity compensation and joint PD)")
         err = pin.difference(s.arm_set.model, state.q, self._q_hold)
-        z = s.pad(self.null_kp * err - self.null_kd * state.v)
-        tau = (blocks.M @ z[:, :, None])[:, :, 0] - blocks.h
-        return s.unpad(np.where(blocks.dof_mask, tau, 0.0))
+        return s.pad(self.null_kp * err - self.null_kd * state.v)
 
     def _start_trajectory(self, o) -> MinimumJerkTrajectory:
         """At the first call: hold the object's pose ``o``, or go through the waypoints from it."""
@@ -322,6 +333,14 @@ class ObjectPD(Controller):
         is written into the buffer's solution segments (one shared evaluation, see
         :func:`multiarm_pin.sim.closed_loop.closed_loop_evaluation`).
 
+        When the evaluation's active set leaves some contacts out, the torques are planned on
+        the touching rows only (:func:`~multiarm_pin._compiled.controller_kernels.
+        touching_torques`, as :meth:`reference` does), or, when those rows cannot make every
+        object wrench, the arms are held still (the hold's bookkeeping and warning as in
+        :meth:`reference`, the torques by :func:`~multiarm_pin._compiled.controller_kernels.
+        hold_still_torques`). The forward dynamics is then the stepper's (a mixed LCP): only
+        ``solve=False`` is served, ``solve=True`` returns None.
+
         Args:
             t: time [s].
             state: the state of ``evaluation``.
@@ -338,8 +357,10 @@ class ObjectPD(Controller):
         if buffer is None:
             return None
         active = getattr(evaluation, "active", None)
-        if active is not None and not np.all(np.asarray(active)[evaluation.blocks.constraint_mask]):
-            return None  # some contacts are separated: the reference plans on the touching ones
+        if active is not None and np.all(np.asarray(active)[evaluation.blocks.constraint_mask]):
+            active = None  # every contact touches
+        if active is not None and solve:
+            return None  # the forward dynamics is the stepper's mixed LCP, not object-first
         self.prepare(state, evaluation)
         s = self.system
         path = s.compiled
@@ -360,21 +381,33 @@ class ObjectPD(Controller):
         qdd = np.empty(kshape)
         a_pts = np.zeros(self.hold_points_in_tool.shape)
         a_d = np.empty(6)
-        status, solved = controller_kernels.object_pd_step(
-            buffer, path.dims, path.N, path.nv_arm, self._unilateral,
-            layout.object_state_vector(o.position, o.quaternion, o.twist), ref[1],
-            self._pd_gains, z,
-            self.hold_points_in_tool, self.hold_points_in_object, self._hold_n, self._gains,
-            path.params, self._forces.active, tau, mu, qdd, a_pts, a_d, solve,
-            controller_kernels.NO_WRENCH)
+        obj = layout.object_state_vector(o.position, o.quaternion, o.twist)
+        if active is not None:  # some contacts are separated: plan on the touching ones
+            status, rank = controller_kernels.touching_torques(
+                buffer, path.dims, path.N, path.nv_arm, self._unilateral,
+                np.ascontiguousarray(active, dtype=bool), obj, ref[1], self._pd_gains, z,
+                self.hold_points_in_tool, self.hold_points_in_object, self._hold_n,
+                self._gains, self._touching_active, tau, mu, qdd, a_pts, a_d)
+            if status == controller_kernels.PD_HOLD:
+                z = self._hold_acceleration(t, state, _rank_reason(rank))
+                controller_kernels.hold_still_torques(buffer, path.dims, path.nv_arm, z, tau)
+                return s.unpad(tau), -1
+            solved = -1
+        else:
+            status, solved = controller_kernels.object_pd_step(
+                buffer, path.dims, path.N, path.nv_arm, self._unilateral, obj, ref[1],
+                self._pd_gains, z,
+                self.hold_points_in_tool, self.hold_points_in_object, self._hold_n, self._gains,
+                path.params, self._forces.active, tau, mu, qdd, a_pts, a_d, solve,
+                controller_kernels.NO_WRENCH)
         if status != controller_kernels.PD_OK:
-            if status == controller_kernels.PD_FORCES_FAILED:
+            if status == controller_kernels.PD_FORCES_FAILED and active is None:
                 self._forces.cold_solves += 1
             return None
         self.last_point_acceleration = a_pts
         self.last = ObjectPDPlan(tau, mu, qdd, a_d)
         self.margin_kept = True  # the compiled QP solved with the margin
-        self.holding = False  # every contact touches and the grasp is controllable again
+        self.holding = False  # the touching contacts make every object wrench again
         return s.unpad(tau), solved
 
     def prepare(self, state: SystemState, evaluation: Evaluation) -> None:
@@ -399,6 +432,8 @@ class ObjectPD(Controller):
         if self._forces is None:
             s = self.system
             self._forces = WarmForceDistribution(s.compiled.N, s.unilateral)
+            # the warm start of the QP on the touching rows only (its own: rows compacted)
+            self._touching_active = np.zeros_like(self._forces.active)
             self._hold_n = self.hold_mask.sum(axis=1).astype(np.int64)
             self._gains = layout.hold_gain_vector(self.hold_kp, self.hold_kd, JACOBIAN_DAMPING,
                                                   self.margin)
@@ -479,8 +514,7 @@ class ObjectPD(Controller):
             unilateral[i, k] = s.unilateral[i, index[i, k]]
             rank = grasp_rank(b)
             if rank < 6:
-                return self._hold_still(t, state, full, "the touching contacts cannot make "
-                                        f"every object wrench (rank {rank} < 6)")
+                return self._hold_still(t, state, full, _rank_reason(rank))
         a_d = self.desired_acceleration(t, state)  # (not needed to hold the arms still)
         try:
             fd = distribute_forces(b, b.M_o @ a_d - b.h_o, unilateral, self.margin)
