@@ -38,7 +38,7 @@ demo: $(STAMP) $(AOT)
 KERNEL_TESTS := tests/test_kernels.py tests/test_arm_set_fast_path.py tests/test_system.py \
 	tests/dynamics/test_solvers.py tests/dynamics/test_force_qp.py tests/test_closed_loop.py \
 	tests/dynamics/test_unilateral.py tests/dynamics/test_impact.py tests/test_trajectories.py \
-	tests/model/test_rigid_body.py tests/test_compiled_loop.py
+	tests/model/test_rigid_body.py tests/test_compiled_loop.py tests/test_object_pd_touching.py
 
 ## The whole test suite (installs headless Chromium for the browser test when it can),
 ## then the compiled kernels' tests again without compilation (bounds-checked).

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from closed_loop_cases import RUN_FIELDS, rel_err, run_scenario, run_tolerance
 
+from multiarm_pin._compiled import controller_kernels
 from multiarm_pin.sim import compiled_loop
 from multiarm_pin.sim.simulation import partial_result
 
@@ -39,6 +40,43 @@ def test_steps_handed_back_keep_the_events(monkeypatch):
         assert abs(a.t - b.t) <= 1e-9
     for field in RUN_FIELDS:
         assert rel_err(getattr(fast, field), getattr(ref, field)) <= 1e-7, field
+
+
+def test_touching_contacts_kernel_leaves_the_run_unchanged(monkeypatch):
+    """grasp_failure to 0.4 s: planning on the touching contacts (from 0.15 s) and holding
+    the arms still (rank 5 from 0.243 s) by the compiled kernels gives the run of the numpy
+    reference (the kernel made to report a doubtful case at every call, as before it served
+    partial active sets): same states, events, warnings."""
+    statuses = []
+    kernel = controller_kernels.touching_torques
+
+    def recording(*args):
+        out = kernel(*args)
+        statuses.append(int(out[0]))
+        return out
+
+    def refusing(*args):
+        return controller_kernels.PD_NOT_FINITE, 0
+
+    with monkeypatch.context() as mp:
+        mp.setattr(controller_kernels, "touching_torques", recording)
+        fast, _ = run_scenario("grasp_failure", 0.4, True, monkeypatch)
+    with monkeypatch.context() as mp:
+        mp.setattr(controller_kernels, "touching_torques", refusing)
+        ref, _ = run_scenario("grasp_failure", 0.4, True, monkeypatch)
+    assert controller_kernels.PD_OK in statuses and controller_kernels.PD_HOLD in statuses
+    assert statuses.count(controller_kernels.PD_OK) + statuses.count(
+        controller_kernels.PD_HOLD) == len(statuses)  # no evaluation went to the reference
+    assert len(ref.events) >= 2 and sum("object_pd:" in w for w in ref.warnings) == 1
+    assert [(e.kind, e.block, e.row) for e in fast.events] == \
+        [(e.kind, e.block, e.row) for e in ref.events]
+    for a, b in zip(fast.events, ref.events, strict=True):
+        assert abs(a.t - b.t) <= 1e-9
+    assert fast.warnings == ref.warnings
+    np.testing.assert_array_equal(fast.t, ref.t)
+    np.testing.assert_array_equal(fast.active, ref.active)
+    for field in RUN_FIELDS:
+        assert rel_err(getattr(fast, field), getattr(ref, field)) <= 1e-9, field
 
 
 def test_an_interrupt_keeps_the_samples_so_far(monkeypatch):
