@@ -10,6 +10,9 @@ all arms, no SVD: the internal forces come from
 by a Householder QR of ``W_i``), and :func:`closed_loop_step` then solves the forward dynamics
 with these torques on the same blocks (one Pinocchio pass and one set of blocks per
 evaluation).
+With some unilateral contacts separated, :func:`touching_torques` plans on the touching rows
+only (or reports :data:`PD_HOLD` when they cannot make every object wrench, and
+:func:`hold_still_torques` gives the arms' hold).
 
 Whenever a step is doubtful (an arm's ``W_i`` not of full column rank with margin, the force
 QP not converged or degenerate, NaN) the kernels report it and the caller runs the numpy

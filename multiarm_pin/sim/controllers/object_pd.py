@@ -311,9 +311,10 @@ class ObjectPD(Controller):
         On an evaluation of the compiled path (:meth:`MultiArmSystem.blocks`) the torques come
         from :func:`~multiarm_pin._compiled.controller_kernels.object_pd_torques` (per-arm blocks,
         the
-        force QP warm-started from the previous call's active set); otherwise, or when the
-        kernel reports a doubtful case, from :meth:`reference`. Both give the same torques
-        (to round-off).
+        force QP warm-started from the previous call's active set; with some contacts
+        separated, :func:`~multiarm_pin._compiled.controller_kernels.touching_torques` or the
+        hold-still fallback, see :meth:`closed_loop`); otherwise, or when the kernel reports a
+        doubtful case, from :meth:`reference`. Both give the same torques (to round-off).
         """
         if self.q_ref is None:
             self.q_ref = np.array(state.q, dtype=float)
