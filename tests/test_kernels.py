@@ -420,3 +420,23 @@ def test_compiled_evaluation_is_read_only_views_of_one_buffer():
     tables = system.constraint_set.contact_tables
     assert tables is system.constraint_set.contact_tables  # built once
     assert not tables.ints.flags.writeable and not tables.floats.flags.writeable
+
+
+@pytest.mark.parametrize("cols", [1, 3, 5, 6, 7, 11])
+@pytest.mark.parametrize("rank", [6, 5, 3])
+def test_singular_values_equal_numpy_svd(cols, rank):
+    """One-sided Jacobi (``linalg.singular_values``, the grasp-rank kernel's) against LAPACK,
+    full-rank and rank-deficient 6 x c matrices with spread singular values."""
+    rng = np.random.default_rng(100 * cols + rank)
+    U, _ = np.linalg.qr(rng.normal(size=(6, 6)))
+    V, _ = np.linalg.qr(rng.normal(size=(cols, cols)))
+    k = min(rank, cols)
+    s = np.zeros(min(6, cols))
+    s[:k] = 10.0 ** rng.uniform(-6, 2, size=k)
+    A = U[:, :len(s)] @ np.diag(s) @ V[:, :len(s)].T
+    out = np.empty(cols)
+    linalg.singular_values(A.copy(), out)
+    got = np.sort(out)[::-1][:len(s)]
+    want = np.linalg.svd(A, compute_uv=False)
+    assert np.abs(got - want).max() <= 1e-13 * want[0]
+    assert np.sort(out)[::-1][len(s):].max(initial=0.0) <= 1e-13 * want[0]  # c > 6: zeros

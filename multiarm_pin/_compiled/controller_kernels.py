@@ -60,7 +60,7 @@ from multiarm_pin._compiled.layout import (
     X_TWIST,
     offsets,
 )
-from multiarm_pin._compiled.linalg import cholesky, cholesky_solve
+from multiarm_pin._compiled.linalg import cholesky, cholesky_solve, singular_values
 from multiarm_pin._compiled.object_first import object_first
 from multiarm_pin.dynamics.force_qp import QP_OK, least_norm_forces
 
@@ -543,12 +543,16 @@ def touching_rank(W_o, N):  # pragma: no cover - compiled
                 for a in range(6):
                     A[a, p] = W_o[i, a, s] / norms[p]
                 p += 1
-    sv = np.linalg.svd(A, full_matrices=False)[1]
+    sv = np.empty(cols)
+    singular_values(A, sv)  # (one-sided Jacobi: no LAPACK call, 1 µs instead of 15)
+    top = 0.0
+    for a in range(cols):
+        top = max(top, sv[a])
     rank = 0
-    for a in range(sv.shape[0]):
-        if sv[a] > GRASP_RANK_TOLERANCE * sv[0]:
+    for a in range(cols):
+        if sv[a] > GRASP_RANK_TOLERANCE * top:
             rank += 1
-    return rank
+    return min(rank, 6)
 
 
 @njit(cache=True, error_model="numpy")
