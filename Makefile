@@ -14,7 +14,7 @@ $(STAMP): pyproject.toml
 	rm -f $(VENV)/.installed-*
 	touch $(STAMP)
 
-# The closed loop compiled ahead of time for this machine (multiarm_pin/_compiled/precompiled.py),
+# The simulation loops (closed loop, contact loop) compiled ahead of time for this machine (multiarm_pin/_compiled/precompiled.py),
 # so that a first run compiles nothing; rebuilt when a kernel source changes. Without a C
 # compiler it is skipped with a message, and the kernels are compiled at first use instead.
 AOT := $(VENV)/.precompiled
@@ -22,7 +22,7 @@ KERNEL_SOURCES := $(wildcard multiarm_pin/_compiled/*.py) multiarm_pin/dynamics/
 	multiarm_pin/dynamics/delassus.py multiarm_pin/dynamics/mlcp.py
 
 $(AOT): $(STAMP) $(KERNEL_SOURCES)
-	@echo "compiling the closed loop ahead of time (about a minute, once)"
+	@echo "compiling the simulation loops ahead of time (a few minutes, once)"
 	-$(VENV)/bin/multiarm-pin precompile --if-stale
 	touch $(AOT)
 
@@ -38,7 +38,8 @@ demo: $(STAMP) $(AOT)
 KERNEL_TESTS := tests/test_kernels.py tests/test_arm_set_fast_path.py tests/test_system.py \
 	tests/dynamics/test_solvers.py tests/dynamics/test_force_qp.py tests/test_closed_loop.py \
 	tests/dynamics/test_unilateral.py tests/dynamics/test_impact.py tests/test_trajectories.py \
-	tests/model/test_rigid_body.py tests/test_compiled_loop.py tests/test_object_pd_touching.py
+	tests/model/test_rigid_body.py tests/test_compiled_loop.py tests/test_object_pd_touching.py \
+	tests/test_contact_loop_kernel.py
 
 ## The whole test suite (installs headless Chromium for the browser test when it can),
 ## then the compiled kernels' tests again without compilation (bounds-checked).

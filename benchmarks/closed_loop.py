@@ -214,17 +214,18 @@ def scenario_rows(names: Sequence[str], timer: Timer, duration: float | None) ->
             note = (f"the run fails ({type(exc).__name__}: "
                     f"{str(exc).splitlines()[0][:90]}...); RTF of the {simt:g} s before")
             print(f"{name}: {note}", flush=True)
-        if not s.n_arms or s.supports.n_rows:  # no compiled loop: the whole run's RTF only
-            note = note or ("no arms" if not s.n_arms else "supports") + \
-                ": runs on the Python stepper (no compiled loop for it)"
+        if not s.n_arms or s.supports.n_rows:  # no closed-loop evaluation: the run's RTF only
+            note = note or (("no arms" if not s.n_arms else "supports")
+                            + f", {events} contact events: the compiled contact loop (no "
+                            "closed-loop evaluation to time alone)")
             rows.append(Row(name, s.n_arms, s.nv, *[math.nan] * 9, simt, wall, simt / wall, 0,
                             note))
             print(f"{name:26s}: RTF {simt / wall:6.2f} ({simt:g} s in {wall:.2f} s); {note}",
                   flush=True)
             continue
         if events and not note:
-            note = (f"{events} contact events: steps with separated contacts and the events "
-                    "run on the Python stepper")
+            note = (f"{events} contact events: the steps with separated contacts and the "
+                    "events run on the compiled contact loop")
         # states and torques of a short run, for the per-call times
         res = simulate(s, built.initial_state, make_controller(built), 40 * sim.dt, sim.dt,
                        **kw)

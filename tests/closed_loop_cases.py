@@ -18,6 +18,7 @@ from multiarm_pin.app.scenario import build_scenario, load_scenario
 from multiarm_pin.model.arm import Arm
 from multiarm_pin.model.rigid_object import ObjectState, RigidObject
 from multiarm_pin.sim.compiled_loop import CompiledLoop
+from multiarm_pin.sim.contact_loop import ContactLoop
 from multiarm_pin.sim.controllers import ObjectPD
 from multiarm_pin.sim.trajectories import MinimumJerkTrajectory
 from multiarm_pin.system import MultiArmSystem, SystemState
@@ -85,9 +86,13 @@ def object_pd(system, trajectory, **kw) -> ObjectPD:
 
 
 def rel_err(a, b) -> float:
-    """Largest difference of ``a`` and ``b`` relative to ``max(1, max |b|)``."""
-    return float(np.abs(np.asarray(a) - np.asarray(b)).max()
-                 / max(1.0, np.abs(np.asarray(b)).max()))
+    """Largest difference of ``a`` and ``b`` relative to ``max(1, max |b|)`` (0 when empty,
+    e.g. the joints of a system without arms; the shapes must agree)."""
+    a, b = np.asarray(a), np.asarray(b)
+    assert a.shape == b.shape, (a.shape, b.shape)
+    if not b.size:
+        return 0.0
+    return float(np.abs(a - b).max() / max(1.0, np.abs(b).max()))
 
 
 def hold_task_conditions(ctrl, ev) -> np.ndarray:
@@ -105,25 +110,34 @@ def hold_task_conditions(ctrl, ev) -> np.ndarray:
 
 
 def run_scenario(name, duration, compiled, monkeypatch, **kw):
-    """A run of a shipped scenario, with or without the compiled loop.
+    """A run of a shipped scenario, with or without the compiled loops.
+
+    ``compiled`` False turns off both the compiled closed loop and the compiled contact loop;
+    ``"closed"`` or ``"contact"`` keeps only that one.
 
     Returns ``(result, calls)``: ``calls`` lists the ``(k0, k1)`` of every stretch the
-    compiled loop was asked to run.
+    compiled loops were asked to run.
     """
     sc = load_scenario(SCENARIOS / f"{name}.yaml")
     built = build_scenario(sc, load_visuals=False)
     sim = sc.simulation
     calls = []
-    original = CompiledLoop.run
+    loops = (CompiledLoop, ContactLoop)
+    originals = [loop.run for loop in loops]
 
-    def counted(self, *args):
-        calls.append(args[3:5])
-        return original(self, *args)
+    def counter(original):
+        def counted(self, *args):
+            calls.append(args[3:5])
+            return original(self, *args)
+        return counted
 
     with monkeypatch.context() as mp:
-        mp.setattr(CompiledLoop, "run", counted)
-        if not compiled:
-            mp.setattr(CompiledLoop, "for_run", classmethod(lambda cls, *a: None))
+        for loop, original in zip(loops, originals, strict=True):
+            mp.setattr(loop, "run", counter(original))
+            keep = compiled is True or compiled == {CompiledLoop: "closed",
+                                                    ContactLoop: "contact"}[loop]
+            if not keep:
+                mp.setattr(loop, "for_run", classmethod(lambda cls, *a: None))
         result = simulate_built(built, make_controller(built), duration, sim.dt, sim.solver,
                                 **kw)
     return result, calls

@@ -30,7 +30,7 @@ def test_runs_equal_the_python_loop(name, monkeypatch):
 def test_steps_handed_back_keep_the_events(monkeypatch):
     """Fingertips that let go (grasp_failure): the kernel hands those steps back, the
     stepper locates the same separations."""
-    fast, calls = run_scenario("grasp_failure", 0.6, True, monkeypatch)
+    fast, calls = run_scenario("grasp_failure", 0.6, "closed", monkeypatch)
     ref, _ = run_scenario("grasp_failure", 0.6, False, monkeypatch)
     assert calls, "the compiled loop did not run"
     assert ref.events, "the scenario should separate"
@@ -60,10 +60,10 @@ def test_touching_contacts_kernel_leaves_the_run_unchanged(monkeypatch):
 
     with monkeypatch.context() as mp:
         mp.setattr(controller_kernels, "touching_torques", recording)
-        fast, _ = run_scenario("grasp_failure", 0.4, True, monkeypatch)
-    with monkeypatch.context() as mp:
+        fast, _ = run_scenario("grasp_failure", 0.4, "closed", monkeypatch)
+    with monkeypatch.context() as mp:  # (the contact loop off: ObjectPD's Python path)
         mp.setattr(controller_kernels, "touching_torques", refusing)
-        ref, _ = run_scenario("grasp_failure", 0.4, True, monkeypatch)
+        ref, _ = run_scenario("grasp_failure", 0.4, "closed", monkeypatch)
     assert controller_kernels.PD_OK in statuses and controller_kernels.PD_HOLD in statuses
     assert statuses.count(controller_kernels.PD_OK) + statuses.count(
         controller_kernels.PD_HOLD) == len(statuses)  # no evaluation went to the reference

@@ -1,13 +1,16 @@
-"""The compiled closed loop built ahead of time, at install: a first run compiles nothing.
+"""The compiled loops built ahead of time, at install: a first run compiles nothing.
 
-numba compiles a kernel at its first call. The closed loop of ``simulate``
-(:func:`multiarm_pin._compiled.closed_loop.run_rk4`, with every kernel of an ``object_pd`` run
-inside it) takes about 50 s of that on a 2-core machine: most of the wait of a first run. The
-install (``make venv``, or ``python -m multiarm_pin._compiled.precompiled``) compiles it once
-with numba's ahead-of-time compiler (``numba.pycc``) into an extension module next to this
-file, for this machine's CPU; :class:`~multiarm_pin.sim.compiled_loop.CompiledLoop` calls it
-when it is there and fits the call (:func:`run_rk4_for`), and numba's JIT (cached on disk as
-before) otherwise. Same code, same results (tested: equal to the JIT kernel's to the bit).
+numba compiles a kernel at its first call. The loops of ``simulate`` (:data:`KERNELS`: the
+closed loop :func:`multiarm_pin._compiled.closed_loop.run_rk4`, with every kernel of an
+``object_pd`` run inside it, about 50 s of compile on a 2-core machine, and the contact loop
+:func:`multiarm_pin._compiled.contact_loop.run_contact_rk4`, with events, about 200 s) are
+most of the wait of a first run. The install (``make venv``, or
+``python -m multiarm_pin._compiled.precompiled``) compiles them once with numba's
+ahead-of-time compiler (``numba.pycc``) into one extension module next to this file, for this
+machine's CPU; :class:`~multiarm_pin.sim.compiled_loop.CompiledLoop` and
+:class:`~multiarm_pin.sim.contact_loop.ContactLoop` call it when it is there and fits the call
+(:func:`kernel_for`), and numba's JIT (cached on disk as before) otherwise. Same code, same
+results (tested: equal to the JIT kernel's to the bit).
 
 Safety, since ``numba.pycc``'s entry points trust their arguments:
 
@@ -38,7 +41,8 @@ import sys
 import tempfile
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numba
@@ -47,6 +51,7 @@ from numba.core import config
 from numba.core.errors import NumbaPendingDeprecationWarning
 
 from multiarm_pin._compiled import closed_loop as kernels
+from multiarm_pin._compiled import contact_loop
 from multiarm_pin._compiled.cache import kernel_sources_digest
 
 FOLDER = Path(__file__).resolve().parent
@@ -59,9 +64,50 @@ ENV_SWITCH = "MULTIARM_PIN_AOT"
 """Environment variable: ``0`` turns the precompiled module off (the JIT kernel is used)."""
 
 RETURN_TYPE = numba.types.UniTuple(numba.types.int64, 2)
-"""``run_rk4``'s return type, ``(status, sample)``."""
+"""The loops' return type, ``(status, sample)``."""
 
-_loaded: dict[Path, tuple | None] = {}  # folder -> (function, argument types) or None
+
+@dataclass(frozen=True)
+class Kernel:
+    """One kernel of the module.
+
+    Attributes:
+        name: its name (the module's function, :data:`KERNELS`' key).
+        dispatcher: the JIT kernel (the same code, compiled at first use).
+        example: ``() -> arguments`` of a short run of a shipped scenario, whose types fix the
+            module's signature (every shipped scenario passes the same types: tested).
+    """
+
+    name: str
+    dispatcher: Callable
+    example: Callable[[], tuple]
+
+
+def _closed_loop_example() -> tuple:
+    return example_arguments()
+
+
+def _contact_loop_example() -> tuple:
+    from multiarm_pin.app.scenario import build_scenario, load_scenario
+    from multiarm_pin.data import data_path
+    from multiarm_pin.sim.contact_loop import ContactLoop
+    from multiarm_pin.sim.stepper import Stepper
+
+    built = build_scenario(load_scenario(data_path("scenarios", "box_on_table.yaml")),
+                           load_visuals=False)
+    sim = built.scenario.simulation
+    stepper = Stepper(built.system, None, sim.solver, sim.baumgarte)
+    stepper.init_active(stepper.blocks_at(0.0, built.initial_state)[1], 1e-9)
+    return ContactLoop(stepper).example_arguments(built.initial_state)
+
+
+KERNELS: dict[str, Kernel] = {k.name: k for k in (
+    Kernel("run_rk4", kernels.run_rk4, _closed_loop_example),
+    Kernel("run_contact_rk4", contact_loop.run_contact_rk4, _contact_loop_example),
+)}
+"""The kernels the module holds, by name."""
+
+_loaded: dict[Path, dict | None] = {}  # folder -> {name: (function, fingerprints)} or None
 
 
 def module_name() -> str:
@@ -89,8 +135,8 @@ def _sidecar(folder: Path) -> Path:
     return folder / f"{module_name()}.json"
 
 
-def load(folder: Path | None = None) -> tuple | None:
-    """``(run_rk4, argument fingerprints)`` of the module built in ``folder``, or None.
+def load(folder: Path | None = None) -> dict | None:
+    """``{name: (function, argument fingerprints)}`` of the module built in ``folder``, or None.
 
     None when it is off (:data:`ENV_SWITCH`, ``NUMBA_DISABLE_JIT``), not built for these
     sources, or built for another CPU or numba. Looked up once per process and folder
@@ -111,39 +157,46 @@ def load(folder: Path | None = None) -> tuple | None:
             spec = importlib.util.spec_from_file_location(module_name(), path)
             module = importlib.util.module_from_spec(spec)
             spec.loader.exec_module(module)
-            found = (module.run_rk4, [bytes.fromhex(f) for f in meta["fingerprints"]])
+            found = {name: (getattr(module, name), [bytes.fromhex(f) for f in entry])
+                     for name, entry in meta["fingerprints"].items()}
     except (OSError, ValueError, KeyError, ImportError, AttributeError):
         found = None
     _loaded[folder] = found
     return found
 
 
-def run_rk4_for(args: Sequence, folder: Path | None = None):
-    """The ``run_rk4`` to call with ``args``.
+def kernel_for(name: str, args: Sequence, folder: Path | None = None):
+    """The kernel ``name`` (:data:`KERNELS`) to call with ``args``.
 
     The precompiled one if it is there and ``args`` are exactly of its types, else the JIT
-    kernel :func:`multiarm_pin._compiled.closed_loop.run_rk4`.
+    kernel.
     """
     found = load(folder)
-    if found is not None:
+    if found is not None and name in found:
+        fn, prints = found[name]
         try:
-            if fingerprints(args) == found[1]:
-                return found[0]
+            if fingerprints(args) == prints:
+                return fn
         except (TypeError, ValueError):  # an argument numba cannot fingerprint
             pass
-    return kernels.run_rk4
+    return KERNELS[name].dispatcher
 
 
-def _entry():
-    """A plain function calling ``run_rk4`` with its own parameters.
+def run_rk4_for(args: Sequence, folder: Path | None = None):
+    """The ``run_rk4`` to call with ``args`` (:func:`kernel_for`)."""
+    return kernel_for("run_rk4", args, folder)
+
+
+def _entry(kernel: Kernel):
+    """A plain function calling the kernel with its own parameters.
 
     The AOT compiler compiles the function it exports with its default flags; exporting this
-    call keeps ``run_rk4`` compiled exactly as the JIT compiles it (``error_model="numpy"``).
+    call keeps the kernel compiled exactly as the JIT compiles it (``error_model="numpy"``).
     """
-    names = list(kernels.run_rk4.py_func.__code__.co_varnames[
-        :kernels.run_rk4.py_func.__code__.co_argcount])
-    src = f"def entry({', '.join(names)}):\n    return run_rk4({', '.join(names)})\n"
-    scope = {"run_rk4": kernels.run_rk4}
+    code = kernel.dispatcher.py_func.__code__
+    names = list(code.co_varnames[:code.co_argcount])
+    src = f"def entry({', '.join(names)}):\n    return kernel({', '.join(names)})\n"
+    scope = {"kernel": kernel.dispatcher}
     exec(compile(src, "<precompiled entry>", "exec"), scope)  # noqa: S102 - our own names
     return scope["entry"]
 
@@ -170,11 +223,17 @@ def example_arguments() -> tuple:
     return loop.example_arguments(built.initial_state)
 
 
-def build(folder: Path | None = None, verbose: bool = False) -> Path:
-    """Compile ``run_rk4`` ahead of time into ``folder``; returns the module's path.
+def build(folder: Path | None = None, verbose: bool = False,
+          names: Sequence[str] | None = None) -> Path:
+    """Compile the kernels ahead of time into ``folder``; returns the module's path.
 
     Writes the module and its sidecar atomically and removes modules of other sources. Takes
-    about a minute (the same compile the first run would otherwise do).
+    a few minutes (the same compile the first runs would otherwise do).
+
+    Args:
+        folder: where (default :data:`FOLDER`).
+        verbose: the AOT compiler's messages.
+        names: the kernels (default: all of :data:`KERNELS`).
 
     Raises:
         Exception: whatever numba's AOT compiler or the C toolchain raises (e.g. no compiler).
@@ -183,9 +242,7 @@ def build(folder: Path | None = None, verbose: bool = False) -> Path:
         warnings.simplefilter("ignore", NumbaPendingDeprecationWarning)  # when it goes, the
         from numba.pycc import CC  # ImportError is a failed build, and the JIT is used
 
-    args = example_arguments()
-    types = [numba.typeof(a) for a in args]
-    signature = RETURN_TYPE(*types)
+    chosen = [KERNELS[n] for n in (KERNELS if names is None else names)]
     folder = FOLDER if folder is None else Path(folder)
     name = module_name()
     with tempfile.TemporaryDirectory(dir=folder, prefix=".aot-") as tmp:
@@ -193,12 +250,17 @@ def build(folder: Path | None = None, verbose: bool = False) -> Path:
         cc.output_dir = tmp
         cc.target_cpu = "host"
         cc.verbose = verbose
-        cc.export("run_rk4", signature)(_entry())
+        arguments, prints = {}, {}
+        for kernel in chosen:
+            args = kernel.example()
+            types = [numba.typeof(a) for a in args]
+            cc.export(kernel.name, RETURN_TYPE(*types))(_entry(kernel))
+            arguments[kernel.name] = [str(t) for t in types]
+            prints[kernel.name] = [f.hex() for f in fingerprints(args)]
         cc.compile()
         built = Path(tmp) / cc.output_file
         meta = {"digest": kernel_sources_digest(), "numba": numba.__version__,
-                "machine": machine(), "arguments": [str(t) for t in types],
-                "fingerprints": [f.hex() for f in fingerprints(args)],
+                "machine": machine(), "arguments": arguments, "fingerprints": prints,
                 "built": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
         side = Path(tmp) / "meta.json"
         side.write_text(json.dumps(meta, indent=1), encoding="utf-8")
@@ -216,23 +278,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Command line: build the module (``--if-stale``: only when none fits these sources)."""
     import argparse
 
-    parser = argparse.ArgumentParser(description="Compile the closed loop ahead of time.")
+    parser = argparse.ArgumentParser(description="Compile the simulation loops ahead of time.")
     parser.add_argument("--if-stale", action="store_true",
                         help="do nothing if a module of these sources is built")
     parser.add_argument("--folder", type=Path, default=None,
                         help="where to build (default: the package's _compiled folder)")
     opts = parser.parse_args(argv)
     if opts.if_stale and load(opts.folder) is not None:
-        print(f"precompiled closed loop up to date ({module_name()})")
+        print(f"precompiled loops up to date ({module_name()})")
         return 0
     t0 = time.perf_counter()
     try:
         path = build(opts.folder)
     except Exception as exc:  # noqa: BLE001 - any build failure: the JIT stays in use
-        print(f"precompiled closed loop not built ({type(exc).__name__}: {exc}); the kernels "
+        print(f"precompiled loops not built ({type(exc).__name__}: {exc}); the kernels "
               "will be compiled at first use instead", file=sys.stderr)
         return 1
-    print(f"precompiled closed loop built in {time.perf_counter() - t0:.0f} s: {path.name}")
+    print(f"precompiled loops built in {time.perf_counter() - t0:.0f} s: {path.name}")
     return 0
 
 
@@ -240,5 +302,5 @@ if __name__ == "__main__":
     sys.exit(main())
 
 
-__all__ = ["ENV_SWITCH", "build", "example_arguments", "fingerprints", "load",
-           "machine", "module_name", "run_rk4_for"]
+__all__ = ["ENV_SWITCH", "KERNELS", "Kernel", "build", "example_arguments", "fingerprints",
+           "kernel_for", "load", "machine", "module_name", "run_rk4_for"]

@@ -133,9 +133,9 @@ def _build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
     p = sub.add_parser("info", help="print key quantities of two arms and an object")
     p.set_defaults(func=_info)
-    p = sub.add_parser("precompile", help="compile the closed loop ahead of time for this "
-                       "machine (about a minute; `make venv` does it): first runs then "
-                       "compile nothing")
+    p = sub.add_parser("precompile", help="compile the simulation loops (closed loop, "
+                       "contact events) ahead of time for this machine (a few minutes; `make "
+                       "venv` does it): first runs then compile nothing")
     p.add_argument("--if-stale", action="store_true",
                    help="do nothing if it is built for the installed sources")
     p.set_defaults(func=_precompile)

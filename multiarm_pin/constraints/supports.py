@@ -136,6 +136,15 @@ class SupportSet:
         """(K, 3) the plane attribute ``name`` (``"normal"`` or ``"point"``) of each row."""
         return np.array([getattr(self.supports[k], name) for k in self.support_index])
 
+    def tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(points, normals, plane points)``, each (K, 3), new C-contiguous arrays.
+
+        Every row's object-frame point [m], its plane's unit normal and a point of its plane
+        [m] (the compiled contact loop's inputs).
+        """
+        return (np.array(self._p, dtype=float), np.array(self._n, dtype=float),
+                np.array(self._a, dtype=float))
+
     def __len__(self) -> int:
         """Number of supports (not rows)."""
         return len(self.supports)

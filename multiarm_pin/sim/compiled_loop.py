@@ -13,9 +13,10 @@ tested against Pinocchio) and records every sample straight into the run's
 Whatever the kernel cannot decide as the Python path would (a doubtful controller or solver
 case, NaN, a unilateral row that stops pushing or separates) it hands back with the sample
 where it stopped; :func:`~multiarm_pin.sim.simulation.simulate` takes that step with the
-:class:`~multiarm_pin.sim.stepper.Stepper` (which raises, falls back or locates the event
-exactly as before) and hands the next stretch to the kernel again. The results equal the
-Python path's to round-off (tests: ``tests/sim/test_compiled_loop.py``).
+contact loop (:class:`~multiarm_pin.sim.contact_loop.ContactLoop`, which locates the event in
+its own kernel) or the :class:`~multiarm_pin.sim.stepper.Stepper` (which raises, falls back or
+locates the event exactly as before) and hands the next stretch to the kernel again. The
+results equal the Python path's to round-off (tests: ``tests/test_compiled_loop.py``).
 """
 
 from __future__ import annotations

@@ -29,6 +29,12 @@ event is in :attr:`SimulationResult.events`. ``rk45`` (adaptive, not event-aware
 systems without unilateral rows. Systems without unilateral rows use the bilateral solvers as
 before.
 
+With RK4, runs of the kinds they take go to the compiled loops, which record the same
+samples and events: :class:`~multiarm_pin.sim.compiled_loop.CompiledLoop` while every contact
+touches (arms, no supports), :class:`~multiarm_pin.sim.contact_loop.ContactLoop` otherwise
+(separations, touchdowns and impacts in the kernel); a step either hands back is taken by the
+stepper.
+
 This module holds :func:`simulate` (input checks, the time grid, the rk45 driver); the
 evaluations, fixed steps and events are :class:`~multiarm_pin.sim.stepper.Stepper`'s, the
 event times :mod:`multiarm_pin.sim.event_location`'s, the record
@@ -45,6 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from multiarm_pin._compiled.closed_loop import STAGE_OK, STAGE_RELEASE
+from multiarm_pin._compiled.contact_loop import STAGE_EVENTS_FULL
 from multiarm_pin._registry import lookup
 from multiarm_pin.constraints.joint import INITIAL_GAP_TOLERANCE
 from multiarm_pin.dynamics import solver_entry
@@ -52,6 +59,7 @@ from multiarm_pin.exceptions import DynamicsError, InputError
 from multiarm_pin.model.rigid_object import ObjectState
 from multiarm_pin.sim.compiled_loop import CompiledLoop
 from multiarm_pin.sim.contact_events import ContactEvent
+from multiarm_pin.sim.contact_loop import ContactLoop
 from multiarm_pin.sim.controllers.base import ControllerFunction
 from multiarm_pin.sim.disturbances import WrenchSchedule
 from multiarm_pin.sim.result import (
@@ -229,12 +237,15 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
     else:
         every = max(1, n_steps // 100)
         loop = CompiledLoop.for_run(stepper, integrator)
+        events = ContactLoop.for_run(stepper, integrator)
+        stretch = _Stretch(every, n_steps)
         k, retaken = 0, -1  # the sample whose step the stepper took last
         while True:
             if loop is not None and loop.ready(state):
                 # a stretch of steps in one compiled call; the step it hands back, if any, is
-                # taken below by the stepper
-                k, state = loop.run(rec, state, times, k, min(n_steps + 1, k + every))
+                # taken below by the contact loop or the stepper
+                with stretch:
+                    k, state = loop.run(rec, state, times, k, stretch.end(k))
                 report(k / n_steps)
                 if k > n_steps:
                     break
@@ -242,10 +253,18 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
                     continue
                 if loop.last_status == STAGE_RELEASE and 0 < k and retaken != k - 1:
                     # a contact lets go at sample k: it did inside the step to k, which the
-                    # kernel took as bilateral; the stepper retakes it and locates the event
+                    # kernel took as bilateral; that step is taken again with its events
                     k -= 1
                     state = rec.state(k)
                 retaken = k
+            if events is not None and events.ready(state):
+                with stretch:
+                    k, state = events.run(rec, state, times, k, stretch.end(k))
+                report(k / n_steps)
+                if k > n_steps:
+                    break
+                if events.last_status in (STAGE_OK, STAGE_EVENTS_FULL):
+                    continue
             t = times[k]
             sol, ev, tau, rows = stepper.evaluate(t, state)
             if stepper.separations(t, sol, rows):
@@ -258,6 +277,36 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
             if k % every == 0:
                 report((k + 1) / n_steps)
             k += 1
+
+
+class _Stretch:
+    """How many samples the next compiled call takes.
+
+    1 % of the run, doubled while a call takes less than :attr:`WALL` seconds, up to 10 % of
+    the run: so that a call's Python around it (unboxing its arguments, the record's bookkeeping:
+    about 0.1 ms) stays small against the call, while the progress reports and a Ctrl-C (seen
+    between calls) still come every few hundredths of a second.
+    """
+
+    WALL = 0.01
+
+    def __init__(self, every: int, n_steps: int):
+        self.size = every
+        self.top = max(every, n_steps // 10)
+        self.n_samples = n_steps + 1
+        self._t0 = 0.0
+
+    def end(self, k: int) -> int:
+        """One past the last sample of a call from sample ``k``."""
+        return min(self.n_samples, k + self.size)
+
+    def __enter__(self):
+        self._t0 = time.perf_counter()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if time.perf_counter() - self._t0 < self.WALL:
+            self.size = min(2 * self.size, self.top)
 
 
 def _normalised(q) -> np.ndarray:

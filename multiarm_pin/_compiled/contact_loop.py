@@ -1,0 +1,1055 @@
+"""Compiled event-driven RK4 with unilateral contacts: the stepper's events in one call.
+
+Mirrors, for RK4, :class:`multiarm_pin.sim.stepper.Stepper` (``evaluate`` on the active set,
+``separations``, ``advance_with_events``, ``_impact``, ``_separate``) and
+:mod:`multiarm_pin.sim.event_location` (``illinois``, ``release``, ``locate_separation``,
+``locate_touchdown``), with the rules and tolerances of
+:mod:`multiarm_pin.sim.contact_events` passed in :data:`EVENT_CONSTANTS` order, so that a run
+with fingertips or supports, separations, touchdowns and impacts is one compiled call per
+stretch of samples instead of thousands of Python evaluations. It takes:
+
+- systems with arms or without (an object on supports), with or without supports;
+- zero torque, or ``object_pd`` on its compiled path: every contact touching
+  (:func:`~multiarm_pin._compiled.controller_kernels.object_pd_step`), some separated
+  (:func:`~multiarm_pin._compiled.controller_kernels.touching_torques`), and its hold-still
+  fallback when the touching contacts cannot make every object wrench;
+- an external wrench schedule.
+
+One evaluation (:func:`contact_stage`): the arms' terms
+(:func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass`) and blocks at zero torque
+(:func:`~multiarm_pin._compiled.evaluate.evaluate_system`), the controller's torques, the
+support rows (``constraints/supports.py``), every row stacked as
+``MultiArmSystem.contact_blocks`` stacks them (the arms' blocks, then one zero-dof support
+block), and the mixed LCP of ``solve_unilateral``: the bilateral object-first solve when every
+row is active, there are no supports and every arm has as many joints as rows, accepted when
+every unilateral multiplier is ``>= 0``; otherwise the active-set kernel
+(:func:`~multiarm_pin.dynamics.delassus.contact_kernel`).
+
+Whatever the kernel cannot decide as the Python path would (a doubtful controller or solver
+case, NaN, too many events in one step) it hands back: the status and the sample whose step
+the Python stepper must take, with the state, the active set, the events and the
+controller's hold state as they were at that sample (the step's partial work is dropped).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from multiarm_pin._compiled.closed_loop import (
+    NULL_KD,
+    NULL_KP,
+    STAGE_CONTROLLER,
+    STAGE_NOT_FINITE,
+    STAGE_OK,
+    STAGE_SOLVE,
+    _advance,
+    wrench_at,
+)
+from multiarm_pin._compiled.controller_kernels import (
+    NO_WRENCH,
+    PD_FORCES_FAILED,
+    PD_HOLD,
+    PD_OK,
+    hold_still_torques,
+    object_pd_step,
+    touching_torques,
+)
+from multiarm_pin._compiled.evaluate import (
+    _arm_segments,
+    _block_segments,
+    evaluate_system,
+    quaternion_rotation,
+)
+from multiarm_pin._compiled.layout import (
+    DIMS_K,
+    DIMS_M,
+    DIMS_N,
+    DIMS_NV,
+    EN_KINETIC,
+    EN_MOMENTUM,
+    EN_POTENTIAL,
+    OBJECT_STATE_SIZE,
+    P_BAUMGARTE_ALPHA,
+    P_BAUMGARTE_BETA,
+    P_BAUMGARTE_ON,
+    P_GRAVITY,
+    P_INERTIA,
+    P_MASS,
+    P_OBJECT_RCOND_TOL,
+    P_RCOND_TOL,
+    ROW_NORMAL,
+    ROW_PHI,
+    ROW_PHI_DOT,
+    ROW_POINT,
+    X_POSITION,
+    X_QUATERNION,
+    X_TWIST,
+    offsets,
+)
+from multiarm_pin._compiled.object_first import SOLVE_OK, object_first
+from multiarm_pin._compiled.rigid_body import difference, rigid_body_pass
+from multiarm_pin._compiled.trajectory import reference_motion
+from multiarm_pin.dynamics.delassus import contact_kernel
+from multiarm_pin.dynamics.mlcp import OK as LCP_OK
+
+STAGE_TOO_MANY_EVENTS = 7
+"""Status: more contact events in one step than the rules allow (the stepper raises)."""
+STAGE_EVENTS_FULL = 8
+"""Status: the event table is nearly full; the caller takes the events and calls again (no
+step to take in Python)."""
+
+CONTROL_NONE = 0
+"""``control[CTL_MODE]``: zero torque."""
+CONTROL_OBJECT_PD = 1
+"""``control[CTL_MODE]``: ``object_pd`` on its compiled path."""
+CTL_MODE = 0
+"""``control`` (int64 array): the controller mode."""
+CTL_HOLDING = 1
+"""``control``: 1 while ``object_pd`` holds the arms still (``ObjectPD.holding``)."""
+CTL_MARGIN_KEPT = 2
+"""``control``: 0 when the last ``object_pd`` call could not keep the margin
+(``ObjectPD.margin_kept``)."""
+
+SOLVER_BILATERAL = 0
+"""A sample's solver code: the bilateral object-first solve (``"bilateral"``)."""
+SOLVER_ACTIVE_SET = 1
+"""A sample's solver code: the active-set method (``"active_set"``)."""
+
+EVENT_SEPARATION = 0
+"""Event kind code: ``"separation"``."""
+EVENT_TOUCHDOWN = 1
+"""Event kind code: ``"touchdown"``."""
+EVENT_WIDTH = 8
+"""Columns of the event table: time [s], kind, block, row, ``φ̇`` before, ``φ̇`` after
+[m/s], impulse [N s], rebound (1.0 / 0.0)."""
+HOLD_WIDTH = 2
+"""Columns of the hold-onset table: time [s], rank of the touching contacts."""
+
+EVENT_CONSTANTS = ("GAP_TOLERANCE", "LOST_GAP", "TIME_TOLERANCE", "LIFT_ACCELERATION",
+                   "SEPARATION_TIME_TOLERANCE", "SEPARATION_ACCELERATION", "SEPARATION_GAP",
+                   "SEPARATION_SPEED", "REBOUND_SPEED", "RESTING_SPEED",
+                   "MAX_EVENTS_PER_STEP", "RESTING_RELEASE", "MAX_ITERATIONS",
+                   "DEPENDENCY_RTOL", "VIOLATION_RTOL", "CONSISTENCY_RTOL")
+"""The rules the kernel reads, in the order of its ``rules`` vector (the first eleven from
+:mod:`multiarm_pin.sim.contact_events`, then :mod:`multiarm_pin.sim.event_location`'s and
+the mixed LCP's tolerances)."""
+(R_GAP, R_LOST, R_TIME, R_LIFT, R_SEP_TIME, R_SEP_ACC, R_SEP_GAP, R_SEP_SPEED, R_REBOUND,
+ R_RESTING, R_MAX_EVENTS, R_RESTING_RELEASE, R_MAX_ITER, R_DEP, R_VIOL, R_CONS) = range(16)
+
+
+# ------------------------------------------------------------------ one evaluation
+@njit(cache=True, error_model="numpy")
+def _support_rows(x, sp_p, sp_n, sp_a, params, b, rows_phi, rows_phi_dot, pts, nrm, W_o,
+                  c):  # pragma: no cover - compiled
+    """The support rows of block ``b`` at ``x`` (``SupportSet.evaluate`` and the stacking).
+
+    ``W_o[b, :, r] = [n; r × n]``, ``c[b, r] = -κ - 2α φ̇ - β² φ`` (Baumgarte when on).
+    """
+    R = np.empty((3, 3))
+    quaternion_rotation(x[X_QUATERNION:X_QUATERNION + 4], R)
+    wx, wy, wz = x[X_TWIST + 3], x[X_TWIST + 4], x[X_TWIST + 5]
+    on = params[P_BAUMGARTE_ON] != 0.0
+    al, be = params[P_BAUMGARTE_ALPHA], params[P_BAUMGARTE_BETA]
+    for j in range(sp_p.shape[0]):
+        r0 = R[0, 0] * sp_p[j, 0] + R[0, 1] * sp_p[j, 1] + R[0, 2] * sp_p[j, 2]
+        r1 = R[1, 0] * sp_p[j, 0] + R[1, 1] * sp_p[j, 1] + R[1, 2] * sp_p[j, 2]
+        r2 = R[2, 0] * sp_p[j, 0] + R[2, 1] * sp_p[j, 1] + R[2, 2] * sp_p[j, 2]
+        n0, n1, n2 = sp_n[j, 0], sp_n[j, 1], sp_n[j, 2]
+        p0, p1, p2 = x[X_POSITION] + r0, x[X_POSITION + 1] + r1, x[X_POSITION + 2] + r2
+        g3 = r1 * n2 - r2 * n1
+        g4 = r2 * n0 - r0 * n2
+        g5 = r0 * n1 - r1 * n0
+        u0 = wy * r2 - wz * r1
+        u1 = wz * r0 - wx * r2
+        u2 = wx * r1 - wy * r0
+        kappa = (n0 * (wy * u2 - wz * u1) + n1 * (wz * u0 - wx * u2)
+                 + n2 * (wx * u1 - wy * u0))
+        phi = n0 * (p0 - sp_a[j, 0]) + n1 * (p1 - sp_a[j, 1]) + n2 * (p2 - sp_a[j, 2])
+        phi_dot = (n0 * x[X_TWIST] + n1 * x[X_TWIST + 1] + n2 * x[X_TWIST + 2]
+                   + g3 * wx + g4 * wy + g5 * wz)
+        rows_phi[b, j] = phi
+        rows_phi_dot[b, j] = phi_dot
+        pts[b, j, 0], pts[b, j, 1], pts[b, j, 2] = p0, p1, p2
+        nrm[b, j, 0], nrm[b, j, 1], nrm[b, j, 2] = n0, n1, n2
+        W_o[b, 0, j], W_o[b, 1, j], W_o[b, 2, j] = n0, n1, n2
+        W_o[b, 3, j], W_o[b, 4, j], W_o[b, 5, j] = g3, g4, g5
+        cs = -kappa
+        if on:
+            cs = cs - 2.0 * al * phi_dot - be * be * phi
+        c[b, j] = cs
+
+
+@njit(cache=True, error_model="numpy")
+def _object_terms(x, params, M_o, h_o):  # pragma: no cover - compiled
+    """``M_o``, ``h_o`` of the object alone (``RigidObject.mass_matrix``, ``bias_wrench``)."""
+    R = np.empty((3, 3))
+    quaternion_rotation(x[X_QUATERNION:X_QUATERNION + 4], R)
+    m = params[P_MASS]
+    Iw = np.empty((3, 3))  # R I Rᵀ
+    RI = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            acc = 0.0
+            for p in range(3):
+                acc += R[a, p] * params[P_INERTIA + 3 * p + b]
+            RI[a, b] = acc
+    for a in range(3):
+        for b in range(3):
+            acc = 0.0
+            for p in range(3):
+                acc += RI[a, p] * R[b, p]
+            Iw[a, b] = acc
+    for a in range(6):
+        for b in range(6):
+            M_o[a, b] = 0.0
+    for a in range(3):
+        M_o[a, a] = m
+        for b in range(3):
+            M_o[3 + a, 3 + b] = Iw[a, b]
+    wx, wy, wz = x[X_TWIST + 3], x[X_TWIST + 4], x[X_TWIST + 5]
+    L = np.empty(3)  # R (I (Rᵀ ω))
+    bw = np.empty(3)
+    for a in range(3):
+        bw[a] = R[0, a] * wx + R[1, a] * wy + R[2, a] * wz
+    for a in range(3):
+        acc = 0.0
+        for p in range(3):
+            acc2 = 0.0
+            for s in range(3):
+                acc2 += params[P_INERTIA + 3 * p + s] * bw[s]
+            acc += R[a, p] * acc2
+        L[a] = acc
+    for a in range(3):
+        h_o[a] = m * params[P_GRAVITY + a]
+    h_o[3] = wz * L[1] - wy * L[2]
+    h_o[4] = wx * L[2] - wz * L[0]
+    h_o[5] = wy * L[0] - wx * L[1]
+
+
+@njit(cache=True, error_model="numpy")
+def _rows_and_blocks(x, sy, wk):  # pragma: no cover - compiled
+    """Every row and the stacked blocks at ``x``, at zero torque (no controller call).
+
+    ``sy``: the system tuple (see :func:`run_contact_rk4`); ``wk``: the workspace tuple. Fills
+    the stacked ``M, h, W, W_o, c, M_o, h_o`` (no wrench) and the rows; returns False on NaN.
+    """
+    (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
+     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
+    (J, dJ, Mq, nle, H, energy, buf, Mc, hc, Wc, W_oc, cc, M_o, h_o, phi, phi_dot, pts,
+     nrm) = wk
+    k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
+    B, kc, R = Wc.shape
+    nq = x.shape[0] - OBJECT_STATE_SIZE - 2 * nv
+    if n:
+        q0 = OBJECT_STATE_SIZE
+        rigid_body_pass(model_ints, model_floats, x[q0:q0 + nq], x[q0 + nq:q0 + nq + nv], J,
+                        dJ, Mq, nle, H, energy)
+        if not evaluate_system(J, dJ, Mq, nle, H, x, arm_ints, v_starts, ints, floats, params,
+                               dims, buf):
+            return False
+        off = offsets(n, k, m)
+        Ma = _arm_segments(buf, off, n, k, m)[0]
+        rows, ha, Wa, W_oa, ca, Mo, ho = _block_segments(buf, off, n, k, m)
+        for i in range(n):
+            for a in range(k):
+                hc[i, a] = ha[i, a]
+                for b in range(k):
+                    Mc[i, a, b] = Ma[i, a, b]
+                for r in range(R):
+                    Wc[i, a, r] = Wa[i, a, r] if r < m else 0.0
+            for r in range(R):
+                inside = r < m
+                for a in range(6):
+                    W_oc[i, a, r] = W_oa[i, a, r] if inside else 0.0
+                cc[i, r] = ca[i, r] if inside else 0.0
+                phi[i, r] = rows[i, r, ROW_PHI] if inside else 0.0
+                phi_dot[i, r] = rows[i, r, ROW_PHI_DOT] if inside else 0.0
+                for a in range(3):
+                    pts[i, r, a] = rows[i, r, ROW_POINT + a] if inside else 0.0
+                    nrm[i, r, a] = rows[i, r, ROW_NORMAL + a] if inside else 0.0
+        for a in range(6):
+            h_o[a] = ho[a]
+            for b in range(6):
+                M_o[a, b] = Mo[a, b]
+    else:
+        _object_terms(x, params, M_o, h_o)
+    if B > n:  # the supports' zero-dof block: M = I, h = 0, W = 0
+        for a in range(kc):
+            hc[n, a] = 0.0
+            for b in range(kc):
+                Mc[n, a, b] = 1.0 if a == b else 0.0
+            for r in range(R):
+                Wc[n, a, r] = 0.0
+        for r in range(R):
+            for a in range(6):
+                W_oc[n, a, r] = 0.0
+            cc[n, r] = 0.0
+            phi[n, r] = 0.0
+            phi_dot[n, r] = 0.0
+            for a in range(3):
+                pts[n, r, a] = 0.0
+                nrm[n, r, a] = 0.0
+        _support_rows(x, sp_p, sp_n, sp_a, params, n, phi, phi_dot, pts, nrm, W_oc, cc)
+    for a in range(6):
+        if not math.isfinite(h_o[a]):
+            return False
+    for b in range(B):
+        for r in range(R):
+            if not math.isfinite(phi[b, r] + phi_dot[b, r] + cc[b, r]):
+                return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _all_touching(active, N):  # pragma: no cover - compiled
+    """True when every arm row (``r < N[i]``) is active."""
+    for i in range(N.shape[0]):
+        for r in range(N[i]):
+            if not active[i, r]:
+                return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compiled
+    """The controller's torques ``out.tau`` (n, k) at ``(t, x)`` on the buffer at zero torque.
+
+    ``object_pd``: :func:`object_pd_step` when every arm row touches, else
+    :func:`touching_torques` on the touching rows, or, when they cannot make every object
+    wrench, the hold-still torques toward ``q_hold`` (set at the onset, which is recorded).
+    """
+    (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
+     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
+    (control, traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, qp_active,
+     unilateral, q_ref, q_hold, onsets, n_onsets, qp_active_r, touching, no_uni,
+     gains_free) = ctl
+    buf = wk[6]
+    (a_o, qdd_c, mu, phi_dd, Av, tau, err, z, ref, E, mu_p, qdd_p, a_pts, a_d) = out
+    k, n = dims[DIMS_K], dims[DIMS_N]
+    for i in range(n):
+        for a in range(k):
+            tau[i, a] = 0.0
+    if control[CTL_MODE] == CONTROL_NONE or n == 0:
+        return STAGE_OK
+    q0 = OBJECT_STATE_SIZE
+    nq = q_ref.shape[0]
+    q = x[q0:q0 + nq]
+    v0 = q0 + nq
+    kp, kd = null_gains[NULL_KP], null_gains[NULL_KD]
+    full = _all_touching(active, N)
+    touching_rows = 0
+    for i in range(n):
+        for r in range(touching.shape[1]):
+            touching[i, r] = active[i, r]
+            if active[i, r] and r < N[i]:
+                touching_rows += 1
+    # holding, with fewer than 6 touching rows: still rank < 6 by structure (the reference
+    # decides the same without its SVD); the rank is only needed at an onset, for its warning
+    status = PD_HOLD
+    rank = touching_rows
+    if full or control[CTL_HOLDING] == 0 or touching_rows >= 6:
+        difference(model_ints, q, q_ref, err)
+        for i in range(n):
+            for a in range(k):
+                z[i, a] = kp * err[v_starts[i] + a] - kd * x[v0 + v_starts[i] + a] \
+                    if a < nv_arm[i] else 0.0
+        reference_motion(t, traj, E, ref)
+        for attempt in range(2):
+            # attempt 1: the margin cannot be kept; the least-norm forces without it (and no
+            # unilateral bound), as ObjectPD.reference falls back
+            uni = unilateral if attempt == 0 else no_uni
+            g = gains if attempt == 0 else gains_free
+            if full:
+                status = object_pd_step(buf, dims, N, nv_arm, uni, x[:OBJECT_STATE_SIZE], ref,
+                                        pd_gains, z, hold_tool, hold_obj, hold_n, g, params,
+                                        qp_active if attempt == 0 else qp_active_r, tau,
+                                        mu_p, qdd_p, a_pts, a_d, False, NO_WRENCH)[0]
+            else:
+                status, rank = touching_torques(buf, dims, N, nv_arm, uni, touching,
+                                                x[:OBJECT_STATE_SIZE], ref, pd_gains, z,
+                                                hold_tool, hold_obj, hold_n, g, qp_active_r,
+                                                tau, mu_p, qdd_p, a_pts, a_d)
+            if status != PD_FORCES_FAILED:
+                if status == PD_OK:  # (ObjectPD.margin_kept: set by a plan, not by holding)
+                    control[CTL_MARGIN_KEPT] = 1 if attempt == 0 else 0
+                break
+    if status == PD_OK:
+        control[CTL_HOLDING] = 0
+        return STAGE_OK
+    if status != PD_HOLD:
+        return STAGE_CONTROLLER
+    if control[CTL_HOLDING] == 0:  # the onset: hold the configuration of this state
+        control[CTL_HOLDING] = 1
+        for a in range(nq):
+            q_hold[a] = q[a]
+        j = n_onsets[0]
+        if j < onsets.shape[0]:
+            onsets[j, 0] = t
+            onsets[j, 1] = rank
+        n_onsets[0] = j + 1
+    difference(model_ints, q, q_hold, err)
+    for i in range(n):
+        for a in range(k):
+            z[i, a] = kp * err[v_starts[i] + a] - kd * x[v0 + v_starts[i] + a] \
+                if a < nv_arm[i] else 0.0
+    hold_still_torques(buf, dims, nv_arm, z, tau)
+    return STAGE_OK
+
+
+@njit(cache=True, error_model="numpy")
+def contact_stage(t, x, active, sy, ctl, wk, out, d):  # pragma: no cover - compiled
+    """One evaluation at ``(t, x)`` on the active set, and its tangent ``d``.
+
+    The rows and blocks (:func:`_rows_and_blocks`), the controller (:func:`_torques`), the
+    external wrench on ``h_o``, then the mixed LCP as ``solve_unilateral`` (see the module
+    docstring). Outputs in ``out``: ``a_o`` (6,), ``qdd_c`` (B, kc), ``mu`` and ``phi_dd``
+    (B, R), ``tau`` (n, k); the rows in ``wk``.
+
+    Returns:
+        ``(status, solver code)``.
+    """
+    (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
+     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
+    (J, dJ, Mq, nle, H, energy, buf, Mc, hc, Wc, W_oc, cc, M_o, h_o, phi, phi_dot, pts,
+     nrm) = wk
+    (a_o, qdd_c, mu, phi_dd, Av, tau, err, z, ref, E, mu_p, qdd_p, a_pts, a_d) = out
+    if not _rows_and_blocks(x, sy, wk):
+        return STAGE_NOT_FINITE, 0
+    st = _torques(t, x, active, sy, ctl, wk, out)
+    if st != STAGE_OK:
+        return st, 0
+    k, nv, n = dims[DIMS_K], dims[DIMS_NV], dims[DIMS_N]
+    B, kc, R = Wc.shape
+    for i in range(n):
+        for a in range(k):
+            hc[i, a] += tau[i, a]
+    hw = np.empty(6)
+    for a in range(6):
+        hw[a] = h_o[a] + wrench_at(t, wrenches, a)
+    solver = SOLVER_ACTIVE_SET
+    fast = n > 0 and B == n
+    if fast:
+        for i in range(n):
+            if nv_c[i] < N_c[i]:
+                fast = False
+        fast = fast and _all_touching(active, N_c)
+    done = False
+    if fast:
+        s = object_first(Mc, hc, Wc, W_oc, cc, M_o, hw, N_c, params[P_RCOND_TOL],
+                         params[P_OBJECT_RCOND_TOL], a_o, qdd_c, mu)
+        if s != SOLVE_OK:
+            return STAGE_SOLVE, 0
+        done = True
+        for b in range(B):
+            for r in range(N_c[b]):
+                if uni_c[b, r] and mu[b, r] < 0.0:
+                    done = False
+        if done:
+            solver = SOLVER_BILATERAL
+            for b in range(B):
+                for r in range(R):
+                    if r >= N_c[b]:
+                        phi_dd[b, r] = 0.0
+                        continue
+                    acc = 0.0
+                    for a in range(6):
+                        acc += W_oc[b, a, r] * a_o[a]
+                    for j in range(kc):
+                        acc += Wc[b, j, r] * qdd_c[b, j]
+                    phi_dd[b, r] = acc - cc[b, r]
+    if not done:
+        s = contact_kernel(Mc, hc, Wc, W_oc, cc, M_o, hw, nv_c, N_c, uni_c, active, active,
+                           False, rules[R_DEP], rules[R_VIOL], rules[R_CONS], a_o, qdd_c, mu, Av)[0]
+        if s != LCP_OK:
+            return STAGE_SOLVE, 0
+        for b in range(B):
+            for r in range(R):
+                phi_dd[b, r] = Av[b, r] - cc[b, r]
+    v0 = x.shape[0] - 2 * nv
+    for j in range(nv):
+        d[j] = x[v0 + j]
+    for i in range(n):
+        for a in range(nv_arm[i]):
+            d[nv + v_starts[i] + a] = qdd_c[i, a]
+    tw = x[X_TWIST:X_TWIST + 6]
+    qx, qy, qz, qw = x[X_QUATERNION], x[X_QUATERNION + 1], x[X_QUATERNION + 2], x[X_QUATERNION + 3]
+    wx, wy, wz = tw[3], tw[4], tw[5]
+    b = 2 * nv
+    d[b], d[b + 1], d[b + 2] = tw[0], tw[1], tw[2]
+    d[b + 3] = 0.5 * (qw * wx + wy * qz - wz * qy)
+    d[b + 4] = 0.5 * (qw * wy + wz * qx - wx * qz)
+    d[b + 5] = 0.5 * (qw * wz + wx * qy - wy * qx)
+    d[b + 6] = 0.5 * -(wx * qx + wy * qy + wz * qz)
+    for a in range(6):
+        d[b + 7 + a] = a_o[a]
+        if not math.isfinite(a_o[a]):
+            return STAGE_NOT_FINITE, 0
+    return STAGE_OK, solver
+
+
+# ------------------------------------------------------------------ steps and events
+@njit(cache=True, error_model="numpy")
+def _step(t, x, d1, h, active, sy, ctl, wk, out, rk, x_new):  # pragma: no cover - compiled
+    """RK4 from ``x`` (tangent ``d1`` there) with step ``h`` into ``x_new`` (``Stepper.step``)."""
+    model_ints = sy[0]
+    d2, d3, d4, hd, xs, dsum = rk
+    for stage in range(3):  # one call site of the stage: t + h/2, t + h/2, t + h
+        hs = h if stage == 2 else 0.5 * h
+        _advance(model_ints, x, d1 if stage == 0 else (d2 if stage == 1 else d3), hs, hd, xs)
+        st = contact_stage(t + hs, xs, active, sy, ctl, wk, out,
+                           d2 if stage == 0 else (d3 if stage == 1 else d4))[0]
+        if st != STAGE_OK:
+            return st
+    for a in range(d1.shape[0]):  # (d1 + 2 d2 + 2 d3 + d4) / 6, numpy's order of operations
+        dsum[a] = (((d1[a] + 2.0 * d2[a]) + 2.0 * d3[a]) + d4[a]) / 6.0
+    _advance(model_ints, x, dsum, h, hd, x_new)
+    return STAGE_OK
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _min_gap(x, watch, sy, wk):  # pragma: no cover - compiled
+    """The smallest gap [m] of the ``watch`` rows at ``x`` (``Stepper.gaps``), NaN if not finite."""
+    if not _rows_and_blocks(x, sy, wk):
+        return np.nan
+    phi = wk[14]
+    g = np.inf
+    for b in range(watch.shape[0]):
+        for r in range(watch.shape[1]):
+            if watch[b, r] and phi[b, r] < g:
+                g = phi[b, r]
+    return g
+
+
+@njit(cache=True, error_model="numpy")
+def _release(mu, phi_dd, rows, rules):  # pragma: no cover - compiled
+    """``event_location.release``: ``-max φ̈`` of the force-free lifting rows, else Σ μ."""
+    lift = False
+    top = -np.inf
+    total = 0.0
+    for b in range(rows.shape[0]):
+        for r in range(rows.shape[1]):
+            if not rows[b, r]:
+                continue
+            total += mu[b, r]
+            if mu[b, r] <= 0.0 and phi_dd[b, r] > rules[R_LIFT]:
+                lift = True
+                top = max(top, phi_dd[b, r])
+    if lift:
+        return -top
+    return max(total, rules[R_RESTING_RELEASE])
+
+
+@njit(cache=True, error_model="numpy")
+def _event(ev, n_ev, t, kind, b, r, before, after, impulse, rebound):  # pragma: no cover
+    """Append one event to the table (``Stepper._event``)."""
+    j = n_ev[0]
+    ev[j, 0] = t
+    ev[j, 1] = kind
+    ev[j, 2] = b
+    ev[j, 3] = r
+    ev[j, 4] = before
+    ev[j, 5] = after
+    ev[j, 6] = impulse
+    ev[j, 7] = 1.0 if rebound else 0.0
+    n_ev[0] = j + 1
+
+
+@njit(cache=True, error_model="numpy")
+def _separations(t, active, mu, phi_dd, phi, phi_dot, keep, use_keep, uni_c, rules, ev,
+                 n_ev):  # pragma: no cover - compiled
+    """``Stepper.separations``: drop active unilateral rows that let go; True if any did."""
+    out = False
+    for b in range(active.shape[0]):
+        for r in range(active.shape[1]):
+            if not (active[b, r] and uni_c[b, r]) or (use_keep and keep[b, r]):
+                continue
+            if ((mu[b, r] <= 0.0 and phi_dd[b, r] > rules[R_SEP_ACC])
+                    or phi[b, r] > rules[R_SEP_GAP] or phi_dot[b, r] > rules[R_SEP_SPEED]):
+                _event(ev, n_ev, t, EVENT_SEPARATION, b, r, phi_dot[b, r], phi_dot[b, r], 0.0,
+                       False)
+                active[b, r] = False
+                out = True
+    return out
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _evaluate_start(t, x, active, sy, ctl, wk, out, st0, keep, use_keep, ev, n_ev, reuse
+                    ):  # pragma: no cover - compiled
+    """Evaluate at ``(t, x)``, drop separating rows and re-evaluate (``Stepper`` after an event).
+
+    The start of the next step is kept in ``st0``: ``d1``, ``mu0``, ``phi_dd0``, ``phi0`` (its
+    gaps). With ``reuse`` the evaluation at ``(t, x)`` is the one in ``wk``, ``out`` and
+    ``loc[10]`` (the previous step's end, the solver code in ``st0[4][1]``): as the stepper's
+    cache, no second controller call.
+    """
+    rules = sy[19]
+    uni_c = sy[13]
+    d1, mu0, phi_dd0, phi0, memo = st0
+    solver = memo[1]
+    for attempt in range(2):  # one call site of the stage
+        if attempt > 0 or not reuse:
+            st, solver = contact_stage(t, x, active, sy, ctl, wk, out, d1)
+            if st != STAGE_OK:
+                return st, solver
+        if attempt == 1 or not _separations(t, active, out[2], out[3], wk[14], wk[15], keep,
+                                            use_keep, uni_c, rules, ev, n_ev):
+            break
+    phi0[:] = wk[14]
+    mu0[:] = out[2]
+    phi_dd0[:] = out[3]
+    return STAGE_OK, solver
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _impact(t, x, watch, active, sy, wk, imp, ev, n_ev, joined):  # pragma: no cover - compiled
+    """``Stepper._impact``: the impact law at a touchdown, into ``x``; the active set updated."""
+    (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
+     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
+    (J, dJ, Mq, nle, H, energy, buf, Mc, hc, Wc, W_oc, cc, M_o, h_o, phi, phi_dot, pts,
+     nrm) = wk
+    touching, cand, uni, rhs, dv_o, dqd, P, Av, zero_h, zero6 = imp
+    if not _rows_and_blocks(x, sy, wk):
+        return STAGE_NOT_FINITE
+    B, R = phi.shape
+    for b in range(B):
+        for r in range(R):
+            touching[b, r] = watch[b, r] and phi[b, r] <= rules[R_GAP]
+            cand[b, r] = active[b, r] or touching[b, r]
+            uni[b, r] = uni_c[b, r]
+    for attempt in range(4):
+        for b in range(B):
+            for r in range(R):
+                if r >= N_c[b]:
+                    rhs[b, r] = 0.0
+                    continue
+                vm = phi_dot[b, r]
+                e = 0.0 if abs(vm) < rules[R_RESTING] else rest_c[b, r]
+                rhs[b, r] = -((1.0 + e) * vm) if uni[b, r] else -vm
+        s = contact_kernel(Mc, zero_h, Wc, W_oc, rhs, M_o, zero6, nv_c, N_c, uni, cand, cand,
+                           False, rules[R_DEP], rules[R_VIOL], rules[R_CONS], dv_o, dqd, P,
+                           Av)[0]
+        if s != LCP_OK:
+            return STAGE_SOLVE
+        for b in range(B):
+            for r in range(R):
+                Av[b, r] += phi_dot[b, r] if r < N_c[b] else 0.0  # φ̇⁺
+        if attempt == 3:
+            break
+        slow = False
+        for b in range(B):
+            for r in range(R):
+                if (cand[b, r] and uni[b, r] and Av[b, r] > rules[R_REBOUND]
+                        and Av[b, r] <= rules[R_RESTING]):
+                    uni[b, r] = False  # held at φ̇⁺ = 0 by this impact
+                    slow = True
+        if not slow:
+            break
+    dims = sy[7]
+    nv, n = dims[DIMS_NV], dims[DIMS_N]
+    nq = x.shape[0] - OBJECT_STATE_SIZE - 2 * nv
+    v0 = OBJECT_STATE_SIZE + nq
+    for i in range(n):
+        for a in range(nv_arm[i]):
+            x[v0 + v_starts[i] + a] += dqd[i, a]
+    for a in range(6):
+        x[X_TWIST + a] += dv_o[a]
+    for b in range(B):  # touchdowns, then the active rows the impact sends off
+        for r in range(R):
+            if touching[b, r]:
+                leave = uni_c[b, r] and Av[b, r] > rules[R_REBOUND]
+                _event(ev, n_ev, t, EVENT_TOUCHDOWN, b, r, phi_dot[b, r], Av[b, r], P[b, r],
+                       leave)
+    for b in range(B):
+        for r in range(R):
+            leave = cand[b, r] and uni_c[b, r] and Av[b, r] > rules[R_REBOUND]
+            if active[b, r] and leave:
+                _event(ev, n_ev, t, EVENT_SEPARATION, b, r, phi_dot[b, r], Av[b, r], P[b, r],
+                       False)
+    for b in range(B):
+        for r in range(R):
+            leave = cand[b, r] and uni_c[b, r] and Av[b, r] > rules[R_REBOUND]
+            joined[b, r] = touching[b, r] and not leave
+            active[b, r] = cand[b, r] and not leave
+    return STAGE_OK
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev
+                         ):  # pragma: no cover - compiled
+    """``Stepper.advance_with_events`` (RK4): ``x`` to ``t_end`` with its events, in place.
+
+    ``st0`` holds the start of the step (``d1``, ``mu0``, ``phi_dd0`` of the evaluation at
+    ``(t, x)``), ``loc`` the location workspace.
+    """
+    rules = sy[19]
+    uni_c, mask_c = sy[13], sy[14]
+    d1, mu0, phi_dd0, phi0, memo = st0
+    (new, s_e, s_hi, mu_end, phi_dd_end, mu_hi, rows_sep, leaving, watch, joined, dtmp,
+     phi_x) = loc
+    memo[0] = 0
+    B, R = active.shape
+    tol = rules[R_GAP]
+    max_events = int(rules[R_MAX_EVENTS])
+    for _ in range(max_events):
+        h = t_end - t
+        st = _step(t, x, d1, h, active, sy, ctl, wk, out, rk, new)
+        if st != STAGE_OK:
+            return st
+        # locate_separation
+        sep = False
+        any_push = False
+        for b in range(B):
+            for r in range(R):
+                if active[b, r] and uni_c[b, r] and mu0[b, r] > 0.0:
+                    any_push = True
+        end_eval = False  # wk and out hold the evaluation at (t_end, new)
+        if any_push:
+            st, memo[1] = contact_stage(t_end, new, active, sy, ctl, wk, out, dtmp)
+            if st != STAGE_OK:
+                return st
+            end_eval = True
+            mu_end[:] = out[2]
+            phi_dd_end[:] = out[3]
+            both = False
+            for b in range(B):
+                for r in range(R):
+                    rows_sep[b, r] = (active[b, r] and uni_c[b, r] and mu_end[b, r] <= 0.0
+                                      and phi_dd_end[b, r] > rules[R_SEP_ACC])
+                    if rows_sep[b, r] and mu0[b, r] > 0.0:
+                        both = True
+            if both:
+                f_lo = _release(mu0, phi_dd0, rows_sep, rules)
+                f_hi = _release(mu_end, phi_dd_end, rows_sep, rules)
+                if f_lo > 0.0 > f_hi:
+                    end_eval = False  # new moves to the separation
+                    # illinois(band=None, bisect_every=3) from [0, 1], payload (state, μ)
+                    lo, hi = 0.0, 1.0
+                    s_hi[:] = new
+                    mu_hi[:] = mu_end
+                    side = 0
+                    for it in range(int(rules[R_MAX_ITER])):
+                        if (hi - lo) * h < rules[R_SEP_TIME]:
+                            break
+                        theta = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+                        if it % 3 == 2 or not (lo < theta < hi):
+                            theta = 0.5 * (lo + hi)
+                        st = _step(t, x, d1, theta * h, active, sy, ctl, wk, out, rk, s_e)
+                        if st != STAGE_OK:
+                            return st
+                        st = contact_stage(t + theta * h, s_e, active, sy, ctl, wk, out, dtmp)[0]
+                        if st != STAGE_OK:
+                            return st
+                        value = _release(out[2], out[3], rows_sep, rules)
+                        if value > 0.0:
+                            lo, f_lo = theta, value
+                            if side == 1:
+                                f_hi *= 0.5
+                            side = 1
+                        else:
+                            hi, f_hi = theta, value
+                            s_hi[:] = s_e
+                            mu_hi[:] = out[2]
+                            if side == -1:
+                                f_lo *= 0.5
+                            side = -1
+                    for b in range(B):
+                        for r in range(R):
+                            leaving[b, r] = rows_sep[b, r] and mu_hi[b, r] <= 0.0
+                    new[:] = s_hi
+                    h = hi * h
+                    sep = True
+        # touchdowns: watched rows (not far below the band at the step's start)
+        any_watch = False
+        for b in range(B):
+            for r in range(R):
+                watch[b, r] = mask_c[b, r] and uni_c[b, r] and not active[b, r]
+                any_watch = any_watch or watch[b, r]
+        g_hi = 0.0
+        if any_watch:
+            any_watch = False
+            for b in range(B):
+                for r in range(R):  # phi0: the gaps at the step's start (x)
+                    watch[b, r] = watch[b, r] and phi0[b, r] >= -rules[R_LOST]
+                    any_watch = any_watch or watch[b, r]
+            if any_watch:
+                if end_eval:  # new's rows are known
+                    g_hi = np.inf
+                    for b in range(B):
+                        for r in range(R):
+                            if watch[b, r]:
+                                g_hi = min(g_hi, wk[14][b, r])
+                else:
+                    g_hi = _min_gap(new, watch, sy, wk)
+                if not math.isfinite(g_hi):
+                    return STAGE_NOT_FINITE
+        if g_hi >= -tol:
+            if not sep:
+                x[:] = new
+                # the end's evaluation is the next sample's (the stepper's cache)
+                memo[0] = 1 if end_eval else 0
+                return STAGE_OK
+            t = t + h
+            x[:] = new
+            # Stepper._separate: the leaving rows' events with their rates at (t, x)
+            if not _rows_and_blocks(x, sy, wk):
+                return STAGE_NOT_FINITE
+            phi_dot = wk[15]
+            for b in range(B):
+                for r in range(R):
+                    if leaving[b, r] and active[b, r]:
+                        _event(ev, n_ev, t, EVENT_SEPARATION, b, r, phi_dot[b, r],
+                               phi_dot[b, r], 0.0, False)
+                        active[b, r] = False
+            st = _evaluate_start(t, x, active, sy, ctl, wk, out, st0, joined, False, ev, n_ev,
+                                 False)[0]
+            if st != STAGE_OK:
+                return st
+            if t_end - t <= rules[R_TIME]:
+                return STAGE_OK
+            continue
+        st, theta = _locate_touchdown(t, x, d1, h, watch, g_hi, active, sy, ctl, wk, out, rk, loc)
+        if st != STAGE_OK:
+            return st
+        t = t + theta * h
+        if theta > 0.0:
+            x[:] = s_e
+        st = _impact(t, x, watch, active, sy, wk, imp, ev, n_ev, joined)
+        if st != STAGE_OK:
+            return st
+        st = _evaluate_start(t, x, active, sy, ctl, wk, out, st0, joined, True, ev, n_ev, False)[0]
+        if st != STAGE_OK:
+            return st
+        if t_end - t <= rules[R_TIME]:
+            return STAGE_OK
+    return STAGE_TOO_MANY_EVENTS
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _locate_touchdown(t, x, d1, h, watch, g_hi, active, sy, ctl, wk, out, rk, loc
+                      ):  # pragma: no cover - compiled
+    """``event_location.locate_touchdown``: ``(status, θ)``, the state at ``θ`` in ``loc[1]``.
+
+    (θ = 0: the state is ``x`` itself, ``loc[1]`` untouched.)
+    """
+    rules = sy[19]
+    s_e = loc[1]
+    tol = rules[R_GAP]
+    target = -0.5 * tol
+    lo, hi = 0.0, 1.0
+    if not _rows_and_blocks(x, sy, wk):
+        return STAGE_NOT_FINITE, 0.0
+    phi, phi_dot = wk[14], wk[15]
+    g0 = np.inf
+    closing = False
+    for b in range(watch.shape[0]):
+        for r in range(watch.shape[1]):
+            if watch[b, r]:
+                g0 = min(g0, phi[b, r])
+                if phi[b, r] <= 0.0 and phi_dot[b, r] < -rules[R_REBOUND]:
+                    closing = True
+    f_lo, f_hi = g0 - target, g_hi - target
+    if f_lo <= 0.5 * tol:  # a watched row starts within (or below) the band
+        if closing:
+            return STAGE_OK, 0.0
+        theta = 1.0
+        while True:
+            theta *= 0.5
+            if theta * h < rules[R_TIME]:
+                return STAGE_OK, 0.0
+            st = _step(t, x, d1, theta * h, active, sy, ctl, wk, out, rk, s_e)
+            if st != STAGE_OK:
+                return st, 0.0
+            f = _min_gap(s_e, watch, sy, wk) - target
+            if not math.isfinite(f):
+                return STAGE_NOT_FINITE, 0.0
+            if f > 0.5 * tol:
+                lo, f_lo = theta, f
+                break
+            hi, f_hi = theta, f
+    # illinois(band=0.5 tol): the last iterate, as soon as |value| <= band or the bracket
+    # was narrow
+    side = 0
+    theta = hi
+    for _ in range(int(rules[R_MAX_ITER])):
+        short = (hi - lo) * h < rules[R_TIME]
+        theta = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+        if not (lo < theta < hi):
+            theta = 0.5 * (lo + hi)
+        st = _step(t, x, d1, theta * h, active, sy, ctl, wk, out, rk, s_e)
+        if st != STAGE_OK:
+            return st, 0.0
+        value = _min_gap(s_e, watch, sy, wk) - target
+        if not math.isfinite(value):
+            return STAGE_NOT_FINITE, 0.0
+        if abs(value) <= 0.5 * tol or short:
+            return STAGE_OK, theta
+        if value > 0.0:
+            lo, f_lo = theta, value
+            if side == 1:
+                f_hi *= 0.5
+            side = 1
+        else:
+            hi, f_hi = theta, value
+            if side == -1:
+                f_lo *= 0.5
+            side = -1
+    return STAGE_OK, theta
+
+
+@njit(cache=True, error_model="numpy")
+def _record_sample(s, t, x, active, sy, wk, out, solver, Rec):  # pragma: no cover - compiled
+    """Record sample ``s`` from its evaluation (``Recorder.record``)."""
+    (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
+     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
+    energy, phi, phi_dot, pts, nrm = wk[5], wk[14], wk[15], wk[16], wk[17]
+    a_o, qdd_c, mu, tau = out[0], out[1], out[2], out[5]
+    (r_q, r_v, r_p, r_quat, r_tw, r_tau, r_mu, r_phi, r_phi_dot, r_points, r_normals, r_a_o,
+     r_qdd, r_violation, r_wrench, r_kinetic, r_potential, r_momentum, r_active,
+     r_solver) = Rec
+    nv, n = dims[DIMS_NV], dims[DIMS_N]
+    nq = x.shape[0] - OBJECT_STATE_SIZE - 2 * nv
+    q0 = OBJECT_STATE_SIZE
+    v0 = q0 + nq
+    for j in range(nq):
+        r_q[s, j] = x[q0 + j]
+    for j in range(nv):
+        r_v[s, j] = x[v0 + j]
+    for a in range(3):
+        r_p[s, a] = x[X_POSITION + a]
+    for a in range(4):
+        r_quat[s, a] = x[X_QUATERNION + a]
+    for a in range(6):
+        r_tw[s, a] = x[X_TWIST + a]
+        r_a_o[s, a] = a_o[a]
+        r_wrench[s, a] = wrench_at(t, wrenches, a)
+    for i in range(n):
+        for a in range(nv_arm[i]):
+            j = v_starts[i] + a
+            r_tau[s, j] = tau[i, a]
+            r_qdd[s, j] = qdd_c[i, a]
+    viol = 0.0
+    B, R = phi.shape
+    for b in range(B):
+        for r in range(R):
+            r_mu[s, b, r] = mu[b, r]
+            r_phi[s, b, r] = phi[b, r]
+            r_phi_dot[s, b, r] = phi_dot[b, r]
+            r_active[s, b, r] = active[b, r]
+            for a in range(3):
+                r_points[s, b, r, a] = pts[b, r, a]
+                r_normals[s, b, r, a] = nrm[b, r, a]
+            if not mask_c[b, r]:
+                continue
+            if active[b, r] or not uni_c[b, r]:
+                viol = max(viol, abs(phi[b, r]))
+            else:
+                viol = max(viol, -phi[b, r])
+    r_violation[s] = viol
+    r_solver[s] = solver
+    # the object's: ½ m |ẋ|² + ½ ωᵀ I_w ω, -m g·x, [m ẋ; I_w ω + x × m ẋ] (I_w = R I_c Rᵀ)
+    Ro = np.empty((3, 3))
+    quaternion_rotation(x[X_QUATERNION:X_QUATERNION + 4], Ro)
+    mass = params[P_MASS]
+    L = np.zeros(3)
+    bw = np.zeros(3)
+    for a in range(3):
+        for c in range(3):
+            bw[a] += Ro[c, a] * x[X_TWIST + 3 + c]
+    for a in range(3):
+        acc = 0.0
+        for c in range(3):
+            acc += params[P_INERTIA + 3 * a + c] * bw[c]
+        for r in range(3):
+            L[r] += Ro[r, a] * acc
+    ke, pe = 0.0, 0.0
+    if n:
+        ke, pe = energy[EN_KINETIC], energy[EN_POTENTIAL]
+    p_lin = np.empty(3)
+    for a in range(3):
+        ke += 0.5 * (mass * x[X_TWIST + a] * x[X_TWIST + a] + x[X_TWIST + 3 + a] * L[a])
+        pe -= mass * params[P_GRAVITY + a] * x[X_POSITION + a]
+        p_lin[a] = mass * x[X_TWIST + a]
+    for a in range(3):
+        c1, c2 = (a + 1) % 3, (a + 2) % 3
+        arm_lin = energy[EN_MOMENTUM + a] if n else 0.0
+        arm_ang = energy[EN_MOMENTUM + 3 + a] if n else 0.0
+        r_momentum[s, a] = arm_lin + p_lin[a]
+        r_momentum[s, 3 + a] = (arm_ang + L[a] + x[X_POSITION + c1] * p_lin[c2]
+                                - x[X_POSITION + c2] * p_lin[c1])
+    r_kinetic[s] = ke
+    r_potential[s] = pe
+
+
+@njit(cache=True, error_model="numpy")
+def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev,
+                    reserve, Rec):  # pragma: no cover - compiled
+    """RK4 with contact events from sample ``k0``, recording samples ``k0 .. k1 - 1``.
+
+    As :func:`~multiarm_pin.sim.simulation.simulate` with the stepper: at each sample the
+    evaluation on the active set, the separations there (and a new evaluation), the record,
+    then :func:`_advance_with_events` to the next sample.
+
+    Args:
+        k0: first sample.
+        k1: one past the last sample to record.
+        times: (T,) the time grid [s].
+        x: the state vector at sample ``k0`` (in and out).
+        active: (B, R) bool, the active set (in and out).
+        sy: the system tuple (model, arm and contact tables, parameters, dimensions, support
+            tables, the rows' masks, joints, rows and restitution, wrenches, rules).
+        ctl: the controller tuple (mode and hold flags, ``object_pd``'s inputs, the hold
+            configuration and onsets, scratch).
+        wk: the workspace of one evaluation (arm terms, buffer, stacked blocks, rows).
+        out: the outputs of one evaluation (solution, torques, plan).
+        rk: the RK4 workspace.
+        st0: the start of a step (tangent, multipliers, rates, gaps, reuse memo).
+        loc: the event-location workspace.
+        imp: the impact workspace.
+        (:class:`multiarm_pin.sim.contact_loop.ContactLoop` builds them.)
+        ev: (E, EVENT_WIDTH) the event table (appended to).
+        n_ev: (1,) int the events in it.
+        reserve: rows of ``ev`` to keep free before a step (more than one step can add).
+        Rec: the record arrays (``Recorder``'s, and the active set and solver codes).
+
+    Returns:
+        ``(status, k)``: ``STAGE_OK`` and ``k1``, or the reason and the sample whose step the
+        Python stepper takes (``x``, ``active``, the events and the controller's hold state
+        are as they were right after that sample's separations; the sample is recorded when
+        the step failed, not when its evaluation did). ``STAGE_EVENTS_FULL``: take the events
+        and call again from ``k``.
+    """
+    control, q_hold, n_onsets = ctl[0], ctl[11], ctl[13]
+    nx = x.shape[0]
+    x0 = np.empty(nx)
+    active0 = np.empty_like(active)
+    q_hold0 = np.empty_like(q_hold)
+    for s in range(k0, k1):
+        if n_ev[0] + reserve > ev.shape[0]:
+            return STAGE_EVENTS_FULL, s
+        t = times[s]
+        reuse = st0[4][0] == 1 and s > k0
+        if reuse:
+            st0[0][:] = loc[10]  # the end's tangent
+        st, solver = _evaluate_start(t, x, active, sy, ctl, wk, out, st0, loc[9], False, ev, n_ev,
+                                     reuse)
+        if st != STAGE_OK:
+            return st, s
+        _record_sample(s, t, x, active, sy, wk, out, solver, Rec)
+        if s == times.shape[0] - 1:
+            return STAGE_OK, s + 1
+        x0[:] = x
+        active0[:] = active
+        q_hold0[:] = q_hold
+        n0, holding0, onsets0 = n_ev[0], control[CTL_HOLDING], n_onsets[0]
+        st = _advance_with_events(t, x, times[s + 1], active, sy, ctl, wk, out, rk, st0, loc,
+                                  imp, ev, n_ev)
+        if st != STAGE_OK:
+            x[:] = x0
+            active[:] = active0
+            q_hold[:] = q_hold0
+            n_ev[0], control[CTL_HOLDING], n_onsets[0] = n0, holding0, onsets0
+            return st, s
+    return STAGE_OK, k1

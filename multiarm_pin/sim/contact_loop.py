@@ -1,0 +1,334 @@
+"""The compiled contact loop of :func:`~multiarm_pin.sim.simulation.simulate`: RK4 with events.
+
+When a run has unilateral rows (fingertips or supports), RK4, arms the compiled rigid-body pass
+supports (or no arms), and zero torque or an :class:`~multiarm_pin.sim.controllers.ObjectPD`
+on its compiled path, :class:`ContactLoop` runs stretches of samples, separations, touchdowns
+and impacts included, in one call of
+:func:`multiarm_pin._compiled.contact_loop.run_contact_rk4`, which mirrors the
+:class:`~multiarm_pin.sim.stepper.Stepper` and :mod:`multiarm_pin.sim.event_location` step for
+step (the same evaluations in the same order, so the same event times to round-off). Its events
+become the stepper's :class:`~multiarm_pin.sim.contact_events.ContactEvent` records, and the
+controller's hold-still onsets its warnings.
+
+What the kernel cannot decide as the Python path would (a doubtful controller or solver case,
+NaN, too many events in one step) it hands back with the sample whose step the stepper then
+takes in Python (which raises, falls back or decides exactly as before); the next stretch goes
+to the kernel again.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multiarm_pin._compiled import contact_loop as kernels
+from multiarm_pin._compiled import layout, precompiled
+from multiarm_pin.dynamics import mlcp
+from multiarm_pin.model.rigid_object import ObjectState
+from multiarm_pin.sim import contact_events as ce
+from multiarm_pin.sim import event_location as el
+from multiarm_pin.sim.result import Recorder
+from multiarm_pin.system import SystemState
+
+SOLVER_NAMES = {kernels.SOLVER_BILATERAL: "bilateral",
+                kernels.SOLVER_ACTIVE_SET: "active_set"}
+"""The solver recorded at the kernel's samples, as ``solve_unilateral`` names it."""
+
+EVENT_KINDS = {kernels.EVENT_SEPARATION: "separation", kernels.EVENT_TOUCHDOWN: "touchdown"}
+"""Event kind codes of the kernel's table."""
+
+EVENT_ROWS = 4096
+"""Rows of the event table of one call (the kernel hands back before it can overflow)."""
+
+HOLD_REASON = ("the touching contacts cannot make every object wrench (rank {rank} < 6); "
+               "holding the arms still (gravity compensation and joint PD)")
+"""``ObjectPD``'s warning at a hold-still onset, after ``t = ... s: object_pd: ``."""
+
+
+def rules_vector() -> np.ndarray:
+    """The kernel's rules (:data:`~multiarm_pin._compiled.contact_loop.EVENT_CONSTANTS`)."""
+    values = {name: getattr(ce, name) for name in kernels.EVENT_CONSTANTS[:11]}
+    values.update(RESTING_RELEASE=el.RESTING_RELEASE, MAX_ITERATIONS=el.MAX_ITERATIONS,
+                  DEPENDENCY_RTOL=mlcp.DEPENDENCY_RTOL, VIOLATION_RTOL=mlcp.VIOLATION_RTOL,
+                  CONSISTENCY_RTOL=mlcp.CONSISTENCY_RTOL)
+    return np.array([float(values[name]) for name in kernels.EVENT_CONSTANTS])
+
+
+def _i64(a) -> np.ndarray:
+    return np.array(a, dtype=np.int64, order="C")
+
+
+def _f64(a) -> np.ndarray:
+    return np.array(a, dtype=float, order="C")
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    """A read-only view of ``a``.
+
+    The kernel's argument types then do not depend on the caller's flags: one compiled
+    specialisation for every run.
+    """
+    view = a.view()
+    view.setflags(write=False)
+    return view
+
+
+class ContactLoop:
+    """Stretches of RK4 steps with contact events in single compiled calls (see the module).
+
+    Use :meth:`for_run`, which returns None when the run is not of the kind the kernel does.
+
+    Args:
+        stepper: the run's stepper (its system, controller, Baumgarte gains, wrench, active
+            set and events).
+    """
+
+    def __init__(self, stepper):
+        from multiarm_pin.dynamics.object_first import DEFAULT_RCOND_TOL, OBJECT_RCOND_TOL
+
+        s = stepper.system
+        self.stepper = stepper
+        self.system = s
+        n, B, R = s.n_arms, s.n_blocks, s.rows_max
+        nq, nv = s.nq, s.nv
+        table = s._contact_rows
+        if n:
+            path = s.compiled
+            model = s.arm_set.compiled_model
+            params = path.params
+            k, m = int(path.dims[layout.DIMS_K]), int(path.dims[layout.DIMS_M])
+            arm = (_i64(model.ints), _f64(model.floats), _i64(path.arm_table),
+                   _i64(path.v_starts), _i64(path.contact_tables.ints),
+                   _f64(path.contact_tables.floats))
+            dims, N, nv_arm = _i64(path.dims), _i64(path.N), _i64(path.nv_arm)
+            buf = np.zeros(path.layout.size)
+        else:
+            params = layout.parameter_vector(s.obj.mass, s.obj.inertia, s.gravity,
+                                             DEFAULT_RCOND_TOL, OBJECT_RCOND_TOL)
+            k, m = 1, 0
+            arm = (np.zeros((0, layout.MODEL_INTS), np.int64),
+                   np.zeros((0, layout.MODEL_FLOATS)), np.zeros((0, 1), np.int64),
+                   np.zeros(0, np.int64), np.zeros((0, layout.CONTACT_INTS), np.int64),
+                   np.zeros((0, layout.CONTACT_FLOATS)))
+            dims = _i64(layout.dims_vector(1, 0, 0, 0))
+            N, nv_arm = np.zeros(0, np.int64), np.zeros(0, np.int64)
+            buf = np.zeros(0)
+        if stepper.baumgarte is not None:
+            params = layout.with_baumgarte(params, *stepper.baumgarte)
+        kc = k if n else table.nv_max_blocks
+        sp_p, sp_n, sp_a = s.supports.tables()
+        wrenches = (np.zeros((0, layout.WRENCH_WIDTH)) if stepper.wrench is None
+                    else _f64(stepper.wrench.table()))
+        self.S = (*arm, _f64(params), dims, N, nv_arm, sp_p, sp_n, sp_a,
+                  np.array(s.contact_unilateral), np.array(s.contact_mask),
+                  _i64(table.nv_blocks), _i64(table.N_blocks), _f64(s.contact_restitution),
+                  wrenches, rules_vector())
+        nd = 2 * nv + layout.OBJECT_STATE_SIZE
+        nx = layout.state_size(nq, nv)
+        self._nx = nx
+        self.W = (np.zeros((6, nv)), np.zeros((6, nv)), np.zeros((nv, nv)), np.zeros(nv),
+                  np.zeros((n, 4, 4)), np.zeros(layout.ENERGY_SIZE), buf,
+                  np.zeros((B, kc, kc)), np.zeros((B, kc)), np.zeros((B, kc, R)),
+                  np.zeros((B, 6, R)), np.zeros((B, R)), np.zeros((6, 6)), np.zeros(6),
+                  np.zeros((B, R)), np.zeros((B, R)), np.zeros((B, R, 3)),
+                  np.zeros((B, R, 3)))
+        self.K = (np.zeros(nd), np.zeros(nd), np.zeros(nd), np.zeros(nd), np.zeros(nx),
+                  np.zeros(nd))
+        self.Z = (np.zeros(nd), np.zeros((B, R)), np.zeros((B, R)), np.zeros((B, R)),
+                  np.zeros(2, np.int64))
+        boolean = np.zeros((B, R), dtype=bool)
+        self.L = (np.zeros(nx), np.zeros(nx), np.zeros(nx), np.zeros((B, R)), np.zeros((B, R)),
+                  np.zeros((B, R)), boolean.copy(), boolean.copy(), boolean.copy(),
+                  boolean.copy(), np.zeros(nd), np.zeros((B, R)))
+        self.I = (boolean.copy(), boolean.copy(), boolean.copy(), np.zeros((B, R)), np.zeros(6),
+                  np.zeros((B, kc)), np.zeros((B, R)), np.zeros((B, R)), np.zeros((B, kc)),
+                  np.zeros(6))
+        self._k, self._m, self._kc = k, m, kc
+        self.events = np.zeros((EVENT_ROWS, kernels.EVENT_WIDTH))
+        self.n_events = np.zeros(1, np.int64)
+        self.reserve = 4 * (int(ce.MAX_EVENTS_PER_STEP) + 2) * B * R + 8
+        self.control = np.zeros(3, np.int64)
+        self.onsets = np.zeros((64, kernels.HOLD_WIDTH))
+        self.n_onsets = np.zeros(1, np.int64)
+        self.q_hold = np.zeros(nq)
+        self.last_status = kernels.STAGE_OK
+        self._kernel = None  # (record, the kernel checked for its arguments' types)
+        self._zero_x = np.zeros(nv)
+
+    @classmethod
+    def for_run(cls, stepper, integrator: str) -> ContactLoop | None:
+        """The contact loop of a run, or None when the run is not of the kind it does.
+
+        It does: RK4, unilateral rows (fingertips or supports), arms whose every joint the
+        compiled rigid-body pass supports (or none), and zero torque or an
+        :class:`~multiarm_pin.sim.controllers.ObjectPD` on its compiled path.
+        """
+        from multiarm_pin.sim.controllers.object_pd import ObjectPD
+
+        s = stepper.system
+        ctrl = stepper.controller
+        if integrator != "rk4" or not stepper.unilateral:
+            return None
+        if s.n_arms and (s.compiled is None or s.arm_set.compiled_model is None):
+            return None
+        if ctrl is not None and (type(ctrl) is not ObjectPD or not ctrl.compiled
+                                 or not s.n_arms):
+            return None
+        return cls(stepper)
+
+    def ready(self, state: SystemState) -> bool:
+        """True when the kernel can take the steps from ``state``.
+
+        The first time, an ``object_pd`` controller fixes its state from a reference (numpy)
+        evaluation of ``state`` (:meth:`ObjectPD.prepare`).
+        """
+        ctrl = self.stepper.controller
+        if ctrl is None:
+            return True
+        if ctrl.kernel_inputs() is None:
+            s = self.system
+            ctrl.prepare(state, s.blocks(state, None, self.stepper.baumgarte, reference=True))
+        return ctrl.kernel_inputs() is not None
+
+    def _controller(self) -> tuple:
+        """The controller tuple of the kernel (``object_pd``'s inputs, or placeholders).
+
+        Built again only when the controller's inputs are new arrays (kept otherwise: its
+        arrays are the kernel's workspace and the controller's own); the controller's hold
+        state is copied in at every call.
+        """
+        s = self.system
+        n, m, k = s.n_arms, self._m, self._k
+        ctrl = self.stepper.controller
+        if ctrl is None:
+            inputs = None
+        else:
+            inputs = ctrl.kernel_inputs()
+            self.control[kernels.CTL_HOLDING] = int(bool(ctrl.holding))
+            self.control[kernels.CTL_MARGIN_KEPT] = int(bool(ctrl.margin_kept))
+            if ctrl.holding and ctrl._q_hold is not None:
+                self.q_hold[:] = ctrl._q_hold
+        kept = getattr(self, "_kept_controller", None)
+        if kept is not None and kept[0] is inputs:
+            return kept[1]
+        if inputs is None:
+            self.control[kernels.CTL_MODE] = kernels.CONTROL_NONE
+            values = (np.zeros((1, layout.TRAJECTORY_WIDTH)), np.zeros(layout.PD_GAINS_SIZE),
+                      np.zeros(2), np.zeros((n, 1, 3)), np.zeros((n, 1, 3)),
+                      np.zeros(n, np.int64), np.zeros(layout.HOLD_GAINS_SIZE),
+                      np.zeros((n, m), np.uint8), np.zeros((n, m), bool), np.zeros(s.nq))
+        else:
+            self.control[kernels.CTL_MODE] = kernels.CONTROL_OBJECT_PD
+            values = inputs
+        (traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, qp_active,
+         unilateral, q_ref) = values
+        traj, unilateral = _read_only(traj), _read_only(unilateral)  # one type for every run
+        self._O = (np.zeros(6), np.zeros((s.n_blocks, self._kc)),
+                   np.zeros((s.n_blocks, s.rows_max)), np.zeros((s.n_blocks, s.rows_max)),
+                   np.zeros((s.n_blocks, s.rows_max)), np.zeros((n, k)), np.zeros(s.nv),
+                   np.zeros((n, k)), np.zeros(layout.REFERENCE_SIZE), np.zeros((3, 3)),
+                   np.zeros((n, m)), np.zeros((n, k)), np.zeros(hold_tool.shape), np.zeros(6))
+        C = (self.control, traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains,
+             qp_active, unilateral, q_ref, self.q_hold, self.onsets, self.n_onsets,
+             np.zeros((n, m), np.uint8), np.zeros((n, m), bool), np.zeros((n, m), bool),
+             self._free_gains(gains))
+        self._kept_controller = (inputs, C)
+        self._kernel = None  # checked again against the module's types
+        return C
+
+    @staticmethod
+    def _free_gains(gains: np.ndarray) -> np.ndarray:
+        """The hold gains with no margin: ``object_pd``'s least-norm fallback."""
+        out = np.array(gains, dtype=float)
+        out[layout.GAIN_MARGIN] = 0.0
+        return out
+
+    def _arguments(self, rec: Recorder, x: np.ndarray, times: np.ndarray, k0: int, k1: int,
+                   C: tuple, active: np.ndarray, codes: np.ndarray) -> tuple:
+        """The arguments of :func:`~multiarm_pin._compiled.contact_loop.run_contact_rk4`."""
+        self.n_events[0] = 0
+        self.n_onsets[0] = 0
+        self.Z[4][0] = 0  # no evaluation to reuse at the first sample
+        Rec = (rec.q, rec.v, rec.p, rec.quat, rec.twist, rec.tau, rec.mu, rec.phi,
+               rec.phi_dot, rec.points, rec.normals, rec.a_o, rec.qdd, rec.violation,
+               rec.wrench, rec.ke, rec.pe, rec.momentum, rec.active, codes)
+        return (k0, k1, times, x, active, self.S, C, self.W, self._O, self.K, self.Z, self.L,
+                self.I, self.events, self.n_events, self.reserve, Rec)
+
+    def example_arguments(self, state: SystemState, steps: int = 2) -> tuple:
+        """The arguments :meth:`run` would pass for ``steps`` steps of 1 ms from ``state``.
+
+        For :mod:`multiarm_pin._compiled.precompiled`, which compiles for their types.
+        """
+        times = np.arange(steps + 1) * 1e-3
+        rec = Recorder(self.system, len(times), self.stepper.solver, 1)
+        o = state.obj
+        x = layout.state_vector(o.position, o.quaternion, o.twist, state.q, state.v,
+                                self._zero_x)
+        return self._arguments(rec, x, times, 0, len(times), self._controller(),
+                               np.array(self.stepper.active, dtype=bool),
+                               np.zeros(len(times), np.int64))
+
+    def run(self, rec: Recorder, state: SystemState, times: np.ndarray, k0: int, k1: int
+            ) -> tuple[int, SystemState]:
+        """Samples ``k0 .. k1 - 1`` by the kernel, from ``state`` at sample ``k0``.
+
+        Args:
+            rec: the run's recorder (filled in place).
+            state: the state at sample ``k0``.
+            times: the run's time grid [s].
+            k0: first sample.
+            k1: one past the last sample.
+
+        Returns:
+            ``(k, state)``: the sample reached and its state. ``k == k1`` when every sample
+            was done; otherwise (:attr:`last_status` says why) the stepper takes the step
+            from sample ``k``, or, with ``STAGE_EVENTS_FULL``, the kernel is called again.
+        """
+        s = self.system
+        stepper = self.stepper
+        o = state.obj
+        x = layout.state_vector(o.position, o.quaternion, o.twist, state.q, state.v,
+                                self._zero_x)
+        C = self._controller()
+        active = np.array(stepper.active, dtype=bool)
+        codes = np.zeros(len(times), np.int64)
+        args = self._arguments(rec, x, times, k0, k1, C, active, codes)
+        if self._kernel is None or self._kernel[0] is not rec:
+            # the arguments' types are fixed by construction for this loop, its controller
+            # tuple and its record: checked once against the precompiled module's
+            self._kernel = (rec, precompiled.kernel_for("run_contact_rk4", args))
+        status, k = self._kernel[1](*args)
+        self.last_status = int(status)
+        k = int(k)
+        # the samples recorded: up to k, and k itself when its step failed (it is recorded
+        # again by the stepper, with the same values)
+        done = slice(k0, k)
+        rec.t[done] = times[done]
+        for j in range(k0, k):
+            rec.solver[j] = SOLVER_NAMES[int(codes[j])]
+        if k > k0:
+            rec.mark_recorded(k)
+        for row in self.events[:int(self.n_events[0])]:
+            t, kind, b, r, before, after, impulse, rebound = row.tolist()
+            stepper._event(t, EVENT_KINDS[int(kind)], int(b), int(r), phi_dot=before,
+                           phi_dot_after=after, impulse=impulse, rebound=bool(rebound))
+        stepper.active = active & s.contact_mask
+        ctrl = stepper.controller
+        if ctrl is not None:
+            for t, rank in self.onsets[:min(int(self.n_onsets[0]), len(self.onsets))].tolist():
+                ctrl.warnings.append(f"t = {t:.6g} s: object_pd: "
+                                     + HOLD_REASON.format(rank=int(rank)))
+            ctrl.holding = bool(self.control[kernels.CTL_HOLDING])
+            ctrl.margin_kept = bool(self.control[kernels.CTL_MARGIN_KEPT])
+            if ctrl.holding:
+                ctrl._q_hold = self.q_hold.copy()
+        q0 = layout.OBJECT_STATE_SIZE
+        nq, nv = s.nq, s.nv
+        new = SystemState(x[q0:q0 + nq].copy(), x[q0 + nq:q0 + nq + nv].copy(),
+                          ObjectState(x[layout.X_POSITION:layout.X_POSITION + 3].copy(),
+                                      x[layout.X_QUATERNION:layout.X_QUATERNION + 4].copy(),
+                                      x[layout.X_TWIST:layout.X_TWIST + 6].copy()))
+        return k, new
+
+
+__all__ = ["EVENT_KINDS", "SOLVER_NAMES", "ContactLoop", "rules_vector"]

@@ -1,0 +1,63 @@
+"""The compiled contact loop (``sim.contact_loop``): whole runs with separations, touchdowns
+and impacts against the Python stepper, sample by sample and event by event."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from closed_loop_cases import RUN_FIELDS, rel_err, run_scenario
+
+from multiarm_pin.sim import contact_events as ce
+from multiarm_pin.sim import contact_loop
+from multiarm_pin.sim import event_location as el
+
+
+def _same_events(fast, ref, tol):
+    assert [(e.kind, e.block, e.row, e.rebound) for e in fast.events] == \
+        [(e.kind, e.block, e.row, e.rebound) for e in ref.events]
+    for a, b in zip(fast.events, ref.events, strict=True):
+        assert abs(a.t - b.t) <= tol
+        for f in ("phi_dot", "phi_dot_after", "impulse"):
+            assert abs(getattr(a, f) - getattr(b, f)) <= 1e-7 * (1.0 + abs(getattr(b, f))), f
+
+
+@pytest.mark.parametrize(("name", "duration", "tol"), [
+    ("box_on_table", 0.6, 1e-9),     # no arms: a bouncing box, 40 touchdowns and separations
+    ("grasp_failure", 0.6, 1e-7),    # fingertips let go, object_pd holds the arms still
+    ("pick_from_table", 0.4, 1e-7),  # arms and a support: the stand's rows let go
+])
+def test_runs_equal_the_python_stepper(name, duration, tol, monkeypatch):
+    fast, calls = run_scenario(name, duration, "contact", monkeypatch)
+    ref, _ = run_scenario(name, duration, False, monkeypatch)
+    assert calls, "the contact loop did not run"
+    assert ref.events, "the scenario should have contact events"
+    _same_events(fast, ref, tol)
+    for field in RUN_FIELDS:
+        assert rel_err(getattr(fast, field), getattr(ref, field)) <= tol, field
+    np.testing.assert_array_equal(fast.t, ref.t)
+    np.testing.assert_array_equal(fast.active, ref.active)
+    assert list(fast.solver) == list(ref.solver)
+    assert fast.warnings == ref.warnings
+
+
+def test_the_whole_grasp_failure_with_both_loops(monkeypatch):
+    """The closed loop until the first release, then the contact loop: the Python run's
+    events, hold-still warning and fall."""
+    fast, calls = run_scenario("grasp_failure", 1.0, True, monkeypatch)
+    ref, _ = run_scenario("grasp_failure", 1.0, False, monkeypatch)
+    assert len(ref.events) > 5
+    _same_events(fast, ref, 1e-7)
+    assert fast.warnings == ref.warnings
+    assert any("holding the arms still" in w for w in fast.warnings)
+    for field in RUN_FIELDS:
+        assert rel_err(getattr(fast, field), getattr(ref, field)) <= 1e-6, field
+
+
+def test_rules_are_the_event_modules():
+    rules = contact_loop.rules_vector()
+    k = contact_loop.kernels
+    assert rules[k.R_GAP] == ce.GAP_TOLERANCE
+    assert rules[k.R_SEP_TIME] == ce.SEPARATION_TIME_TOLERANCE
+    assert rules[k.R_MAX_EVENTS] == ce.MAX_EVENTS_PER_STEP
+    assert rules[k.R_RESTING_RELEASE] == el.RESTING_RELEASE
+    assert len(rules) == len(k.EVENT_CONSTANTS)
