@@ -5,11 +5,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from closed_loop_cases import RUN_FIELDS, rel_err, run_scenario
+from closed_loop_cases import RUN_FIELDS, SCENARIOS, rel_err, run_scenario
 
+from multiarm_pin.app.runner import make_controller
+from multiarm_pin.app.scenario import build_scenario, load_scenario
 from multiarm_pin.sim import contact_events as ce
 from multiarm_pin.sim import contact_loop
 from multiarm_pin.sim import event_location as el
+from multiarm_pin.sim.compiled_loop import CompiledLoop
+from multiarm_pin.sim.contact_loop import ContactLoop
+from multiarm_pin.sim.disturbances import WrenchSchedule
+from multiarm_pin.sim.stepper import Stepper
 
 
 def _same_events(fast, ref, tol):
@@ -61,3 +67,20 @@ def test_rules_are_the_event_modules():
     assert rules[k.R_MAX_EVENTS] == ce.MAX_EVENTS_PER_STEP
     assert rules[k.R_RESTING_RELEASE] == el.RESTING_RELEASE
     assert len(rules) == len(k.EVENT_CONSTANTS)
+
+
+def test_a_wrench_schedule_of_another_kind_stays_on_the_stepper():
+    """The loops read a schedule's intervals as a table: a subclass with its own ``__call__``
+    (here a ramp) would be read wrongly, so neither loop takes such a run."""
+    class Ramp(WrenchSchedule):
+        def __call__(self, t):
+            return np.array([0.0, 0.0, -10.0 * t, 0.0, 0.0, 0.0])
+
+    for name, loop in (("two_ur5_box", CompiledLoop), ("grasp_failure", ContactLoop)):
+        built = build_scenario(load_scenario(SCENARIOS / f"{name}.yaml"), load_visuals=False)
+        plain = WrenchSchedule([(0.0, 1.0, np.ones(6))])
+        ramp = Ramp([(0.0, 1.0, np.ones(6))])
+        for wrench, takes in ((plain, True), (ramp, False)):
+            stepper = Stepper(built.system, make_controller(built), "object_first", None,
+                              wrench)
+            assert (loop.for_run(stepper, "rk4") is not None) == takes, (name, takes)

@@ -78,7 +78,23 @@ def assemble(J, Jdq, nle, tau_padded, rows, params, obj_R, obj_twist, h, W, W_o,
             if on != 0.0:
                 cs -= 2.0 * alpha * rows[i, s, ROW_PHI_DOT] + beta * beta * rows[i, s, ROW_PHI]
             c[i, s] = cs
-    # object: M_o = diag(m I, R I_c Rᵀ), h_o = [m g; -ω × I_w ω]
+    object_terms(mass, inertia_body, gravity, obj_R, obj_twist, M_o, h_o)
+
+
+@njit(cache=True, error_model="numpy")
+def object_terms(mass, inertia_body, gravity, obj_R, obj_twist, M_o, h_o
+                 ):  # pragma: no cover - compiled
+    """The object's ``M_o = diag(m I, R I_c Rᵀ)`` and ``h_o = [m g; -ω × I_w ω]``.
+
+    Args:
+        mass: [kg].
+        inertia_body: (3, 3) inertia about the COM, object axes [kg m²].
+        gravity: (3,) [m/s²].
+        obj_R: (3, 3) object axes in world axes.
+        obj_twist: (6,) ``[ẋ; ω]`` world axes.
+        M_o: output (6, 6).
+        h_o: output (6,) [N, N m], world axes at the COM.
+    """
     Iw = np.zeros((3, 3))
     for a in range(3):
         for b in range(3):
@@ -105,4 +121,4 @@ def assemble(J, Jdq, nle, tau_padded, rows, params, obj_R, obj_twist, h, W, W_o,
     h_o[5] = wy * Lx - wx * Ly
 
 
-__all__ = ["assemble"]
+__all__ = ["assemble", "object_terms"]

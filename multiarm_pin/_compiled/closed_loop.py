@@ -438,7 +438,19 @@ def _record(s, t, x, nq, nv, N, nv_arm, v_starts, unilateral, wrenches, separati
                 r_points[s, i, r, a] = rows[i, r, ROW_POINT + a]
                 r_normals[s, i, r, a] = rows[i, r, ROW_NORMAL + a]
     r_violation[s] = viol
-    # the object's: ½ m |ẋ|² + ½ ωᵀ I_w ω, -m g·x, [m ẋ; I_w ω + x × m ẋ] (I_w = R I_c Rᵀ)
+    record_energy(s, x, params, energy, True, r_kinetic, r_potential, r_momentum)
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def record_energy(s, x, params, energy, arms, r_kinetic, r_potential, r_momentum
+                  ):  # pragma: no cover - compiled
+    """Record sample ``s``'s kinetic and potential energy and momentum.
+
+    The object's, plus the arms' ``energy`` (:func:`~.rigid_body.rigid_body_pass`'s) when
+    ``arms``. The object's: ``½ m |ẋ|² + ½ ωᵀ I_w ω``, ``-m g·x``, ``[m ẋ; I_w ω + x × m ẋ]``
+    (``I_w = R I_c Rᵀ``); the potential is zero at the origin.
+    """
     R = np.empty((3, 3))
     quaternion_rotation(x[X_QUATERNION:X_QUATERNION + 4], R)
     mass = params[P_MASS]
@@ -453,22 +465,24 @@ def _record(s, t, x, nq, nv, N, nv_arm, v_starts, unilateral, wrenches, separati
             acc += params[P_INERTIA + 3 * a + c] * b[c]
         for r in range(3):
             L[r] += R[r, a] * acc
-    ke, pe = energy[EN_KINETIC], energy[EN_POTENTIAL]
+    ke = energy[EN_KINETIC] if arms else 0.0
+    pe = energy[EN_POTENTIAL] if arms else 0.0
     p_lin = np.empty(3)
     for a in range(3):
         ke += 0.5 * (mass * x[X_TWIST + a] * x[X_TWIST + a] + x[X_TWIST + 3 + a] * L[a])
         pe -= mass * params[P_GRAVITY + a] * x[X_POSITION + a]
         p_lin[a] = mass * x[X_TWIST + a]
     for a in range(3):
-        r_momentum[s, a] = energy[EN_MOMENTUM + a] + p_lin[a]
         c1, c2 = (a + 1) % 3, (a + 2) % 3
-        r_momentum[s, 3 + a] = (energy[EN_MOMENTUM + 3 + a] + L[a]
-                                + x[X_POSITION + c1] * p_lin[c2] - x[X_POSITION + c2] * p_lin[c1])
+        lin = energy[EN_MOMENTUM + a] if arms else 0.0
+        ang = energy[EN_MOMENTUM + 3 + a] if arms else 0.0
+        r_momentum[s, a] = lin + p_lin[a]
+        r_momentum[s, 3 + a] = (ang + L[a] + x[X_POSITION + c1] * p_lin[c2]
+                                - x[X_POSITION + c2] * p_lin[c1])
     r_kinetic[s] = ke
     r_potential[s] = pe
-    return True
 
 
 __all__ = ["NULL_KD", "NULL_KP", "STAGE_CONTROLLER", "STAGE_NOT_FINITE", "STAGE_OK",
            "STAGE_RELEASE", "STAGE_RELEASE_IN_STEP", "STAGE_SEPARATION", "STAGE_SOLVE",
-           "closed_loop_stage", "run_rk4"]
+           "closed_loop_stage", "record_energy", "run_rk4"]

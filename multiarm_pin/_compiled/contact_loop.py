@@ -38,6 +38,7 @@ import math
 import numpy as np
 from numba import njit
 
+from multiarm_pin._compiled.assembly import object_terms
 from multiarm_pin._compiled.closed_loop import (
     NULL_KD,
     NULL_KP,
@@ -46,6 +47,7 @@ from multiarm_pin._compiled.closed_loop import (
     STAGE_OK,
     STAGE_SOLVE,
     _advance,
+    record_energy,
     wrench_at,
 )
 from multiarm_pin._compiled.controller_kernels import (
@@ -68,9 +70,6 @@ from multiarm_pin._compiled.layout import (
     DIMS_M,
     DIMS_N,
     DIMS_NV,
-    EN_KINETIC,
-    EN_MOMENTUM,
-    EN_POTENTIAL,
     OBJECT_STATE_SIZE,
     P_BAUMGARTE_ALPHA,
     P_BAUMGARTE_BETA,
@@ -184,49 +183,11 @@ def _support_rows(x, sp_p, sp_n, sp_a, params, b, rows_phi, rows_phi_dot, pts, n
 
 @njit(cache=True, error_model="numpy")
 def _object_terms(x, params, M_o, h_o):  # pragma: no cover - compiled
-    """``M_o``, ``h_o`` of the object alone (``RigidObject.mass_matrix``, ``bias_wrench``)."""
+    """``M_o``, ``h_o`` of the object alone at ``x`` (:func:`~.assembly.object_terms`)."""
     R = np.empty((3, 3))
     quaternion_rotation(x[X_QUATERNION:X_QUATERNION + 4], R)
-    m = params[P_MASS]
-    Iw = np.empty((3, 3))  # R I Rᵀ
-    RI = np.empty((3, 3))
-    for a in range(3):
-        for b in range(3):
-            acc = 0.0
-            for p in range(3):
-                acc += R[a, p] * params[P_INERTIA + 3 * p + b]
-            RI[a, b] = acc
-    for a in range(3):
-        for b in range(3):
-            acc = 0.0
-            for p in range(3):
-                acc += RI[a, p] * R[b, p]
-            Iw[a, b] = acc
-    for a in range(6):
-        for b in range(6):
-            M_o[a, b] = 0.0
-    for a in range(3):
-        M_o[a, a] = m
-        for b in range(3):
-            M_o[3 + a, 3 + b] = Iw[a, b]
-    wx, wy, wz = x[X_TWIST + 3], x[X_TWIST + 4], x[X_TWIST + 5]
-    L = np.empty(3)  # R (I (Rᵀ ω))
-    bw = np.empty(3)
-    for a in range(3):
-        bw[a] = R[0, a] * wx + R[1, a] * wy + R[2, a] * wz
-    for a in range(3):
-        acc = 0.0
-        for p in range(3):
-            acc2 = 0.0
-            for s in range(3):
-                acc2 += params[P_INERTIA + 3 * p + s] * bw[s]
-            acc += R[a, p] * acc2
-        L[a] = acc
-    for a in range(3):
-        h_o[a] = m * params[P_GRAVITY + a]
-    h_o[3] = wz * L[1] - wy * L[2]
-    h_o[4] = wx * L[2] - wz * L[0]
-    h_o[5] = wy * L[0] - wx * L[1]
+    object_terms(params[P_MASS], params[P_INERTIA:P_INERTIA + 9].reshape((3, 3)),
+                 params[P_GRAVITY:P_GRAVITY + 3], R, x[X_TWIST:X_TWIST + 6], M_o, h_o)
 
 
 @njit(cache=True, error_model="numpy")
@@ -492,6 +453,20 @@ def contact_stage(t, x, active, sy, ctl, wk, out, d):  # pragma: no cover - comp
 
 # ------------------------------------------------------------------ steps and events
 @njit(cache=True, error_model="numpy")
+def _illinois(theta, value, lo, f_lo, hi, f_hi, side):  # pragma: no cover - compiled
+    """One update of ``event_location.illinois``'s bracket with the iterate ``(θ, value)``.
+
+    Returns:
+        ``(lo, f_lo, hi, f_hi, side)``; ``side`` is -1 when ``θ`` became the upper end.
+    """
+    if value > 0.0:
+        if side == 1:
+            f_hi *= 0.5
+        return theta, value, hi, f_hi, 1
+    if side == -1:
+        f_lo *= 0.5
+    return lo, f_lo, theta, value, -1
+@njit(cache=True, error_model="numpy")
 def _step(t, x, d1, h, active, sy, ctl, wk, out, rk, x_new):  # pragma: no cover - compiled
     """RK4 from ``x`` (tangent ``d1`` there) with step ``h`` into ``x_new`` (``Stepper.step``)."""
     model_ints = sy[0]
@@ -743,18 +718,11 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
                         if st != STAGE_OK:
                             return st
                         value = _release(out[2], out[3], rows_sep, rules)
-                        if value > 0.0:
-                            lo, f_lo = theta, value
-                            if side == 1:
-                                f_hi *= 0.5
-                            side = 1
-                        else:
-                            hi, f_hi = theta, value
+                        lo, f_lo, hi, f_hi, side = _illinois(theta, value, lo, f_lo, hi, f_hi,
+                                                             side)
+                        if side == -1:  # the iterate is the new upper end: its payload
                             s_hi[:] = s_e
                             mu_hi[:] = out[2]
-                            if side == -1:
-                                f_lo *= 0.5
-                            side = -1
                     for b in range(B):
                         for r in range(R):
                             leaving[b, r] = rows_sep[b, r] and mu_hi[b, r] <= 0.0
@@ -886,16 +854,7 @@ def _locate_touchdown(t, x, d1, h, watch, g_hi, active, sy, ctl, wk, out, rk, lo
             return STAGE_NOT_FINITE, 0.0
         if abs(value) <= 0.5 * tol or short:
             return STAGE_OK, theta
-        if value > 0.0:
-            lo, f_lo = theta, value
-            if side == 1:
-                f_hi *= 0.5
-            side = 1
-        else:
-            hi, f_hi = theta, value
-            if side == -1:
-                f_lo *= 0.5
-            side = -1
+        lo, f_lo, hi, f_hi, side = _illinois(theta, value, lo, f_lo, hi, f_hi, side)
     return STAGE_OK, theta
 
 
@@ -949,38 +908,7 @@ def _record_sample(s, t, x, active, sy, wk, out, solver, Rec):  # pragma: no cov
                 viol = max(viol, -phi[b, r])
     r_violation[s] = viol
     r_solver[s] = solver
-    # the object's: ½ m |ẋ|² + ½ ωᵀ I_w ω, -m g·x, [m ẋ; I_w ω + x × m ẋ] (I_w = R I_c Rᵀ)
-    Ro = np.empty((3, 3))
-    quaternion_rotation(x[X_QUATERNION:X_QUATERNION + 4], Ro)
-    mass = params[P_MASS]
-    L = np.zeros(3)
-    bw = np.zeros(3)
-    for a in range(3):
-        for c in range(3):
-            bw[a] += Ro[c, a] * x[X_TWIST + 3 + c]
-    for a in range(3):
-        acc = 0.0
-        for c in range(3):
-            acc += params[P_INERTIA + 3 * a + c] * bw[c]
-        for r in range(3):
-            L[r] += Ro[r, a] * acc
-    ke, pe = 0.0, 0.0
-    if n:
-        ke, pe = energy[EN_KINETIC], energy[EN_POTENTIAL]
-    p_lin = np.empty(3)
-    for a in range(3):
-        ke += 0.5 * (mass * x[X_TWIST + a] * x[X_TWIST + a] + x[X_TWIST + 3 + a] * L[a])
-        pe -= mass * params[P_GRAVITY + a] * x[X_POSITION + a]
-        p_lin[a] = mass * x[X_TWIST + a]
-    for a in range(3):
-        c1, c2 = (a + 1) % 3, (a + 2) % 3
-        arm_lin = energy[EN_MOMENTUM + a] if n else 0.0
-        arm_ang = energy[EN_MOMENTUM + 3 + a] if n else 0.0
-        r_momentum[s, a] = arm_lin + p_lin[a]
-        r_momentum[s, 3 + a] = (arm_ang + L[a] + x[X_POSITION + c1] * p_lin[c2]
-                                - x[X_POSITION + c2] * p_lin[c1])
-    r_kinetic[s] = ke
-    r_potential[s] = pe
+    record_energy(s, x, params, energy, n > 0, r_kinetic, r_potential, r_momentum)
 
 
 @njit(cache=True, error_model="numpy")

@@ -29,6 +29,7 @@ from multiarm_pin._compiled import layout, precompiled
 from multiarm_pin.model.rigid_object import ObjectState
 from multiarm_pin.sim import contact_events as ce
 from multiarm_pin.sim.closed_loop import FUSED_SOLVERS
+from multiarm_pin.sim.disturbances import WrenchSchedule
 from multiarm_pin.sim.result import Recorder
 from multiarm_pin.system import SystemState
 
@@ -78,8 +79,10 @@ class CompiledLoop:
         """The compiled loop of a run, or None when the run is not of the kind it does.
 
         It does: RK4, a compiled solver (:data:`~multiarm_pin.sim.closed_loop.FUSED_SOLVERS`),
-        arms whose every joint the compiled rigid-body pass supports, no supports, and an
-        :class:`~multiarm_pin.sim.controllers.ObjectPD` controller on its compiled path.
+        arms whose every joint the compiled rigid-body pass supports, no supports, an
+        :class:`~multiarm_pin.sim.controllers.ObjectPD` controller on its compiled path, and no
+        external wrench or a :class:`~multiarm_pin.sim.disturbances.WrenchSchedule` itself
+        (its intervals are the kernel's table; a subclass with its own ``__call__`` is not).
         """
         from multiarm_pin.sim.controllers.object_pd import ObjectPD
 
@@ -87,7 +90,8 @@ class CompiledLoop:
         if (integrator != "rk4" or stepper.solver not in FUSED_SOLVERS or not s.n_arms
                 or s.supports.n_rows
                 or type(stepper.controller) is not ObjectPD or not stepper.controller.compiled
-                or s.arm_set.compiled_model is None):
+                or s.arm_set.compiled_model is None
+                or (stepper.wrench is not None and type(stepper.wrench) is not WrenchSchedule)):
             return None
         return cls(stepper)
 
@@ -137,13 +141,7 @@ class CompiledLoop:
         if k > k0:
             self._finish_record(rec, times, done)
             ctrl.kernel_planned(tau, mu, qdd, a_pts, a_d)
-        nq, nv = s.nq, s.nv
-        q0 = layout.OBJECT_STATE_SIZE
-        new = SystemState(x[q0:q0 + nq].copy(), x[q0 + nq:q0 + nq + nv].copy(),
-                          ObjectState(x[layout.X_POSITION:layout.X_POSITION + 3].copy(),
-                                      x[layout.X_QUATERNION:layout.X_QUATERNION + 4].copy(),
-                                      x[layout.X_TWIST:layout.X_TWIST + 6].copy()))
-        return k, new
+        return k, state_from_vector(x, s.nq, s.nv)
 
     def _arguments(self, rec: Recorder, x: np.ndarray, times: np.ndarray, k0: int, k1: int,
                    a_pts: np.ndarray, a_d: np.ndarray) -> tuple:
@@ -229,6 +227,18 @@ class CompiledLoop:
         rec.mark_recorded(done.stop)
 
 
+def state_from_vector(x: np.ndarray, nq: int, nv: int) -> SystemState:
+    """The :class:`SystemState` (copies) of a kernels' state vector ``x``.
+
+    ``x`` in :func:`~multiarm_pin._compiled.layout.state_vector`'s layout.
+    """
+    q0 = layout.OBJECT_STATE_SIZE
+    return SystemState(x[q0:q0 + nq].copy(), x[q0 + nq:q0 + nq + nv].copy(),
+                       ObjectState(x[layout.X_POSITION:layout.X_POSITION + 3].copy(),
+                                   x[layout.X_QUATERNION:layout.X_QUATERNION + 4].copy(),
+                                   x[layout.X_TWIST:layout.X_TWIST + 6].copy()))
+
+
 def _entry_point(kernel, args: tuple):
     """The compiled specialisation of ``kernel`` for exactly the types of ``args``.
 
@@ -242,4 +252,4 @@ def _entry_point(kernel, args: tuple):
     return kernel.compile(tuple(numba.typeof(a) for a in args))
 
 
-__all__ = ["SOLVER_NAMES", "CompiledLoop"]
+__all__ = ["SOLVER_NAMES", "CompiledLoop", "state_from_vector"]

@@ -23,9 +23,10 @@ import numpy as np
 from multiarm_pin._compiled import contact_loop as kernels
 from multiarm_pin._compiled import layout, precompiled
 from multiarm_pin.dynamics import mlcp
-from multiarm_pin.model.rigid_object import ObjectState
 from multiarm_pin.sim import contact_events as ce
 from multiarm_pin.sim import event_location as el
+from multiarm_pin.sim.compiled_loop import state_from_vector
+from multiarm_pin.sim.disturbances import WrenchSchedule
 from multiarm_pin.sim.result import Recorder
 from multiarm_pin.system import SystemState
 
@@ -37,7 +38,8 @@ EVENT_KINDS = {kernels.EVENT_SEPARATION: "separation", kernels.EVENT_TOUCHDOWN: 
 """Event kind codes of the kernel's table."""
 
 EVENT_ROWS = 4096
-"""Rows of the event table of one call (the kernel hands back before it can overflow)."""
+"""Rows of the event table of one call at the least (the kernel hands back before it can
+overflow)."""
 
 HOLD_REASON = ("the touching contacts cannot make every object wrench (rank {rank} < 6); "
                "holding the arms still (gravity compensation and joint PD)")
@@ -143,11 +145,15 @@ class ContactLoop:
                   np.zeros((B, kc)), np.zeros((B, R)), np.zeros((B, R)), np.zeros((B, kc)),
                   np.zeros(6))
         self._k, self._m, self._kc = k, m, kc
-        self.events = np.zeros((EVENT_ROWS, kernels.EVENT_WIDTH))
-        self.n_events = np.zeros(1, np.int64)
+        # a step adds at most 4 B R events per event it handles (separations, touchdowns, the
+        # impact's separations, separations after it): the kernel hands back before a step
+        # when fewer rows than that are free
         self.reserve = 4 * (int(ce.MAX_EVENTS_PER_STEP) + 2) * B * R + 8
+        self.events = np.zeros((max(EVENT_ROWS, 2 * self.reserve), kernels.EVENT_WIDTH))
+        self.n_events = np.zeros(1, np.int64)
         self.control = np.zeros(3, np.int64)
-        self.onsets = np.zeros((64, kernels.HOLD_WIDTH))
+        # a hold-still onset follows a change of the active set: at most one per event
+        self.onsets = np.zeros((len(self.events) + 1, kernels.HOLD_WIDTH))
         self.n_onsets = np.zeros(1, np.int64)
         self.q_hold = np.zeros(nq)
         self.last_status = kernels.STAGE_OK
@@ -159,8 +165,10 @@ class ContactLoop:
         """The contact loop of a run, or None when the run is not of the kind it does.
 
         It does: RK4, unilateral rows (fingertips or supports), arms whose every joint the
-        compiled rigid-body pass supports (or none), and zero torque or an
-        :class:`~multiarm_pin.sim.controllers.ObjectPD` on its compiled path.
+        compiled rigid-body pass supports (or none), zero torque or an
+        :class:`~multiarm_pin.sim.controllers.ObjectPD` on its compiled path, and no external
+        wrench or a :class:`~multiarm_pin.sim.disturbances.WrenchSchedule` itself (its
+        intervals are the kernel's table; a subclass with its own ``__call__`` is not).
         """
         from multiarm_pin.sim.controllers.object_pd import ObjectPD
 
@@ -168,6 +176,8 @@ class ContactLoop:
         ctrl = stepper.controller
         if integrator != "rk4" or not stepper.unilateral:
             return None
+        if stepper.wrench is not None and type(stepper.wrench) is not WrenchSchedule:
+            return None  # a schedule of another kind (a subclass): its own __call__ decides
         if s.n_arms and (s.compiled is None or s.arm_set.compiled_model is None):
             return None
         if ctrl is not None and (type(ctrl) is not ObjectPD or not ctrl.compiled
@@ -315,20 +325,14 @@ class ContactLoop:
         stepper.active = active & s.contact_mask
         ctrl = stepper.controller
         if ctrl is not None:
-            for t, rank in self.onsets[:min(int(self.n_onsets[0]), len(self.onsets))].tolist():
+            for t, rank in self.onsets[:int(self.n_onsets[0])].tolist():
                 ctrl.warnings.append(f"t = {t:.6g} s: object_pd: "
                                      + HOLD_REASON.format(rank=int(rank)))
             ctrl.holding = bool(self.control[kernels.CTL_HOLDING])
             ctrl.margin_kept = bool(self.control[kernels.CTL_MARGIN_KEPT])
             if ctrl.holding:
                 ctrl._q_hold = self.q_hold.copy()
-        q0 = layout.OBJECT_STATE_SIZE
-        nq, nv = s.nq, s.nv
-        new = SystemState(x[q0:q0 + nq].copy(), x[q0 + nq:q0 + nq + nv].copy(),
-                          ObjectState(x[layout.X_POSITION:layout.X_POSITION + 3].copy(),
-                                      x[layout.X_QUATERNION:layout.X_QUATERNION + 4].copy(),
-                                      x[layout.X_TWIST:layout.X_TWIST + 6].copy()))
-        return k, new
+        return k, state_from_vector(x, s.nq, s.nv)
 
 
 __all__ = ["EVENT_KINDS", "SOLVER_NAMES", "ContactLoop", "rules_vector"]

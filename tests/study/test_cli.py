@@ -59,10 +59,11 @@ def _rows_written(out) -> int:
 
 
 def test_sigint_then_resume_runs_no_finished_case_again(tmp_path, warm_kernels):
-    # cases of 0.2 s simulated (~0.3-0.5 s each): after the first row, the interrupt lands with
-    # most of the 8 cases unfinished by a wide margin, whatever the machine's load
+    # cases of 6 s simulated (~0.3-0.5 s each on the compiled loop, 15-20x real time): after
+    # the first row, the interrupt lands with most of the 8 cases unfinished by a wide margin,
+    # whatever the machine's load
     study = tiny_simulation_study(tmp_path, masses=(2.0, 3.0, 4.0, 5.0), samples=2,
-                                  duration=0.2)
+                                  duration=6.0)
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "multiarm_pin.app.cli", "sweep", str(study), "--out", str(out),
            "--workers", "1"]
