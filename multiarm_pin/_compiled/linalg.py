@@ -144,8 +144,12 @@ def singular_values(A, out):  # pragma: no cover - compiled
                 if gamma == 0.0 or abs(gamma) <= eps * math.sqrt(alpha * beta):
                     continue
                 rotated = True
-                zeta = (beta - alpha) / (2.0 * gamma)
-                t = math.copysign(1.0, zeta) / (abs(zeta) + math.sqrt(1.0 + zeta * zeta))
+                diff = beta - alpha
+                if abs(gamma) * 1e150 < abs(diff):  # |zeta| > 5e149: t = 1 / (2 zeta) to
+                    t = gamma / diff                # round-off, without overflowing zeta
+                else:
+                    zeta = diff / (2.0 * gamma)
+                    t = math.copysign(1.0, zeta) / (abs(zeta) + math.sqrt(1.0 + zeta * zeta))
                 cs = 1.0 / math.sqrt(1.0 + t * t)
                 sn = cs * t
                 for a in range(r):
