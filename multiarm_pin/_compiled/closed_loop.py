@@ -411,6 +411,29 @@ def _record(s, t, x, nq, nv, N, nv_arm, v_starts, unilateral, wrenches, separati
             viol = max(viol, abs(ph))
             if unilateral[i, r] and (ph > separation[0] or rows[i, r, ROW_PHI_DOT] > separation[1]):
                 return False
+    record_state(s, t, x, nq, nv, nv_arm, v_starts, tau, qdd_s, a_o, wrenches, r_q, r_v, r_p,
+                 r_quat, r_tw, r_tau, r_qdd, r_a_o, r_wrench)
+    for i in range(n):
+        for r in range(m):
+            r_mu[s, i, r] = mu_s[i, r]
+            r_phi[s, i, r] = rows[i, r, ROW_PHI]
+            r_phi_dot[s, i, r] = rows[i, r, ROW_PHI_DOT]
+            for a in range(3):
+                r_points[s, i, r, a] = rows[i, r, ROW_POINT + a]
+                r_normals[s, i, r, a] = rows[i, r, ROW_NORMAL + a]
+    r_violation[s] = viol
+    record_energy(s, x, params, energy, True, r_kinetic, r_potential, r_momentum)
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def record_state(s, t, x, nq, nv, nv_arm, v_starts, tau, qdd, a_o, wrenches, r_q, r_v, r_p,
+                 r_quat, r_tw, r_tau, r_qdd, r_a_o, r_wrench):  # pragma: no cover - compiled
+    """Record sample ``s``'s state ``x``, torques, accelerations and external wrench.
+
+    ``tau`` and ``qdd`` are padded per arm, ``(n, k)``; ``a_o`` (6,); the wrench is the one at
+    ``t``; the record arrays as :func:`run_rk4`'s.
+    """
     q0 = OBJECT_STATE_SIZE
     v0 = q0 + nq
     for j in range(nq):
@@ -425,21 +448,11 @@ def _record(s, t, x, nq, nv, N, nv_arm, v_starts, unilateral, wrenches, separati
         r_tw[s, a] = x[X_TWIST + a]
         r_a_o[s, a] = a_o[a]
         r_wrench[s, a] = wrench_at(t, wrenches, a)
-    for i in range(n):
+    for i in range(nv_arm.shape[0]):
         for a in range(nv_arm[i]):
             j = v_starts[i] + a
             r_tau[s, j] = tau[i, a]
-            r_qdd[s, j] = qdd_s[i, a]
-        for r in range(m):
-            r_mu[s, i, r] = mu_s[i, r]
-            r_phi[s, i, r] = rows[i, r, ROW_PHI]
-            r_phi_dot[s, i, r] = rows[i, r, ROW_PHI_DOT]
-            for a in range(3):
-                r_points[s, i, r, a] = rows[i, r, ROW_POINT + a]
-                r_normals[s, i, r, a] = rows[i, r, ROW_NORMAL + a]
-    r_violation[s] = viol
-    record_energy(s, x, params, energy, True, r_kinetic, r_potential, r_momentum)
-    return True
+            r_qdd[s, j] = qdd[i, a]
 
 
 @njit(cache=True, error_model="numpy")
@@ -485,4 +498,4 @@ def record_energy(s, x, params, energy, arms, r_kinetic, r_potential, r_momentum
 
 __all__ = ["NULL_KD", "NULL_KP", "STAGE_CONTROLLER", "STAGE_NOT_FINITE", "STAGE_OK",
            "STAGE_RELEASE", "STAGE_RELEASE_IN_STEP", "STAGE_SEPARATION", "STAGE_SOLVE",
-           "closed_loop_stage", "record_energy", "run_rk4"]
+           "closed_loop_stage", "record_energy", "record_state", "run_rk4"]

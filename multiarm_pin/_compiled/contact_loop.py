@@ -48,6 +48,7 @@ from multiarm_pin._compiled.closed_loop import (
     STAGE_SOLVE,
     _advance,
     record_energy,
+    record_state,
     wrench_at,
 )
 from multiarm_pin._compiled.controller_kernels import (
@@ -870,25 +871,8 @@ def _record_sample(s, t, x, active, sy, wk, out, solver, Rec):  # pragma: no cov
      r_solver) = Rec
     nv, n = dims[DIMS_NV], dims[DIMS_N]
     nq = x.shape[0] - OBJECT_STATE_SIZE - 2 * nv
-    q0 = OBJECT_STATE_SIZE
-    v0 = q0 + nq
-    for j in range(nq):
-        r_q[s, j] = x[q0 + j]
-    for j in range(nv):
-        r_v[s, j] = x[v0 + j]
-    for a in range(3):
-        r_p[s, a] = x[X_POSITION + a]
-    for a in range(4):
-        r_quat[s, a] = x[X_QUATERNION + a]
-    for a in range(6):
-        r_tw[s, a] = x[X_TWIST + a]
-        r_a_o[s, a] = a_o[a]
-        r_wrench[s, a] = wrench_at(t, wrenches, a)
-    for i in range(n):
-        for a in range(nv_arm[i]):
-            j = v_starts[i] + a
-            r_tau[s, j] = tau[i, a]
-            r_qdd[s, j] = qdd_c[i, a]
+    record_state(s, t, x, nq, nv, nv_arm, v_starts, tau, qdd_c, a_o, wrenches, r_q, r_v, r_p,
+                 r_quat, r_tw, r_tau, r_qdd, r_a_o, r_wrench)
     viol = 0.0
     B, R = phi.shape
     for b in range(B):

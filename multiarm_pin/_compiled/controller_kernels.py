@@ -520,7 +520,7 @@ def touching_rank(W_o, N):  # pragma: no cover - compiled
         The rank, 0..6.
     """
     n = W_o.shape[0]
-    norms = np.zeros(W_o.shape[0] * W_o.shape[2])
+    A = np.empty((6, n * W_o.shape[2]))  # the unit columns, the first ``cols`` of them
     cols = 0
     for i in range(n):
         for s in range(N[i]):
@@ -528,21 +528,13 @@ def touching_rank(W_o, N):  # pragma: no cover - compiled
             for a in range(6):
                 acc += W_o[i, a, s] * W_o[i, a, s]
             if acc > 0.0:
-                norms[cols] = math.sqrt(acc)
+                norm = math.sqrt(acc)
+                for a in range(6):
+                    A[a, cols] = W_o[i, a, s] / norm
                 cols += 1
     if cols == 0:
         return 0
-    A = np.empty((6, cols))
-    p = 0
-    for i in range(n):
-        for s in range(N[i]):
-            acc = 0.0
-            for a in range(6):
-                acc += W_o[i, a, s] * W_o[i, a, s]
-            if acc > 0.0:
-                for a in range(6):
-                    A[a, p] = W_o[i, a, s] / norms[p]
-                p += 1
+    A = np.ascontiguousarray(A[:, :cols])
     sv = np.empty(cols)
     singular_values(A, sv)  # (one-sided Jacobi: no LAPACK call, 1 µs instead of 15)
     top = 0.0
