@@ -108,6 +108,62 @@ def wrench_at(t, wrenches, a):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
+def joint_pd(err, x, v_starts, nv_arm, kp, kd, z):  # pragma: no cover - compiled
+    """``object_pd``'s joint-space PD ``z = pad(kp err - kd v)`` (n, k) into ``z``.
+
+    Args:
+        err: (nv,) ``q_target ⊖ q`` [rad, m].
+        x: the state vector (``v`` read).
+        v_starts: (n,) int first joint of each arm in ``v``.
+        nv_arm: (n,) int joints per arm.
+        kp: stiffness [1/s²].
+        kd: damping [1/s].
+        z: output (n, k), zero on padding.
+    """
+    nv = err.shape[0]
+    v0 = x.shape[0] - 2 * nv
+    for i in range(z.shape[0]):
+        for a in range(z.shape[1]):
+            if a < nv_arm[i]:
+                j = v_starts[i] + a
+                z[i, a] = kp * err[j] - kd * x[v0 + j]
+            else:
+                z[i, a] = 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def tangent(x, nv, nv_arm, v_starts, qdd, a_o, d):  # pragma: no cover - compiled
+    """The tangent ``d`` (2 nv + 13,) ``[q̇; v̇; ṗ; q̇uat; ȧ]`` of ``x`` (``Stepper.derivative``).
+
+    Args:
+        x: the state vector.
+        nv: joints.
+        nv_arm: (n,) int joints per arm.
+        v_starts: (n,) int first joint of each arm in ``v``.
+        qdd: (n, k) the arms' accelerations, padded.
+        a_o: (6,) the object's acceleration.
+        d: output.
+    """
+    v0 = x.shape[0] - 2 * nv
+    for j in range(nv):
+        d[j] = x[v0 + j]
+    for i in range(nv_arm.shape[0]):
+        for a in range(nv_arm[i]):
+            d[nv + v_starts[i] + a] = qdd[i, a]
+    tw = x[X_TWIST:X_TWIST + 6]
+    qx, qy, qz, qw = x[X_QUATERNION], x[X_QUATERNION + 1], x[X_QUATERNION + 2], x[X_QUATERNION + 3]
+    wx, wy, wz = tw[3], tw[4], tw[5]
+    b = 2 * nv
+    d[b], d[b + 1], d[b + 2] = tw[0], tw[1], tw[2]
+    d[b + 3] = 0.5 * (qw * wx + wy * qz - wz * qy)
+    d[b + 4] = 0.5 * (qw * wy + wz * qx - wx * qz)
+    d[b + 5] = 0.5 * (qw * wz + wx * qy - wy * qx)
+    d[b + 6] = 0.5 * -(wx * qx + wy * qy + wz * qz)
+    for a in range(6):
+        d[b + 7 + a] = a_o[a]
+
+
+@njit(cache=True, error_model="numpy")
 def closed_loop_stage(t, x, arm_pass, model_ints, model_floats, q_ref, err, J, dJ, M, nle, H,
                       energy, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
                       unilateral, traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains,
@@ -184,15 +240,7 @@ def closed_loop_stage(t, x, arm_pass, model_ints, model_floats, q_ref, err, J, d
                            buf):
         return STAGE_NOT_FINITE
     reference_motion(t, traj, E, ref)
-    v0 = x.shape[0] - 2 * nv
-    kp, kd = null_gains[NULL_KP], null_gains[NULL_KD]
-    for i in range(n):
-        for a in range(k):
-            if a < nv_arm[i]:
-                j = v_starts[i] + a
-                z[i, a] = kp * err[j] - kd * x[v0 + j]
-            else:
-                z[i, a] = 0.0
+    joint_pd(err, x, v_starts, nv_arm, null_gains[NULL_KP], null_gains[NULL_KD], z)
     w = np.empty(6)
     for a in range(6):
         w[a] = wrench_at(t, wrenches, a)
@@ -210,22 +258,7 @@ def closed_loop_stage(t, x, arm_pass, model_ints, model_floats, q_ref, err, J, d
                 return STAGE_RELEASE
     qdd_s = view2(buf, off, SEG_QDD, n, k, m)
     a_o = view1(buf, off, SEG_A_O)
-    for j in range(nv):
-        d[j] = x[v0 + j]
-    for i in range(n):
-        for a in range(nv_arm[i]):
-            d[nv + v_starts[i] + a] = qdd_s[i, a]
-    tw = x[X_TWIST:X_TWIST + 6]
-    qx, qy, qz, qw = x[X_QUATERNION], x[X_QUATERNION + 1], x[X_QUATERNION + 2], x[X_QUATERNION + 3]
-    wx, wy, wz = tw[3], tw[4], tw[5]
-    b = 2 * nv
-    d[b], d[b + 1], d[b + 2] = tw[0], tw[1], tw[2]
-    d[b + 3] = 0.5 * (qw * wx + wy * qz - wz * qy)
-    d[b + 4] = 0.5 * (qw * wy + wz * qx - wx * qz)
-    d[b + 5] = 0.5 * (qw * wz + wx * qy - wy * qx)
-    d[b + 6] = 0.5 * -(wx * qx + wy * qy + wz * qz)
-    for a in range(6):
-        d[b + 7 + a] = a_o[a]
+    tangent(x, nv, nv_arm, v_starts, qdd_s, a_o, d)
     return STAGE_OK
 
 
@@ -498,4 +531,4 @@ def record_energy(s, x, params, energy, arms, r_kinetic, r_potential, r_momentum
 
 __all__ = ["NULL_KD", "NULL_KP", "STAGE_CONTROLLER", "STAGE_NOT_FINITE", "STAGE_OK",
            "STAGE_RELEASE", "STAGE_RELEASE_IN_STEP", "STAGE_SEPARATION", "STAGE_SOLVE",
-           "closed_loop_stage", "record_energy", "record_state", "run_rk4"]
+           "closed_loop_stage", "joint_pd", "record_energy", "record_state", "run_rk4", "tangent"]

@@ -47,8 +47,10 @@ from multiarm_pin._compiled.closed_loop import (
     STAGE_OK,
     STAGE_SOLVE,
     _advance,
+    joint_pd,
     record_energy,
     record_state,
+    tangent,
     wrench_at,
 )
 from multiarm_pin._compiled.controller_kernels import (
@@ -299,7 +301,6 @@ def _torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compiled
     q0 = OBJECT_STATE_SIZE
     nq = q_ref.shape[0]
     q = x[q0:q0 + nq]
-    v0 = q0 + nq
     kp, kd = null_gains[NULL_KP], null_gains[NULL_KD]
     full = _all_touching(active, N)
     touching_rows = 0
@@ -314,10 +315,7 @@ def _torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compiled
     rank = touching_rows
     if full or control[CTL_HOLDING] == 0 or touching_rows >= 6:
         difference(model_ints, q, q_ref, err)
-        for i in range(n):
-            for a in range(k):
-                z[i, a] = kp * err[v_starts[i] + a] - kd * x[v0 + v_starts[i] + a] \
-                    if a < nv_arm[i] else 0.0
+        joint_pd(err, x, v_starts, nv_arm, kp, kd, z)
         reference_motion(t, traj, E, ref)
         for attempt in range(2):
             # attempt 1: the margin cannot be kept; the least-norm forces without it (and no
@@ -353,10 +351,7 @@ def _torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compiled
             onsets[j, 1] = rank
         n_onsets[0] = j + 1
     difference(model_ints, q, q_hold, err)
-    for i in range(n):
-        for a in range(k):
-            z[i, a] = kp * err[v_starts[i] + a] - kd * x[v0 + v_starts[i] + a] \
-                if a < nv_arm[i] else 0.0
+    joint_pd(err, x, v_starts, nv_arm, kp, kd, z)
     hold_still_torques(buf, dims, nv_arm, z, tau)
     return STAGE_OK
 
@@ -430,25 +425,10 @@ def contact_stage(t, x, active, sy, ctl, wk, out, d):  # pragma: no cover - comp
         for b in range(B):
             for r in range(R):
                 phi_dd[b, r] = Av[b, r] - cc[b, r]
-    v0 = x.shape[0] - 2 * nv
-    for j in range(nv):
-        d[j] = x[v0 + j]
-    for i in range(n):
-        for a in range(nv_arm[i]):
-            d[nv + v_starts[i] + a] = qdd_c[i, a]
-    tw = x[X_TWIST:X_TWIST + 6]
-    qx, qy, qz, qw = x[X_QUATERNION], x[X_QUATERNION + 1], x[X_QUATERNION + 2], x[X_QUATERNION + 3]
-    wx, wy, wz = tw[3], tw[4], tw[5]
-    b = 2 * nv
-    d[b], d[b + 1], d[b + 2] = tw[0], tw[1], tw[2]
-    d[b + 3] = 0.5 * (qw * wx + wy * qz - wz * qy)
-    d[b + 4] = 0.5 * (qw * wy + wz * qx - wx * qz)
-    d[b + 5] = 0.5 * (qw * wz + wx * qy - wy * qx)
-    d[b + 6] = 0.5 * -(wx * qx + wy * qy + wz * qz)
     for a in range(6):
-        d[b + 7 + a] = a_o[a]
         if not math.isfinite(a_o[a]):
             return STAGE_NOT_FINITE, 0
+    tangent(x, nv, nv_arm, v_starts, qdd_c, a_o, d)
     return STAGE_OK, solver
 
 

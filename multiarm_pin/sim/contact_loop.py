@@ -158,6 +158,7 @@ class ContactLoop:
         self.q_hold = np.zeros(nq)
         self.last_status = kernels.STAGE_OK
         self._kernel = None  # (record, the kernel checked for its arguments' types)
+        self._kept_controller = None  # (controller inputs, the kernel's controller tuple)
         self._zero_x = np.zeros(nv)
 
     @classmethod
@@ -217,7 +218,7 @@ class ContactLoop:
             self.control[kernels.CTL_MARGIN_KEPT] = int(bool(ctrl.margin_kept))
             if ctrl.holding and ctrl._q_hold is not None:
                 self.q_hold[:] = ctrl._q_hold
-        kept = getattr(self, "_kept_controller", None)
+        kept = self._kept_controller
         if kept is not None and kept[0] is inputs:
             return kept[1]
         if inputs is None:
