@@ -246,3 +246,81 @@ def two_gripper_table_states(n_states: int, seed: int) -> list[SystemBlocks]:
         Wt = np.array([np.concatenate((z, np.cross(world[k], z))) for k in low]).T
         out.append(with_support_rows(b, Wt))
     return out
+
+
+def two_gripper_table_pushing_states(
+    n_states: int, seed: int, margin: float = 2.0,
+) -> list[tuple[SystemBlocks, np.ndarray]]:
+    """States of :func:`two_gripper_table_states`'s system built so that every row pushes.
+
+    By construction, not by drawing and filtering: at a random consistent state (velocities
+    projected on the constraints), the multipliers ``λ*`` are chosen first, every one at least
+    ``margin`` [N], and the torques are then solved for so that ``λ*`` and the motion they
+    give satisfy every row with ``φ̈ = 0``:
+
+    1. fingertip forces ``λ_f ~ U[margin, 4 margin]`` [N];
+    2. table forces ``λ_t``: the table is a zero-dof support, so its rows hold only if the
+       object's acceleration ``a_o = M_o⁻¹ (h_o + W_o,f λ_f + W_t λ_t)`` has ``W_tᵀ a_o = c_t``:
+       three independent equations in four unknowns (the coplanar rows are redundant); of the
+       line of solutions, the point with the largest smallest entry is taken, and the state is
+       redrawn when that entry is below ``margin``;
+    3. each arm's joint acceleration ``q̈_i``: the least-norm solution of its rows,
+       ``W_iᵀ q̈_i = c_i - W_o,iᵀ a_o``;
+    4. the torques ``τ_i = M_i q̈_i - h_i(0) - W_i λ_i`` (``M q̈ = h + W λ``, ``h`` containing ``τ``).
+
+    Then ``(a_o, q̈, λ*)`` solves the unilateral problem with every row pushing by at least
+    ``margin``, and since its motion is unique (``G`` is PSD), it is *the* motion: the
+    verdict "every row pushes" does not rest on round-off.
+
+    Returns:
+        ``(blocks, motion)`` pairs, ``motion`` the constructed dense ``[a_o; q̈_0; q̈_1]``.
+    """
+    from pathlib import Path
+
+    from multiarm_pin.app.scenario import build_scenario, load_scenario
+    from multiarm_pin.spatial import quaternion_to_rotation
+
+    path = Path(__file__).resolve().parents[2] / "scenarios" / "two_gripper_form_closure.yaml"
+    built = build_scenario(load_scenario(path))
+    system, s0 = built.system, built.initial_state
+    rng = np.random.default_rng(seed)
+    z = np.array([0.0, 0.0, 1.0])
+    out: list[tuple[SystemBlocks, np.ndarray]] = []
+    for _ in range(50 * n_states):
+        if len(out) == n_states:
+            break
+        st = system.project_velocities(system.state(
+            s0.q, rng.normal(0.0, 0.3, system.nv), s0.obj.position, s0.obj.quaternion,
+            rng.normal(0.0, 0.1, 6)))
+        b0 = system.blocks(st).blocks
+        world = built.obj.shape.vertices @ quaternion_to_rotation(st.obj.quaternion).T
+        low = np.argsort(world[:, 2], kind="stable")[:4]
+        Wt = np.array([np.concatenate((z, np.cross(world[k], z))) for k in low]).T
+        lam_f = [rng.uniform(margin, 4.0 * margin, int(b0.N[i])) for i in range(b0.n)]
+        w_f = b0.h_o + sum(b0.W_o[i, :, : b0.N[i]] @ lam_f[i] for i in range(b0.n))
+        Minv = np.linalg.inv(b0.M_o)
+        # W_tᵀ M_o⁻¹ (w_f + W_t λ_t) = 0 (c_t = 0): λ_t = λ_p + s n on the solution line
+        K = Wt.T @ Minv @ Wt
+        lam_p, *_ = np.linalg.lstsq(K, -Wt.T @ Minv @ w_f, rcond=1e-10)
+        n = np.linalg.svd(Wt)[2][-1]  # null vector of W_t (4 coplanar rows: rank 3)
+        # the s maximising min(λ_p + s n): the best of the pairwise crossings of the lines
+        cands = [(lam_p[j] - lam_p[k]) / (n[k] - n[j])
+                 for j in range(4) for k in range(j + 1, 4) if abs(n[k] - n[j]) > 1e-6]
+        s = max(cands, key=lambda v: (lam_p + v * n).min())
+        lam_t = lam_p + s * n
+        if lam_t.min() < margin:
+            continue
+        a_o = Minv @ (w_f + Wt @ lam_t)
+        assert np.abs(Wt.T @ a_o).max() < 1e-9 * max(1.0, np.abs(a_o).max())
+        taus, qdds = [], []
+        for i in range(b0.n):
+            k, m = int(b0.nv[i]), int(b0.N[i])
+            Wi = b0.W[i, :k, :m]
+            qdd_i, *_ = np.linalg.lstsq(Wi.T, b0.c[i, :m] - b0.W_o[i, :, :m].T @ a_o,
+                                        rcond=None)
+            taus.append(b0.M[i, :k, :k] @ qdd_i - b0.h[i, :k] - Wi @ lam_f[i])
+            qdds.append(qdd_i)
+        b = system.blocks(st, np.concatenate(taus)).blocks
+        out.append((with_support_rows(b, Wt), np.concatenate([a_o, *qdds])))
+    assert len(out) == n_states, "two_gripper_table_pushing_states: too few states pushed"
+    return out
