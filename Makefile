@@ -4,7 +4,7 @@ PYTHON ?= python3.11
 VENV := .venv
 STAMP := $(VENV)/.installed-$(shell cksum pyproject.toml | cut -d' ' -f1)
 
-.PHONY: demo test lint browser venv clean
+.PHONY: demo test portability lint browser venv clean
 
 $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "$(PYTHON) not found: install Python 3.11 or run make PYTHON=/path/to/python3.11"; exit 1; }
@@ -46,6 +46,12 @@ KERNEL_TESTS := tests/test_kernels.py tests/test_arm_set_fast_path.py tests/test
 test: $(STAMP) $(AOT) browser
 	$(VENV)/bin/python -m pytest -q
 	NUMBA_DISABLE_JIT=1 $(VENV)/bin/python -m pytest -q -p no:cacheprovider $(KERNEL_TESTS)
+
+## The round-off-sensitive tests (grasp, solvers, unilateral contacts, events) under other
+## CPUs' arithmetic: numba code-generation targets, OpenBLAS kernels and numpy SIMD paths that
+## this machine can execute, each in a fresh numba cache (tools/portability.py; not in `make test`).
+portability: $(STAMP)
+	$(VENV)/bin/python tools/portability.py
 
 ## Headless Chromium for the replay-page browser test (Debian package; needs root/apt).
 browser:
