@@ -82,7 +82,8 @@ class CompiledLoop:
         arms whose every joint the compiled rigid-body pass supports, no supports, an
         :class:`~multiarm_pin.sim.controllers.ObjectPD` controller on its compiled path, and no
         external wrench or a :class:`~multiarm_pin.sim.disturbances.WrenchSchedule` itself
-        (its intervals are the kernel's table; a subclass with its own ``__call__`` is not).
+        (its intervals are the kernel's table; a subclass with its own ``__call__`` is not),
+        and no torque saturation (the kernel adds the controller's torque as it is).
         """
         from multiarm_pin.sim.controllers.object_pd import ObjectPD
 
@@ -91,7 +92,8 @@ class CompiledLoop:
                 or s.supports.n_rows
                 or type(stepper.controller) is not ObjectPD or not stepper.controller.compiled
                 or s.arm_set.compiled_model is None
-                or (stepper.wrench is not None and type(stepper.wrench) is not WrenchSchedule)):
+                or (stepper.wrench is not None and type(stepper.wrench) is not WrenchSchedule)
+                or stepper.torque_limit is not None):
             return None
         return cls(stepper)
 

@@ -169,14 +169,15 @@ class ContactLoop:
         compiled rigid-body pass supports (or none), zero torque or an
         :class:`~multiarm_pin.sim.controllers.ObjectPD` on its compiled path, and no external
         wrench or a :class:`~multiarm_pin.sim.disturbances.WrenchSchedule` itself (its
-        intervals are the kernel's table; a subclass with its own ``__call__`` is not).
+        intervals are the kernel's table; a subclass with its own ``__call__`` is not), and no
+        torque saturation.
         """
         from multiarm_pin.sim.controllers.object_pd import ObjectPD
 
         s = stepper.system
         ctrl = stepper.controller
-        if integrator != "rk4" or not stepper.unilateral:
-            return None
+        if integrator != "rk4" or not stepper.unilateral or stepper.torque_limit is not None:
+            return None  # saturation: the kernel adds the controller's torque as it is
         if stepper.wrench is not None and type(stepper.wrench) is not WrenchSchedule:
             return None  # a schedule of another kind (a subclass): its own __call__ decides
         if s.n_arms and (s.compiled is None or s.arm_set.compiled_model is None):

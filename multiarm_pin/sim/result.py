@@ -36,6 +36,9 @@ class SimulationResult:
         object_position: (T, 3) [m]; object_quaternion: (T, 4) ``[x, y, z, w]``;
         object_twist: (T, 6) ``[ẋ; ω]`` world axes.
         tau: (T, nv) joint torques applied [N m].
+        tau_commanded: (T, nv) joint torques the controller commanded [N m]: ``tau`` itself
+            unless the run saturates the actuators (``simulate(torque_limit=...)``), where
+            ``tau = clip(tau_commanded, -limit, limit)``.
         mu: (T, B, R) contact multipliers [N] (positive = pushing; 0 on padding and on
             separated rows).
         phi: (T, B, R) gaps [m]; phi_dot: (T, B, R) gap rates [m/s].
@@ -59,6 +62,8 @@ class SimulationResult:
         external_wrench: (T, 6) ``[f; m]`` applied at the COM, world axes [N, N m].
         events: every separation and touchdown (:class:`ContactEvent`), in time order.
         contact_labels: ``(block, row, label)`` of every real row.
+        torque_limit: (nv,) the saturation bounds [N m or N] of the run (``inf``: none), or
+            None when it did not saturate.
     """
 
     t: np.ndarray
@@ -91,6 +96,8 @@ class SimulationResult:
     external_wrench: np.ndarray | None = None
     events: list[ContactEvent] = field(default_factory=list)
     contact_labels: list = field(default_factory=list)
+    tau_commanded: np.ndarray | None = None
+    torque_limit: np.ndarray | None = None
 
     @property
     def total_energy(self) -> np.ndarray:
@@ -117,6 +124,7 @@ class Recorder:
         self.quat = np.zeros((T, 4))
         self.twist = np.zeros((T, 6))
         self.tau = np.zeros((T, system.nv))
+        self.tau_cmd = None  # (T, nv) when the run saturates (start_saturation)
         self.mu = np.zeros((T, n, m))
         self.phi = np.zeros((T, n, m))
         self.phi_dot = np.zeros((T, n, m))
@@ -149,6 +157,8 @@ class Recorder:
         self.quat[k] = state.obj.quaternion
         self.twist[k] = state.obj.twist
         self.tau[k] = tau
+        if self.tau_cmd is not None:
+            self.tau_cmd[k] = stepper.commanded
         self.mu[k] = sol.mu
         self.phi[k] = ct.phi
         self.phi_dot[k] = ct.phi_dot
@@ -181,6 +191,10 @@ class Recorder:
             self.switches.append(float(t))
         self._singular = singular
         self.count = k + 1
+
+    def start_saturation(self) -> None:
+        """Record the commanded torques too (a run whose actuators saturate)."""
+        self.tau_cmd = np.zeros_like(self.tau)
 
     def state(self, k: int) -> SystemState:
         """The state recorded at sample ``k`` (copies)."""
@@ -223,6 +237,8 @@ class Recorder:
             active=self.active[:n], external_wrench=self.wrench[:n],
             events=[e for e in stepper.events if n == len(self.t) or e.t <= self.t[max(n - 1, 0)]],
             contact_labels=list(self.system.contact_labels),
+            tau_commanded=self.tau[:n] if self.tau_cmd is None else self.tau_cmd[:n],
+            torque_limit=stepper.torque_limit,
         )
 
 

@@ -128,6 +128,7 @@ def simulate(
     atol: float = 1e-11,
     max_record_bytes: int | None = None,
     external_wrench: WrenchSchedule | None = None,
+    torque_limit=None,
 ) -> SimulationResult:
     """Simulate the closed-loop system from ``initial_state`` for ``duration`` seconds.
 
@@ -152,6 +153,11 @@ def simulate(
             (:func:`record_bytes`); default :func:`default_record_limit`.
         external_wrench: wrench on the object's COM over time intervals
             (:class:`~multiarm_pin.sim.disturbances.WrenchSchedule`), or None.
+        torque_limit: (nv,) bound [N m or N] of each joint's applied torque (``inf``: none),
+            or None: the actuators saturate, ``τ = clip(τ_commanded, -limit, limit)`` inside
+            the dynamics, and both are recorded (``tau``, ``tau_commanded``). A saturating run
+            is integrated by the numpy stepper (the compiled loops add the controller's
+            torque as it is) and its result says so once in ``warnings``.
 
     Returns:
         :class:`SimulationResult`.
@@ -191,7 +197,8 @@ def simulate(
         )
     if external_wrench is not None and not isinstance(external_wrench, WrenchSchedule):
         external_wrench = WrenchSchedule(external_wrench)
-    stepper = Stepper(system, controller, solver, baumgarte, external_wrench)
+    limit = _torque_limit(system, torque_limit)
+    stepper = Stepper(system, controller, solver, baumgarte, external_wrench, limit)
     if integrator == "rk45" and stepper.unilateral:
         raise InputError(
             "integrator 'rk45' is not event-aware and the system has unilateral contacts "
@@ -207,6 +214,10 @@ def simulate(
         )
     times = np.arange(n_steps + 1) * dt
     rec = Recorder(system, len(times), solver, MAX_WARNINGS)
+    if limit is not None:
+        rec.start_saturation()
+        rec.warnings.append("torque saturation: the run is integrated by the numpy stepper "
+                            "(the compiled loops do not clip torques)")
 
     def report(frac: float) -> None:
         if progress is not None:
@@ -307,6 +318,17 @@ class _Stretch:
     def __exit__(self, *exc) -> None:
         if time.perf_counter() - self._t0 < self.WALL:
             self.size = min(2 * self.size, self.top)
+
+
+def _torque_limit(system: MultiArmSystem, torque_limit) -> np.ndarray | None:
+    """``torque_limit`` checked: None, or (nv,) positive bounds (``inf`` allowed)."""
+    if torque_limit is None:
+        return None
+    lim = np.array(torque_limit, dtype=float)
+    if lim.shape != (system.nv,) or np.isnan(lim).any() or not (lim > 0.0).all():
+        raise InputError(f"torque_limit: expected {system.nv} positive bounds [N m or N] "
+                         f"(inf: none), got {np.asarray(torque_limit).tolist()!r}")
+    return lim
 
 
 def _normalised(q) -> np.ndarray:

@@ -38,10 +38,15 @@ class Stepper:
     """Evaluates the closed-loop dynamics on the active set and handles contact events."""
 
     def __init__(self, system: MultiArmSystem, controller, solver: str, baumgarte,
-                 wrench: WrenchSchedule | None = None):
+                 wrench: WrenchSchedule | None = None, torque_limit: np.ndarray | None = None):
         self.system = system
         self.controller = controller
         self.solver = solver
+        # (nv,) |τ| bound [N m or N] of every joint, +inf where none; None: no saturation.
+        # The applied torque is clip(τ_commanded, -limit, limit); the commanded torque of the
+        # last evaluation is kept in `commanded` (the record's tau_commanded)
+        self.torque_limit = torque_limit
+        self.commanded = np.zeros(system.nv)
         # parsed once per run: the same tuple of floats at every evaluation (whose compiled
         # parameter vector CompiledSystem keeps)
         self.baumgarte = None if baumgarte is None else baumgarte_gains(baumgarte)
@@ -54,9 +59,10 @@ class Stepper:
         # id(state) -> (state, rows) of the last ROWS_KEPT states whose rows were evaluated
         # (the state is kept so that its id is not reused while the entry lives)
         self._rows: dict[int, tuple[SystemState, ContactRows]] = {}
-        # _evaluate's fused branch, decided once: arms' bilateral rows only and no wrench
+        # _evaluate's fused branch, decided once: arms' bilateral rows only, no wrench and no
+        # saturation (the fused kernels add the controller's torque as it is)
         self._fused = bool(system.n_arms and not self.unilateral and self.wrench is None
-                           and not system.supports.n_rows)
+                           and not system.supports.n_rows and torque_limit is None)
 
     def evaluate(self, t: float, state: SystemState):
         """``(solution, evaluation, tau, rows)`` at ``(t, state)`` with the current active set.
@@ -65,10 +71,11 @@ class Stepper:
         """
         c = self._cache
         if c is not None and c[0] == t and c[1] is state and np.array_equal(c[2], self.active):
+            self.commanded = c[4]
             return c[3]
         try:
             out = self._evaluate(t, state)
-            self._cache = (t, state, self.active.copy(), out)
+            self._cache = (t, state, self.active.copy(), out, self.commanded)
             self._remember(state, out[3])
             return out
         except MultiArmError as exc:
@@ -96,7 +103,7 @@ class Stepper:
         if not s.n_arms:
             full, rows = s.contact_blocks(state, None, None, self.baumgarte, w)
             return self._solve(t, full), None, np.zeros(0), rows
-        if not self.unilateral and w is None and not s.supports.n_rows:
+        if self._fused:
             # arms' bilateral rows only: one shared, fused evaluation (blocks, controller and
             # forward dynamics on one buffer, multiarm_pin.sim.closed_loop)
             sol, ev, tau = closed_loop_evaluation(s, self.controller, t, state, self.solver,
@@ -111,6 +118,9 @@ class Stepper:
             blocks = ev.blocks
         else:
             tau = controller_torques(self.controller, t, state, ev, s.nv)
+            if self.torque_limit is not None:  # the actuators saturate: τ applied = clip(τ)
+                self.commanded = tau
+                tau = np.clip(tau, -self.torque_limit, self.torque_limit)
             # with_torques's sum without its input checks: tau is checked (shape, finite)
             # and pad puts zeros on the padded dofs
             blocks = ev.blocks.replaced(h=ev.blocks.h + s.pad(tau))
