@@ -109,6 +109,19 @@ class SimulationResult:
         return _sample_state(self.q, self.v, self.object_position, self.object_quaternion,
                              self.object_twist, k)
 
+    def arm_wrench(self, n_arms: int) -> np.ndarray:
+        """(T, n_arms, 6) each arm's wrench on the object ``[f; m]`` [N, N m], world axes.
+
+        ``f = Σ μ_r n_r`` over the arm's rows and ``m = Σ (p_r - x) × μ_r n_r``, the moment
+        about the object's COM ``x`` (``object_position``); ``p_r`` and ``n_r`` are the rows'
+        recorded contact points and push directions, so ``[f; m]`` is ``W_o,i μ_i``, the arm's
+        share of the wrench the object's Newton-Euler equations see. The arms are the first
+        ``n_arms`` blocks (the supports' block, if any, comes after them).
+        """
+        f = self.mu[:, :n_arms, :, None] * self.normals[:, :n_arms]
+        r = self.contact_points[:, :n_arms] - self.object_position[:, None, None, :]
+        return np.concatenate([f.sum(axis=2), np.cross(r, f).sum(axis=2)], axis=-1)
+
 class Recorder:
     """Preallocated arrays of T samples, filled one sample at a time by :meth:`record`."""
 
