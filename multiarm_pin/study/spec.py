@@ -229,7 +229,7 @@ def _load_yaml(path: Path, f: str):
     try:
         return load_yaml_file(path)
     except ScenarioError as exc:
-        raise StudyError(exc.file, exc.key, exc.message) from None
+        raise StudyError(exc.file, exc.key, exc.message, exc.line, exc.column) from None
 
 
 def parse_study(data, file: str = "<study>") -> StudySpec:

@@ -96,7 +96,7 @@ def test_six_contacts_and_empty_region(capsys, tmp_path):
         ("object: {shape: {type: box, size: [2, 1, 1]}}\ncontacts: [1]\n", "contacts[0]"),
         ("object: {shape: {type: box, size: [2, 1, 1]}}\ncontacts: []\nseventh_contact_face: up\n",
          "seventh_contact_face"),
-        ("object: [unclosed\n", "invalid YAML"),
+        ("object: [unclosed\n", "bad.yaml:2:1: YAML syntax error"),
     ],
 )  # fmt: skip
 def test_invalid_files_exit_2_naming_file_and_key(tmp_path, capsys, text, needle):
