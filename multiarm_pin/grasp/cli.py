@@ -16,9 +16,17 @@ from multiarm_pin.grasp.report import analyse, draw_grasp, format_report, load_g
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    """Add the grasp command's arguments: FILE, ``--json``, ``--picture``, ``--no-picture``."""
+    """Add the grasp command's arguments (FILE, --json, --seventh, --picture, --no-picture)."""
     parser.add_argument("file", metavar="FILE", help="grasp YAML file")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
+    parser.add_argument(
+        "--seventh",
+        metavar="K",
+        type=int,
+        default=None,
+        help="compute the seventh-contact region of contact K only (numbered from 1 in the "
+             "file's order; default: every contact whose removal leaves six independent ones)",
+    )
     parser.add_argument(
         "--picture",
         metavar="PATH",
@@ -65,7 +73,13 @@ def run(args: argparse.Namespace) -> int:
             return 2
     try:
         gf = load_grasp_file(args.file)
-        rep, region = analyse(gf)
+        seventh = getattr(args, "seventh", None)
+        if seventh is not None and not 1 <= seventh <= len(gf.grasp):
+            print(f"error: --seventh {seventh}: expected a contact number in "
+                  f"1..{len(gf.grasp)} ({gf.path} has {len(gf.grasp)} contacts, numbered from "
+                  "1 in the order of the file)", file=sys.stderr)
+            return 2
+        rep, region = analyse(gf, None if seventh is None else seventh - 1)
     except ScenarioError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
