@@ -312,7 +312,11 @@ def _jsonable(x):
 def format_report(rep: dict[str, Any]) -> str:
     """A readable multi-line text of a report from :func:`analyse`."""
     yes = {True: "yes", False: "no"}
-    lines = [f"grasp file: {rep['file']}  ({rep['n_contacts']} contacts)"]
+    if rep.get("kind") == "scenario":
+        lines = [f"scenario file: {rep['file']}  ({rep['n_contacts']} fingertip contacts: "
+                 + ", ".join(f"{i} {n}" for i, n in enumerate(rep["contact_names"], 1)) + ")"]
+    else:
+        lines = [f"grasp file: {rep['file']}  ({rep['n_contacts']} contacts)"]
     lines.append(
         f"form closure: {yes[rep['form_closure']]}   rank {rep['rank']}   LP margin "
         f"{rep['margin']:.6g}   Ferrari-Canny epsilon {rep['ferrari_canny']:.6g} "

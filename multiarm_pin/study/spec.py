@@ -260,7 +260,9 @@ def parse_study(data, file: str = "<study>") -> StudySpec:
         raise StudyError(f, "base", f"invalid base file: {exc}") from None
     if not isinstance(base_data, Mapping):
         raise StudyError(f, "base", f"{base_file}: expected a scenario or grasp mapping")
-    base_kind = "grasp" if "contacts" in base_data and "arms" not in base_data else "scenario"
+    from multiarm_pin.app.grasp_input import is_grasp_file
+
+    base_kind = "grasp" if is_grasp_file(base_data) else "scenario"
     _validate_base(base_data, str(base_file), base_kind, f)
     name = data.get("name", Path(f).stem)
     if not isinstance(name, str) or not name:

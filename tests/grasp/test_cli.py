@@ -200,3 +200,57 @@ def test_seventh_contact_key(tmp_path, capsys):
         assert run(_args(f, "--no-picture")) == 2
         err = capsys.readouterr().err
         assert f"{f}: seventh_contact: expected a contact number in 1..7" in err
+
+
+SCENARIOS = ROOT / "scenarios"
+
+
+def test_grasp_of_a_scenario_with_supports_through_the_cli():
+    """Issue 25: `grasp` refused a scenario with supports that `sweep` in grasp mode read."""
+    import yaml
+    from run_helpers import run_cli
+
+    from multiarm_pin.study.case import grasp_of
+    from multiarm_pin.study.metrics import grasp_metrics
+
+    f = SCENARIOS / "pick_from_table.yaml"
+    p = run_cli("grasp", f, "--json", "--no-picture")
+    assert p.returncode == 0, p.stderr
+    rep = json.loads(p.stdout)
+    assert rep["kind"] == "scenario" and rep["n_contacts"] == 7 and rep["form_closure"] is True
+    assert rep["contact_names"][0] == "four_finger:fingertip_1"
+    (note,) = [n for n in rep["notes"] if n.startswith("scenario file")]
+    assert "ignored (not about the grasp): supports, controller, simulation" in note
+    assert len(rep["regions"]) == 7 and all(e["contact_inside"] for e in rep["regions"])
+    # the study's grasp mode reads the same grasp
+    grasp, L = grasp_of(yaml.safe_load(f.read_text()), str(f))
+    m = grasp_metrics(grasp, L)
+    assert rep["margin"] == pytest.approx(m["margin"], abs=1e-12)
+    text = run_cli("grasp", f, "--no-picture", "--seventh", "4")
+    assert text.returncode == 0, text.stderr
+    assert text.stdout.startswith("scenario file: ") and "4 four_finger:fingertip_4" in text.stdout
+    assert "contact 4 on face +z, fixed 1, 2, 3, 5, 6, 7: area" in text.stdout
+
+
+@pytest.mark.parametrize("name, needle", [
+    ("two_ur5_box.yaml", "arms: no fingertip grasp to analyse: the scenario has left (weld), "
+                         "right (weld)"),
+    ("box_on_table.yaml", "arms: no fingertip grasp to analyse: the scenario has no arms and "
+                          "1 support(s)"),
+])
+def test_grasp_of_a_scenario_without_fingertips_is_refused(name, needle):
+    from run_helpers import run_cli
+
+    p = run_cli("grasp", SCENARIOS / name, "--no-picture")
+    assert p.returncode == 2 and "Traceback" not in p.stderr
+    assert f"{SCENARIOS / name}: {needle}" in p.stderr and len(p.stderr.splitlines()) == 1
+
+
+def test_grasp_of_a_scenario_contact_off_its_face(tmp_path, capsys):
+    text = (SCENARIOS / "two_gripper_form_closure.yaml").read_text()
+    first = text.index("point: [", text.index("contacts:"))
+    f = tmp_path / "off.yaml"
+    f.write_text(text[:first] + "point: [0.4, 0.9, 0.15]}" + text[text.index("}", first) + 1:])
+    assert run(_args(f, "--no-picture")) == 2
+    err = capsys.readouterr().err
+    assert f"{f}: arms[0].joint.contacts[0]: contact point [0.4, 0.9, 0.15]" in err
