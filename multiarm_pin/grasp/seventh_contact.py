@@ -16,6 +16,12 @@ Two methods give the region, both as a convex polygon in the face's own 2-D coor
   ``p7 = proj + e7 × m`` (Appendix A.3: the moment is the in-plane offset from the projected
   origin turned by -90° about ``e7``) turns moments into face points.
 
+Which contacts are fixed is the caller's choice in those two; :func:`seventh_contact_regions`
+makes it independent of the order of the contacts: each contact in turn moves on its face,
+the others held fixed, and its region is computed when they are independent (rank 6, decided
+with the margin :data:`RANK_MARGIN` on ``σ_6 / σ_1`` so that no order's round-off changes
+the verdict); the report and ``multiarm-pin grasp`` use it.
+
 The region is open (strict inequalities); the polygon returned is its closure clipped to the
 face, and it is reported empty when it has no area. The 2-D polygon geometry (area, clipping,
 hulls) is :mod:`multiarm_pin.grasp.polygon2d`; ``polygon_area`` and ``signed_inside_distance``
