@@ -334,7 +334,8 @@ def seventh_contact_regions(
         (empty for fewer than six contacts, and for six without a ``face``).
 
     Raises:
-        GraspError: no polyhedron, ``seventh`` out of range, or an unknown face.
+        GraspError: no polyhedron, ``seventh`` out of range (or given with fewer than seven
+            contacts), or an unknown face.
     """
     N = len(grasp)
     poly = grasp.polyhedron
@@ -343,6 +344,10 @@ def seventh_contact_regions(
     if seventh is not None and not 0 <= int(seventh) < N:
         raise GraspError(f"seventh contact: expected a contact number in 1..{N}, got "
                          f"{int(seventh) + 1}")
+    if seventh is not None and N < 7:
+        raise GraspError(f"seventh contact {int(seventh) + 1}: a contact moves with six others "
+                         f"held fixed, and the grasp has {N} contacts; name a face for one "
+                         "more contact instead")
     k_face = None
     if face is not None:
         k_face = _face_setup(grasp, face)[1]

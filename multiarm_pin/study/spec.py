@@ -277,6 +277,13 @@ def parse_study(data, file: str = "<study>") -> StudySpec:
                          f"expected one of {', '.join(MODES)}")
     if base_kind == "grasp" and mode != "grasp":
         raise StudyError(f, "mode", "a grasp file base can only be studied in mode 'grasp'")
+    if base_kind == "scenario" and mode == "grasp":  # its grasp, read as `grasp` reads it
+        from multiarm_pin.app.grasp_input import grasp_input_from_data
+
+        try:
+            grasp_input_from_data(base_data, base_file)
+        except MultiArmError as exc:
+            raise StudyError(f, "base", f"invalid base file for mode 'grasp': {exc}") from exc
     fixed_raw = data.get("set", {}) or {}
     if not isinstance(fixed_raw, Mapping):
         raise StudyError(f, "set", "expected a mapping {key path: value}")

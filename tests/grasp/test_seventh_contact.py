@@ -286,3 +286,13 @@ def test_named_seventh_contact_and_face():
     assert r.contact == 5 and r.inside
     with pytest.raises(GraspError, match="1..7"):
         seventh_contact_regions(g, seventh=7)
+
+
+def test_a_named_seventh_needs_six_others():
+    from multiarm_pin.grasp import load_grasp_file, seventh_contact_regions
+
+    g = load_grasp_file(GRASPS / "box_form_closure.yaml").grasp
+    six = g.with_contacts(g.contacts[:6])
+    with pytest.raises(GraspError, match="six others held fixed, and the grasp has 6"):
+        seventh_contact_regions(six, seventh=2)
+    assert seventh_contact_regions(six) == ()
