@@ -93,14 +93,15 @@ def _print_arm(arm, q, joints: bool = False, joint_to_object: str = "", q_source
 
 def _joint_kind(shortname: str) -> str:
     """Pinocchio's joint model name in words (``JointModelRZ`` -> ``revolute z``)."""
+    import re
+
     name = shortname.removeprefix("JointModel")
-    for prefix, word in (("RevoluteUnaligned", "revolute (axis)"),
-                         ("RevoluteUnboundedUnaligned", "continuous (axis)"),
-                         ("RUB", "continuous "), ("PrismaticUnaligned", "prismatic (axis)"),
-                         ("R", "revolute "), ("P", "prismatic ")):
-        if name.startswith(prefix):
-            return (word + name[len(prefix):].lower()).strip()
-    return name.lower()
+    words = {"R": "revolute", "P": "prismatic", "RUB": "continuous"}
+    m = re.fullmatch(r"(RUB|R|P)([XYZ])", name)
+    if m:
+        return f"{words[m.group(1)]} {m.group(2).lower()}"
+    return {"RevoluteUnaligned": "revolute (axis)", "PrismaticUnaligned": "prismatic (axis)",
+            "RevoluteUnboundedUnaligned": "continuous (axis)"}.get(name, name.lower())
 
 
 def _print_object(obj, state, gravity) -> None:
