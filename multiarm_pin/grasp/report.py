@@ -352,7 +352,7 @@ def format_report(rep: dict[str, Any]) -> str:
             lines.append(f"    - {msg}")
         lines.append("    vertices: " + ", ".join(
             f"[{v[0]:.4f}, {v[1]:.4f}, {v[2]:.4f}]" for v in e["vertices"]))
-        if "independence_bound" in e:
+        if "independence_bound" in e and e["contact"] is not None:  # else: under stability
             lines.append(f"    the fixed six stay independent for displacements < "
                          f"{e['independence_bound']:.6g} m")
         if "linearised_tolerance" in e:
