@@ -296,3 +296,20 @@ def test_a_named_seventh_needs_six_others():
     with pytest.raises(GraspError, match="six others held fixed, and the grasp has 6"):
         seventh_contact_regions(six, seventh=2)
     assert seventh_contact_regions(six) == ()
+
+
+def test_eq_2_3_in_all_720_orders_of_the_six_fixed_contacts():
+    """Eq 2.3's blocks depend on the order (e_A is the first three normals, or the best
+    triple when those are dependent): all 6! orders of the fixed six give one region."""
+    from itertools import permutations
+
+    from multiarm_pin.grasp import load_grasp_file
+
+    g = load_grasp_file(GRASPS / "box_form_closure.yaml").grasp
+    six, seventh = g.contacts[:6], g.contacts[6]
+    ref = region_by_inverse(g, "+z")
+    assert ref.area > 1.0
+    for order in permutations(range(6)):
+        r = region_by_inverse(g.with_contacts([six[i] for i in order] + [seventh]), "+z")
+        assert r.area == pytest.approx(ref.area, rel=1e-9)
+        assert len(r.polygon) == len(ref.polygon) and _hausdorff(r.polygon, ref.polygon) < 1e-9
