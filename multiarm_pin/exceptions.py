@@ -130,13 +130,18 @@ class ScenarioError(MultiArmError, ValueError):
     Attributes:
         file: the scenario file.
         key: the key path, e.g. ``"arms[1].joint.type"``.
+        line, column: 1-based position in the file (a YAML syntax error), or None; the
+            message then starts ``file:line:column:``.
     """
 
-    def __init__(self, file: str, key: str, message: str):
+    def __init__(self, file: str, key: str, message: str, line: int | None = None,
+                 column: int | None = None):
         self.file = str(file)
         self.key = key
         self.message = message
-        super().__init__(f"{self.file}: {key}: {message}" if key else f"{self.file}: {message}")
+        self.line, self.column = line, column
+        where = self.file if line is None else f"{self.file}:{line}:{column}"
+        super().__init__(f"{where}: {key}: {message}" if key else f"{where}: {message}")
 
 
 class OutputError(MultiArmError, OSError):

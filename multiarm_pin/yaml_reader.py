@@ -81,17 +81,54 @@ def load_yaml_text(text: str, file: str):
         for an empty document.
 
     Raises:
-        ScenarioError: syntax error or a duplicate key (naming both lines).
+        ScenarioError: syntax error (one line: file, line, column, what was found) or a
+            duplicate key (naming both lines).
     """
     try:
         node = yaml.compose(text, Loader=StrictLoader)
         if node is not None:
             _check_duplicates(node, file)
         return yaml.load(text, Loader=StrictLoader)  # noqa: S506 (a SafeLoader subclass)
+    except yaml.MarkedYAMLError as exc:
+        raise syntax_error(exc, file) from None
     except yaml.YAMLError as exc:
         raise ScenarioError(file, "", f"invalid YAML (YAML syntax error): {exc}") from None
     except RecursionError:
         raise ScenarioError(file, "", "YAML nested too deeply") from None
+
+
+def syntax_error(exc: yaml.MarkedYAMLError, file: str) -> ScenarioError:
+    """One line for a PyYAML error: ``file:line:column: YAML syntax error: what was found``.
+
+    PyYAML's own text quotes the document as ``<unicode string>`` over several lines (the
+    context, a caret line, the problem); this keeps the problem, its position (1-based) and
+    where the construct it was reading started.
+    """
+    mark = exc.problem_mark or exc.context_mark
+    problem = _plain(exc.problem or "syntax error")
+    text = f"YAML syntax error: {problem}"
+    if exc.context:
+        cm = exc.context_mark
+        elsewhere = (cm is not None and mark is not None
+                     and (cm.line, cm.column) != (mark.line, mark.column))
+        started = f" started on line {cm.line + 1}, column {cm.column + 1}" if elsewhere else ""
+        text += f" ({_plain(exc.context)}{started})"
+    if mark is None:
+        return ScenarioError(file, "", text)
+    return ScenarioError(file, "", text, mark.line + 1, mark.column + 1)
+
+
+def _plain(text: str) -> str:
+    """PyYAML's token names in words (``'<stream end>'`` is the end of the file)."""
+    for token, words in (("'<stream end>'", "the end of the file"),
+                         ("<stream end>", "the end of the file"),
+                         ("end of stream", "end of the file"),
+                         ("'<scalar>'", "a value"),
+                         ("<block end>", "the end of the indented block"),
+                         ("'<block mapping start>'", "a key indented differently"),
+                         ("<block mapping start>", "a key indented differently")):
+        text = text.replace(token, words)
+    return " ".join(text.split())
 
 
 def load_yaml_file(path) -> object:
@@ -272,4 +309,12 @@ def _shape_text(shape) -> str:
     return f"({inner},)" if len(shape) == 1 else f"({inner})"
 
 
-__all__ = ["Reader", "StrictLoader", "describe", "did_you_mean", "load_yaml_file", "load_yaml_text"]
+__all__ = [
+    "Reader",
+    "StrictLoader",
+    "describe",
+    "did_you_mean",
+    "load_yaml_file",
+    "load_yaml_text",
+    "syntax_error",
+]

@@ -82,6 +82,43 @@ def test_exit_codes_and_no_tracebacks(tmp_path):
         assert p.stderr.startswith("error: ") and "Traceback" not in p.stderr, p.stderr
 
 
+def _numbers(line: str) -> np.ndarray:
+    """The numbers of the bracketed list at the end of a printed line."""
+    return np.array(line[line.rindex("[") + 1:line.rindex("]")].split(), dtype=float)
+
+
+def test_info_of_a_scenario_file():
+    """Issue 25: `info` accepts a scenario: its arms, tool frames, joints, object, supports."""
+    from run_helpers import REPO
+
+    p = run_cli("info", REPO / "scenarios" / "pick_from_table.yaml")
+    assert p.returncode == 0, p.stderr
+    out = p.stdout
+    lines = out.splitlines()
+    assert lines[0].startswith("scenario pick_from_table (") and "2 arm(s), 1 support(s)" in out
+    assert sum(ln.startswith("arm ") for ln in lines) == 2
+    assert "arm four_finger (" in out and "nq=6 nv=6 tool=tool0" in out
+    assert "  joints: shoulder_pan_joint (revolute z), shoulder_lift_joint (revolute y)" in out
+    assert ("  joint to the object: fingertips (fingertip_1 on +x, fingertip_2 on +y, "
+            "fingertip_3 on +z, fingertip_4 on +z)") in out
+    assert out.count("(found by inverse kinematics)") == 2
+    assert "object: box 0.8 x 0.6 x 0.4 m, 4 kg" in out
+    assert "support table: plane through [0.  0.  0.7] m, normal [0. 0. 1.]" in out
+    # the object's numbers against their closed forms: a uniform 4 kg box, gravity 9.81
+    m, (a, b, c) = 4.0, (0.8, 0.6, 0.4)
+    inertia = m / 12 * np.array([b * b + c * c, a * a + c * c, a * a + b * b])
+    M_o = next(ln for ln in lines if ln.startswith("  M_o diagonal"))
+    np.testing.assert_allclose(_numbers(M_o), [m, m, m, *inertia], atol=1e-4)
+    h_o = next(ln for ln in lines if ln.startswith("  h_o"))
+    np.testing.assert_allclose(_numbers(h_o), [0, 0, -m * 9.81, 0, 0, 0], atol=1e-4)
+    # without an argument: today's two arms and a box
+    p = run_cli("info")
+    assert p.returncode == 0, p.stderr
+    assert "arm left (" in p.stdout and "object: box 0.8 x 0.4 x 0.3 m, 4 kg" in p.stdout
+    p = run_cli("info", REPO / "missing.yaml")
+    assert p.returncode == 2 and "missing.yaml: file not found" in p.stderr
+
+
 def _imported_after(code: str) -> set[str]:
     """Top-level packages (and a few submodules) in ``sys.modules`` after running ``code``."""
     import subprocess

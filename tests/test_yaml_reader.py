@@ -43,3 +43,37 @@ def test_file_errors(tmp_path):
     f.write_bytes(b"a: [1, 2\n")
     with pytest.raises(ScenarioError, match="YAML syntax error"):
         load_yaml_file(f)
+
+
+def test_syntax_error_is_one_line_with_file_line_and_column():
+    with pytest.raises(ScenarioError) as info:
+        load_yaml_text("a: 1\nb: [1, 2\n", "f.yaml")
+    assert (info.value.line, info.value.column) == (3, 1)
+    text = str(info.value)
+    assert text.startswith("f.yaml:3:1: YAML syntax error: ") and "\n" not in text
+    assert "the end of the file" in text and "started on line 2, column 4" in text
+    assert "<unicode string>" not in text and "<stream end>" not in text
+
+
+BAD_YAML = "name: x\nobject: {shape: {type: box, size: [1, 1, 1]}\ncontacts: []\n"
+"""A flow mapping left open on line 2 (column 9): PyYAML stops at line 3, column 1."""
+
+
+@pytest.mark.parametrize("command", ["run", "grasp", "sweep", "sweep-base", "info"])
+def test_syntax_errors_through_the_cli(tmp_path, command):
+    """Exit 2, one or two lines naming the file and line:column, no traceback (issue 25)."""
+    from run_helpers import run_cli, write
+
+    bad = write(tmp_path / "bad.yaml", BAD_YAML)
+    if command == "sweep-base":  # a valid study whose base scenario is broken
+        study = write(tmp_path / "study.yaml", "base: bad.yaml\nmode: grasp\nparameters:\n"
+                      "  - {path: object.mass, grid: [1, 2]}\n")
+        p = run_cli("sweep", study, "--out", tmp_path / "out")
+    else:
+        p = run_cli(command, bad, *(["--out", tmp_path / "out"] if command == "sweep" else []))
+    assert p.returncode == 2, (p.stdout, p.stderr)
+    err = p.stderr.strip()
+    assert f"{bad}:3:1: YAML syntax error: expected ',' or '}}', but got a value" in err
+    assert "started on line 2, column 9" in err
+    assert len(err.splitlines()) <= 2, err
+    assert "Traceback" not in err and "<unicode string>" not in err

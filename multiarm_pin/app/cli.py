@@ -7,7 +7,7 @@ Subcommands:
     ``sweep STUDY.yaml``    a study (sweep / Monte Carlo) of a scenario or grasp, on Dask
     ``demo``                run the shipped default scenario (the README's main command)
     ``scenarios``           list the shipped scenario, grasp and study files
-    ``info``                load arms and an object and print their key quantities
+    ``info [SCENARIO]``     a scenario's (or two default arms') key quantities
 
 The argument parsing of ``run``, ``replay``, ``demo`` and ``scenarios`` lives here; the work is
 done by :mod:`multiarm_pin.app.runner` (``grasp`` and ``sweep`` bring their own parsers from
@@ -34,14 +34,23 @@ from multiarm_pin.exceptions import MultiArmError, RunFailedError, RunInterrupte
 
 
 def _info(args: argparse.Namespace) -> int:
-    """Load two arms and an object and print their key quantities."""
+    """Print the key quantities of a scenario's arms and object (or of a default pair).
+
+    With a scenario file: its arms (robot, tool frame, the arm's joints with their types, the
+    joint to the object), built and placed as ``run`` builds them (q0 given or found by
+    inverse kinematics), the object, and the supports. Without one: a UR5 and a Panda beside a
+    4 kg box.
+    """
     import numpy as np
+
+    np.set_printoptions(precision=4, suppress=True)
+    if getattr(args, "scenario", None):
+        return _info_scenario(args.scenario)
     import pinocchio as pin
 
     from multiarm_pin.model.arm import Arm
     from multiarm_pin.model.rigid_object import ObjectState, RigidObject
 
-    np.set_printoptions(precision=4, suppress=True)
     arms = [
         Arm.from_robot_name(
             "ur5", name="left", base_placement=pin.SE3(np.eye(3), np.array([0.0, 0.5, 0.0]))
@@ -52,23 +61,83 @@ def _info(args: argparse.Namespace) -> int:
     ]
     q0 = {"left": np.array([0.0, -1.2, 1.6, -0.4, 1.57, 0.0])}
     for arm in arms:
-        q = q0.get(arm.name, arm.neutral())
-        t = arm.terms(q, np.zeros(arm.nv))
-        print(f"arm {arm.name} ({arm.source}): nq={arm.nq} nv={arm.nv} tool={arm.tool_frame}")
-        print(f"  q = {q}")
-        print(f"  tool position [m] = {t.tool_position}")
-        print(f"  mass matrix diagonal [kg m^2] = {np.diag(t.M)}")
-        print(f"  gravity torque [N m] = {t.gravity}")
-        print(f"  cond(J M^-1 J^T) = {t.Lambda_condition:.3g}")
-        if t.has_operational_space_inertia:
-            print(f"  operational-space inertia diag = {np.diag(t.Lambda)}")
+        _print_arm(arm, q0.get(arm.name, arm.neutral()))
     obj = RigidObject.box([0.8, 0.4, 0.3], 4.0)
-    state = ObjectState.create([0.6, 0.0, 0.4])
     print("object: box 0.8 x 0.4 x 0.3 m, 4 kg")
+    _print_object(obj, ObjectState.create([0.6, 0.0, 0.4]), np.array([0, 0, -9.81]))
+    return 0
+
+
+def _print_arm(arm, q, joints: bool = False, joint_to_object: str = "", q_source: str = "") -> None:
+    """The key quantities of one arm at ``q`` (its base and joints with their types when asked)."""
+    import numpy as np
+
+    t = arm.terms(q, np.zeros(arm.nv))
+    print(f"arm {arm.name} ({arm.source}): nq={arm.nq} nv={arm.nv} tool={arm.tool_frame}")
+    if joints:
+        print(f"  base position [m] = {arm.base_placement.translation}")
+        m = arm.model
+        kinds = [f"{m.names[j]} ({_joint_kind(m.joints[j].shortname())})"
+                 for j in range(1, m.njoints)]
+        print(f"  joints: {', '.join(kinds)}")
+    if joint_to_object:
+        print(f"  joint to the object: {joint_to_object}")
+    print(f"  q = {q}" + (f" ({q_source})" if q_source else ""))
+    print(f"  tool position [m] = {t.tool_position}")
+    print(f"  mass matrix diagonal [kg m^2] = {np.diag(t.M)}")
+    print(f"  gravity torque [N m] = {t.gravity}")
+    print(f"  cond(J M^-1 J^T) = {t.Lambda_condition:.3g}")
+    if t.has_operational_space_inertia:
+        print(f"  operational-space inertia diag = {np.diag(t.Lambda)}")
+
+
+def _joint_kind(shortname: str) -> str:
+    """Pinocchio's joint model name in words (``JointModelRZ`` -> ``revolute z``)."""
+    import re
+
+    name = shortname.removeprefix("JointModel")
+    words = {"R": "revolute", "P": "prismatic", "RUB": "continuous"}
+    m = re.fullmatch(r"(RUB|R|P)([XYZ])", name)
+    if m:
+        return f"{words[m.group(1)]} {m.group(2).lower()}"
+    return {"RevoluteUnaligned": "revolute (axis)", "PrismaticUnaligned": "prismatic (axis)",
+            "RevoluteUnboundedUnaligned": "continuous (axis)"}.get(name, name.lower())
+
+
+def _print_object(obj, state, gravity) -> None:
+    """Inertia, ``M_o`` and the gravity wrench ``h_o`` of the object at ``state``."""
+    import numpy as np
+
     print(f"  inertia about COM [kg m^2] = {np.diag(obj.inertia)}")
     print(f"  M_o diagonal = {np.diag(obj.mass_matrix(state.rotation))}")
-    h_o = obj.bias_wrench(state.rotation, state.twist, np.array([0, 0, -9.81]))
+    h_o = obj.bias_wrench(state.rotation, state.twist, gravity)
     print(f"  h_o (gravity wrench) = {h_o}")
+
+
+def _info_scenario(path: str) -> int:
+    """``multiarm-pin info SCENARIO``: build the scenario as ``run`` does and describe it."""
+    from multiarm_pin.app.scenario import build_scenario, load_scenario
+
+    sc = load_scenario(path)
+    built = build_scenario(sc, load_visuals=False)
+    print(f"scenario {sc.name} ({sc.file}): {len(sc.arms)} arm(s), {len(sc.supports)} "
+          f"support(s), gravity {sc.gravity} m/s^2")
+    for spec, arm, q, ik in zip(sc.arms, built.arms, built.q0, built.ik, strict=True):
+        joint = spec.joint.type
+        if spec.joint.contacts:
+            joint += " (" + ", ".join(f"{c.tip} on {c.face}" for c in spec.joint.contacts) + ")"
+        _print_arm(arm, q, joints=True, joint_to_object=joint,
+                   q_source="q0 of the file" if ik is None else "found by inverse kinematics")
+    o = sc.object
+    shape = (f"box {' x '.join(f'{x:g}' for x in o.size)} m" if o.shape_type == "box"
+             else f"polyhedron of {len(o.vertices)} vertices")
+    print(f"object: {shape}, {o.mass:g} kg, at {o.position} m")
+    _print_object(built.obj, built.initial_state.obj, sc.gravity)
+    for s in sc.supports:
+        points = ("the object's vertices" if isinstance(s.points, str)
+                  else f"{len(s.points)} object points")
+        print(f"support {s.name}: plane through {s.point} m, normal {s.normal}, contacts at "
+              f"{points}, restitution {s.restitution:g}")
     return 0
 
 
@@ -131,7 +200,10 @@ def _build_parser(command: str | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser("scenarios", help="list the shipped scenario, grasp and study files")
     p.set_defaults(func=_scenarios)
 
-    p = sub.add_parser("info", help="print key quantities of two arms and an object")
+    p = sub.add_parser("info", help="print the key quantities of a scenario's arms and object "
+                       "(default: two arms and a box)")
+    p.add_argument("scenario", nargs="?", default=None, metavar="SCENARIO",
+                   help="scenario YAML file: its arms, tool frames, joints, object and supports")
     p.set_defaults(func=_info)
     p = sub.add_parser("precompile", help="compile the simulation loops (closed loop, "
                        "contact events) ahead of time for this machine (a few minutes; `make "

@@ -37,9 +37,11 @@ from multiarm_pin.grasp.optimisation import GripperLayout, OptimisedGrasp, optim
 from multiarm_pin.grasp.report import analyse, load_grasp_file
 from multiarm_pin.grasp.seventh_contact import (
     ContactRegion,
+    SeventhContactRegion,
     box_corner_region_lines,
     region_by_generators,
     region_by_inverse,
+    seventh_contact_regions,
 )
 from multiarm_pin.grasp.stability import (
     ClosureBound,
@@ -61,6 +63,7 @@ __all__ = [
     "LinearisedMargins",
     "ObjectPose",
     "OptimisedGrasp",
+    "SeventhContactRegion",
     "analyse",
     "block_decomposition",
     "box_corner_region_lines",
@@ -81,6 +84,7 @@ __all__ = [
     "parallel_planes_object",
     "region_by_generators",
     "region_by_inverse",
+    "seventh_contact_regions",
     "seventh_offset_min",
     "two_corner_box_grasp",
     "wrench_matrix",

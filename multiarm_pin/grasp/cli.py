@@ -1,7 +1,9 @@
 """Command line of the grasp analysis: ``multiarm-pin grasp FILE.yaml`` (or this module).
 
-``configure_parser`` adds the arguments to a parser given by the main command line and
-``run`` executes them; ``python -m multiarm_pin.grasp.cli FILE`` runs them stand-alone.
+FILE is a grasp file or a scenario file (its fingertip contacts, read as a study in mode
+``grasp`` reads them: :mod:`multiarm_pin.app.grasp_input`). ``configure_parser`` adds the
+arguments to a parser given by the main command line and ``run`` executes them;
+``python -m multiarm_pin.grasp.cli FILE`` runs them stand-alone.
 """
 
 from __future__ import annotations
@@ -12,13 +14,22 @@ import sys
 from pathlib import Path
 
 from multiarm_pin.exceptions import MultiArmError, ScenarioError
-from multiarm_pin.grasp.report import analyse, draw_grasp, format_report, load_grasp_file
+from multiarm_pin.grasp.report import analyse, draw_grasp, format_report
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    """Add the grasp command's arguments: FILE, ``--json``, ``--picture``, ``--no-picture``."""
-    parser.add_argument("file", metavar="FILE", help="grasp YAML file")
+    """Add the grasp command's arguments (FILE, --json, --seventh, --picture, --no-picture)."""
+    parser.add_argument("file", metavar="FILE",
+                        help="grasp YAML file, or a scenario file (its fingertip contacts)")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
+    parser.add_argument(
+        "--seventh",
+        metavar="K",
+        type=int,
+        default=None,
+        help="compute the seventh-contact region of contact K only (numbered from 1 in the "
+             "file's order; default: every contact whose removal leaves six independent ones)",
+    )
     parser.add_argument(
         "--picture",
         metavar="PATH",
@@ -63,9 +74,21 @@ def run(args: argparse.Namespace) -> int:
                   f"{fmt or '(no extension)'!r}; expected a file name ending in one of "
                   f"{', '.join('.' + f for f in formats)}", file=sys.stderr)
             return 2
+    from multiarm_pin.app.grasp_input import load_grasp_input
+
     try:
-        gf = load_grasp_file(args.file)
-        rep, region = analyse(gf)
+        source = load_grasp_input(args.file)
+        gf = source.grasp_file
+        seventh = getattr(args, "seventh", None)
+        if seventh is not None and not 1 <= seventh <= len(gf.grasp):
+            print(f"error: --seventh {seventh}: expected a contact number in "
+                  f"1..{len(gf.grasp)} ({gf.path} has {len(gf.grasp)} contacts, numbered from "
+                  "1 in the order of the file)", file=sys.stderr)
+            return 2
+        rep, region = analyse(gf, None if seventh is None else seventh - 1)
+        rep["kind"] = source.kind
+        rep["contact_names"] = list(source.contact_names)
+        rep["notes"] = list(source.notes) + rep["notes"]
     except ScenarioError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

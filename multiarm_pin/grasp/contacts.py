@@ -53,8 +53,9 @@ class Grasp:
     """A set of contacts on an object.
 
     Attributes:
-        contacts: the contacts, in the order the analysis uses (the first six are the
-            candidate independent set of Sec 2.2.1).
+        contacts: the contacts (``check_independence`` and ``region_by_inverse`` take the
+            first six by default; the report's regions do not depend on the order:
+            :func:`~multiarm_pin.grasp.seventh_contact.seventh_contact_regions`).
         polyhedron: the object's shape in the object frame, or ``None`` for bare contacts.
     """
 

@@ -6,16 +6,23 @@ File format (lengths in metres, points in the object frame)::
     contacts:
       - {face: +x, point: [1.0, 0.3, 0.2]}                # a face name or index and a point on it
       - {point: [...], normal: [...]}                     # or a point and the inward normal
+    seventh_contact: 7                                    # optional, a contact number (from 1)
     seventh_contact_face: +z                              # optional
     length_scale: 1.0                                     # optional, [m], divides moments
 
-The seventh-contact region is computed for one contact on ``seventh_contact_face`` given the
-first six contacts (Eq 2.3 and Eq 2.4) when the file has six or seven contacts, and given all
-contacts but the last (Eq 2.4) when it has more.
+The seventh-contact regions do not depend on the order of the contacts. With seven or more
+contacts, each contact in turn moves on its face while the others are held fixed, and its
+region (where it may lie for form closure) is computed when the others have rank 6 (Eq 2.3
+with six fixed independent contacts, checked against Eq 2.4; Eq 2.4 with more). The report
+names, for each region, the contacts it holds fixed. ``seventh_contact`` (or ``multiarm-pin
+grasp --seventh K``) keeps only contact K's region; ``seventh_contact_face`` keeps the
+contacts on that face, or, when none lies on it (always with six contacts), gives the region
+of one more contact on it with every contact fixed.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -28,8 +35,8 @@ from multiarm_pin.grasp.form_closure import MIN_CONTACTS, form_closure
 from multiarm_pin.grasp.independence import check_independence
 from multiarm_pin.grasp.seventh_contact import (
     ContactRegion,
-    region_by_generators,
-    region_by_inverse,
+    SeventhContactRegion,
+    seventh_contact_regions,
 )
 from multiarm_pin.grasp.stability import closure_bound, independence_bound, linearised_margins
 from multiarm_pin.model.polyhedron import box, from_vertices
@@ -45,12 +52,15 @@ class GraspFile:
         grasp: the object and its contacts.
         seventh_contact_face: face name/index for the region, or ``None``.
         length_scale: ``L`` [m] for the margins (moments divided by it).
+        seventh_contact: index (0-based) of the one contact whose region is computed (the
+            file's ``seventh_contact`` is its number, from 1), or ``None`` for every contact.
     """
 
     path: Path
     grasp: Grasp
     seventh_contact_face: str | int | None
     length_scale: float
+    seventh_contact: int | None = None
 
 
 def load_grasp_file(path: str | Path) -> GraspFile:
@@ -66,7 +76,8 @@ def load_grasp_file(path: str | Path) -> GraspFile:
     return grasp_from_data(data, path)
 
 
-_TOP_KEYS = ("object", "contacts", "seventh_contact_face", "length_scale", "name", "description")
+_TOP_KEYS = ("object", "contacts", "seventh_contact", "seventh_contact_face", "length_scale",
+             "name", "description")
 
 
 def grasp_from_data(data, path: str | Path) -> GraspFile:
@@ -125,20 +136,51 @@ def grasp_from_data(data, path: str | Path) -> GraspFile:
         except InputError as exc:
             raise root.get("seventh_contact_face").error(str(exc)) from exc
     L = root.get("length_scale").number(positive=True) if "length_scale" in d else 1.0
-    return GraspFile(path, Grasp(tuple(contacts), poly), face, L)
+    seventh = None
+    if "seventh_contact" in d:
+        seventh = seventh_number(root.get("seventh_contact"), len(contacts))
+    return GraspFile(path, Grasp(tuple(contacts), poly), face, L, seventh)
 
 
-def analyse(gf: GraspFile) -> tuple[dict[str, Any], ContactRegion | None]:
-    """Analyse a grasp file: closure, margins, independence, region, stability.
+def seventh_number(r: Reader, n_contacts: int) -> int:
+    """The 0-based index of a contact number (from 1) read at ``r``; ScenarioError if invalid."""
+    v = r.value
+    if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= n_contacts:
+        raise r.error(f"expected a contact number in 1..{n_contacts} (contacts are numbered "
+                      f"from 1 in the order of the file), got {describe(v)}")
+    return v - 1
+
+
+def analyse(
+    gf: GraspFile, seventh: int | None = None
+) -> tuple[dict[str, Any], tuple[SeventhContactRegion, ...]]:
+    """Analyse a grasp file: closure, margins, independence, regions, stability.
+
+    Nothing in the report depends on the order of the contacts in the file but the contact
+    numbers (1-based, in the file's order, as in the picture). The seventh-contact regions
+    are those of :func:`~multiarm_pin.grasp.seventh_contact.seventh_contact_regions`: with
+    seven or more contacts, each contact whose removal leaves six independent ones (or the
+    one named by ``seventh`` or the file's ``seventh_contact``) moves on its face, the others
+    held fixed; the file's ``seventh_contact_face`` picks the contacts on that face (or, when
+    none lies on it, one more contact on it).
+
+    Args:
+        gf: the grasp file.
+        seventh: the moving contact (0-based index), overriding the file's
+            ``seventh_contact``; None keeps the file's.
 
     Returns:
-        ``(report, region)``: a JSON-ready dict with at least ``form_closure`` (bool),
-        ``margin`` (float), ``independent`` (bool, first six contacts) and
-        ``region_vertices`` (list of [x, y, z] in the object frame, in order around the
-        region clipped to its face; empty when there is none), and the region itself.
+        ``(report, regions)``: a JSON-ready dict with at least ``form_closure`` (bool),
+        ``margin`` (float), ``independent`` (bool: some six contacts are independent, i.e.
+        the wrenches have rank 6) and ``regions`` (one entry per moving contact: ``contact``
+        (its number, None for one more contact), ``fixed_contacts`` (numbers), ``face``,
+        ``computed``, ``area`` [m^2], ``vertices`` (list of [x, y, z] in the object frame, in
+        order around the region clipped to its face; empty when there is none),
+        ``contact_inside``, ``reason``...), and the regions themselves.
     """
     g = gf.grasp
     N = len(g)
+    seventh = gf.seventh_contact if seventh is None else seventh
     rep: dict[str, Any] = {"file": str(gf.path), "n_contacts": N, "notes": []}
     if N >= MIN_CONTACTS:
         fc = form_closure(g, length_scale=gf.length_scale)
@@ -149,49 +191,30 @@ def analyse(gf: GraspFile) -> tuple[dict[str, Any], ContactRegion | None]:
         rep.update(form_closure=False, margin=0.0, rank=fc.rank, ferrari_canny=0.0,
                    length_scale=gf.length_scale)  # fmt: skip
         rep["notes"].append(f"{N} contacts: form closure needs at least {MIN_CONTACTS}")
-    if N >= 6:
+    if N == 6:
         ind = check_independence(g)
         rep["independent"] = ind.independent
-        rep["independence"] = {
-            "sigma_min": ind.sigma_min,
-            "violated_conditions": [{"name": n, "contacts": list(c)} for n, c in ind.violated],
-            "messages": ind.messages,
-        }
-        if ind.decomposition is not None:
-            rep["independence"]["order"] = list(ind.decomposition.order)
-            rep["independence"]["cond_e_A"] = ind.decomposition.cond_e_A
-            rep["independence"]["cond_a"] = ind.decomposition.cond_a
+        rep["independence"] = _independence(ind, tuple(range(6)))
+    elif N > 6:
+        rep["independent"] = fc.rank == 6
     else:
         rep["independent"] = False
         rep["notes"].append(f"{N} contacts: independence needs six")
-    region = None
-    rep["region_vertices"] = []
-    if gf.seventh_contact_face is not None and N >= 6:
-        fixed = list(range(6)) if N <= 7 else list(range(N - 1))
-        region = region_by_generators(g, gf.seventh_contact_face, fixed)
-        rep["region_method"] = "Eq 2.4 (generators)"
-        if len(fixed) == 6 and rep["independent"]:
-            r23 = region_by_inverse(g, gf.seventh_contact_face, fixed)
-            rep["region_methods_agree"] = bool(
-                abs(r23.area - region.area) <= 1e-6 * max(1.0, r23.area)
-            )
-            region = r23
-            rep["region_method"] = "Eq 2.3 (inverse), checked against Eq 2.4"
-        rep["region_face"] = region.face_name
-        rep["region_fixed_contacts"] = fixed
-        rep["region_vertices"] = region.vertices_3d.tolist()
-        rep["region_area"] = region.area
-        rep["region_bounded"] = region.bounded
-        rep["region_empty"] = region.empty
-        if region.empty:
-            rep["notes"].append(
-                f"no point of face {region.face_name} completes form closure with contacts "
-                f"{fixed}: {region.reason}"
-            )
-        last = g.contacts[-1]
-        if N == len(fixed) + 1 and last.face == region.face:
-            s = region.to_face(last.point)
-            rep["last_contact_in_region"] = bool(region.contains(s)[0])
+    rep["seventh_contact"] = None if seventh is None else int(seventh) + 1
+    rep["region_face"] = _face_label(g, gf.seventh_contact_face)
+    regions = seventh_contact_regions(g, seventh, gf.seventh_contact_face) if N >= 6 else ()
+    rep["regions"] = [_region_entry(g, r) for r in regions]
+    if N == 6 and gf.seventh_contact_face is None:
+        rep["notes"].append("six contacts: name a face (seventh_contact_face) for the region "
+                            "of one more contact")
+    for r, e in zip(regions, rep["regions"], strict=True):
+        if r.region is not None and r.region.empty:
+            rep["notes"].append(f"no point of face {e['face']} completes form closure for "
+                                f"{_who(e)} with contacts {_numbers(e['fixed_contacts'])} fixed: "
+                                f"{r.reason}")
+        if rep["form_closure"] and r.inside is False:  # closure holds at the contact itself
+            rep["notes"].append(f"{_who(e)} is not inside its region although the grasp is "
+                                "form closure: a numerical boundary case")
     stab: dict[str, Any] = {}
     if rep["form_closure"]:
         cb = closure_bound(g)
@@ -199,17 +222,76 @@ def analyse(gf: GraspFile) -> tuple[dict[str, Any], ContactRegion | None]:
         stab["closure_bound_length_scale"] = cb.length_scale
         stab["edge_distances"] = cb.edge_distances.tolist()
         stab["bound"] = float(min(cb.bound, cb.edge_distances.min()))
-    if rep["independent"]:
+    if N == 6 and rep["independent"]:
         stab["independence_bound"] = independence_bound(g)
-        if N == 7:
-            try:
-                lm = linearised_margins(g)
-                stab["linearised_measures"] = lm.measures.tolist()
-                stab["linearised_tolerance"] = lm.min_tolerance
-            except MultiArmError as exc:
-                rep["notes"].append(f"linearised margins: {exc}")
     rep["stability"] = stab
-    return _jsonable(rep), region
+    return _jsonable(rep), regions
+
+
+def _independence(ind, fixed: tuple[int, ...]) -> dict[str, Any]:
+    """The JSON of an independence check of the contacts ``fixed`` (numbered from 1)."""
+    out: dict[str, Any] = {
+        "contacts": [i + 1 for i in fixed],
+        "sigma_min": ind.sigma_min,
+        "violated_conditions": [{"name": n, "contacts": [i + 1 for i in c]}
+                                for n, c in ind.violated],
+        "messages": ind.messages,
+    }
+    if ind.decomposition is not None:
+        out["order"] = [fixed[i] + 1 for i in ind.decomposition.order]
+        out["cond_e_A"] = ind.decomposition.cond_e_A
+        out["cond_a"] = ind.decomposition.cond_a
+    return out
+
+
+def _region_entry(g: Grasp, r: SeventhContactRegion) -> dict[str, Any]:
+    """The JSON of one seventh-contact region (contacts numbered from 1)."""
+    e: dict[str, Any] = {
+        "contact": r.contact + 1 if r.contact >= 0 else None,
+        "contact_face": g.contacts[r.contact].label if r.contact >= 0 else None,
+        "fixed_contacts": [i + 1 for i in r.fixed],
+        "face": _face_label(g, r.face) if r.face >= 0 else None,
+        "fixed_independent": r.independent,
+        "fixed_sigma_ratio": r.sigma_ratio,
+        "computed": r.region is not None,
+        "reason": r.reason,
+    }
+    if r.region is not None:
+        reg = r.region
+        e["method"] = ("Eq 2.3 (inverse), checked against Eq 2.4" if r.methods_agree is not None
+                       else "Eq 2.4 (generators)")
+        e["methods_agree"] = r.methods_agree
+        e.update(empty=reg.empty, area=reg.area, bounded=reg.bounded,
+                 vertices=reg.vertices_3d.tolist(), contact_inside=r.inside)
+    else:
+        e.update(empty=True, area=0.0, vertices=[], contact_inside=None)
+    if len(r.fixed) == 6 and r.independent:
+        e["independence"] = _independence(check_independence(g, r.fixed), r.fixed)
+        e["independence_bound"] = independence_bound(g, r.fixed)
+        if r.contact >= 0 and len(g) == 7:
+            try:
+                lm = linearised_margins(g, r.fixed, r.contact)
+                e["linearised_measures"] = lm.measures.tolist()
+                e["linearised_tolerance"] = lm.min_tolerance
+            except MultiArmError as exc:
+                e["linearised_note"] = str(exc)
+    return e
+
+
+def _face_label(g: Grasp, face) -> str | None:
+    """The name of a face (given by name or index), or None."""
+    if face is None or g.polyhedron is None:
+        return None
+    k = g.polyhedron.face_index(face)
+    return g.polyhedron.face_names[k] if g.polyhedron.face_names else f"#{k}"
+
+
+def _who(e: dict[str, Any]) -> str:
+    return f"contact {e['contact']}" if e["contact"] is not None else "one more contact"
+
+
+def _numbers(numbers) -> str:
+    return ", ".join(str(i) for i in numbers)
 
 
 def _jsonable(x):
@@ -230,32 +312,52 @@ def _jsonable(x):
 def format_report(rep: dict[str, Any]) -> str:
     """A readable multi-line text of a report from :func:`analyse`."""
     yes = {True: "yes", False: "no"}
-    lines = [f"grasp file: {rep['file']}  ({rep['n_contacts']} contacts)"]
+    if rep.get("kind") == "scenario":
+        lines = [f"scenario file: {rep['file']}  ({rep['n_contacts']} fingertip contacts: "
+                 + ", ".join(f"{i} {n}" for i, n in enumerate(rep["contact_names"], 1)) + ")"]
+    else:
+        lines = [f"grasp file: {rep['file']}  ({rep['n_contacts']} contacts)"]
     lines.append(
         f"form closure: {yes[rep['form_closure']]}   rank {rep['rank']}   LP margin "
         f"{rep['margin']:.6g}   Ferrari-Canny epsilon {rep['ferrari_canny']:.6g} "
         f"(moments / {rep['length_scale']:g} m)"
     )
-    lines.append(f"first six contacts independent: {yes[rep['independent']]}")
+    if rep["n_contacts"] == 6:
+        lines.append(f"the six contacts independent: {yes[rep['independent']]}")
+    elif rep["n_contacts"] > 6:
+        lines.append(f"six independent contacts among them (rank 6): {yes[rep['independent']]}")
     ind = rep.get("independence", {})
     for msg in ind.get("messages", []):
         lines.append(f"  - {msg}")
-    if "region_face" in rep:
-        lines.append(
-            f"region for one more contact on face {rep['region_face']} "
-            f"(given contacts {rep['region_fixed_contacts']}, {rep['region_method']}):"
-        )
-        if rep["region_empty"]:
-            lines.append("  empty: no point of this face completes form closure")
-        else:
-            lines.append(
-                f"  area {rep['region_area']:.6g} m^2, "
-                f"{'bounded' if rep['region_bounded'] else 'unbounded on the plane'}; vertices:"
-            )
-            for v in rep["region_vertices"]:
-                lines.append(f"    [{v[0]: .6f}, {v[1]: .6f}, {v[2]: .6f}]")
-        if "last_contact_in_region" in rep:
-            lines.append(f"  last contact inside it: {yes[rep['last_contact_in_region']]}")
+    regions = rep.get("regions", [])
+    if regions:
+        lines.append("seventh-contact regions (contacts numbered from 1 in the file's order; each "
+                     "region: where that contact may lie on the face, the others fixed):")
+    for e in regions:
+        where = (f"contact {e['contact']} on face {e['face']}" if e["contact"] is not None
+                 else f"one more contact on face {e['face']}")
+        head = f"  {where}, fixed {_numbers(e['fixed_contacts'])}: "
+        if not e["computed"]:
+            lines.append(head + f"not computed: {e['reason']}")
+            continue
+        if e["empty"]:
+            lines.append(head + f"empty ({e['method']}): {e['reason']}")
+            continue
+        inside = ("" if e["contact_inside"] is None
+                  else f"; contact {e['contact']} inside it: {yes[e['contact_inside']]}")
+        lines.append(head + f"area {e['area']:.6g} m^2, "
+                     f"{'bounded' if e['bounded'] else 'unbounded on the plane'} "
+                     f"({e['method']}){inside}")
+        for msg in e.get("independence", {}).get("messages", []):
+            lines.append(f"    - {msg}")
+        lines.append("    vertices: " + ", ".join(
+            f"[{v[0]:.4f}, {v[1]:.4f}, {v[2]:.4f}]" for v in e["vertices"]))
+        if "independence_bound" in e and e["contact"] is not None:  # else: under stability
+            lines.append(f"    the fixed six stay independent for displacements < "
+                         f"{e['independence_bound']:.6g} m")
+        if "linearised_tolerance" in e:
+            lines.append("    linearised region margins (Example 2.4) tolerate "
+                         f"~{e['linearised_tolerance']:.6g} m per coordinate")
     st = rep.get("stability", {})
     if st:
         lines.append("stability:")
@@ -267,12 +369,7 @@ def format_report(rep: dict[str, Any]) -> str:
             )
         if "independence_bound" in st:
             lines.append(
-                f"  first six stay independent for displacements < {st['independence_bound']:.6g} m"
-            )
-        if "linearised_tolerance" in st:
-            lines.append(
-                "  linearised region margins (Example 2.4) tolerate "
-                f"~{st['linearised_tolerance']:.6g} m per coordinate"
+                f"  the six stay independent for displacements < {st['independence_bound']:.6g} m"
             )
     for note in rep.get("notes", []):
         lines.append(f"note: {note}")
@@ -282,13 +379,17 @@ def format_report(rep: dict[str, Any]) -> str:
 
 
 def draw_grasp(
-    grasp: Grasp, region: ContactRegion | None, path: str | Path, title: str = ""
+    grasp: Grasp,
+    region: ContactRegion | SeventhContactRegion | Sequence | None,
+    path: str | Path,
+    title: str = "",
 ) -> Path:
-    """Save a 3-D picture of the object, its contacts (with normals) and the region.
+    """Save a 3-D picture of the object, its contacts (with normals) and the regions.
 
     Args:
         grasp: the grasp (needs its polyhedron).
-        region: the seventh-contact region to shade on its face, or ``None``.
+        region: the seventh-contact region(s) to shade on their faces (a region, the
+            :class:`SeventhContactRegion` entries of :func:`analyse`, or ``None``).
         path: output image file (PNG).
         title: optional title.
 
@@ -313,9 +414,12 @@ def draw_grasp(
     else:
         size = float(np.ptp(grasp.points, axis=0).max() or 1.0)
         lo, hi = grasp.points.min(axis=0), grasp.points.max(axis=0)
-    if region is not None and not region.empty:
-        ax.add_collection3d(Poly3DCollection([region.vertices_3d], facecolor="limegreen",
-                                             alpha=0.6, edgecolor="darkgreen"))  # fmt: skip
+    items = [] if region is None else [region] if not isinstance(region, Sequence) else region
+    for r in items:
+        r = r.region if isinstance(r, SeventhContactRegion) else r
+        if r is not None and not r.empty:
+            ax.add_collection3d(Poly3DCollection([r.vertices_3d], facecolor="limegreen",
+                                                 alpha=0.45, edgecolor="darkgreen"))  # fmt: skip
     P, Nrm = grasp.points, grasp.normals
     ax.scatter(P[:, 0], P[:, 1], P[:, 2], color="crimson", s=30, depthshade=False)
     L = 0.15 * size

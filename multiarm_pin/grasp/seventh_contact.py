@@ -16,6 +16,12 @@ Two methods give the region, both as a convex polygon in the face's own 2-D coor
   ``p7 = proj + e7 × m`` (Appendix A.3: the moment is the in-plane offset from the projected
   origin turned by -90° about ``e7``) turns moments into face points.
 
+Which contacts are fixed is the caller's choice in those two; :func:`seventh_contact_regions`
+makes it independent of the order of the contacts: each contact in turn moves on its face,
+the others held fixed, and its region is computed when they are independent (rank 6, decided
+with the margin :data:`RANK_MARGIN` on ``σ_6 / σ_1`` so that no order's round-off changes
+the verdict); the report and ``multiarm-pin grasp`` use it.
+
 The region is open (strict inequalities); the polygon returned is its closure clipped to the
 face, and it is reported empty when it has no area. The 2-D polygon geometry (area, clipping,
 hulls) is :mod:`multiarm_pin.grasp.polygon2d`; ``polygon_area`` and ``signed_inside_distance``
@@ -244,6 +250,162 @@ def region_by_generators(grasp: Grasp, face: int | str, fixed=None) -> ContactRe
     )
 
 
+RANK_MARGIN = 1e-6
+"""Fixed contacts count as independent (rank 6) when ``σ_6 / σ_1`` of their wrench matrix
+(moments divided by the grasp's size) exceeds this. Generic independent sets sit orders of
+magnitude above it and structurally dependent ones (a contact whose force vanishes in a
+marginal grasp, parallel normals) at round-off, far below: the verdict does not hang on
+round-off, so it is the same in every order of the contacts."""
+
+INSIDE_MARGIN = 1e-9
+"""A contact counts as inside its region when it is deeper than this times the object's size;
+a contact on the region's boundary (a marginal grasp) is not inside, in every order."""
+
+
+@dataclass(frozen=True)
+class SeventhContactRegion:
+    """The region of one moving contact, the others held fixed.
+
+    Attributes:
+        contact: index (0-based) of the contact that moves, or -1 for one more contact
+            added to the grasp.
+        fixed: indices (0-based, increasing) of the contacts held fixed.
+        face: index of the face the region lies on.
+        sigma_ratio: ``σ_6 / σ_1`` of the fixed contacts' wrench matrix (moments divided by
+            the object's size); they are independent when it exceeds :data:`RANK_MARGIN`.
+        region: the region (Eq 2.3 with six fixed independent contacts, checked against
+            Eq 2.4; Eq 2.4 with more), or None when it is not computed (``reason`` says why).
+        methods_agree: Eq 2.3 and Eq 2.4 give the same area (six fixed contacts), else None.
+        inside: the moving contact lies inside the region by more than :data:`INSIDE_MARGIN`
+            times the object's size (None for a new contact or one on another face).
+        reason: why the region is not computed or is empty, or ``""``.
+    """
+
+    contact: int
+    fixed: tuple[int, ...]
+    face: int
+    sigma_ratio: float
+    region: ContactRegion | None
+    methods_agree: bool | None = None
+    inside: bool | None = None
+    reason: str = ""
+
+    @property
+    def independent(self) -> bool:
+        """The fixed contacts' wrenches have rank 6 (by :data:`RANK_MARGIN`)."""
+        return self.sigma_ratio > RANK_MARGIN
+
+
+def fixed_sigma_ratio(grasp: Grasp, fixed) -> float:
+    """``σ_6 / σ_1`` of the wrench matrix of the contacts ``fixed`` (0 below six of them).
+
+    Moments are divided by the object's size (its largest vertex or contact distance from the
+    origin) so that forces and moments weigh alike; the ratio does not depend on the order.
+    """
+    idx = list(fixed)
+    if len(idx) < 6:
+        return 0.0
+    W = grasp.wrenches(None, _size(grasp))[:, idx]
+    sv = np.linalg.svd(W, compute_uv=False)
+    return float(sv[5] / sv[0]) if sv[0] > 0 else 0.0
+
+
+def seventh_contact_regions(
+    grasp: Grasp, seventh: int | None = None, face: int | str | None = None
+) -> tuple[SeventhContactRegion, ...]:
+    """Where each contact may lie on its face, the others fixed, for form closure.
+
+    The region does not depend on the order of the contacts: with ``N >= 7`` contacts, each
+    contact ``k`` in turn is the moving ("seventh") one and the other ``N - 1`` are held
+    fixed; its region is computed when those have rank 6 (:data:`RANK_MARGIN`; with six
+    fixed, they are the independent six of Eq 2.3). For a form-closure grasp of seven
+    contacts, every six are independent and every region holds its contact.
+
+    Args:
+        grasp: grasp with a polyhedron.
+        seventh: the one moving contact (0-based index), or None for every contact.
+        face: the face of the region. None: each moving contact's own face. Given without
+            ``seventh``: the contacts on that face move; when none lies on it (or the grasp
+            has six contacts), the region is for one more contact on it, all contacts fixed.
+            Given with ``seventh``: where on that face the contact could go instead.
+
+    Returns:
+        One :class:`SeventhContactRegion` per moving contact, in the order of the contacts
+        (empty for fewer than six contacts, and for six without a ``face``).
+
+    Raises:
+        GraspError: no polyhedron, ``seventh`` out of range (or given with fewer than seven
+            contacts), or an unknown face.
+    """
+    N = len(grasp)
+    poly = grasp.polyhedron
+    if poly is None:
+        raise GraspError("the contact region needs the object's polyhedron (grasp.polyhedron)")
+    if seventh is not None and not 0 <= int(seventh) < N:
+        raise GraspError(f"seventh contact: expected a contact number in 1..{N}, got "
+                         f"{int(seventh) + 1}")
+    if seventh is not None and N < 7:
+        raise GraspError(f"seventh contact {int(seventh) + 1}: a contact moves with six others "
+                         f"held fixed, and the grasp has {N} contacts; name a face for one "
+                         "more contact instead")
+    k_face = None
+    if face is not None:
+        k_face = _face_setup(grasp, face)[1]
+    if N < 6:
+        return ()
+    if seventh is not None and N >= 7:
+        moving = [int(seventh)]
+    elif k_face is not None:
+        moving = [k for k, c in enumerate(grasp.contacts) if c.face == k_face] if N >= 7 else []
+        if not moving:
+            return (_region_of(grasp, -1, tuple(range(N)), k_face),)
+    elif N >= 7:
+        moving = list(range(N))
+    else:
+        return ()
+    out = []
+    for k in moving:
+        fixed = tuple(i for i in range(N) if i != k)
+        target = k_face if k_face is not None else grasp.contacts[k].face
+        out.append(_region_of(grasp, k, fixed, target))
+    return tuple(out)
+
+
+def _region_of(grasp: Grasp, k: int, fixed: tuple[int, ...], face: int) -> SeventhContactRegion:
+    """The region of contact ``k`` (-1: a new contact) on ``face``, ``fixed`` held fixed."""
+    ratio = fixed_sigma_ratio(grasp, fixed)
+    who = f"contact {k + 1}" if k >= 0 else "one more contact"
+    if face < 0:
+        return SeventhContactRegion(k, fixed, face, ratio, None,
+                                    reason=f"{who} lies on no face of the object")
+    if ratio <= RANK_MARGIN:
+        others = "the other contacts" if k >= 0 else "the contacts"
+        return SeventhContactRegion(
+            k, fixed, face, ratio, None,
+            reason=f"{others} are not independent: their wrenches have rank < 6 "
+                   f"(σ6/σ1 = {ratio:.3g} <= {RANK_MARGIN:g}), so {who} cannot complete "
+                   "form closure alone")
+    region = region_by_generators(grasp, face, fixed)
+    agree = None
+    if len(fixed) == 6:
+        dec = block_decomposition(grasp.points[list(fixed)], grasp.normals[list(fixed)])
+        if dec.independent:
+            r23 = region_by_inverse(grasp, face, fixed)
+            agree = bool(abs(r23.area - region.area) <= 1e-6 * max(1.0, r23.area))
+            region = r23
+    inside = None
+    if k >= 0 and grasp.contacts[k].face == face:
+        s = region.to_face(grasp.contacts[k].point)
+        inside = bool(region.contains(s, INSIDE_MARGIN * _size(grasp))[0])
+    return SeventhContactRegion(k, fixed, face, ratio, region, agree, inside, region.reason)
+
+
+def _size(grasp: Grasp) -> float:
+    """The object's size [m]: its largest vertex (or contact) distance from the origin."""
+    pts = grasp.polyhedron.vertices if grasp.polyhedron is not None else grasp.points
+    return max(float(np.linalg.norm(pts, axis=1).max(initial=0.0)), 1e-9)
+
+
 def box_corner_region_lines(
     a: float, b: float, c: float, d: float, e: float, f: float, thesis_form: bool = False
 ):
@@ -428,10 +590,15 @@ def _cut_with_plane(points, rays, h, tol):
 
 __all__ = [
     "AREA_TOLERANCE",
+    "INSIDE_MARGIN",
+    "RANK_MARGIN",
     "ContactRegion",
+    "SeventhContactRegion",
     "box_corner_region_lines",
+    "fixed_sigma_ratio",
     "polygon_area",
     "region_by_generators",
     "region_by_inverse",
+    "seventh_contact_regions",
     "signed_inside_distance",
 ]

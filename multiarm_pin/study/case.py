@@ -127,37 +127,19 @@ def _grasp_case(task: CaseTask) -> tuple[dict, dict]:
 def grasp_of(data: dict, file: str):
     """The grasp of a grasp file's data, or of a scenario's fingertip contacts.
 
+    The same reading as ``multiarm-pin grasp`` (:mod:`multiarm_pin.app.grasp_input`).
+
     Returns:
         ``(grasp, length_scale [m])``.
 
     Raises:
-        ScenarioError: invalid data, or a contact point off its face (names the key path).
+        ScenarioError: invalid data, a contact point off its face (names the key path), or
+            a scenario with no fingertip contacts.
     """
-    from multiarm_pin.exceptions import GraspError, InputError, ScenarioError
+    from multiarm_pin.app.grasp_input import grasp_input_from_data
 
-    if "arms" not in data:
-        from multiarm_pin.grasp.report import grasp_from_data
-
-        gf = grasp_from_data(data, file)
-        return gf.grasp, gf.length_scale
-    from multiarm_pin.app.scenario import build_object, parse_scenario
-    from multiarm_pin.grasp.contacts import Grasp, contact_on_face
-
-    sc = parse_scenario(data, file)
-    poly = build_object(sc).shape
-    contacts = []
-    for a, arm in enumerate(sc.arms):
-        for k, c in enumerate(arm.joint.contacts):
-            if c.point is None:
-                raise ScenarioError(file, f"arms[{a}].joint.contacts[{k}].point",
-                                    "a grasp study needs every contact point")
-            try:
-                contacts.append(contact_on_face(poly, c.face, c.point))
-            except (GraspError, InputError) as exc:
-                raise ScenarioError(file, f"arms[{a}].joint.contacts[{k}]", str(exc)) from exc
-    if not contacts:
-        raise ScenarioError(file, "arms", "no fingertip contacts: nothing to analyse as a grasp")
-    return Grasp(tuple(contacts), poly), 1.0
+    gf = grasp_input_from_data(data, file).grasp_file
+    return gf.grasp, gf.length_scale
 
 
 __all__ = ["CaseTask", "grasp_of", "run_case"]

@@ -34,14 +34,19 @@ def _numeric(values) -> np.ndarray | None:
 
 
 def _fmt(v) -> str:
+    """A table cell: numbers to 4 digits, text whole (on one line, ``|`` escaped)."""
     if v is None:
         return ""
     if isinstance(v, float):
         if math.isnan(v):
             return "nan"
         return f"{v:.4g}"
-    s = str(v)
-    return s if len(s) <= 60 else s[:57] + "..."
+    return _one_line(str(v)).replace("|", "\\|")
+
+
+def _one_line(text: str) -> str:
+    """``text`` with its line breaks and runs of spaces made single spaces (nothing cut)."""
+    return " ".join(text.split())
 
 
 def _safe(name: str) -> str:
@@ -134,16 +139,16 @@ def write_report(out_dir, spec, table) -> Path:
                                 if first_fail is not None else " (the whole range)"))
         lines.append("")
     base = str(spec.base_file)  # the base file by its name: no machine paths in reports
-    errors = [(c, str(e).replace(base, Path(base).name))
+    errors = [(c, _one_line(str(e).replace(base, Path(base).name)))
               for c, s, e in zip(cols.get("case_id", []), status, cols.get("error", []),
                                  strict=False) if s != "ok"]
-    if errors:
-        kinds: dict[str, int] = {}
-        for _, e in errors:
-            k = re.sub(r"[-+]?\d[\d.e+-]*", "#", str(e))[:220]
-            kinds[k] = kinds.get(k, 0) + 1
+    if errors:  # every message whole: the kinds (numbers as #), then each kind's first case
+        kinds: dict[str, list[str]] = {}
+        for c, e in errors:
+            kinds.setdefault(re.sub(r"[-+]?\d[\d.e+-]*", "#", e), []).append(c)
         lines += ["## Failed cases", ""]
-        lines += [f"- {count} x {k}" for k, count in sorted(kinds.items(), key=lambda x: -x[1])]
+        lines += [f"- {len(cs)} x {k} (first: {cs[0]})"
+                  for k, cs in sorted(kinds.items(), key=lambda x: -len(x[1]))]
         lines += ["", "First failures:", ""] + [f"- {c}: {e}" for c, e in errors[:5]] + [""]
     plots = _plots(plots_dir, spec, cols)
     if plots:
@@ -151,8 +156,12 @@ def write_report(out_dir, spec, table) -> Path:
     if n <= MAX_FULL_TABLE:
         keys = ["case_id", *spec.varied, "sample", *spec.metrics, "status", "error"]
         keys = [k for k in keys if k in cols]
+        shown = [{k: cols[k][i] for k in keys} for i in range(n)]
+        for row in shown:  # the base file by its name here too
+            if row.get("error"):
+                row["error"] = str(row["error"]).replace(base, Path(base).name)
         lines += ["## All cases", ""]
-        lines += _md_table([{k: cols[k][i] for k in keys} for i in range(n)]) + [""]
+        lines += _md_table(shown) + [""]
     path = out / "report.md"
     from multiarm_pin.study.store import write_atomic
 

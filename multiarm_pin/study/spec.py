@@ -229,7 +229,7 @@ def _load_yaml(path: Path, f: str):
     try:
         return load_yaml_file(path)
     except ScenarioError as exc:
-        raise StudyError(exc.file, exc.key, exc.message) from None
+        raise StudyError(exc.file, exc.key, exc.message, exc.line, exc.column) from None
 
 
 def parse_study(data, file: str = "<study>") -> StudySpec:
@@ -260,7 +260,9 @@ def parse_study(data, file: str = "<study>") -> StudySpec:
         raise StudyError(f, "base", f"invalid base file: {exc}") from None
     if not isinstance(base_data, Mapping):
         raise StudyError(f, "base", f"{base_file}: expected a scenario or grasp mapping")
-    base_kind = "grasp" if "contacts" in base_data and "arms" not in base_data else "scenario"
+    from multiarm_pin.app.grasp_input import is_grasp_file
+
+    base_kind = "grasp" if is_grasp_file(base_data) else "scenario"
     _validate_base(base_data, str(base_file), base_kind, f)
     name = data.get("name", Path(f).stem)
     if not isinstance(name, str) or not name:
@@ -275,6 +277,13 @@ def parse_study(data, file: str = "<study>") -> StudySpec:
                          f"expected one of {', '.join(MODES)}")
     if base_kind == "grasp" and mode != "grasp":
         raise StudyError(f, "mode", "a grasp file base can only be studied in mode 'grasp'")
+    if base_kind == "scenario" and mode == "grasp":  # its grasp, read as `grasp` reads it
+        from multiarm_pin.app.grasp_input import grasp_input_from_data
+
+        try:
+            grasp_input_from_data(base_data, base_file)
+        except MultiArmError as exc:
+            raise StudyError(f, "base", f"invalid base file for mode 'grasp': {exc}") from exc
     fixed_raw = data.get("set", {}) or {}
     if not isinstance(fixed_raw, Mapping):
         raise StudyError(f, "set", "expected a mapping {key path: value}")

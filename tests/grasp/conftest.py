@@ -43,3 +43,24 @@ def random_face_point(P, face, rng, inset=0.02):
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+def random_form_closure_grasp(rng: np.random.Generator, n_contacts: int = 7,
+                              min_margin: float = 0.01, tries: int = 500) -> Grasp:
+    """A random form-closure grasp of a random box whose LP margin exceeds ``min_margin``.
+
+    One contact on each face (in a random order) and the others on random faces, all strictly
+    inside their faces; draws whose LP margin is not clearly positive are thrown away, so the
+    verdict holds by construction (not by round-off).
+    """
+    from multiarm_pin.grasp import form_closure
+
+    for _ in range(tries):
+        P = box(rng.uniform(0.5, 2.5, 3))
+        faces = list(P.face_names) + list(rng.choice(P.face_names, n_contacts - 6))
+        rng.shuffle(faces)
+        g = Grasp(tuple(contact_on_face(P, f, random_face_point(P, f, rng, inset=0.1))
+                        for f in faces), P)
+        if form_closure(g).margin > min_margin:
+            return g
+    raise RuntimeError(f"no form-closure grasp with margin > {min_margin} in {tries} draws")

@@ -1,3 +1,5 @@
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -15,6 +17,8 @@ from multiarm_pin.grasp.seventh_contact import polygon_area
 from multiarm_pin.model.polyhedron import box
 
 from .conftest import corner_grasp, random_corner_parameters, random_face_point
+
+GRASPS = Path(__file__).resolve().parents[2] / "scenarios" / "grasps"
 
 
 def _hausdorff(A, B):
@@ -160,3 +164,152 @@ def test_region_input_errors():
         region_by_inverse(Grasp(g.contacts), "+z")
     with pytest.raises(GraspError, match="det"):
         box_corner_region_lines(1, 1, 1, 1, 1, 1)
+
+
+# --- the regions do not depend on the order of the contacts (issue 25) ----------------------
+
+
+def _orders(n: int, rng: np.random.Generator, n_random: int,
+            reversed_too: bool = True) -> list[list[int]]:
+    """Every rotation of the contacts, each reversed, and ``n_random`` random orders."""
+    rot = [[(i + r) % n for i in range(n)] for r in range(n)]
+    rev = [o[::-1] for o in rot] if reversed_too else [rot[0][::-1]]
+    return rot + rev + [list(rng.permutation(n)) for _ in range(n_random)]
+
+
+def _regions_by_contact(grasp, order, face=None):
+    """The regions of ``grasp`` with its contacts listed in ``order``, keyed by the original
+    index of the moving contact (-1: one more contact), with the fixed ones as original
+    indices: ``{k: (fixed, computed, area, vertices (V, 3), inside)}``, and the verdict."""
+    from multiarm_pin.grasp import seventh_contact_regions
+
+    g = grasp.with_contacts([grasp.contacts[i] for i in order])
+    out = {}
+    for r in seventh_contact_regions(g, face=face):
+        k = order[r.contact] if r.contact >= 0 else -1
+        reg = r.region
+        out[k] = (tuple(sorted(order[i] for i in r.fixed)), reg is not None,
+                  0.0 if reg is None else reg.area,
+                  np.zeros((0, 3)) if reg is None else reg.vertices_3d, r.inside)
+    return out, form_closure(g, allow_fewer=True).form_closure
+
+
+def _assert_same_regions(a, b):
+    assert a.keys() == b.keys()
+    for k in a:
+        (fa, ca, Aa, Va, ia), (fb, cb, Ab, Vb, ib) = a[k], b[k]
+        assert (fa, ca, ia) == (fb, cb, ib), k
+        assert Aa == pytest.approx(Ab, rel=1e-9, abs=1e-12), k
+        assert len(Va) == len(Vb), k
+        if len(Va):
+            assert _hausdorff(Va, Vb) < 1e-9, k
+
+
+def _assert_order_free(grasp, rng, n_random, face=None, reversed_too=True):
+    ref, verdict = _regions_by_contact(grasp, list(range(len(grasp))), face)
+    for order in _orders(len(grasp), rng, n_random, reversed_too):
+        got, v = _regions_by_contact(grasp, order, face)
+        assert v == verdict, order
+        _assert_same_regions(ref, got)
+    return ref, verdict
+
+
+@pytest.mark.parametrize("name", ["box_form_closure", "box_marginal", "hexahedron_point_normal"])
+@pytest.mark.parametrize("with_face", [False, True])
+def test_shipped_grasps_same_regions_in_every_order(name, with_face):
+    from multiarm_pin.grasp import load_grasp_file
+
+    gf = load_grasp_file(GRASPS / f"{name}.yaml")
+    rng = np.random.default_rng(25)
+    face = gf.seventh_contact_face if with_face else None
+    ref, verdict = _assert_order_free(gf.grasp, rng, 4 if with_face else 2, face)
+    assert verdict == (name != "box_marginal")
+    computed = [k for k, v in ref.items() if v[1]]
+    if verdict:  # seven contacts in form closure: every six are independent, every region
+        assert sorted(ref) == sorted(computed)  # holds its contact
+        assert all(v[2] > 0 and v[4] for v in ref.values())
+    else:  # the marginal seventh is on its region's boundary; contact 3's force vanishes
+        assert all(v[4] is False for v in ref.values() if v[1])
+        assert 2 in ref and not ref[2][1]
+
+
+@pytest.mark.parametrize("n_contacts, n_grasps", [(7, 3), (8, 1)])
+def test_random_form_closure_grasps_same_regions_in_every_order(n_contacts, n_grasps):
+    from .conftest import random_form_closure_grasp
+
+    rng = np.random.default_rng(2025 + n_contacts)
+    for _ in range(n_grasps):
+        g = random_form_closure_grasp(rng, n_contacts, min_margin=0.01)
+        ref, verdict = _assert_order_free(g, rng, 2, reversed_too=n_contacts == 7)
+        assert verdict
+        for k, (_, computed, area, _, inside) in ref.items():
+            if n_contacts == 7:  # a seven-contact closure: every six independent
+                assert computed
+            if computed:  # closure holds at the contact itself: its region holds it
+                assert area > 0 and inside, k
+
+
+def test_regions_agree_with_the_lp_when_the_contact_moves(rng):
+    """Each contact's region (others fixed) against the LP with the contact moved there."""
+    from multiarm_pin.grasp import seventh_contact_regions
+
+    from .conftest import random_form_closure_grasp
+
+    g = random_form_closure_grasp(np.random.default_rng(7), 7, min_margin=0.01)
+    P = g.polyhedron
+    checked = 0
+    for r in seventh_contact_regions(g):
+        face = r.region.face
+        for _ in range(12):
+            p = random_face_point(P, face, rng, inset=0.0)
+            moved = list(g.contacts)
+            moved[r.contact] = contact_on_face(P, face, p)
+            depth = -1.0 if r.region.empty else _depth(r.region.polygon, r.region.to_face(p))[0]
+            if abs(depth) > 1e-6:
+                assert form_closure(g.with_contacts(moved)).form_closure == (depth > 0)
+                checked += 1
+    assert checked >= 70
+
+
+def test_named_seventh_contact_and_face():
+    from multiarm_pin.grasp import load_grasp_file, seventh_contact_regions
+
+    g = load_grasp_file(GRASPS / "box_form_closure.yaml").grasp
+    (r,) = seventh_contact_regions(g, seventh=3)  # the -x contact
+    assert r.contact == 3 and r.fixed == (0, 1, 2, 4, 5, 6) and r.inside
+    assert g.polyhedron.face_names[r.face] == "-x"
+    # with a face: where on +z a contact could replace the -x one (nowhere: nothing would
+    # push along +x)
+    (r,) = seventh_contact_regions(g, seventh=3, face="+z")
+    assert r.region.empty and r.inside is None
+    (r,) = seventh_contact_regions(g, face="-z")  # the contacts on -z: contact 6 alone
+    assert r.contact == 5 and r.inside
+    with pytest.raises(GraspError, match="1..7"):
+        seventh_contact_regions(g, seventh=7)
+
+
+def test_a_named_seventh_needs_six_others():
+    from multiarm_pin.grasp import load_grasp_file, seventh_contact_regions
+
+    g = load_grasp_file(GRASPS / "box_form_closure.yaml").grasp
+    six = g.with_contacts(g.contacts[:6])
+    with pytest.raises(GraspError, match="six others held fixed, and the grasp has 6"):
+        seventh_contact_regions(six, seventh=2)
+    assert seventh_contact_regions(six) == ()
+
+
+def test_eq_2_3_in_all_720_orders_of_the_six_fixed_contacts():
+    """Eq 2.3's blocks depend on the order (e_A is the first three normals, or the best
+    triple when those are dependent): all 6! orders of the fixed six give one region."""
+    from itertools import permutations
+
+    from multiarm_pin.grasp import load_grasp_file
+
+    g = load_grasp_file(GRASPS / "box_form_closure.yaml").grasp
+    six, seventh = g.contacts[:6], g.contacts[6]
+    ref = region_by_inverse(g, "+z")
+    assert ref.area > 1.0
+    for order in permutations(range(6)):
+        r = region_by_inverse(g.with_contacts([six[i] for i in order] + [seventh]), "+z")
+        assert r.area == pytest.approx(ref.area, rel=1e-9)
+        assert len(r.polygon) == len(ref.polygon) and _hausdorff(r.polygon, ref.polygon) < 1e-9

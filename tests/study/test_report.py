@@ -55,3 +55,21 @@ def test_report_has_tables_plots_and_failures(tmp_path):
     pngs = sorted(p.name for p in (tmp_path / "out" / "plots").glob("*.png"))
     assert pngs == ["form_closure__vs__perturb_contacts.sigma.png",
                     "margin__vs__perturb_contacts.sigma.png"]
+
+
+def test_report_keeps_error_messages_whole(tmp_path):
+    """Issue 25: the report cut messages at 60 characters (tables) and 220 (failure kinds)."""
+    spec = _spec(tmp_path)
+    rows = _rows()
+    long = ("ScenarioError: " + str(spec.base_file) + ": arms[1].joint.contacts[2].point: "
+            "contact point [0.41, 0.2, 0.1] is 0.0125 m outside face +x (tolerance 1e-06 m); "
+            "expected a point on the face | moved by perturb_contacts.sigma = 0.02 m\n"
+            "second line of the message " + "x" * 300 + " END")
+    rows[10]["error"] = rows[11]["error"] = long
+    text = write_report(tmp_path / "out", spec, rows_to_table(rows)).read_text()
+    whole = " ".join(long.replace(str(spec.base_file), "two_gripper_form_closure.yaml").split())
+    assert f"- case_00010: {whole}" in text  # First failures, on one line
+    assert f"| {whole.replace('|', chr(92) + '|')} |" in text  # the All cases table
+    kind = [ln for ln in text.splitlines() if ln.startswith("- 2 x ")]
+    assert len(kind) == 1 and kind[0].endswith("x" * 300 + " END (first: case_00010)")
+    assert "..." not in text

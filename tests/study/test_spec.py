@@ -141,3 +141,16 @@ def test_grids_of_names_and_vectors_are_table_cells(tmp_path):
         ["dense_kkt"] * 2
     assert cases[1].params["arms[0].base.position"] == "[0.0, 0.6, 0.0]"
     assert cases[1].overrides["arms[0].base.position"] == [0, 0.6, 0]
+
+
+def test_grasp_mode_reads_the_scenario_as_the_grasp_command_does(tmp_path):
+    """Issue 25: one reader; a scenario with supports is a grasp, a weld-only one is not."""
+    spec = load_study(write_study(tmp_path, {
+        "base": str(SCENARIOS / "pick_from_table.yaml"), "mode": "grasp",
+        "parameters": [{"perturb_contacts": {"sigma": [0.001]}}]}))
+    assert spec.base_kind == "scenario" and spec.mode == "grasp"
+    with pytest.raises(StudyError, match=r"base: invalid base file for mode 'grasp': .*"
+                       r"two_ur5_box.yaml: arms: no fingertip grasp to analyse"):
+        load_study(write_study(tmp_path, {
+            "base": str(SCENARIOS / "two_ur5_box.yaml"), "mode": "grasp",
+            "parameters": [{"path": "object.mass", "grid": [1.0, 2.0]}]}, name="weld.yaml"))
