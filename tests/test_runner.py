@@ -63,6 +63,13 @@ def test_trajectory_keys_and_shapes(run_dir):
     m = 4.0
     resid = m * a[2:-2] - (f[2:-2] + m * np.array([0, 0, -9.81]))
     assert np.abs(resid).max() < 1e-2 * (np.abs(f).max() + m * 9.81)
+    # each arm's wrench: its forces add up to the contacts' (the moments are tested against
+    # W_o mu in test_arm_wrench); the UR5's URDF effort limits beside the torques
+    w = d["arm_wrench"]
+    assert w.shape == (len(d["t"]), 2, 6)
+    assert np.abs(w[:, :, :3].sum(axis=1) - f).max() < 1e-9 * np.abs(f).max()
+    assert d["tau_limit_left"].tolist() == [150.0, 150.0, 150.0, 28.0, 28.0, 28.0]
+    assert "tau_commanded_left" not in d and d["unilateral_arms"].tolist() == []
 
 
 def test_summary(run_dir):
@@ -75,14 +82,17 @@ def test_summary(run_dir):
     assert s["min_contact_force"] <= s["max_contact_force"]
     assert [a["q0_from"] for a in s["arms"]] == ["inverse kinematics"] * 2
     for f in ("trajectory.npz", "summary.json", "replay.html", "scenario.yaml",
-              "object_pose.png", "contact_forces.png", "constraint_violation.png"):
+              "object_pose.png", "arm_wrenches.png", "joint_torques.png",
+              "constraint_violation.png"):
         assert (run_dir / f).is_file(), f
+    assert not (run_dir / "contact_forces.png").exists()  # welds: their wrench says it
 
 
 def test_plots_are_png_images(run_dir):
     from PIL import Image
 
-    for f in ("object_pose.png", "contact_forces.png", "constraint_violation.png"):
+    for f in ("object_pose.png", "arm_wrenches.png", "joint_torques.png",
+              "constraint_violation.png"):
         img = np.asarray(Image.open(run_dir / f).convert("L"))
         assert img.shape[0] > 200 and img.shape[1] > 300
         assert img.std() > 5  # not a blank image

@@ -192,6 +192,78 @@ def plot_constraint_violation(path, t, violation, title: str = "") -> Path:
     return _save(fig, path)
 
 
+def plot_arm_wrenches(path, t, wrench: Mapping[str, np.ndarray], title: str = "",
+                      events=()) -> Path:
+    """Each arm's wrench on the object against time: force and moment at the COM, world axes.
+
+    Args:
+        path: PNG file.
+        t: (T,) times [s].
+        wrench: arm name -> (T, 6) ``[f; m]`` [N, N m], the moment about the object's COM.
+        title: figure title.
+        events: ``[(t, kind), ...]`` contact events, drawn as vertical lines.
+    """
+    t = _times(t)
+    if not wrench:
+        raise InputError("plot_arm_wrenches: no arms given")
+    n = len(wrench)
+    fig, axes = plt.subplots(n, 2, figsize=(10, 2.2 + 1.8 * n), sharex=True, squeeze=False)
+    for row, (name, w) in zip(axes, wrench.items(), strict=True):
+        w = as_array(w, (len(t), 6), f"arm_wrench {name} (T, 6)")
+        for ax, part, unit in ((row[0], slice(0, 3), "f [N]"), (row[1], slice(3, 6), "m [N m]")):
+            for axis, k in zip("xyz", range(part.start, part.stop), strict=True):
+                ax.plot(t, w[:, k], lw=1.0, label=axis)
+            ax.axhline(0.0, color="k", lw=0.6)
+            _mark_events(ax, events)
+            ax.set_ylabel(f"{name}: {unit}")
+            ax.grid(alpha=0.3)
+            ax.legend(loc="upper right", fontsize=7, ncol=3)
+    for ax in axes[-1]:
+        ax.set_xlabel("time [s]")
+    fig.suptitle(title or "each arm's wrench on the object (world axes, at the COM)")
+    return _save(fig, path)
+
+
+def plot_torque_ratios(path, t, tau: Mapping[str, np.ndarray],
+                       limits: Mapping[str, np.ndarray], joint_names=None,
+                       title: str = "") -> Path:
+    """Each joint's ``|τ| / τ_max`` against time, with the limit (1) drawn and excess marked.
+
+    Args:
+        path: PNG file.
+        t: (T,) times [s].
+        tau: arm name -> (T, nv) joint torques [N m].
+        limits: arm name -> (nv,) effort limits [N m] (``inf`` or 0: none, not drawn).
+        joint_names: optional arm name -> joint names (legend).
+        title: figure title.
+    """
+    t = _times(t)
+    if not tau:
+        raise InputError("plot_torque_ratios: no arms given")
+    n = len(tau)
+    fig, axes = plt.subplots(n, 1, figsize=(9, 2.2 + 1.8 * n), sharex=True, squeeze=False)
+    for ax, (name, tq) in zip(axes[:, 0], tau.items(), strict=True):
+        tq = as_array(tq, (len(t), None), f"tau_{name} (T, nv)")
+        lim = np.asarray(limits[name], dtype=float).reshape(-1)
+        names = list((joint_names or {}).get(name, [])) or [str(j) for j in range(tq.shape[1])]
+        for j in range(tq.shape[1]):
+            if not (np.isfinite(lim[j]) and lim[j] > 0):
+                continue
+            ratio = np.abs(tq[:, j]) / lim[j]
+            (line,) = ax.plot(t, ratio, lw=1.0, label=names[j])
+            over = ratio > 1.0
+            if over.any():
+                ax.plot(t[over], ratio[over], "x", ms=3, color=line.get_color())
+        ax.axhline(1.0, color="tab:red", lw=1.0, ls="--", label="limit")
+        ax.set_ylabel(f"{name}: |τ| / τ_max")
+        ax.set_ylim(0.0, max(1.1, 1.05 * ax.get_ylim()[1]))
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7)
+    axes[-1, 0].set_xlabel("time [s]")
+    axes[0, 0].set_title(title or "joint torques against their URDF effort limits (x: over)")
+    return _save(fig, path)
+
+
 def write_plots(out_dir, trajectory: Mapping[str, np.ndarray], arm_names, title: str = "",
                 support_names=()) -> list[Path]:
     """All standard plots of a run from its ``trajectory.npz`` arrays.
@@ -206,10 +278,17 @@ def write_plots(out_dir, trajectory: Mapping[str, np.ndarray], arm_names, title:
         title: scenario name, prefixed to the titles.
         support_names: the supports' names.
 
+    With ``arm_wrench`` (T, n_arms, 6) it also writes ``arm_wrenches.png``, each arm's wrench
+    on the object; then ``contact_forces.png`` shows only the arms with unilateral rows
+    (fingertips) and the supports, whose multipliers are forces at named points (a weld's six
+    rows are not: its wrench says what it does), and is left out when there are none. With
+    ``tau_<arm>`` and ``tau_limit_<arm>`` (nv,) for every arm it writes ``joint_torques.png``,
+    the torques as ratios of their limits.
+
     Returns:
         The PNG files written: ``object_pose.png``, ``contact_forces.png``,
-        ``constraint_violation.png``, and ``contact_states.png`` when the run has contact
-        events or supports.
+        ``constraint_violation.png``, ``contact_states.png`` when the run has contact
+        events or supports, ``arm_wrenches.png`` and ``joint_torques.png``.
     """
     out = Path(out_dir)
     pre = f"{title}: " if title else ""
@@ -226,20 +305,38 @@ def write_plots(out_dir, trajectory: Mapping[str, np.ndarray], arm_names, title:
             trajectory["contact_labels"],
             list(zip(ev_t.tolist(), ev_kind.tolist(), ev_k.tolist(), strict=True)),
             pre + "contacts touching (bars); x separation, o touchdown"))
-    return extra + [
-        plot_object_pose(out / "object_pose.png", t, trajectory["object_position"],
-                         trajectory["object_quaternion"], pre + "object pose"),
-        plot_contact_forces(out / "contact_forces.png", t,
-                            {a: trajectory[f"mu_{a}"] for a in names},
-                            pre + "contact forces (positive = pushing)", events),
-        plot_constraint_violation(out / "constraint_violation.png", t,
-                                  trajectory["constraint_violation"],
-                                  pre + "constraint violation"),
-    ]
+    forces = names
+    if "arm_wrench" in trajectory and len(arm_names):
+        w = np.asarray(trajectory["arm_wrench"])
+        extra.append(plot_arm_wrenches(
+            out / "arm_wrenches.png", t, {a: w[:, i] for i, a in enumerate(arm_names)},
+            pre + "each arm's wrench on the object (world axes, at the COM)", events))
+        uni = trajectory.get("unilateral_arms")
+        fingertips = set(np.asarray(uni, dtype=str).tolist()) if uni is not None else set()
+        forces = [a for a in arm_names if a in fingertips] + list(support_names)
+    if len(arm_names) and all(f"tau_limit_{a}" in trajectory for a in arm_names):
+        extra.append(plot_torque_ratios(
+            out / "joint_torques.png", t, {a: trajectory[f"tau_{a}"] for a in arm_names},
+            {a: trajectory[f"tau_limit_{a}"] for a in arm_names},
+            {a: trajectory[f"joint_names_{a}"] for a in arm_names
+             if f"joint_names_{a}" in trajectory},
+            title=pre + "joint torques / URDF effort limits (x: over the limit)"))
+    plots = [plot_object_pose(out / "object_pose.png", t, trajectory["object_position"],
+                              trajectory["object_quaternion"], pre + "object pose")]
+    if forces:
+        plots.append(plot_contact_forces(out / "contact_forces.png", t,
+                                         {a: trajectory[f"mu_{a}"] for a in forces},
+                                         pre + "contact forces (positive = pushing)", events))
+    plots.append(plot_constraint_violation(out / "constraint_violation.png", t,
+                                           trajectory["constraint_violation"],
+                                           pre + "constraint violation"))
+    return extra + plots
 
 
 __all__ = [
     "EVENT_STYLE",
+    "plot_arm_wrenches",
+    "plot_torque_ratios",
     "plot_constraint_violation",
     "plot_contact_states",
     "plot_contact_forces",

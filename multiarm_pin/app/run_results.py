@@ -15,7 +15,13 @@ its results folder:
   ``support_planes`` (S, 6) (plane point and normal, world); ``external_wrench`` (T, 6);
   the contact events ``event_t`` (E,) [s], ``event_contact`` (E,) (index in K) and
   ``event_kind`` (E,) (``separation`` / ``touchdown``);
-  ``kinetic_energy``, ``potential_energy`` (T,) [J]; ``momentum`` (T, 6).
+  ``kinetic_energy``, ``potential_energy`` (T,) [J]; ``momentum`` (T, 6);
+  ``arm_wrench`` (T, n_arms, 6): each arm's wrench on the object ``[f; m]`` [N, N m], world
+  axes, the moment about the COM (:meth:`SimulationResult.arm_wrench`); for each arm A
+  ``tau_limit_A`` (nv,) its joints' URDF effort limits [N m] (``inf``: none),
+  ``joint_names_A`` (nv,) their names, and, when the
+  run saturates the actuators, ``tau_commanded_A`` (T, nv) (``tau_A`` is then the applied
+  torque); ``unilateral_arms``: the arms with unilateral (fingertip) rows.
 - ``summary.json``: scenario name, solver, steps, wall time, max constraint violation,
   min contact force, warnings (contact separations, solver switches), ``input_warnings``
   (legal but suspicious input values, also printed on stderr before the run), per-arm
@@ -23,7 +29,8 @@ its results folder:
   ``failed`` or ``interrupted``), ``error`` (the message, or null) and ``t_end`` (the last
   simulated time [s]);
   ``events`` (every separation and touchdown: time, contact, arm or support).
-- ``object_pose.png``, ``contact_forces.png``, ``constraint_violation.png``.
+- ``object_pose.png``, ``arm_wrenches.png``, ``joint_torques.png``, ``contact_forces.png``
+  (fingertips and supports), ``constraint_violation.png``.
 - ``replay.html``: a self-contained Meshcat page replaying the run offline.
 - ``scenario.yaml``: the scenario (URDF paths absolute), so that ``multiarm-pin replay DIR``
   can rebuild the arms.
@@ -96,7 +103,28 @@ def system_trajectory_arrays(system, result) -> dict[str, np.ndarray]:
     out["event_t"] = np.array([e.t for e in result.events], dtype=float)
     out["event_contact"] = np.array([flat[e.block, e.row] for e in result.events], dtype=int)
     out["event_kind"] = np.array([e.kind for e in result.events], dtype=str)
+    out["arm_wrench"] = result.arm_wrench(n)
+    saturated = getattr(result, "torque_limit", None) is not None
+    for i, arm in enumerate(system.arms):
+        lim = np.asarray(arm.model.effortLimit, dtype=float)[: arm.nv].copy()
+        lim[~(lim > 0.0)] = np.inf  # a URDF without <limit effort>: none
+        out[f"tau_limit_{arm.name}"] = lim
+        out[f"joint_names_{arm.name}"] = np.array(velocity_names(arm.model), dtype=str)
+        if saturated:
+            out[f"tau_commanded_{arm.name}"] = result.tau_commanded[:, aset.v_slices[i]]
+    uni = system.contact_unilateral[:n].any(axis=1) if n else np.zeros(0, dtype=bool)
+    out["unilateral_arms"] = np.array([a.name for a, u in zip(system.arms, uni, strict=True)
+                                       if u], dtype=str)
     return {k: np.ascontiguousarray(v) for k, v in out.items()}
+
+
+def velocity_names(model: pin.Model) -> list[str]:
+    """The name of each of the ``nv`` velocity coordinates of ``model``.
+
+    A joint's name, with ``[k]`` added on joints of several coordinates.
+    """
+    return [model.names[j] if model.nvs[j] == 1 else f"{model.names[j]}[{k}]"
+            for j in range(1, model.njoints) for k in range(model.nvs[j])]
 
 
 def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> dict:
