@@ -121,7 +121,7 @@ def test_grasp_failure_shows_which_contact_goes_first(tmp_path):
                                                      "four_finger")
     assert abs(first.t - 0.15) < 1e-12
     assert res.summary["events"][0]["label"] == "four_finger:tip[2]"
-    assert res.summary["warnings"][0].startswith("t = 0.15 s: arm 0 (four_finger) contact 2")
+    assert res.summary["warnings"][0].startswith("t = 0.15 s: contact four_finger:tip[2] (arm 0)")
 
 
 def test_grasp_failure_object_pd_holds_the_arms_once_the_grasp_is_lost(tmp_path):

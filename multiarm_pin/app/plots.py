@@ -7,7 +7,7 @@ gaps [m].
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import matplotlib
@@ -104,7 +104,7 @@ def _mark_events(ax, events) -> None:
 
 
 def plot_contact_forces(path, t, mu: Mapping[str, np.ndarray], title: str = "",
-                        events=()) -> Path:
+                        events=(), labels: Mapping[str, Sequence[str]] | None = None) -> Path:
     """Contact multipliers (forces, positive = pushing) of each arm or support against time.
 
     Args:
@@ -114,23 +114,29 @@ def plot_contact_forces(path, t, mu: Mapping[str, np.ndarray], title: str = "",
         title: figure title.
         events: ``[(t, kind), ...]`` contact events (``separation`` red dashed,
             ``touchdown`` green dotted vertical lines).
+        labels: optional name -> (N_A,) contact names for the legend (the events' and
+            warnings' ``"<arm>:<contact>"`` / ``"<support>[point]"``); row indices otherwise.
     """
     t = _times(t)
     if not mu:
         raise InputError("plot_contact_forces: no arms given")
+    labels = labels or {}
     n = len(mu)
     fig, axes = plt.subplots(n, 1, figsize=(7, 2.2 + 1.8 * n), sharex=True, squeeze=False)
     for ax, (name, m) in zip(axes[:, 0], mu.items(), strict=True):
         m = as_array(m, (len(t), None), f"mu_{name} (T, N)")
+        names = list(labels.get(name, ()))
+        if len(names) != m.shape[1]:
+            names = [str(k) for k in range(m.shape[1])]
         for k in range(m.shape[1]):
-            ax.plot(t, m[:, k], lw=1.0, label=f"{k}")
+            ax.plot(t, m[:, k], lw=1.0, label=names[k])
         ax.axhline(0.0, color="k", lw=0.6)
         _mark_events(ax, events)
         ax.set_ylabel(f"{name}: μ [N]")
         ax.grid(alpha=0.3)
         if 0 < m.shape[1] <= 8:
-            ax.legend(loc="upper right", fontsize=7, ncol=m.shape[1], title="contact",
-                      title_fontsize=7)
+            ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7,
+                      title="contact", title_fontsize=7)
     axes[-1, 0].set_xlabel("time [s]")
     axes[0, 0].set_title(title or "contact forces (positive = pushing)")
     return _save(fig, path)
@@ -324,9 +330,12 @@ def write_plots(out_dir, trajectory: Mapping[str, np.ndarray], arm_names, title:
     plots = [plot_object_pose(out / "object_pose.png", t, trajectory["object_position"],
                               trajectory["object_quaternion"], pre + "object pose")]
     if forces:
+        every = [str(x) for x in np.asarray(trajectory.get("contact_labels", []), dtype=str)]
+        legend = {a: [x for x in every if x.startswith((f"{a}:", f"{a}["))] for a in forces}
         plots.append(plot_contact_forces(out / "contact_forces.png", t,
                                          {a: trajectory[f"mu_{a}"] for a in forces},
-                                         pre + "contact forces (positive = pushing)", events))
+                                         pre + "contact forces (positive = pushing)", events,
+                                         legend))
     plots.append(plot_constraint_violation(out / "constraint_violation.png", t,
                                            trajectory["constraint_violation"],
                                            pre + "constraint violation"))

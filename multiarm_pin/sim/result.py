@@ -157,6 +157,7 @@ class Recorder:
         self.switches: list[float] = []
         self._negative = np.zeros((n, m), dtype=bool)
         self._singular = False
+        self._labels = None  # (block, row) -> label, built at the first warning
         self.count = 0
 
     def record(self, k: int, t: float, state: SystemState, sol: Solution, ev: Evaluation,
@@ -195,7 +196,7 @@ class Recorder:
             self.n_warnings += 1
             if len(self.warnings) < self.max_warnings:
                 self.warnings.append(
-                    f"t = {t:.6g} s: arm {i} ({s.arms[i].name}) contact {j}: multiplier "
+                    f"t = {t:.6g} s: contact {self._label(i, j)} (arm {i}): multiplier "
                     f"μ = {sol.mu[i, j]:.4g} N < 0, a frictionless contact would separate"
                 )
         self._negative = negative
@@ -204,6 +205,12 @@ class Recorder:
             self.switches.append(float(t))
         self._singular = singular
         self.count = k + 1
+
+    def _label(self, block: int, row: int) -> str:
+        """The contact's name, ``"<arm>:<contact>"`` or ``"<support>[point]"`` (as in events)."""
+        if self._labels is None:
+            self._labels = {(b, r): lab for b, r, lab in self.system.contact_labels}
+        return self._labels.get((block, row), f"{block}:{row}")
 
     def start_saturation(self) -> None:
         """Record the commanded torques too (a run whose actuators saturate)."""
@@ -229,7 +236,7 @@ class Recorder:
         n = len(self.t) if n is None else int(n)
         s = self.system
         warnings = [  # a grasp contact letting go is worth a warning (a support's is not)
-            f"t = {e.t:.6g} s: arm {e.block} ({e.body}) contact {e.row}: separates (multiplier "
+            f"t = {e.t:.6g} s: contact {e.label} (arm {e.block}): separates (multiplier "
             f"μ = 0 N; holding it would need a pulling force)"
             for e in stepper.events if e.kind == "separation" and e.block < s.n_arms
         ][:self.max_warnings] + list(self.warnings) + [  # a controller's own (ObjectPD holding)
