@@ -100,7 +100,9 @@ def test_pick_from_table_records_lift_off_and_touchdown(tmp_path):
         events = [e for e in table if e.row == row]
         lift = events[0]
         assert lift.kind == "separation" and 0.02 <= lift.t <= 0.12, lift
-        down = next(e for e in events if e.kind == "touchdown")
+        downs = [e for e in events if e.kind == "touchdown"]
+        assert downs, f"table row {row} never touches down again"
+        down = downs[0]
         # closing speed: above the resting speed (1 mm/s; measured 4.0 mm/s), below the peak
         assert 0.25 < down.t < 0.5 and -0.0057 < down.phi_dot < -1e-3, down
         first_down.append(down.t)
