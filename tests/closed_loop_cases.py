@@ -155,3 +155,54 @@ held points from evaluations equal to round-off, not bit for bit."""
 def run_tolerance(field: str) -> float:
     """Agreement of the compiled and the Python loop on a recorded field."""
     return TOL_RANK_DEFICIENT_HOLD if field in PLANNED else 1e-9
+
+
+def support_resultant(result, block: int) -> np.ndarray:
+    """(T, 6) resultant ``[f; m]`` [N, N m] of contact block ``block``'s forces about the
+    object's COM, world axes, from the recorded multipliers, normals and contact points.
+
+    Unique even where its split among the block's rows is not (a support's coplanar
+    vertices are redundant: which of them carries the load is decided by round-off).
+    """
+    f = result.mu[:, block, :, None] * result.normals[:, block]
+    lever = result.contact_points[:, block] - result.object_position[:, None, :]
+    return np.concatenate([f.sum(axis=1), np.cross(lever, f).sum(axis=1)], axis=1)
+
+
+def assert_same_contact_run(fast, ref, tol: float, field_tol: float | None = None,
+                            support_block: int | None = None) -> None:
+    """The compiled run ``fast`` equals the Python run ``ref``: events, samples and fields.
+
+    Events: the same (kind, block, row, rebound) in the same order, times within ``tol``,
+    gap rates before and after to 1e-7; impulses row by row on the arms' rows, and on the
+    rows of ``support_block`` (a support's plane: one normal for every row) their sum over
+    the rows hit at one instant. Fields: ``RUN_FIELDS`` within ``field_tol`` (default
+    ``tol``), the support block's multipliers through :func:`support_resultant`.
+    """
+    key = [(e.kind, e.block, e.row, e.rebound) for e in ref.events]
+    assert [(e.kind, e.block, e.row, e.rebound) for e in fast.events] == key
+    sums: dict[float, list[float]] = {}
+    for a, b in zip(fast.events, ref.events, strict=True):
+        assert abs(a.t - b.t) <= tol
+        fields = ["phi_dot", "phi_dot_after"]
+        if b.block == support_block:
+            group = sums.setdefault(b.t, [0.0, 0.0])
+            group[0] += a.impulse
+            group[1] += b.impulse
+        else:
+            fields.append("impulse")
+        for f in fields:
+            assert abs(getattr(a, f) - getattr(b, f)) <= 1e-7 * (1.0 + abs(getattr(b, f))), f
+    for t, (pa, pb) in sums.items():
+        assert abs(pa - pb) <= 1e-7 * (1.0 + abs(pb)), ("support impulse", t)
+    field_tol = tol if field_tol is None else field_tol
+    for field in RUN_FIELDS:
+        a, b = getattr(fast, field), getattr(ref, field)
+        if field == "mu" and support_block is not None:
+            assert rel_err(support_resultant(fast, support_block),
+                           support_resultant(ref, support_block)) <= field_tol, "support"
+            a, b = np.delete(a, support_block, axis=1), np.delete(b, support_block, axis=1)
+        assert rel_err(a, b) <= field_tol, field
+    np.testing.assert_array_equal(fast.t, ref.t)
+    np.testing.assert_array_equal(fast.active, ref.active)
+    assert list(fast.solver) == list(ref.solver)

@@ -5,7 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from closed_loop_cases import RUN_FIELDS, SCENARIOS, rel_err, run_scenario
+from closed_loop_cases import (
+    RUN_FIELDS,
+    SCENARIOS,
+    assert_same_contact_run,
+    rel_err,
+    run_scenario,
+)
 
 from multiarm_pin.app.runner import make_controller
 from multiarm_pin.app.scenario import build_scenario, load_scenario
@@ -27,22 +33,22 @@ def _same_events(fast, ref, tol):
             assert abs(getattr(a, f) - getattr(b, f)) <= 1e-7 * (1.0 + abs(getattr(b, f))), f
 
 
-@pytest.mark.parametrize(("name", "duration", "tol"), [
-    ("box_on_table", 0.6, 1e-9),     # no arms: a bouncing box, 40 touchdowns and separations
-    ("grasp_failure", 0.6, 1e-7),    # fingertips let go, object_pd holds the arms still
-    ("pick_from_table", 0.4, 1e-7),  # arms and a support: the stand's rows let go
+@pytest.mark.parametrize(("name", "duration", "tol", "support_block"), [
+    ("box_on_table", 0.6, 1e-9, 0),     # no arms: a bouncing box, 40 touchdowns
+    ("grasp_failure", 0.6, 1e-7, None),  # fingertips let go, object_pd holds the arms still
+    ("pick_from_table", 0.4, 1e-7, 2),  # arms and a support: the stand's rows let go
 ])
-def test_runs_equal_the_python_stepper(name, duration, tol, monkeypatch):
+def test_runs_equal_the_python_stepper(name, duration, tol, support_block, monkeypatch):
+    """Event by event and sample by sample. The support's rows (four coplanar vertices)
+    are redundant: which of them takes a force or an impulse is decided by round-off, so
+    they are compared by their resultant, which is unique (the row by row split agrees only
+    while both paths compute the same numbers to the bit); the fingertips on 6-joint arms
+    are independent rows, compared one by one."""
     fast, calls = run_scenario(name, duration, "contact", monkeypatch)
     ref, _ = run_scenario(name, duration, False, monkeypatch)
     assert calls, "the contact loop did not run"
     assert ref.events, "the scenario should have contact events"
-    _same_events(fast, ref, tol)
-    for field in RUN_FIELDS:
-        assert rel_err(getattr(fast, field), getattr(ref, field)) <= tol, field
-    np.testing.assert_array_equal(fast.t, ref.t)
-    np.testing.assert_array_equal(fast.active, ref.active)
-    assert list(fast.solver) == list(ref.solver)
+    assert_same_contact_run(fast, ref, tol, support_block=support_block)
     assert fast.warnings == ref.warnings
 
 

@@ -77,6 +77,14 @@ def test_pick_from_table_records_lift_off_and_touchdown(tmp_path):
     the stand back: touchdown events of the stand's rows, closing slower than the last
     segment's peak speed ``1.875 · 0.6 mm / 0.2 s ≈ 5.6 mm/s`` (minimum jerk). Every event
     is in the result, in ``summary.json`` and in ``trajectory.npz``.
+
+    Only what is physically determined is asserted: each stand row's first event (lift-off)
+    and its first touchdown (the put-down's impact, the four rows at once: the box is level)
+    with its closing speed, zero stand forces in between, and the box resting on the stand at
+    the end. Not the exact event list after the put-down: there the four coplanar stand rows
+    are redundant (which of them takes the impulse is decided by round-off) and fingertips
+    whose gap rate is zero to round-off (1e-18 m/s) separate and touch again in the same
+    instant, a sequence that may change with the CPU's rounding.
     """
     wp = [{"t": 0.02, "position": [0.0, 0.0, 0.9]}, {"t": 0.12, "position": [0.0, 0.0, 0.905]},
           {"t": 0.25, "position": [0.0, 0.0, 0.9005]}, {"t": 0.45, "position": [0.0, 0.0, 0.8999]}]
@@ -86,12 +94,27 @@ def test_pick_from_table_records_lift_off_and_touchdown(tmp_path):
     res = run_scenario(sc, tmp_path, html=False, plots=True)
     r = res.result
     table = [e for e in r.events if e.body == "table"]
-    lift = [e for e in table if e.kind == "separation"]
-    down = [e for e in table if e.kind == "touchdown"]
-    assert sorted({e.row for e in lift}) == [0, 1, 2, 3]
-    assert all(0.02 <= e.t <= 0.12 for e in lift[:4])
-    assert down and all(e.t > 0.12 for e in down)
-    assert all(-0.0057 < e.phi_dot < 0 for e in down)
+    assert {e.row for e in table} == {0, 1, 2, 3}
+    first_down = []
+    for row in range(4):
+        events = [e for e in table if e.row == row]
+        lift = events[0]
+        assert lift.kind == "separation" and 0.02 <= lift.t <= 0.12, lift
+        downs = [e for e in events if e.kind == "touchdown"]
+        assert downs, f"table row {row} never touches down again"
+        down = downs[0]
+        # closing speed: above the resting speed (1 mm/s; measured 4.0 mm/s), below the peak
+        assert 0.25 < down.t < 0.5 and -0.0057 < down.phi_dot < -1e-3, down
+        first_down.append(down.t)
+    assert max(first_down) - min(first_down) < 1e-9
+    n = len(res.built.arms)
+    between = (r.t > max(e.t for e in table if e.kind == "separation" and e.t < 0.12) + 1e-12) \
+        & (r.t < min(first_down))
+    assert between.sum() > 100 and not r.mu[between, n, :4].any()
+    # at the end the box rests on the stand, which carries most of its weight (measured all)
+    weight = res.built.obj.mass * 9.81
+    assert abs(r.object_position[-1, 2] - r.object_position[0, 2]) < 1e-6
+    assert r.mu[-1, n, :4].sum() > 0.5 * weight
     summary = json.loads((tmp_path / "summary.json").read_text(encoding="utf-8"))
     assert [(e["t"], e["kind"], e["label"]) for e in summary["events"]] == \
         [(e.t, e.kind, e.label) for e in r.events]

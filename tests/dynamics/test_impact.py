@@ -150,14 +150,28 @@ def test_random_impacts_match_enumeration(seed):
     assert np.abs(ref.phi_dot_plus - sol.phi_dot_plus).max() <= 1e-12 * max(np.abs(vm).max(), 1)
 
 
+def impulses_unique(b: SystemBlocks, seed: int) -> bool:
+    """True when the rows of ``random_impact(seed)`` are independent by construction: no
+    redundant row, and at most 6 rows beyond what each arm's joints make independent (the
+    rest act through the object's 6 dofs). Only then is which row takes an impulse unique."""
+    excess = sum(max(0, int(m) - int(k)) for k, m in zip(b.nv, b.N, strict=True))
+    return not (seed % 3 == 0 and int(b.N.max()) >= 3) and excess <= 6
+
+
 def test_random_impacts_are_not_trivial():
-    hit = separate = 0
+    """Rows hit (``P > 0``) and rows leave (``P = 0``, ``φ̇⁺ > 0``), counted on the cases
+    whose impulses are unique only (with redundant rows which of them takes the impulse is
+    decided by round-off); ``φ̇⁺`` of the rows counted as leaving is at least 0.04 here."""
+    hit = separate = unique = 0
     for seed in range(24):
         b, uni, vm, e = random_impact(seed)
+        if not impulses_unique(b, seed):
+            continue
+        unique += 1
         sol = solve_impact(b, uni, b.constraint_mask.copy(), vm, e)
         hit += int((sol.P[uni] > 0).sum())
         separate += int(((sol.P == 0) & uni & (sol.phi_dot_plus > 0)).sum())
-    assert hit >= 15 and separate >= 15
+    assert unique >= 15 and hit >= 15 and separate >= 15
 
 
 @pytest.mark.parametrize("seed", range(12))

@@ -12,12 +12,18 @@ FACES = ("+x", "-x", "+y", "-y", "+z", "-z")
 
 
 def test_eq_2_2_inverse_matches_numpy_inverse(rng):
+    """Random six-contact box grasps: the skip of dependent sets is a verdict with a margin
+    (σ_min of W either at round-off, a structural dependence, or above 1e-4: 21 of the 30
+    sets are compared)."""
+    compared = 0
     for _ in range(30):
         P = box(rng.uniform(0.5, 2.5, 3))
         faces = [FACES[k] for k in rng.integers(0, 6, 6)]
         g = Grasp(tuple(contact_on_face(P, f, random_face_point(P, f, rng)) for f in faces), P)
         W = g.wrenches()
-        if np.linalg.svd(W, compute_uv=False)[-1] < 1e-6:
+        sigma = np.linalg.svd(W, compute_uv=False)[-1]
+        assert sigma < 1e-12 or sigma > 1e-4, sigma
+        if sigma < 1e-6:
             continue
         try:
             dec = block_decomposition(g.points, g.normals)
@@ -25,6 +31,7 @@ def test_eq_2_2_inverse_matches_numpy_inverse(rng):
             assert np.linalg.matrix_rank(g.normals) < 3
             continue
         assert dec.independent
+        compared += 1
         inv = dec.inverse()
         order = list(dec.order)
         np.testing.assert_allclose(inv @ W[:, order], np.eye(6), atol=1e-9)
@@ -32,6 +39,7 @@ def test_eq_2_2_inverse_matches_numpy_inverse(rng):
         # the blocks satisfy their definitions
         np.testing.assert_allclose(dec.e_A @ dec.T1, -dec.e_B, atol=1e-12)
         np.testing.assert_allclose(dec.a @ dec.T2, -dec.a_A, atol=1e-9)
+    assert compared >= 15, compared
 
 
 def test_case_i_symmetric_contacts_have_T1_identity(rng):
