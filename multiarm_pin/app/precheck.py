@@ -197,7 +197,7 @@ def grasp_wrenches(system, state, length_scale: float) -> np.ndarray:
 
 def grasp_warnings(built) -> list[str]:
     """A grasp with unilateral contacts that is not form closure, with no support."""
-    from multiarm_pin.grasp.form_closure import form_closure
+    from multiarm_pin.grasp.form_closure import MIN_CONTACTS, form_closure
 
     sc, system = built.scenario, built.system
     if not system.n_arms or not system.unilateral.any() or system.supports.n_rows:
@@ -208,9 +208,15 @@ def grasp_warnings(built) -> list[str]:
     if fc.form_closure:
         return []
     n_uni = int(system.unilateral.sum())
-    why = (f"rank {fc.rank} < 6" if fc.rank < 6 else
-           "no strictly positive combination of the contact wrenches is zero (LP margin "
-           f"{fc.lp_epsilon:.3g})")
+    if fc.rank < 6:
+        why = f"their wrenches have rank {fc.rank} < 6"
+    elif not np.isfinite(fc.lp_epsilon):
+        why = "no combination of their wrenches with non-negative forces is zero"
+    else:
+        why = (f"no combination with strictly positive forces is zero: LP margin "
+               f"{fc.lp_epsilon:.3g} <= 0")
+    if W.shape[1] < MIN_CONTACTS:
+        why += f"; frictionless form closure needs at least {MIN_CONTACTS} contacts"
     hold = ""
     try:
         static_torques(system, built.initial_state)
