@@ -159,6 +159,9 @@ def singular_arms(built, result) -> list[str]:
         return []
     idx = np.unique(np.r_[np.linspace(0, T - 1, min(T, MAX_JACOBIAN_SAMPLES)).astype(int),
                           T - 1])
+    idx = idx[np.isfinite(result.q[idx]).all(axis=1)]  # a run ending in NaN: the samples before
+    if idx.size == 0:
+        return []
     out = []
     for arm, qs in zip(system.arms, system.arm_set.q_slices, strict=True):
         q = result.q[:, qs]
@@ -231,7 +234,7 @@ def failure_causes(built, result, dt: float, controller=None) -> list[str]:
     """
     out = []
     if len(result.t):
-        msg = step_too_large(built, result.state(len(result.t) - 1), dt, controller, 1.0)
+        msg = step_too_large(built, built.initial_state, dt, controller, 1.0)
         if msg:
             out.append(msg)
     out += singular_arms(built, result)
@@ -242,9 +245,10 @@ def failure_causes(built, result, dt: float, controller=None) -> list[str]:
 def describe_failure(built, result, dt: float, controller=None) -> str:
     """:func:`failure_causes` as one text to append to the error message."""
     try:
-        causes = failure_causes(built, result, dt, controller)
-    except MultiArmError as exc:  # a state the checks cannot evaluate (NaN...)
-        return f"; the causes could not be checked ({exc})"
+        with np.errstate(all="ignore"):
+            causes = failure_causes(built, result, dt, controller)
+    except (MultiArmError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+        return f"; the causes could not be checked ({type(exc).__name__}: {exc})"
     t = f"{result.t[-1]:.4g} s" if len(result.t) else "the start"
     if not causes:
         return (f"; checked up to t = {t}: no arm near a singularity, no torque beyond the "
