@@ -51,11 +51,6 @@ def two_ur5_welds(name: str = "two_ur5", mass: float = 4.0, quaternion: str = "[
                                 waypoints=waypoints, duration=duration, dt=dt)
 
 
-STRETCH_WAYPOINTS = "    - {t: 3.0, position: [1.4, 0.0, 0.5]}"
-"""The box carried 0.9 m along x, out of the arms' reach: the left UR5 stretches its elbow
-through its singularity (elbow angle through 0) near t = 0.97 s, and the run fails."""
-
-
 SIX_FINGERTIPS = """name: six_fingertips
 object:
   shape: {type: box, size: [0.8, 0.6, 0.4]}
@@ -91,3 +86,48 @@ simulation: {duration: 0.01, integrator: rk4, dt: 0.002, solver: object_first}
 """
 """The two corner grippers of two_gripper_form_closure.yaml with six fingertips (the
 four-finger gripper's fourth left out): six frictionless contacts are never form closure."""
+
+
+GRIPPERS_STRETCHED = """name: grippers_stretched
+object:
+  shape: {type: box, size: [0.8, 0.6, 0.4]}
+  mass: 4.0
+  pose: {position: [0.0, 0.0, 0.9]}
+arms:
+  - name: four_finger
+    urdf: mp6/mp6_4f.urdf
+    tool_frame: tool0
+    base: {position: [1.0, 0.45, 0.5], rpy: [0, 0, 2.5]}
+    q_seed: [0.8, -1.15, 1.05, 0.6, 0.9, -0.8]
+    joint:
+      type: fingertips
+      tip_radius: 0.015
+      contacts:
+        - {tip: fingertip_1, face: +x, point: [0.4, 0.25, 0.15]}
+        - {tip: fingertip_2, face: +y, point: [0.35, 0.3, 0.15]}
+        - {tip: fingertip_3, face: +z, point: [0.38, 0.25, 0.2]}
+        - {tip: fingertip_4, face: +z, point: [0.23, 0.25, 0.2]}
+  - name: three_finger
+    urdf: mp6/mp6.urdf
+    tool_frame: tool0
+    base: {position: [-0.8, -0.7, 0.0], rpy: [0, 0, 0.8]}
+    q_seed: [0.0, 0.0, -1.4, 0.0, 0.7, -0.75]
+    joint:
+      type: fingertips
+      tip_radius: 0.015
+      contacts:
+        - {tip: fingertip_1, face: -x, point: [-0.4, -0.25, -0.15]}
+        - {tip: fingertip_2, face: -y, point: [-0.35, -0.3, -0.15]}
+        - {tip: fingertip_3, face: -z, point: [-0.38, -0.25, -0.2]}
+controller:
+  type: object_pd
+  margin: 5.0
+  waypoints:
+    - {t: 1.5, position: [-1.2, -1.0, 0.9]}
+simulation: {duration: 0.5, integrator: rk4, dt: 0.002, solver: object_first,
+             baumgarte: {alpha: 5.0, beta: 5.0}}
+"""
+"""The 7-contact two-gripper grasp of two_gripper_form_closure.yaml asked to carry the box
+1.6 m away, out of four_finger's reach: its elbow stretches through 0 (its singularity) near
+t = 0.33 s, its shoulder torque goes far over the 200 N m limit, and the run ends in an
+event storm ("more than 50 contact events in one step")."""
