@@ -151,3 +151,16 @@ def test_fastest_rate_is_the_closed_form_of_the_pd(tmp_path, kp, kd, rate):
     warns = precheck.step_warnings(built, 0.5)
     assert len(warns) == 1 and f"dt · rate = {0.5 * rate:.3g}" in warns[0]
     assert precheck.step_warnings(built, 0.002) == []
+
+
+def test_joint_pd_rate_is_the_generalised_eigenvalue_of_its_stiffness(tmp_path):
+    """joint_pd without damping: modes ±i sqrt(λ(M⁻¹ K_p)); λ from scipy's eigh(K_p, M)."""
+    from scipy.linalg import eigh
+
+    kp = 4000.0
+    built = _build(tmp_path, one_arm_scenario(controller=f"{{type: joint_pd, kp: {kp}, kd: 0}}"))
+    arm = built.arms[0]
+    M = pin.crba(arm.model, arm.model.createData(), np.array(Q0_UR5))
+    lam = eigh(kp * np.eye(6), np.triu(M) + np.triu(M, 1).T, eigvals_only=True)
+    r, source = fastest_rate(built, built.initial_state)
+    assert r == pytest.approx(np.sqrt(lam.max()), rel=1e-9) and "joint-space gains" in source

@@ -89,6 +89,7 @@ def fastest_rate(built, state, controller=None) -> tuple[float, str]:
         for arm, sl, qs in zip(system.arms, system.arm_set.v_slices, system.arm_set.q_slices,
                                strict=True):
             M = pin.crba(arm.model, arm.model.createData(), np.asarray(state.q)[qs])
+            M = np.triu(M) + np.triu(M, 1).T  # whichever triangle Pinocchio filled
             Mi = np.linalg.inv(M)
             n = arm.nv
             A = np.block([[np.zeros((n, n)), np.eye(n)],
