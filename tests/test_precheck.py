@@ -137,7 +137,14 @@ def test_the_same_grasp_on_a_support_is_not_flagged(tmp_path):
     plane: {point: [0, 0, 0.7], normal: [0, 0, 1]}
     points: [[0.3, 0.2, -0.2], [0.3, -0.2, -0.2], [-0.3, 0.2, -0.2], [-0.3, -0.2, -0.2]]
 controller:""")
-    assert precheck.grasp_warnings(_build(tmp_path, text)) == []
+    built = _build(tmp_path, text)
+    assert precheck.grasp_warnings(built) == []
+    assert precheck.static_torque_warnings(built) == []
+    tau, how = precheck.static_torques(built.system, built.initial_state, supports=True)
+    assert how == "by the arms and the supports" and np.isfinite(tau).all()
+    # the stand takes most of the weight: the torques stay near the arms' own gravity torques
+    g = built.system.gravity_torques(built.initial_state.q)
+    assert np.abs(tau - g).max() < np.abs(g).max()
 
 
 @pytest.mark.parametrize(("kp", "kd", "rate"), [(100.0, 20.0, 10.0), (400.0, 10.0, 20.0)])

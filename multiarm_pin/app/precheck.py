@@ -113,18 +113,14 @@ def static_torques(system, state, supports: bool = False) -> tuple[np.ndarray, s
                                    np.asarray(o.quaternion, float), np.zeros(6)))
     ev = system.blocks(rest)
     b = ev.blocks
-    wrench = -np.asarray(b.h_o, float)
-    mask = system.unilateral
     if supports and system.supports.n_rows:
-        full, _ = system.contact_blocks(rest, b, ev.constraints)
-        dist = distribute_forces(full, -np.asarray(full.h_o, float), system.contact_unilateral)
-        mu = dist.mu[:system.n_arms]
-        how = "by the arms and the supports"
+        b, _ = system.contact_blocks(rest, b, ev.constraints)  # the arms' blocks, then theirs
+        mask, how = system.contact_unilateral, "by the arms and the supports"
     else:
-        dist = distribute_forces(b, wrench, mask)
-        mu = dist.mu
-        how = "by the arms alone"
-    tau = -b.h - np.einsum("nij,nj->ni", b.W, mu)
+        mask, how = system.unilateral, "by the arms alone"
+    mu = distribute_forces(b, -np.asarray(b.h_o, float), mask).mu
+    n = system.n_arms
+    tau = -b.h[:n] - np.einsum("nij,nj->ni", b.W[:n], mu[:n])
     return system.unpad(tau), how
 
 
