@@ -93,7 +93,7 @@ def test_w_first_quaternion_of_the_object_is_pointed_out(tmp_path):
     proc = run_cli("run", scenario, "--out", tmp_path / "out", "--quiet", "--no-html")
     assert proc.returncode == 2, proc.stderr
     assert "out of reach" in proc.stderr
-    assert ("object.pose.quaternion [1, 0, 0, 0] looks written [w, x, y, z]: quaternions are "
+    assert ("object.pose.quaternion [1, 0, 0, 0] may be written [w, x, y, z]: quaternions are "
             "[x, y, z, w], and reordered so, [0, 0, 0, 1], arm 'left' reaches its pose"
             in proc.stderr), proc.stderr
 
@@ -110,3 +110,32 @@ def test_no_w_first_hint_for_an_xyzw_quaternion(tmp_path):
     sc = load_scenario(write(tmp_path / "w.yaml", two_ur5_welds(
         quaternion="[0, 0, 0.3826834323650898, 0.9238795325112867]")))
     assert w_first_hint(sc, sc.arms[0], lambda spec, oMo: False) == ""
+
+
+def test_an_identity_quaternion_is_never_retried_reordered(tmp_path):
+    """[0, 0, 0, 1] is the identity as written: not blamed even if reordering would reach."""
+    sc = load_scenario(write(tmp_path / "w.yaml", two_ur5_welds(quaternion="[0, 0, 0, 1]")))
+    assert w_first_hint(sc, sc.arms[0], lambda spec, oMo: True) == ""
+
+
+def test_a_w_first_joint_placement_is_retried_reordered(tmp_path):
+    """The retried spec holds the written numbers read as (w, x, y, z) (Pinocchio's
+    4-number constructor order), the object placement unchanged."""
+    w, x = float(np.cos(0.4)), float(np.sin(0.4))  # 0.8 rad about x, written w-first
+    text = two_ur5_welds().replace(
+        "placement_in_object: {position: [0.0, 0.2, 0.0], rpy: [1.5707963267948966, 0, 0]}",
+        f"placement_in_object: {{position: [0.0, 0.2, 0.0], quaternion: [{w!r}, {x!r}, 0, 0]}}")
+    sc = load_scenario(write(tmp_path / "w.yaml", text))
+    seen = []
+
+    def reachable(spec, oMo):
+        seen.append((spec, oMo))
+        return True
+
+    hint = w_first_hint(sc, sc.arms[0], reachable)
+    assert "arms[0].joint.placement_in_object.quaternion" in hint and "reaches its pose" in hint
+    (spec, oMo), = seen
+    expected = pin.Quaternion(w, x, 0.0, 0.0).toRotationMatrix()
+    np.testing.assert_allclose(spec.joint.placement_in_object.rotation, expected, atol=1e-12)
+    np.testing.assert_allclose(spec.joint.placement_in_object.translation, [0, 0.2, 0])
+    assert oMo.isApprox(sc.object.placement)

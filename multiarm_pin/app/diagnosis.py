@@ -38,6 +38,10 @@ CONTINUOUS_STEP = 0.5
 """Largest configuration change [rad] between two samples across which a sign change of
 ``det J`` counts as a crossed singularity (larger: the state jumped)."""
 
+IDENTITY_LIKE = 0.9
+"""A quaternion whose last component (w as written) exceeds this in absolute value (unit
+norm) is taken as meant ``[x, y, z, w]`` and not tried reordered."""
+
 MAX_JACOBIAN_SAMPLES = 2000
 """Recorded samples at most at which the Jacobians are evaluated (evenly spaced, plus the
 last)."""
@@ -300,7 +304,8 @@ def w_first_hint(scenario, spec, reachable: Callable[[object, pin.SE3], bool]) -
     placements, the pose is tried again with it read as ``[w, x, y, z]`` (i.e. ``[b, c, d,
     a]`` in the scenario's ``[x, y, z, w]``); if that is reachable, the sentence says so.
     Otherwise a quaternion whose first component is near ±1 and last near 0 (the identity
-    written w-first) is pointed out.
+    written w-first) is pointed out. A quaternion near the identity as written (last
+    component above :data:`IDENTITY_LIKE`) is left alone.
 
     Args:
         scenario: the :class:`~multiarm_pin.app.scenario.Scenario`.
@@ -323,6 +328,8 @@ def w_first_hint(scenario, spec, reachable: Callable[[object, pin.SE3], bool]) -
         alt = _reordered(q)
         if np.isclose(abs(alt @ (q / np.linalg.norm(q))), 1.0, atol=1e-12):
             continue  # the same rotation either way
+        if abs(q[3]) / np.linalg.norm(q) > IDENTITY_LIKE:
+            continue  # near the identity as written [x, y, z, w]: most likely meant so
         s, o = spec, oMo
         if key == "object.pose.quaternion":
             o = _placement(alt, oMo.translation)
@@ -343,7 +350,7 @@ def w_first_hint(scenario, spec, reachable: Callable[[object, pin.SE3], bool]) -
         except MultiArmError:
             ok = False
         if ok:
-            hints.append(f"{key} {text} looks written [w, x, y, z]: quaternions are "
+            hints.append(f"{key} {text} may be written [w, x, y, z]: quaternions are "
                          f"[x, y, z, w], and reordered so, {fixed}, arm {spec.name!r} "
                          "reaches its pose")
         elif abs(q[0]) / np.linalg.norm(q) > 0.9 and abs(q[3]) / np.linalg.norm(q) < 0.1:
@@ -355,6 +362,7 @@ def w_first_hint(scenario, spec, reachable: Callable[[object, pin.SE3], bool]) -
 
 __all__ = [
     "CONTINUOUS_STEP",
+    "IDENTITY_LIKE",
     "MAX_JACOBIAN_SAMPLES",
     "SINGULAR_FRACTION",
     "STABILITY_LIMITS",
