@@ -171,3 +171,14 @@ def test_joint_pd_rate_is_the_generalised_eigenvalue_of_its_stiffness(tmp_path):
     lam = eigh(kp * np.eye(6), np.triu(M) + np.triu(M, 1).T, eigvals_only=True)
     r, source = fastest_rate(built, built.initial_state)
     assert r == pytest.approx(np.sqrt(lam.max()), rel=1e-9) and "joint-space gains" in source
+
+
+def test_a_weld_alone_is_form_closure_through_its_rows_counted_both_ways(tmp_path):
+    """A weld resists every wrench: its 6 bilateral rows, each as ±, positively span R^6."""
+    from multiarm_pin.grasp.form_closure import form_closure
+
+    built = _build(tmp_path, one_arm_scenario())
+    W = precheck.grasp_wrenches(built.system, built.initial_state, 0.3)
+    assert W.shape == (6, 12)
+    assert form_closure(W).form_closure
+    assert not form_closure(W[:, ::2], allow_fewer=True).form_closure  # one way only: no
