@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from multiarm_pin.app.diagnosis import describe_failure
+from multiarm_pin.app.precheck import precheck_warnings
 from multiarm_pin.app.progress import ProgressBar
 from multiarm_pin.app.results_io import (
     ResultsWriter,
@@ -194,7 +196,7 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
                                 f"needing ~{need / 2**30:.3g} GiB of memory (limit "
                                 f"{limit / 2**30:.3g} GiB, half the machine's memory); shorten "
                                 "the duration or lengthen simulation.dt")
-        input_warns = input_warnings(built, T)
+        input_warns = input_warnings(built, T) + precheck_warnings(built, dt)
         for w in input_warns:
             print(f"warning: {w}", file=sys.stderr, flush=True)
         bar = None if quiet else ProgressBar(f"{safe_component(sc.name)}", T)
@@ -215,6 +217,8 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
                 raise ScenarioError(sc.file, "", str(exc)) from exc
             status = "failed"
             error = f"{sc.file}: simulation failed: {exc}"
+            if len(result.t):  # name the cause: singular arm, torques over limits, dt
+                error += describe_failure(built, result, dt, controller)
             if len(result.t) == 0:  # the set-up cannot even start: an input error
                 key = "controller" if "controller" in str(exc) else ""
                 raise ScenarioError(sc.file, key, f"the simulation cannot start: {exc}") from exc

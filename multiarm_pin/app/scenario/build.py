@@ -195,7 +195,12 @@ def _joint_targets(spec: ArmSpec, tool: str, oMo: pin.SE3) -> tuple[list, str]:
     return [PoseTarget(tool, _placed_target(spec, oMo))], "tool at joint.placement_in_object"
 
 
-def _solve_arm_ik(scenario, spec: ArmSpec, arm, poly, oMo):
+def _solve_arm_ik(scenario, spec: ArmSpec, arm, poly, oMo, hints: bool = True):
+    """The arm's inverse kinematics (its :class:`~multiarm_pin.model.ik.IKResult`).
+
+    When unreachable, the error says if a quaternion written w-first explains it
+    (:func:`~multiarm_pin.app.diagnosis.w_first_hint`, unless ``hints`` is False).
+    """
     from multiarm_pin.model.ik import PostureTarget, UnreachableError, solve_ik
 
     seed = spec.q_seed
@@ -217,8 +222,18 @@ def _solve_arm_ik(scenario, spec: ArmSpec, arm, poly, oMo):
     try:
         return solve_ik(arm.model, targets, seed, what=what)
     except UnreachableError as exc:
+        from multiarm_pin.app.diagnosis import w_first_hint
+
+        def reachable(other: ArmSpec, oMo_other: pin.SE3) -> bool:
+            try:
+                _solve_arm_ik(scenario, other, arm, poly, oMo_other, hints=False)
+            except ScenarioError:
+                return False
+            return True
+
+        hint = w_first_hint(scenario, spec, reachable) if hints else ""
         raise ScenarioError(scenario.file, key,
-                            f"{exc} (try another q_seed, or move the arm's base)") from exc
+                            f"{exc}{hint} (try another q_seed, or move the arm's base)") from exc
 
 
 def _fingertip_joint(scenario, spec: ArmSpec, arm, obj, oMt: pin.SE3, oMo: pin.SE3):
