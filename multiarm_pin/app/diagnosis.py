@@ -197,13 +197,19 @@ def singular_arms(built, result) -> list[str]:
 
 
 def torques_over_limits(built, result) -> list[str]:
-    """Joints whose recorded torque exceeded the URDF effort limit: the peak and its time."""
+    """Joints whose recorded torque exceeded the URDF effort limit: the peak and its time.
+
+    The commanded torque (``tau_commanded``): where the actuators saturate, the applied one
+    never exceeds the limit, and the command that asked for more is the cause.
+    """
     system = built.system
     if not system.n_arms or len(result.t) == 0:
         return []
     rows = []
+    commanded = getattr(result, "tau_commanded", None)
+    commanded = result.tau if commanded is None else commanded
     for arm, sl in zip(system.arms, system.arm_set.v_slices, strict=True):
-        tau = np.asarray(result.tau)[:, sl]
+        tau = np.asarray(commanded)[:, sl]
         ratio = np.abs(tau) / effort_limits(arm)[None, :]
         ratio[~np.isfinite(ratio)] = 0.0
         names = joint_names(arm)
