@@ -154,3 +154,25 @@ def test_bad_extents_exit_2_naming_the_key(tmp_path, capsys, path, value, key, t
     stderr = capsys.readouterr().err
     assert stderr.startswith("error: ") and key in stderr and "Traceback" not in stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_box_off_table_records_its_off_edge_events(tmp_path):
+    """The shipped ``box_off_table``: the off-edge time and labels in ``summary.json``.
+
+    4 N on 2 kg, the edge 5 cm ahead of the leading vertices (rows 4 and 6 of the box's
+    vertices, x = +0.2 m, bottom): both lose the table at ``√(2 m d / F)`` = 0.2236 s.
+    """
+    from multiarm_pin.data import data_path
+
+    res = run_scenario(data_path("scenarios", "box_off_table.yaml"), tmp_path / "out",
+                       duration=0.25, html=False, plots=False)
+    s = res.summary
+    assert s["supports"][0]["extent"] == [1.0, 1.0]
+    assert s["supports"][0]["x_axis"] == [1.0, 0.0, 0.0]
+    assert sorted((e["kind"], e["label"]) for e in s["events"]) == [
+        ("off_edge", "table[4]"), ("off_edge", "table[6]")]
+    for e in s["events"]:
+        assert abs(e["t"] - np.sqrt(2 * 2.0 * 0.05 / 4.0)) < 1e-9
+    assert any("Python stepper" in w for w in s["warnings"])
+    np.testing.assert_array_equal(res.trajectory["support_extents"], [[1.0, 1.0]])
+    assert sorted(res.trajectory["event_kind"].tolist()) == ["off_edge", "off_edge"]

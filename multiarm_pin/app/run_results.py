@@ -171,7 +171,9 @@ def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> di
                             result.object_twist))),
         "arms": arms,
         "supports": [{"name": sp.name, "point": sp.point.tolist(), "normal": sp.normal.tolist(),
-                      "points": int(len(sp.points)), "restitution": sp.restitution}
+                      "points": int(len(sp.points)), "restitution": sp.restitution,
+                      "extent": None if sp.extent is None else sp.extent.tolist(),
+                      "x_axis": sp.x_axis.tolist()}
                      for sp in system.supports.supports],
         "external_wrench": [{"from": a, "to": b, "wrench": w.tolist()}
                             for a, b, w in built.scenario.object.external_wrench],

@@ -259,10 +259,11 @@ class Stepper:
         return self.fallen | (self.rows_margins(rows) <= 0.0)
 
     def _update_fallen(self, state: SystemState) -> None:
-        """Mark the rows below their plane while outside its rectangle; clear those above it."""
+        """Mark the rows below their plane while outside its rectangle; clear those back above."""
         g = self.gaps(state)
         outside = self.finite_rows & ~self.active & (self.edge_margins(state) <= 0.0)
-        self.fallen = (self.fallen | (outside & (g < -ce.GAP_TOLERANCE))) & (g < 0.0)
+        self.fallen = ((self.fallen | (outside & (g < -ce.GAP_TOLERANCE)))
+                       & (g <= ce.GAP_TOLERANCE))
 
     def separations(self, t: float, sol, rows: ContactRows, keep=None) -> bool:
         """Drop active unilateral rows that the solution lets go; True if any was dropped.
@@ -371,7 +372,7 @@ class Stepper:
                 if ending is None:
                     return new
                 t, state = t + h, new
-                self._leave(t, ending[1], ending[0], self.rows_at(t, state))
+                self._leave(t, ending[1], ending[0], state=state)
                 sol, _, _, rows = self.evaluate(t, state)
                 if self.separations(t, sol, rows):
                     sol = self.evaluate(t, state)[0]
@@ -399,11 +400,17 @@ class Stepper:
         raise DynamicsError(f"t = {t:.6g} s: more than {ce.MAX_EVENTS_PER_STEP} contact events "
                             "in one step")
 
-    def _leave(self, t: float, leaving: np.ndarray, kind: str, rows: ContactRows) -> None:
-        """Drop ``leaving`` rows from the active set, with their events (``kind``) at ``t``."""
+    def _leave(self, t: float, leaving: np.ndarray, kind: str, rows: ContactRows | None = None,
+               state: SystemState | None = None) -> None:
+        """Drop ``leaving`` rows from the active set, with their events (``kind``) at ``t``.
+
+        ``rows``: the rows at ``t``, or None to get them at ``state`` (only if a row leaves).
+        """
         leaving = leaving & self.active
         if not leaving.any():
             return
+        if rows is None:
+            rows = self.rows_at(t, state)
         for b, r in zip(*np.nonzero(leaving), strict=True):
             self._event(t, kind, b, r, phi_dot=float(rows.phi_dot[b, r]),
                         phi_dot_after=float(rows.phi_dot[b, r]))
