@@ -208,3 +208,18 @@ def test_a_finite_support_stays_on_the_stepper_and_a_large_one_changes_nothing()
         np.testing.assert_array_equal(getattr(finite, field), getattr(infinite, field),
                                       err_msg=field)
     assert ce.EDGE_TIME_TOLERANCE < 1e-6  # the off-edge times asked for (issue 23)
+
+
+def test_a_point_below_the_plane_beside_the_table_is_no_initial_penetration():
+    """The initial-state check counts only the points over the rectangle.
+
+    The box's bottom 5 cm below the table's plane: beside the table (x from 1 to 2 m) that is
+    no penetration; half over it (x from -1 to 0), its two bottom vertices over the table are.
+    """
+    from multiarm_pin.exceptions import InitialGapError
+
+    beside, state = _box_system(_table(1.0, 2.0), [0.0, 0.0, C / 2 - 0.05])
+    beside.check_supports(state)
+    over, state = _box_system(_table(-1.0, 0.0), [0.0, 0.0, C / 2 - 0.05])
+    with pytest.raises(InitialGapError, match=r"2 point\(s\) below the plane"):
+        over.check_supports(state)
