@@ -223,3 +223,39 @@ def test_a_point_below_the_plane_beside_the_table_is_no_initial_penetration():
     over, state = _box_system(_table(-1.0, 0.0), [0.0, 0.0, C / 2 - 0.05])
     with pytest.raises(InitialGapError, match=r"2 point\(s\) below the plane"):
         over.check_supports(state)
+
+
+def test_a_box_sliding_down_a_finite_ramp_leaves_its_lower_edge_at_the_closed_form_time():
+    """On a frictionless ramp of slope θ the box slides at ``g sin θ``, off at ``√(2d/(g sin θ))``.
+
+    The ramp's normal is ``n = (sin θ, 0, cos θ)``, its downhill direction ``e = (cos θ, 0,
+    -sin θ)``, the rectangle's x axis given as ``[2, 0, 0.3]`` (any direction of the x-z
+    plane projects onto ``±e``); the box lies on it (rotated by θ about y), its downhill
+    vertices ``d`` before the lower edge. Gravity's component along the ramp is ``g sin θ``,
+    the normal forces balance the rest and the box slides without turning, so the downhill
+    vertices reach the edge at ``t* = √(2d / (g sin θ))``; the uphill ones stay on.
+    """
+    theta, d = np.radians(20.0), 0.05
+    n = np.array([np.sin(theta), 0.0, np.cos(theta)])
+    e = np.array([np.cos(theta), 0.0, -np.sin(theta)])
+    s0 = 0.0  # the box's centre along e from the ramp's centre line
+    edge = s0 + A / 2 + d
+    V = RigidObject.box([A, B, C], M).shape.vertices
+    length = 1.0 + edge
+    ramp = Support("ramp", (edge - 0.5 * length) * e, n, V, extent=[length, 2.0],
+                   x_axis=[2.0, 0.0, 0.3])
+    np.testing.assert_allclose(ramp.x_axis, e, atol=1e-15)
+    box = RigidObject.box([A, B, C], M)
+    system = MultiArmSystem([], box, [], gravity=(0, 0, -G), supports=[ramp])
+    state = system.state(np.zeros(0), None, s0 * e + (C / 2) * n,
+                         (0.0, np.sin(theta / 2), 0.0, np.cos(theta / 2)))
+    r = simulate(system, state, None, 0.2, 0.01, "rk4")
+    p = ramp.points
+    down = np.flatnonzero((p[:, 2] < 0) & (p[:, 0] > 0))
+    t_star = np.sqrt(2 * d / (G * np.sin(theta)))
+    assert sorted(ev.row for ev in r.events) == sorted(down)
+    for ev in r.events:
+        assert ev.kind == "off_edge" and abs(ev.t - t_star) < 1e-9, (ev.t, t_star)
+    before = r.t < t_star
+    np.testing.assert_allclose(r.object_position[before] @ e,
+                               0.5 * G * np.sin(theta) * r.t[before] ** 2, atol=1e-12)
