@@ -58,9 +58,10 @@ Integration scheme (event-driven; see docs/ARCHITECTURE.md, "Unilateral contacts
   outside at a step's start leaves the same way at that time. A row outside its rectangle
   never touches down: rows are watched for a touchdown only when inside at the step's
   start or end, and a touchdown located where the row is outside is none (the step is only
-  split there). A row that goes below the plane while outside (it fell past the edge) is
-  *fallen*: not watched, nor counted as a penetration, until it is above the plane again;
-  a point that comes back over the rectangle while above the plane touches down as usual.
+  split there). A row that goes below the plane (by more than ``GAP_TOLERANCE``) while
+  outside (it fell past the edge) is *fallen*: not watched, nor counted as a penetration,
+  until it is above the plane again (by more than ``GAP_TOLERANCE``); a point that comes
+  back over the rectangle while above the plane touches down as usual.
 
 The scheme is exact at events up to the stated tolerances and keeps the smooth integrator's
 order between them; velocity-level time stepping (Moreau-Jean) would be more robust for many
