@@ -156,16 +156,21 @@ def test_bad_extents_exit_2_naming_the_key(tmp_path, capsys, path, value, key, t
     assert not (tmp_path / "out").exists()
 
 
-def test_box_off_table_records_its_off_edge_events(tmp_path):
-    """The shipped ``box_off_table``: the off-edge time and labels in ``summary.json``.
+def test_a_box_pushed_off_a_finite_table_records_its_off_edge_events(tmp_path):
+    """A scenario file with ``extent``: the off-edge time and labels in ``summary.json``.
 
-    4 N on 2 kg, the edge 5 cm ahead of the leading vertices (rows 4 and 6 of the box's
-    vertices, x = +0.2 m, bottom): both lose the table at ``√(2 m d / F)`` = 0.2236 s.
+    4 N on 2 kg, the table's edge (x = 0.25 m) 5 cm ahead of the leading vertices (rows 4
+    and 6 of the box's vertices, x = +0.2 m, bottom): both lose the table at
+    ``√(2 m d / F)`` = 0.2236 s.
     """
-    from multiarm_pin.data import data_path
-
-    res = run_scenario(data_path("scenarios", "box_off_table.yaml"), tmp_path / "out",
-                       duration=0.25, html=False, plots=False)
+    data = _with("supports.0.extent", [1.0, 1.0])
+    data["supports"][0]["plane"]["point"] = [-0.25, 0.0, 0.0]
+    data["supports"][0]["x_axis"] = [1, 0, 0]
+    data["object"]["external_wrench"] = [{"from": 0.0, "to": 1.0, "wrench": [4, 0, 0, 0, 0, 0]}]
+    data["simulation"] = {"duration": 0.25, "dt": 0.005}
+    p = tmp_path / "s.yaml"
+    p.write_text(yaml.safe_dump(data), encoding="utf-8")
+    res = run_scenario(p, tmp_path / "out", html=False, plots=False)
     s = res.summary
     assert s["supports"][0]["extent"] == [1.0, 1.0]
     assert s["supports"][0]["x_axis"] == [1.0, 0.0, 0.0]
