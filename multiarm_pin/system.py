@@ -583,20 +583,26 @@ class MultiArmSystem:
     def check_supports(self, state: SystemState, tol: float = INITIAL_GAP_TOLERANCE) -> None:
         """Raise if the object penetrates a support by more than ``tol`` [m].
 
+        A point outside its support's rectangle (``extent``) is beside the support, not in
+        it: only points inside count.
+
         Raises:
             InitialGapError: names the support, the point and its gap.
         """
         if not self.supports.n_rows:
             return
         st = self.support_terms(state)
-        k = int(np.argmin(st.phi))
-        if st.phi[k] < -tol:
+        phi = st.phi
+        if self.supports.finite:
+            phi = np.where(self.supports.edge_margins(st.contact_points) > 0.0, phi, np.inf)
+        k = int(np.argmin(phi))
+        if phi[k] < -tol:
             raise InitialGapError(
                 f"the object starts penetrating support {self.supports.labels[k]!r}: gap "
-                f"{st.phi[k]:.6g} m (tolerance {tol:g} m, "
-                f"{int((st.phi < -tol).sum())} point(s) below the plane)",
+                f"{phi[k]:.6g} m (tolerance {tol:g} m, "
+                f"{int((phi < -tol).sum())} point(s) below the plane)",
                 support=int(self.supports.support_index[k]),
-                contact=int(self.supports.point_index[k]), gap=st.phi[k], tol=tol,
+                contact=int(self.supports.point_index[k]), gap=phi[k], tol=tol,
             )
 
     # ------------------------------------------------------------------ physics

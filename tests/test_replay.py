@@ -632,3 +632,45 @@ def _slab_pose(window) -> np.ndarray:
                 and c.get("type") == "set_transform":
             return np.array(c["matrix"]).reshape(4, 4).T
     raise AssertionError("no set_transform on supports/table")
+
+
+def test_a_finite_support_is_drawn_as_its_rectangle():
+    """A support with an extent: a slab of its sides ``lx x ly``, x along its ``x_axis``.
+
+    The trajectory arrays of a run carry each support's extent and x axis
+    (``support_extents``, ``support_x_axes``); :func:`replay_parts` makes the rectangle of
+    them, centred at the plane point; the slab's pose has the columns ``x_axis``,
+    ``n × x_axis``, ``n`` and its box the sides ``[lx, ly, thickness]``.
+    """
+    from multiarm_pin.app.replay import SUPPORT_THICKNESS
+    from multiarm_pin.app.run_results import replay_parts, system_trajectory_arrays
+    from multiarm_pin.constraints import Support
+    from multiarm_pin.model.rigid_object import RigidObject
+    from multiarm_pin.sim.simulation import simulate
+    from multiarm_pin.system import MultiArmSystem
+
+    box = RigidObject.box([0.4, 0.3, 0.2], 2.0)
+    x_axis = np.array([0.6, 0.8, 0.0])
+    table = Support("table", [0.1, 0.0, 0.0], [0, 0, 1], box.shape.vertices, extent=[1.2, 0.5],
+                    x_axis=x_axis)
+    system = MultiArmSystem([], box, [], supports=[table])
+    r = simulate(system, system.state(np.zeros(0), None, [0.1, 0.0, 0.1]), None, 0.01, 0.01)
+    traj = system_trajectory_arrays(system, r)
+    np.testing.assert_array_equal(traj["support_extents"], [[1.2, 0.5]])
+    np.testing.assert_array_equal(traj["support_x_axes"], [x_axis])
+    _, _, contacts = replay_parts([], box, traj)
+    sp = contacts.supports[0]
+    np.testing.assert_array_equal(sp.center, [0.1, 0.0, 0.0])
+    window = RecordingWindow()
+    build_animation(Visualizer(window=window), [], None, contacts, r.t, fps=10)
+    T = _slab_pose(window)
+    np.testing.assert_allclose(T[:3, :3], np.column_stack([x_axis, [-0.8, 0.6, 0.0],
+                                                           [0, 0, 1]]), atol=1e-12)
+    np.testing.assert_allclose(T[:3, 3], [0.1, 0.0, -0.5 * SUPPORT_THICKNESS], atol=1e-12)
+    geometry = [c["object"]["geometries"][0] for c in window.commands
+                if isinstance(c, dict) and c.get("type") == "set_object"
+                and c.get("path", "").endswith("supports/table")]
+    assert geometry, "the support slab is sent to the viewer"
+    g = geometry[-1]
+    np.testing.assert_allclose([g["width"], g["height"], g["depth"]],
+                               [1.2, 0.5, SUPPORT_THICKNESS])

@@ -113,3 +113,71 @@ def test_joint_unilateral_override(tmp_path):
     with pytest.raises(ScenarioError, match="expected true or false") as info:
         parse_scenario(data, "x.yaml")
     assert info.value.key == "arms[0].joint.unilateral"
+
+
+def test_support_extent_and_x_axis_are_read_and_built(tmp_path):
+    """``extent`` makes the support a rectangle; ``x_axis`` is projected onto its plane."""
+    from multiarm_pin.app.scenario import parse_scenario
+
+    data = _with("supports.0.extent", [1.0, 0.8])
+    sup = build_scenario(parse_scenario(data, "x.yaml")).system.supports
+    assert sup.finite
+    np.testing.assert_array_equal(sup.supports[0].extent, [1.0, 0.8])
+    np.testing.assert_array_equal(sup.supports[0].x_axis, [1.0, 0.0, 0.0])  # the default
+    data["supports"][0]["x_axis"] = [1.0, 1.0, 5.0]
+    sup = build_scenario(parse_scenario(data, "x.yaml")).system.supports
+    np.testing.assert_allclose(sup.supports[0].x_axis, [2**-0.5, 2**-0.5, 0.0], atol=1e-15)
+    plain = build_scenario(parse_scenario(copy.deepcopy(BOX), "x.yaml")).system.supports
+    assert not plain.finite and plain.supports[0].extent is None
+
+
+@pytest.mark.parametrize(("path", "value", "key", "text"), [
+    ("supports.0.extent", [-1.0, 0.5], "supports[0].extent", "two positive side lengths"),
+    ("supports.0.extent", [0.0, 0.5], "supports[0].extent", "two positive side lengths"),
+    ("supports.0.extent", [1.0, 0.5, 0.2], "supports[0].extent", "expected 2 numbers"),
+    ("supports.0.extent", 1.0, "supports[0].extent", "expected shape (2,)"),
+    ("supports.0.x_axis", [0, 0, -2], "supports[0].x_axis", "parallel to the plane's normal"),
+    ("supports.0.x_axis", [0, 0, 0], "supports[0].x_axis", "parallel to the plane's normal"),
+    ("supports.0.x_axis", [1, 0], "supports[0].x_axis", "expected 3 numbers"),
+    ("supports.0.extnet", [1.0, 0.5], "supports[0].extnet", "extent"),
+])
+def test_bad_extents_exit_2_naming_the_key(tmp_path, capsys, path, value, key, text):
+    """Bad ``extent`` / ``x_axis``: a ScenarioError with the key path, and ``run`` exits 2."""
+    from multiarm_pin.app.cli import main
+
+    data = _with(path, value)
+    if path.endswith("x_axis"):
+        data["supports"][0]["extent"] = [1.0, 0.5]
+    err = _error(tmp_path, data)
+    assert err.key == key and text in str(err), str(err)
+    assert main(["run", str(tmp_path / "s.yaml"), "--out", str(tmp_path / "out")]) == 2
+    stderr = capsys.readouterr().err
+    assert stderr.startswith("error: ") and key in stderr and "Traceback" not in stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_box_pushed_off_a_finite_table_records_its_off_edge_events(tmp_path):
+    """A scenario file with ``extent``: the off-edge time and labels in ``summary.json``.
+
+    4 N on 2 kg, the table's edge (x = 0.25 m) 5 cm ahead of the leading vertices (rows 4
+    and 6 of the box's vertices, x = +0.2 m, bottom): both lose the table at
+    ``√(2 m d / F)`` = 0.2236 s.
+    """
+    data = _with("supports.0.extent", [1.0, 1.0])
+    data["supports"][0]["plane"]["point"] = [-0.25, 0.0, 0.0]
+    data["supports"][0]["x_axis"] = [1, 0, 0]
+    data["object"]["external_wrench"] = [{"from": 0.0, "to": 1.0, "wrench": [4, 0, 0, 0, 0, 0]}]
+    data["simulation"] = {"duration": 0.25, "dt": 0.005}
+    p = tmp_path / "s.yaml"
+    p.write_text(yaml.safe_dump(data), encoding="utf-8")
+    res = run_scenario(p, tmp_path / "out", html=False, plots=False)
+    s = res.summary
+    assert s["supports"][0]["extent"] == [1.0, 1.0]
+    assert s["supports"][0]["x_axis"] == [1.0, 0.0, 0.0]
+    assert sorted((e["kind"], e["label"]) for e in s["events"]) == [
+        ("off_edge", "table[4]"), ("off_edge", "table[6]")]
+    for e in s["events"]:
+        assert abs(e["t"] - np.sqrt(2 * 2.0 * 0.05 / 4.0)) < 1e-9
+    assert any("Python stepper" in w for w in s["warnings"])
+    np.testing.assert_array_equal(res.trajectory["support_extents"], [[1.0, 1.0]])
+    assert sorted(res.trajectory["event_kind"].tolist()) == ["off_edge", "off_edge"]

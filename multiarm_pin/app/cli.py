@@ -305,7 +305,8 @@ def run_command(args: argparse.Namespace) -> int:
           f"{forces}")
     if s.get("events"):
         e0 = s["events"][0]
-        print(f"  {len(s['events'])} contact events (separations, touchdowns); first: "
+        kinds = ", ".join(sorted({str(e.get("kind")) for e in s["events"]}))
+        print(f"  {len(s['events'])} contact events ({kinds}); first: "
               f"{e0['kind']} of {e0['label']} at t = {e0['t']:.4g} s")
     for w in s["warnings"][:10]:
         print(f"  warning: {w}")

@@ -93,7 +93,8 @@ def plot_object_pose(path, t, position, quaternion, title: str = "") -> Path:
     return _save(fig, path)
 
 
-EVENT_STYLE = {"separation": ("tab:red", "--"), "touchdown": ("tab:green", ":")}
+EVENT_STYLE = {"separation": ("tab:red", "--"), "touchdown": ("tab:green", ":"),
+               "off_edge": ("tab:orange", "-.")}
 """Colour and line style of the vertical lines marking contact events."""
 
 
@@ -113,7 +114,7 @@ def plot_contact_forces(path, t, mu: Mapping[str, np.ndarray], title: str = "",
         mu: arm or support name -> (T, N_A) multipliers [N].
         title: figure title.
         events: ``[(t, kind), ...]`` contact events (``separation`` red dashed,
-            ``touchdown`` green dotted vertical lines).
+            ``touchdown`` green dotted, ``off_edge`` orange dash-dotted vertical lines).
         labels: optional name -> (N_A,) contact names for the legend (the events' and
             warnings' ``"<arm>:<contact>"`` / ``"<support>[point]"``); row indices otherwise.
     """
@@ -151,7 +152,7 @@ def plot_contact_states(path, t, active, labels, events=(), title: str = "") -> 
         active: (T, K) bool, True where contact k touches (active set, or bilateral).
         labels: (K,) contact names (``arm:contact`` or ``support[j]``).
         events: ``[(t, kind, k), ...]`` events with the contact index, drawn as markers
-            (red x: separation, green o: touchdown).
+            (red x: separation, green o: touchdown, orange x: off the edge of a support).
         title: figure title.
     """
     t = _times(t)
@@ -166,7 +167,7 @@ def plot_contact_states(path, t, active, labels, events=(), title: str = "") -> 
         ax.plot(t, y, lw=5, solid_capstyle="butt", color="tab:blue")
     for te, kind, k in events:
         color = EVENT_STYLE.get(str(kind), ("k", "-"))[0]
-        ax.plot([te], [k], "x" if kind == "separation" else "o", color=color, ms=6,
+        ax.plot([te], [k], "o" if kind == "touchdown" else "x", color=color, ms=6,
                 mfc="none")
     ax.set_yticks(range(K))
     ax.set_yticklabels([str(x) for x in labels], fontsize=7)
@@ -174,7 +175,8 @@ def plot_contact_states(path, t, active, labels, events=(), title: str = "") -> 
     ax.set_xlim(t[0], t[-1] if t[-1] > t[0] else t[0] + 1.0)
     ax.set_xlabel("time [s]")
     ax.grid(alpha=0.3, axis="x")
-    ax.set_title(title or "contacts: touching (bar), separated (gap); x separation, o touchdown")
+    ax.set_title(title or "contacts: touching (bar), separated (gap); "
+                 "x separation or off edge, o touchdown")
     return _save(fig, path)
 
 
@@ -310,7 +312,7 @@ def write_plots(out_dir, trajectory: Mapping[str, np.ndarray], arm_names, title:
             out / "contact_states.png", t, trajectory["contact_active"],
             trajectory["contact_labels"],
             list(zip(ev_t.tolist(), ev_kind.tolist(), ev_k.tolist(), strict=True)),
-            pre + "contacts touching (bars); x separation, o touchdown"))
+            pre + "contacts touching (bars); x separation or off edge, o touchdown"))
     forces = names
     if "arm_wrench" in trajectory and len(arm_names):
         w = np.asarray(trajectory["arm_wrench"])

@@ -15,7 +15,8 @@ The scene has three parts, all animated on one Meshcat timeline:
   (``ReplayContacts.touching``), a touching contact's sphere is yellow and a separated
   one's is grey (``contacts/free_<k>``; the other sphere is scaled to nothing);
 - ``supports/<name>``: a thin slab on each support plane (``ReplayContacts.supports``),
-  its top face on the plane, under the support's contact points.
+  its top face on the plane, under the support's contact points (a support with an
+  ``extent``: its rectangle).
 
 Samples are subsampled to ``fps`` frames per second (nearest sample in time, no
 interpolation), so a page's size grows with the duration, not with the integrator step.
@@ -348,10 +349,14 @@ def build_animation(
             fmax = float(np.max(np.linalg.norm(contacts.forces, axis=2), initial=0.0))
             force_scale = AUTO_FORCE_LENGTH / fmax if fmax > 0 else 1.0
         for sp in contacts.supports:
-            R = _rotation_y_to(sp.normal) @ _Y_TO_Z  # slab's local z along the normal
+            if sp.extent is None:
+                R = _rotation_y_to(sp.normal) @ _Y_TO_Z  # slab's local z along the normal
+                size = [2 * sp.half_size, 2 * sp.half_size, SUPPORT_THICKNESS]
+            else:  # the rectangle, its sides along the support's axes
+                R = sp.rotation
+                size = [float(sp.extent[0]), float(sp.extent[1]), SUPPORT_THICKNESS]
             vis[f"supports/{sp.name}"].set_object(
-                mg.Box([2 * sp.half_size, 2 * sp.half_size, SUPPORT_THICKNESS]),
-                mg.MeshLambertMaterial(color=SUPPORT_COLOR))
+                mg.Box(size), mg.MeshLambertMaterial(color=SUPPORT_COLOR))
             vis[f"supports/{sp.name}"].set_transform(
                 _pose(R, sp.center - 0.5 * SUPPORT_THICKNESS * sp.normal))
         for k in range(n_contacts):

@@ -97,19 +97,27 @@ class ReplayObject:
 
 @dataclass
 class ReplaySupport:
-    """A support plane drawn as a square slab whose top face lies on the plane.
+    """A support plane drawn as a slab whose top face lies on the plane.
+
+    An infinite plane is drawn as a square around the object's points; a support with an
+    ``extent`` as its rectangle.
 
     Attributes:
         name: scene node name (``supports/<name>``).
         center: (3,) centre of the slab's top face, on the plane, world [m].
         normal: (3,) unit normal out of the support, world axes.
-        half_size: half the side of the square [m].
+        half_size: half the side of the square [m] (without ``extent``).
+        extent: None, or (2,) ``[lx, ly]`` [m], the rectangle's sides along ``x_axis`` and
+            ``normal × x_axis``.
+        x_axis: (3,) the rectangle's x axis, world (unit, in the plane); with ``extent``.
     """
 
     name: str
     center: np.ndarray
     normal: np.ndarray
     half_size: float
+    extent: np.ndarray | None = None
+    x_axis: np.ndarray | None = None
 
     def __post_init__(self):
         self.center = as_array(self.center, (3,), f"ReplaySupport {self.name!r}.center")
@@ -120,6 +128,26 @@ class ReplaySupport:
         if not (math.isfinite(self.half_size) and self.half_size > 0):
             raise InputError(f"ReplaySupport {self.name!r}.half_size: expected a positive "
                              f"length [m], got {self.half_size!r}")
+        if self.extent is not None:
+            ext = as_array(self.extent, (2,), f"ReplaySupport {self.name!r}.extent")
+            if not np.all(ext > 0):
+                raise InputError(f"ReplaySupport {self.name!r}.extent: expected two positive "
+                                 f"lengths [m], got {ext.tolist()}")
+            x = as_array(self.x_axis, (3,), f"ReplaySupport {self.name!r}.x_axis")
+            x = x - (x @ self.normal) * self.normal
+            if np.linalg.norm(x) < 1e-9:
+                raise InputError(f"ReplaySupport {self.name!r}.x_axis: along the normal")
+            self.extent, self.x_axis = ext, x / np.linalg.norm(x)
+
+    @property
+    def rotation(self) -> np.ndarray | None:
+        """(3, 3) the rectangle's axes ``[x_axis, normal × x_axis, normal]`` (columns, world).
+
+        None without ``extent``.
+        """
+        if self.extent is None:
+            return None
+        return np.column_stack([self.x_axis, np.cross(self.normal, self.x_axis), self.normal])
 
 
 @dataclass

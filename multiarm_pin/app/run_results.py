@@ -12,9 +12,11 @@ its results folder:
   object, world axes) of the K contacts of all arms in order, then of the supports;
   ``contact_labels`` (K,) and ``contact_active`` (T, K) (touching: in the active set, or
   bilateral); for each support S ``mu_S``, ``phi_S`` (T, P_S); ``support_names`` (S,) and
-  ``support_planes`` (S, 6) (plane point and normal, world); ``external_wrench`` (T, 6);
+  ``support_planes`` (S, 6) (plane point and normal, world), ``support_extents`` (S, 2)
+  (``[lx, ly]`` [m], NaN for an infinite plane) and ``support_x_axes`` (S, 3) (the
+  rectangles' x axes, world); ``external_wrench`` (T, 6);
   the contact events ``event_t`` (E,) [s], ``event_contact`` (E,) (index in K) and
-  ``event_kind`` (E,) (``separation`` / ``touchdown``);
+  ``event_kind`` (E,) (``separation`` / ``touchdown`` / ``off_edge``);
   ``kinetic_energy``, ``potential_energy`` (T,) [J]; ``momentum`` (T, 6);
   ``arm_wrench`` (T, n_arms, 6): each arm's wrench on the object ``[f; m]`` [N, N m], world
   axes, the moment about the COM (:meth:`SimulationResult.arm_wrench`); for each arm A
@@ -98,6 +100,10 @@ def system_trajectory_arrays(system, result) -> dict[str, np.ndarray]:
     out["support_names"] = np.array([sp.name for sp in sup.supports], dtype=str)
     out["support_planes"] = np.array([np.concatenate([sp.point, sp.normal])
                                       for sp in sup.supports]).reshape(-1, 6)
+    out["support_extents"] = np.array([sp.extent if sp.finite else (np.nan, np.nan)
+                                       for sp in sup.supports], dtype=float).reshape(-1, 2)
+    out["support_x_axes"] = np.array([sp.x_axis for sp in sup.supports],
+                                     dtype=float).reshape(-1, 3)
     flat = -np.ones(mask.shape, dtype=int)
     flat[mask] = np.arange(int(mask.sum()))
     out["event_t"] = np.array([e.t for e in result.events], dtype=float)
@@ -193,7 +199,9 @@ def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> di
                             result.object_twist))),
         "arms": arms,
         "supports": [{"name": sp.name, "point": sp.point.tolist(), "normal": sp.normal.tolist(),
-                      "points": int(len(sp.points)), "restitution": sp.restitution}
+                      "points": int(len(sp.points)), "restitution": sp.restitution,
+                      "extent": None if sp.extent is None else sp.extent.tolist(),
+                      "x_axis": sp.x_axis.tolist()}
                      for sp in system.supports.supports],
         "external_wrench": [{"from": a, "to": b, "wrench": w.tolist()}
                             for a, b, w in built.scenario.object.external_wrench],
@@ -226,10 +234,19 @@ def replay_parts(arms, obj, trajectory: dict):
     if trajectory["contact_points"].shape[1] > 0:
         labels = [str(x) for x in trajectory.get("contact_labels", [])]
         supports = []
-        for name, plane in zip(trajectory.get("support_names", []),
-                               trajectory.get("support_planes", np.zeros((0, 6))), strict=True):
-            rows = [k for k, lab in enumerate(labels) if lab.startswith(f"{name}[")]
+        names = trajectory.get("support_names", [])
+        extents = trajectory.get("support_extents", np.full((len(names), 2), np.nan))
+        x_axes = trajectory.get("support_x_axes", np.full((len(names), 3), np.nan))
+        for name, plane, extent, x_axis in zip(
+                names, trajectory.get("support_planes", np.zeros((0, 6))), extents, x_axes,
+                strict=True):
             a, n = plane[:3], plane[3:]
+            if np.all(np.isfinite(extent)) and np.all(np.isfinite(x_axis)):
+                # a rectangle: drawn as it is, centred at its plane point
+                supports.append(ReplaySupport(str(name), a, n, 0.5 * float(np.max(extent)),
+                                              extent, x_axis))
+                continue
+            rows = [k for k, lab in enumerate(labels) if lab.startswith(f"{name}[")]
             pts = trajectory["contact_points"][0, rows]
             pts = pts - ((pts - a) @ n)[:, None] * n  # projected onto the plane
             c = pts.mean(axis=0)

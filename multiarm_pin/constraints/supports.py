@@ -2,7 +2,13 @@
 
 A support is a plane fixed in the world (a point ``a`` on it and its unit normal ``n``,
 pointing out of the support, towards the free side) and a set of points ``p`` fixed in the
-object frame (the object's polyhedron vertices, or points given). Each point is one contact
+object frame (the object's polyhedron vertices, or points given). The plane is infinite, or,
+with an ``extent`` ``[lx, ly]``, the rectangle of those side lengths centred at ``a``, its
+sides along the plane's axes ``e_x`` (:attr:`Support.x_axis`) and ``e_y = n × e_x``. A point
+whose in-plane position is outside the rectangle is not supported: it neither rests nor
+touches down there (:meth:`SupportSet.edge_margins`; the simulation's ``off_edge`` events,
+:mod:`multiarm_pin.sim.contact_events`). Only the listed points touch: the rectangle's edge
+does not push on the object's faces. Each point is one contact
 row, with the conventions of docs/ARCHITECTURE.md (the world plays the tool's role, with a
 zero twist and no joints). With ``x`` the COM, ``R`` the object's rotation, ``r = R p``:
 
@@ -26,17 +32,63 @@ import numpy as np
 
 from multiarm_pin.exceptions import ConstraintError
 
+PARALLEL_SINE = 1e-6
+"""An ``x_axis`` whose angle to the plane's normal has a sine below this is refused (its
+projection onto the plane, the rectangle's x axis, would be undefined or round-off)."""
+
+DEFAULT_X_SWITCH = 1.0 / np.sqrt(2.0)
+"""The default x axis is the world x axis projected onto the plane, or the world y axis
+projected when ``|n_x|`` exceeds this (the normal within 45° of ±x)."""
+
+
+def plane_x_axis(normal: np.ndarray, x_axis=None, where: str = "support") -> np.ndarray:
+    """(3,) unit x axis of a plane: ``x_axis`` projected onto it, or the default.
+
+    Args:
+        normal: (3,) unit normal of the plane, world axes.
+        x_axis: (3,) a world direction not parallel to ``normal``, or None for the default:
+            world x projected onto the plane, or world y when ``|n_x| > 1/√2``
+            (:data:`DEFAULT_X_SWITCH`).
+        where: prefix of the error messages.
+
+    Raises:
+        ConstraintError: ``x_axis`` not 3 finite numbers, or (nearly) parallel to the normal.
+    """
+    n = np.asarray(normal, dtype=float)
+    if x_axis is None:
+        axis = np.eye(3)[1 if abs(n[0]) > DEFAULT_X_SWITCH else 0]
+    else:
+        axis = np.asarray(x_axis, dtype=float)
+        if axis.shape != (3,) or not np.all(np.isfinite(axis)):
+            raise ConstraintError(f"{where}: x_axis must be 3 finite numbers (a world "
+                                  f"direction in the plane), got {x_axis!r}")
+    length = float(np.linalg.norm(axis))
+    in_plane = axis - float(axis @ n) * n
+    norm = float(np.linalg.norm(in_plane))
+    if length == 0.0 or norm < PARALLEL_SINE * length:
+        raise ConstraintError(f"{where}: x_axis {axis.tolist()} is parallel to the plane's "
+                              f"normal {n.tolist()} (or zero); expected a direction along "
+                              "the plane (it is projected onto it)")
+    return in_plane / norm
+
 
 @dataclass(frozen=True)
 class Support:
-    """A fixed plane and the object points that may rest on it.
+    """A fixed plane (or a rectangle of it) and the object points that may rest on it.
 
     Attributes:
         name: label (events and plots name the support and the point index).
-        point: (3,) a point of the plane, world frame [m].
+        point: (3,) a point of the plane, world frame [m]; the rectangle's centre.
         normal: (3,) unit normal, world axes, pointing out of the support (free side).
         points: (P, 3) contact points in the object (COM) frame [m].
         restitution: Newton's coefficient of restitution of impacts, ``0 <= e <= 1``.
+        extent: None (an infinite plane) or (2,) ``[lx, ly]`` [m] (> 0): the side lengths of
+            the supporting rectangle, along ``x_axis`` and ``n × x_axis``, centred at
+            ``point``.
+        x_axis: (3,) the rectangle's x axis, world axes: the given direction projected onto
+            the plane and normalised; default (None given) the world x axis projected onto
+            the plane, or the world y axis when the normal is within 45° of ±x
+            (:func:`plane_x_axis`).
     """
 
     name: str
@@ -44,6 +96,8 @@ class Support:
     normal: np.ndarray
     points: np.ndarray
     restitution: float = 0.0
+    extent: np.ndarray | None = None
+    x_axis: np.ndarray | None = None
 
     def __post_init__(self):
         where = f"support {self.name!r}"
@@ -67,10 +121,46 @@ class Support:
         if not (np.isfinite(e) and 0.0 <= e <= 1.0):
             raise ConstraintError(f"{where}: restitution must be in [0, 1], got "
                                   f"{self.restitution!r}")
+        extent = None
+        if self.extent is not None:
+            extent = np.asarray(self.extent, dtype=float)
+            if (extent.shape != (2,) or not np.all(np.isfinite(extent))
+                    or not np.all(extent > 0.0)):
+                raise ConstraintError(f"{where}: extent must be 2 positive finite side lengths "
+                                      f"[lx, ly] [m], got {self.extent!r}")
         object.__setattr__(self, "point", point)
         object.__setattr__(self, "normal", normal / length)
         object.__setattr__(self, "points", pts)
         object.__setattr__(self, "restitution", e)
+        object.__setattr__(self, "extent", extent)
+        object.__setattr__(self, "x_axis", plane_x_axis(self.normal, self.x_axis, where))
+
+    @property
+    def y_axis(self) -> np.ndarray:
+        """(3,) the rectangle's y axis ``n × x_axis``, world axes (unit)."""
+        return np.cross(self.normal, self.x_axis)
+
+    @property
+    def finite(self) -> bool:
+        """True when the support is a rectangle (an ``extent``), False for a whole plane."""
+        return self.extent is not None
+
+    def edge_margins(self, points_in_world) -> np.ndarray:
+        """(P,) how far inside the rectangle each world point's in-plane position is [m].
+
+        ``min(lx/2 - |u|, ly/2 - |v|)`` with ``(u, v)`` the point's coordinates along
+        ``x_axis`` and ``y_axis`` from :attr:`point`: positive inside, zero on the edge,
+        negative outside (the point is supported iff > 0); ``+inf`` for an infinite plane.
+
+        Args:
+            points_in_world: (P, 3) world points [m].
+        """
+        p = np.asarray(points_in_world, dtype=float).reshape(-1, 3)
+        if self.extent is None:
+            return np.full(len(p), np.inf)
+        d = p - self.point
+        return np.minimum(0.5 * self.extent[0] - np.abs(d @ self.x_axis),
+                          0.5 * self.extent[1] - np.abs(d @ self.y_axis))
 
 
 @dataclass(frozen=True)
@@ -105,6 +195,8 @@ class SupportSet:
         labels: (K,) ``"name[j]"`` for point j of support ``name``.
         support_index: (K,) int, the support of each row; point_index: (K,) int.
         restitution: (K,) coefficient of restitution of each row.
+        finite: True when some support has an ``extent`` (a rectangle).
+        finite_rows: (K,) bool, the rows of such supports.
     """
 
     def __init__(self, supports: Sequence[Support] = ()):
@@ -131,10 +223,35 @@ class SupportSet:
             self._p = self._n = self._a = np.zeros((0, 3))
             self.restitution = np.zeros(0)
         self._n_columns = tuple(np.ascontiguousarray(self._n[:, j]) for j in range(3))
+        self.finite_rows = np.array([self.supports[k].finite for k in self.support_index],
+                                    dtype=bool)
+        self.finite = bool(self.finite_rows.any())
+        if self.finite:
+            self._ex = self.supports_array("x_axis")
+            self._ey = np.array([self.supports[k].y_axis for k in self.support_index])
+            self._half = np.array([0.5 * self.supports[k].extent if self.supports[k].finite
+                                   else (np.inf, np.inf) for k in self.support_index])
 
     def supports_array(self, name: str) -> np.ndarray:
-        """(K, 3) the plane attribute ``name`` (``"normal"`` or ``"point"``) of each row."""
+        """(K, 3) the attribute ``name`` (``"normal"``, ``"point"``, ``"x_axis"``) of each row."""
         return np.array([getattr(self.supports[k], name) for k in self.support_index])
+
+    def edge_margins(self, contact_points) -> np.ndarray:
+        """(K,) how far inside its support's rectangle each row's point is [m].
+
+        :meth:`Support.edge_margins` row by row: positive inside (supported), zero on the
+        edge, negative outside; ``+inf`` on the rows of infinite planes.
+
+        Args:
+            contact_points: (K, 3) the rows' object points in the world [m]
+                (:attr:`SupportTerms.contact_points`).
+        """
+        if not self.finite:
+            return np.full(self.n_rows, np.inf)
+        d = np.asarray(contact_points, dtype=float) - self._a
+        u = np.einsum("ki,ki->k", d, self._ex)
+        v = np.einsum("ki,ki->k", d, self._ey)
+        return np.minimum(self._half[:, 0] - np.abs(u), self._half[:, 1] - np.abs(v))
 
     def tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(points, normals, plane points)``, each (K, 3), new C-contiguous arrays.
@@ -190,4 +307,5 @@ class SupportSet:
         return SupportTerms(phi, phi_dot, G, kappa, pts, n.copy())
 
 
-__all__ = ["Support", "SupportSet", "SupportTerms"]
+__all__ = ["DEFAULT_X_SWITCH", "PARALLEL_SINE", "Support", "SupportSet", "SupportTerms",
+           "plane_x_axis"]

@@ -45,6 +45,24 @@ Integration scheme (event-driven; see docs/ARCHITECTURE.md, "Unilateral contacts
   ``φ ≈ 0``, ``φ̇ ≈ 0``). The step is then finished from the event time with the new
   active set.
 
+- **Off the edge**: a support with an ``extent`` is a rectangle of its plane
+  (:class:`~multiarm_pin.constraints.Support`). An active row of such a support whose
+  point's in-plane position leaves the rectangle (its edge margin, positive inside,
+  :meth:`~multiarm_pin.constraints.SupportSet.edge_margins`, reaches 0) while it touches
+  is no longer supported: the time is the root of the smallest edge margin of those rows
+  on ``θ ∈ [0, 1]`` of the step (the same re-integration, active set unchanged), located by
+  the Illinois method to a bracket shorter than ``EDGE_TIME_TOLERANCE`` (the bracket's
+  upper end, just past the edge); the step is split there (a separation or a touchdown
+  located before it is handled first), the row leaves the active set (event
+  ``"off_edge"``) and the step is finished with the new active set. An active row found
+  outside at a step's start leaves the same way at that time. A row outside its rectangle
+  never touches down: rows are watched for a touchdown only when inside at the step's
+  start or end, and a touchdown located where the row is outside is none (the step is only
+  split there). A row that goes below the plane (by more than ``GAP_TOLERANCE``) while
+  outside (it fell past the edge) is *fallen*: not watched, nor counted as a penetration,
+  until it is above the plane again (by more than ``GAP_TOLERANCE``); a point that comes
+  back over the rectangle while above the plane touches down as usual.
+
 The scheme is exact at events up to the stated tolerances and keeps the smooth integrator's
 order between them; velocity-level time stepping (Moreau-Jean) would be more robust for many
 simultaneous impacts but is first order everywhere. The sampling grid stays ``k dt``.
@@ -73,6 +91,10 @@ millisecond)."""
 SEPARATION_TIME_TOLERANCE = 1e-10
 """[s] Separation location stops when the bracket is shorter than this: a recorded
 separation time is at most this late (the bracket's upper end, where ``μ = 0``)."""
+
+EDGE_TIME_TOLERANCE = 1e-10
+"""[s] Off-edge location stops when the bracket is shorter than this: a recorded ``off_edge``
+time is at most this late (the bracket's upper end, where the point is outside)."""
 
 SEPARATION_ACCELERATION = 1e-3
 """[m/s²] An active unilateral row with ``μ = 0`` separates when ``φ̈`` exceeds this.
@@ -106,17 +128,19 @@ MAX_EVENTS_PER_STEP = 50
 
 @dataclass(frozen=True)
 class ContactEvent:
-    """A unilateral contact separating or touching down.
+    """A unilateral contact separating, touching down or losing its support off an edge.
 
     Attributes:
         t: time [s].
-        kind: ``"separation"`` or ``"touchdown"`` (``rebound`` True: it left again at once).
+        kind: ``"separation"``, ``"touchdown"`` (``rebound`` True: it left again at once)
+            or ``"off_edge"`` (a support row whose point left its support's rectangle).
         block: block index (an arm, or ``n_arms`` for the supports); row: row in the block.
         label: ``"<arm>:<contact>"`` or ``"<support>[point]"``.
         body: the arm's or the support's name.
         phi_dot: gap rate [m/s] before the event (``φ̇⁻`` at a touchdown).
         phi_dot_after: gap rate [m/s] after it (``φ̇⁺`` at a touchdown).
-        impulse: contact impulse ``P`` [N s] of the impact (0 for a separation by force).
+        impulse: contact impulse ``P`` [N s] of the impact (0 for a separation by force
+            and off the edge).
         rebound: True if the row left again at once after its impact (restitution).
     """
 
@@ -137,6 +161,7 @@ class ContactEvent:
 
 
 __all__ = [
+    "EDGE_TIME_TOLERANCE",
     "GAP_TOLERANCE",
     "LIFT_ACCELERATION",
     "LOST_GAP",

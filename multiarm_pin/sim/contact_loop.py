@@ -45,6 +45,11 @@ HOLD_REASON = ("the touching contacts cannot make every object wrench (rank {ran
                "holding the arms still (gravity compensation and joint PD)")
 """``ObjectPD``'s warning at a hold-still onset, after ``t = ... s: object_pd: ``."""
 
+FINITE_SUPPORTS_NOTE = ("supports with an extent (finite rectangles): the run is taken by "
+                        "the Python stepper, not the compiled contact loop (whose supports "
+                        "are whole planes), so it is slower")
+"""The note of an RK4 run with a finite support (:meth:`ContactLoop.for_run` declines it)."""
+
 
 def rules_vector() -> np.ndarray:
     """The kernel's rules (:data:`~multiarm_pin._compiled.contact_loop.EVENT_CONSTANTS`)."""
@@ -169,8 +174,9 @@ class ContactLoop:
         compiled rigid-body pass supports (or none), zero torque or an
         :class:`~multiarm_pin.sim.controllers.ObjectPD` on its compiled path, and no external
         wrench or a :class:`~multiarm_pin.sim.disturbances.WrenchSchedule` itself (its
-        intervals are the kernel's table; a subclass with its own ``__call__`` is not), and no
-        torque saturation.
+        intervals are the kernel's table; a subclass with its own ``__call__`` is not), no
+        torque saturation, and no support with an ``extent`` (the kernel's supports are whole
+        planes: such runs are the stepper's, with the note :data:`FINITE_SUPPORTS_NOTE`).
         """
         from multiarm_pin.sim.controllers.object_pd import ObjectPD
 
@@ -180,6 +186,8 @@ class ContactLoop:
             return None  # saturation: the kernel adds the controller's torque as it is
         if stepper.wrench is not None and type(stepper.wrench) is not WrenchSchedule:
             return None  # a schedule of another kind (a subclass): its own __call__ decides
+        if s.supports.finite:
+            return None  # rectangles: off-edge events, which the kernel does not locate
         if s.n_arms and (s.compiled is None or s.arm_set.compiled_model is None):
             return None
         if ctrl is not None and (type(ctrl) is not ObjectPD or not ctrl.compiled

@@ -1,14 +1,15 @@
-"""Location of contact events inside an integration step: separations and touchdowns.
+"""Location of contact events inside an integration step: separations, off-edge, touchdowns.
 
-Both are roots of a scalar function of the step fraction ``θ ∈ [0, 1]`` (the integration
+All are roots of a scalar function of the step fraction ``θ ∈ [0, 1]`` (the integration
 re-run from the step's start with step ``θ h`` and the active set unchanged), found by one
 Illinois (modified regula falsi) iteration, :func:`illinois`: the separation search on the
-release function of the rows that let go (:func:`release`), the touchdown search on the
+release function of the rows that let go (:func:`release`), the off-edge search on the
+smallest edge margin of the active rows of finite supports, the touchdown search on the
 smallest watched gap. They differ in their stopping test, their bisection safeguard and what
 they carry along; the rules (tolerances, bands) are those of
 :mod:`multiarm_pin.sim.contact_events`. The stepper
-(:class:`~multiarm_pin.sim.stepper.Stepper`) calls :func:`locate_separation` and
-:func:`locate_touchdown` and applies the events.
+(:class:`~multiarm_pin.sim.stepper.Stepper`) calls :func:`locate_separation`,
+:func:`locate_off_edge` and :func:`locate_touchdown` and applies the events.
 """
 
 from __future__ import annotations
@@ -168,6 +169,50 @@ def locate_separation(stepper: Stepper, integrator: str, t: float, state: System
         f, 0.0, f_lo, 1.0, f_hi, lambda lo, hi: (hi - lo) * h < ce.SEPARATION_TIME_TOLERANCE,
         hi_payload=(new, end), bisect_every=3)
     return theta, s_hi, rows & (sol_hi.mu <= 0.0)
+
+
+def locate_off_edge(stepper: Stepper, integrator: str, t: float, state: SystemState, sol,
+                    h: float, new: SystemState):
+    """The first active row of a finite support leaving its rectangle inside a step, or None.
+
+    The rows watched: active rows of supports with an ``extent``
+    (:attr:`Stepper.finite_rows`), all inside at the step's start (edge margin > 0; a row
+    already outside is dropped by the check at a step's start). When the smallest of their
+    edge margins (:meth:`Stepper.edge_margins`) is <= 0 at the step's end, its root on
+    ``θ ∈ [0, 1]`` is located by :func:`illinois` to a bracket shorter than
+    ``EDGE_TIME_TOLERANCE``.
+
+    Args:
+        stepper: the stepper (its active set, steps and edge margins).
+        integrator: the integrator's name.
+        t: the step's start [s].
+        state: the state at ``t``.
+        sol: its solution.
+        h: the step [s].
+        new: the state at ``t + h``.
+
+    Returns:
+        ``(θ, state at t + θ h, (B, R) mask of those rows outside there)`` (θ the bracket's
+        upper end, just past the edge), or None.
+    """
+    rows = stepper.active & stepper.finite_rows
+    if not rows.any():
+        return None
+    f_hi = float(stepper.edge_margins(new)[rows].min())
+    if f_hi > 0.0:
+        return None
+    f_lo = float(stepper.edge_margins(state)[rows].min())
+    if not f_lo > 0.0:
+        return None
+
+    def f(theta: float):
+        s_e = stepper.step(integrator, t, state, sol, theta * h)
+        return float(stepper.edge_margins(s_e)[rows].min()), s_e
+
+    theta, s_hi = illinois(
+        f, 0.0, f_lo, 1.0, f_hi, lambda lo, hi: (hi - lo) * h < ce.EDGE_TIME_TOLERANCE,
+        hi_payload=new)
+    return theta, s_hi, rows & (stepper.edge_margins(s_hi) <= 0.0)
 
 
 def locate_touchdown(stepper: Stepper, integrator: str, t: float, state: SystemState, sol,

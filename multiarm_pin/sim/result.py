@@ -49,7 +49,8 @@ class SimulationResult:
         momentum: (T, 6) total ``[linear; angular]`` momentum of arms and object about the
             world origin [kg m/s, kg m²/s].
         constraint_violation: (T,) ``max |φ|`` over bilateral and active rows, and the
-            largest penetration ``-φ`` of separated rows [m].
+            largest penetration ``-φ`` of separated rows [m] (not of support rows beside a
+            finite support's rectangle, or fallen past its edge: they penetrate nothing).
         solver: (T,) name of the solver used at each sample.
         warnings: contact separations (unilateral contact with ``μ < 0``) with time and
             arm/contact index, at each onset.
@@ -60,7 +61,8 @@ class SimulationResult:
         unilateral: (B, R) bool mask of unilateral rows.
         active: (T, B, R) bool, rows in the active set (touching) at each sample.
         external_wrench: (T, 6) ``[f; m]`` applied at the COM, world axes [N, N m].
-        events: every separation and touchdown (:class:`ContactEvent`), in time order.
+        events: every separation, touchdown and off-edge event (:class:`ContactEvent`), in
+            time order.
         contact_labels: ``(block, row, label)`` of every real row.
         torque_limit: (nv,) the saturation bounds [N m or N] of the run (``inf``: none), or
             None when it did not saturate.
@@ -185,6 +187,9 @@ class Recorder:
         self.momentum[k] = s.momentum(state)
         held = stepper.active | (s.contact_mask & ~s.contact_unilateral)
         free = s.contact_mask & ~held
+        beside = stepper.beside(ct)
+        if beside is not None:  # below the plane beside (or under) a finite support
+            free &= ~beside
         viol = np.concatenate([np.abs(ct.phi[held]), np.maximum(-ct.phi[free], 0.0), [0.0]])
         self.violation[k] = float(viol.max())
         self.active[k] = stepper.active
@@ -240,7 +245,8 @@ class Recorder:
             f"μ = 0 N; holding it would need a pulling force)"
             for e in stepper.events if e.kind == "separation" and e.block < s.n_arms
         ][:self.max_warnings] + list(self.warnings) + [  # a controller's own (ObjectPD holding)
-            w for w in getattr(stepper.controller, "warnings", ()) if isinstance(w, str)]
+            w for w in getattr(stepper.controller, "warnings", ()) if isinstance(w, str)
+        ] + list(stepper.notes)
         if self.n_warnings > len(warnings):
             warnings.append(f"... {self.n_warnings - len(warnings)} more separation warnings")
         return SimulationResult(

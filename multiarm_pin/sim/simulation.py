@@ -33,7 +33,8 @@ With RK4, runs of the kinds they take go to the compiled loops, which record the
 samples and events: :class:`~multiarm_pin.sim.compiled_loop.CompiledLoop` while every contact
 touches (arms, no supports), :class:`~multiarm_pin.sim.contact_loop.ContactLoop` otherwise
 (separations, touchdowns and impacts in the kernel); a step either hands back is taken by the
-stepper.
+stepper. Runs with a support of finite ``extent`` (off-edge events) are the stepper's
+throughout, and say so in their warnings (``FINITE_SUPPORTS_NOTE``).
 
 This module holds :func:`simulate` (input checks, the time grid, the rk45 driver); the
 evaluations, fixed steps and events are :class:`~multiarm_pin.sim.stepper.Stepper`'s, the
@@ -59,7 +60,7 @@ from multiarm_pin.exceptions import DynamicsError, InputError
 from multiarm_pin.model.rigid_object import ObjectState
 from multiarm_pin.sim.compiled_loop import CompiledLoop
 from multiarm_pin.sim.contact_events import ContactEvent
-from multiarm_pin.sim.contact_loop import ContactLoop
+from multiarm_pin.sim.contact_loop import FINITE_SUPPORTS_NOTE, ContactLoop
 from multiarm_pin.sim.controllers.base import ControllerFunction
 from multiarm_pin.sim.disturbances import WrenchSchedule
 from multiarm_pin.sim.result import (
@@ -249,6 +250,8 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
         every = max(1, n_steps // 100)
         loop = CompiledLoop.for_run(stepper, integrator)
         events = ContactLoop.for_run(stepper, integrator)
+        if integrator == "rk4" and stepper.edges:
+            stepper.notes.append(FINITE_SUPPORTS_NOTE)
         stretch = _Stretch(every, n_steps)
         k, retaken = 0, -1  # the sample whose step the stepper took last
         while True:

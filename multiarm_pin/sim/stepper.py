@@ -5,7 +5,8 @@ blocks at zero torque, its torque added, the forward dynamics solved on the acti
 rows: :func:`multiarm_pin.dynamics.solve` or, with unilateral rows,
 :func:`multiarm_pin.dynamics.unilateral.solve_unilateral`), takes fixed steps (``"rk4"``,
 ``"semi_implicit"``) and, with unilateral rows, handles separations and touchdowns (with
-impacts) inside a step, event-driven, as :mod:`multiarm_pin.sim.contact_events` describes; the
+impacts) inside a step, event-driven, as :mod:`multiarm_pin.sim.contact_events` describes
+(with supports of finite extent, the points leaving their rectangle too: ``off_edge``); the
 events are located by :mod:`multiarm_pin.sim.event_location`.
 """
 
@@ -25,7 +26,7 @@ from multiarm_pin.sim import contact_events as ce
 from multiarm_pin.sim.closed_loop import closed_loop_evaluation, controller_torques
 from multiarm_pin.sim.contact_events import ContactEvent
 from multiarm_pin.sim.disturbances import WrenchSchedule
-from multiarm_pin.sim.event_location import locate_separation, locate_touchdown
+from multiarm_pin.sim.event_location import locate_off_edge, locate_separation, locate_touchdown
 from multiarm_pin.spatial import integrate_quaternion
 from multiarm_pin.system import ContactRows, MultiArmSystem, SystemState
 
@@ -35,7 +36,17 @@ its three stages, its end and a few event iterates)."""
 
 
 class Stepper:
-    """Evaluates the closed-loop dynamics on the active set and handles contact events."""
+    """Evaluates the closed-loop dynamics on the active set and handles contact events.
+
+    Attributes:
+        active: (B, R) bool, the active set (rows of :meth:`MultiArmSystem.contact_blocks`).
+        events: the contact events so far (:class:`ContactEvent`).
+        finite_rows: (B, R) bool, the rows of supports with an ``extent`` (a rectangle).
+        fallen: (B, R) bool, rows of finite supports that went below their plane while
+            outside its rectangle and have not come back above it (never watched for a
+            touchdown, nor counted as penetrating; :mod:`multiarm_pin.sim.contact_events`).
+        notes: notes of the run (the result's warnings), e.g. why it is not on a compiled loop.
+    """
 
     def __init__(self, system: MultiArmSystem, controller, solver: str, baumgarte,
                  wrench: WrenchSchedule | None = None, torque_limit: np.ndarray | None = None):
@@ -55,6 +66,13 @@ class Stepper:
         self.unilateral = bool(system.contact_unilateral.any())
         self.active = system.contact_mask.copy()
         self.events: list[ContactEvent] = []
+        self.notes: list[str] = []
+        sup = system.supports
+        self.edges = sup.finite  # some support is a rectangle: off-edge events
+        self.finite_rows = np.zeros(system.contact_mask.shape, dtype=bool)
+        if self.edges:
+            self.finite_rows[system.n_arms, :sup.n_rows] = sup.finite_rows
+        self.fallen = np.zeros_like(self.finite_rows)
         self._cache = None  # (t, state, active, result) of the last evaluation
         # id(state) -> (state, rows) of the last ROWS_KEPT states whose rows were evaluated
         # (the state is kept so that its id is not reused while the entry lives)
@@ -202,12 +220,67 @@ class Stepper:
         self.events.append(ContactEvent(float(t), kind, int(b), int(r), label, body, **kw))
 
     def init_active(self, rows: ContactRows, tol: float) -> None:
-        """Active at t = 0: bilateral rows, and unilateral rows whose gap is within ``tol``."""
+        """Active at t = 0: bilateral rows, and unilateral rows whose gap is within ``tol``.
+
+        A row of a finite support is active only if its point is inside the rectangle.
+        """
         s = self.system
-        self.active = s.contact_mask & (~s.contact_unilateral | (rows.phi <= tol))
+        touching = rows.phi <= tol
+        if self.edges:
+            touching &= self.rows_margins(rows) > 0.0
+        self.active = s.contact_mask & (~s.contact_unilateral | touching)
+
+    # ------------------------------------------------------------------ finite supports
+    def _margins(self, support_points: np.ndarray) -> np.ndarray:
+        """(B, R) edge margins [m] from the support rows' (K, 3) world points (inf elsewhere)."""
+        s = self.system
+        out = np.full(s.contact_mask.shape, np.inf)
+        if self.edges:
+            out[s.n_arms, :s.supports.n_rows] = s.supports.edge_margins(support_points)
+        return out
+
+    def rows_margins(self, rows: ContactRows) -> np.ndarray:
+        """(B, R) edge margins [m] of the rows' points: > 0 inside their support's rectangle.
+
+        :meth:`~multiarm_pin.constraints.SupportSet.edge_margins` on the support block;
+        ``+inf`` on the rows of infinite supports, the arms' rows and padding.
+        """
+        s = self.system
+        return self._margins(rows.contact_points[s.n_arms, :s.supports.n_rows]
+                             if self.edges else None)
+
+    def edge_margins(self, state: SystemState) -> np.ndarray:
+        """(B, R) edge margins [m] at a state (:meth:`rows_margins`; geometry only)."""
+        if not self.edges:
+            return self._margins(None)
+        known = self._known_rows(state)
+        if known is not None:
+            return self.rows_margins(known)
+        return self._margins(self.system.support_terms(state).contact_points)
+
+    def beside(self, rows: ContactRows) -> np.ndarray | None:
+        """(B, R) rows not on their support: outside its rectangle, or fallen; None: none can be.
+
+        Their negative gaps are distances to the plane beside (or under) the support, not
+        penetrations.
+        """
+        if not self.edges:
+            return None
+        return self.fallen | (self.rows_margins(rows) <= 0.0)
+
+    def _update_fallen(self, state: SystemState) -> None:
+        """Mark the rows below their plane while outside its rectangle; clear those back above."""
+        g = self.gaps(state)
+        outside = self.finite_rows & ~self.active & (self.edge_margins(state) <= 0.0)
+        self.fallen = ((self.fallen | (outside & (g < -ce.GAP_TOLERANCE)))
+                       & (g <= ce.GAP_TOLERANCE))
 
     def separations(self, t: float, sol, rows: ContactRows, keep=None) -> bool:
         """Drop active unilateral rows that the solution lets go; True if any was dropped.
+
+        Rows of finite supports whose point is outside the rectangle leave first (event
+        ``off_edge``); when there are any, only they leave now (the solution had them in the
+        active set), the others are checked at the next call.
 
         ``keep``: (B, R) bool rows not to drop now (those that just touched down: they stay
         active until the next sample, where the check runs again).
@@ -215,6 +288,11 @@ class Stepper:
         if not self.unilateral:
             return False
         s = self.system
+        if self.edges:  # rows whose point is outside its support's rectangle: off the edge
+            off = self.active & self.finite_rows & (self.rows_margins(rows) <= 0.0)
+            if off.any():  # ``sol`` had them: the others are checked on the new solution
+                self._leave(t, off, "off_edge", rows)
+                return True
         leave = self.active & s.contact_unilateral & (
             ((sol.mu <= 0.0) & (sol.phi_dd > ce.SEPARATION_ACCELERATION))
             | (rows.phi > ce.SEPARATION_GAP) | (rows.phi_dot > ce.SEPARATION_SPEED))
@@ -279,20 +357,32 @@ class Stepper:
             h = t_end - t
             new = self.step(integrator, t, state, sol, h)
             # a separation inside the step: the step ends there (touchdowns before it first)
+            ending = None  # (event kind, rows leaving) at the step's (new) end
             sep = locate_separation(self, integrator, t, state, sol, h, new, t_end)
             if sep is not None:
                 theta_s, new, leaving = sep
                 h = theta_s * h
+                ending = ("separation", leaving)
+            if self.edges:  # a point leaving its rectangle before that: the step ends there
+                off = locate_off_edge(self, integrator, t, state, sol, h, new)
+                if off is not None:
+                    theta_e, new, leaving = off
+                    h = theta_e * h
+                    ending = ("off_edge", leaving)
             watch = self._watch()
             # a row far below the band at the step's start is not watched: its tip went
             # round an edge, behind the (infinite) plane of its face, and touches nothing
             watch &= self.gaps(state) >= -ce.LOST_GAP
+            if self.edges:  # a point outside its rectangle all along touches nothing
+                self._update_fallen(state)
+                watch &= ~self.fallen & ((self.edge_margins(state) > 0.0)
+                                         | (self.edge_margins(new) > 0.0))
             g_hi = float(self.gaps(new)[watch].min()) if watch.any() else 0.0
             if g_hi >= -tol:
-                if sep is None:
+                if ending is None:
                     return new
                 t, state = t + h, new
-                self._separate(t, state, leaving)
+                self._leave(t, ending[1], ending[0], state=state)
                 sol, _, _, rows = self.evaluate(t, state)
                 if self.separations(t, sol, rows):
                     sol = self.evaluate(t, state)[0]
@@ -301,6 +391,16 @@ class Stepper:
                 continue
             theta, s_e = locate_touchdown(self, integrator, t, state, sol, h, watch, g_hi)
             t = t + theta * h
+            if self.edges and not self._lands(t, s_e, watch):
+                # the row reaching the plane is beside the rectangle: no touchdown, the step
+                # is split there (that row is fallen now)
+                state = s_e
+                sol, _, _, rows = self.evaluate(t, state)
+                if self.separations(t, sol, rows):
+                    sol = self.evaluate(t, state)[0]
+                if t_end - t <= ce.TIME_TOLERANCE:
+                    return state
+                continue
             state, joined = self._impact(t, s_e, watch)
             sol, _, _, rows = self.evaluate(t, state)
             if self.separations(t, sol, rows, keep=joined):
@@ -310,16 +410,32 @@ class Stepper:
         raise DynamicsError(f"t = {t:.6g} s: more than {ce.MAX_EVENTS_PER_STEP} contact events "
                             "in one step")
 
-    def _separate(self, t: float, state: SystemState, leaving: np.ndarray) -> None:
-        """Drop ``leaving`` rows from the active set, with their events at ``t``."""
+    def _leave(self, t: float, leaving: np.ndarray, kind: str, rows: ContactRows | None = None,
+               state: SystemState | None = None) -> None:
+        """Drop ``leaving`` rows from the active set, with their events (``kind``) at ``t``.
+
+        ``rows``: the rows at ``t``, or None to get them at ``state`` (only if a row leaves).
+        """
         leaving = leaving & self.active
         if not leaving.any():
             return
-        rows = self.rows_at(t, state)
+        if rows is None:
+            rows = self.rows_at(t, state)
         for b, r in zip(*np.nonzero(leaving), strict=True):
-            self._event(t, "separation", b, r, phi_dot=float(rows.phi_dot[b, r]),
+            self._event(t, kind, b, r, phi_dot=float(rows.phi_dot[b, r]),
                         phi_dot_after=float(rows.phi_dot[b, r]))
         self.active = self.active & ~leaving
+
+    def _lands(self, t: float, state: SystemState, watch: np.ndarray) -> bool:
+        """True if a watched row reaching its plane at a located touchdown is inside its rectangle.
+
+        The watched rows at the plane but outside their rectangle become fallen.
+        """
+        rows = self.rows_at(t, state)
+        at_plane = watch & (rows.phi <= ce.GAP_TOLERANCE)
+        inside = self.rows_margins(rows) > 0.0
+        self.fallen |= at_plane & ~inside
+        return bool((at_plane & inside).any())
 
     def _impact(self, t: float, state: SystemState, watch: np.ndarray
                 ) -> tuple[SystemState, np.ndarray]:
@@ -333,6 +449,8 @@ class Stepper:
         s = self.system
         full, rows = self.blocks_at(t, state)
         touching = watch & (rows.phi <= ce.GAP_TOLERANCE)
+        if self.edges:  # only inside its support's rectangle
+            touching &= self.rows_margins(rows) > 0.0
         candidates = self.active | touching
         e = np.where(np.abs(rows.phi_dot) < ce.RESTING_SPEED, 0.0, s.contact_restitution)
         uni = s.contact_unilateral

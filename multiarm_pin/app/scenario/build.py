@@ -402,7 +402,8 @@ def _build_supports(scenario: Scenario, obj) -> list:
     for sp in scenario.supports:
         pts = obj.shape.vertices if isinstance(sp.points, str) else sp.points
         try:
-            out.append(Support(sp.name, sp.point, sp.normal, pts, sp.restitution))
+            out.append(Support(sp.name, sp.point, sp.normal, pts, sp.restitution,
+                               extent=sp.extent, x_axis=sp.x_axis))
         except MultiArmError as exc:
             raise ScenarioError(scenario.file, f"supports[{sp.index}]", str(exc)) from exc
     return out

@@ -26,6 +26,8 @@ object, the controller and the simulation settings (format in the README)::
         plane: {point: [0, 0, 0], normal: [0, 0, 1]}   # world; normal out of the support
         points: vertices                     # or a list of object-frame points [m]
         restitution: 0.0                     # 0 <= e <= 1
+        extent: [1.2, 0.8]                   # optional: a rectangle [lx, ly] [m] around point
+        x_axis: [1, 0, 0]                    # optional: its x side (world, onto the plane)
 
 The object may carry ``external_wrench: [{from: s, to: s, wrench: [fx, fy, fz, mx, my,
 mz]}]`` (at the COM, world axes [N, N m], over each interval). A joint may say ``unilateral:
@@ -81,7 +83,9 @@ from multiarm_pin.app.scenario.specs import (
     SupportSpec,
 )
 from multiarm_pin.constraints.joint_types import JOINT_TYPES
+from multiarm_pin.constraints.supports import plane_x_axis
 from multiarm_pin.data import data_path
+from multiarm_pin.exceptions import ConstraintError
 from multiarm_pin.sim.controllers import CONTROLLERS
 from multiarm_pin.yaml_reader import Reader, describe, load_yaml_file
 
@@ -157,12 +161,13 @@ def parse_scenario(data, file: str = "<scenario>") -> Scenario:
 
 def _parse_supports(r: Reader) -> tuple[SupportSpec, ...]:
     if not isinstance(r.value, list):
-        raise r.error(f"expected a list of supports {{name, plane, points, restitution}}, got "
-                      f"{describe(r.value)}")
+        raise r.error(f"expected a list of supports {{name, plane, points, restitution, "
+                      f"extent, x_axis}}, got {describe(r.value)}")
     out, names = [], []
     for k, item in enumerate(r.value):
         c = r.child(k, item)
-        d = c.mapping(("name", "plane", "points", "restitution"), required=("plane", "points"))
+        d = c.mapping(("name", "plane", "points", "restitution", "extent", "x_axis"),
+                      required=("plane", "points"))
         name = c.get("name").string() if "name" in d else f"support{k}"
         if name in names:
             raise c.get("name").error(f"duplicate support name {name!r}; names must be unique")
@@ -190,7 +195,24 @@ def _parse_supports(r: Reader) -> tuple[SupportSpec, ...]:
             e = er.number(nonnegative=True)
             if e > 1.0:
                 raise er.error(f"expected a coefficient of restitution in [0, 1], got {e}")
-        out.append(SupportSpec(name, point, normal / np.linalg.norm(normal), points, e, k))
+        normal = normal / np.linalg.norm(normal)
+        extent = x_axis = None
+        if "extent" in d:
+            xr = c.get("extent")
+            extent = xr.array((2,), "[lx, ly] side lengths of the rectangle [m]")
+            if not np.all(extent > 0.0):
+                raise xr.error(f"expected two positive side lengths [lx, ly] [m], got "
+                               f"{extent.tolist()}")
+        if "x_axis" in d:
+            ar = c.get("x_axis")
+            x_axis = ar.array((3,), "world direction of the rectangle's x side")
+            try:
+                plane_x_axis(normal, x_axis)
+            except ConstraintError as exc:
+                raise ar.error(f"x_axis {x_axis.tolist()} is parallel to the plane's normal "
+                               f"{normal.tolist()} (or zero); expected a direction along the "
+                               "plane (it is projected onto it)") from exc
+        out.append(SupportSpec(name, point, normal, points, e, k, extent, x_axis))
     return tuple(out)
 
 

@@ -71,7 +71,10 @@ class SupportSpec:
         name: unique name. point: (3,) a point of the plane, world [m]. normal: (3,) unit
         normal out of the support, world axes. points: ``"vertices"`` or (P, 3) points in
         the object frame [m]. restitution: Newton's coefficient, 0..1. index: position in
-        the file's ``supports`` list.
+        the file's ``supports`` list. extent: None (an infinite plane) or (2,) ``[lx, ly]``
+        [m], the side lengths of the supporting rectangle centred at ``point``. x_axis: None
+        (the default axis) or (3,) the world direction of the rectangle's x side (projected
+        onto the plane).
     """
 
     name: str
@@ -80,6 +83,8 @@ class SupportSpec:
     points: str | np.ndarray
     restitution: float
     index: int
+    extent: np.ndarray | None = None
+    x_axis: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
