@@ -208,7 +208,7 @@ def test_page_is_the_meshcat_servers_page(ur5):
     with contextlib.redirect_stdout(io.StringIO()):
         server = Visualizer()
     try:
-        page = PageWindow()
+        page = PageWindow(compact=False)
         vis = Visualizer(window=TeeWindow(server.window, page))
         anim = build_animation(vis, arms[:1], obj, contacts, t)
         vis.set_animation(anim, play=True, repetitions=1)

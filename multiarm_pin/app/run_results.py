@@ -14,7 +14,8 @@ its results folder:
   bilateral); for each support S ``mu_S``, ``phi_S`` (T, P_S); ``support_names`` (S,) and
   ``support_planes`` (S, 6) (plane point and normal, world); ``external_wrench`` (T, 6);
   the contact events ``event_t`` (E,) [s], ``event_contact`` (E,) (index in K) and
-  ``event_kind`` (E,) (``separation`` / ``touchdown``);
+  ``event_kind`` (E,) (``separation`` / ``touchdown``) and ``event_impulse`` (E,) (the
+  impact's contact impulse [N s], 0 for none);
   ``kinetic_energy``, ``potential_energy`` (T,) [J]; ``momentum`` (T, 6).
 - ``summary.json``: scenario name, solver, steps, wall time, max constraint violation,
   min contact force, warnings (contact separations, solver switches), ``input_warnings``
@@ -96,6 +97,7 @@ def system_trajectory_arrays(system, result) -> dict[str, np.ndarray]:
     out["event_t"] = np.array([e.t for e in result.events], dtype=float)
     out["event_contact"] = np.array([flat[e.block, e.row] for e in result.events], dtype=int)
     out["event_kind"] = np.array([e.kind for e in result.events], dtype=str)
+    out["event_impulse"] = np.array([e.impulse for e in result.events], dtype=float)
     return {k: np.ascontiguousarray(v) for k, v in out.items()}
 
 
@@ -181,7 +183,13 @@ def replay_parts(arms, obj, trajectory: dict):
     Returns:
         ``(replay_arms, replay_object, replay_contacts)``.
     """
-    from multiarm_pin.app.replay import ReplayArm, ReplayContacts, ReplayObject, ReplaySupport
+    from multiarm_pin.app.replay import (
+        ReplayArm,
+        ReplayContacts,
+        ReplayEvent,
+        ReplayObject,
+        ReplaySupport,
+    )
 
     def finite(a, limit=1e12):  # a failed run may end on huge or NaN values: drawable
         return np.clip(np.nan_to_num(np.asarray(a, float), nan=0.0, posinf=limit,
@@ -208,10 +216,17 @@ def replay_parts(arms, obj, trajectory: dict):
             half = float(np.max(np.linalg.norm(pts - c, axis=1), initial=0.0)) + 0.1
             supports.append(ReplaySupport(str(name), c, n, half))
         touching = trajectory.get("contact_active")
+        K = trajectory["contact_points"].shape[1]
+        kinds = [str(x) for x in trajectory.get("event_kind", [])]
+        impulses = trajectory.get("event_impulse", np.zeros(len(kinds)))
+        events = [ReplayEvent(float(te), kind, int(k), float(p)) for te, kind, k, p in
+                  zip(trajectory.get("event_t", []), kinds, trajectory.get("event_contact", []),
+                      impulses, strict=True)
+                  if 0 <= int(k) < K and np.isfinite(te)]
         rc = ReplayContacts(finite(trajectory["contact_points"], 1e6),
                             finite(trajectory["contact_forces"]),
                             None if touching is None else np.asarray(touching, dtype=bool),
-                            supports)
+                            supports, labels if len(labels) == K else None, events)
     return rarms, robj, rc
 
 
