@@ -325,11 +325,11 @@ class PageWindow:
         if shared is None:
             lowered = command.lower()
             cmd = lowered["type"]
-            path_str = lowered["path"]
         else:
-            cmd, path_str = "set_object", command.path.lower()
+            cmd = "set_object"
         if cmd not in MESHCAT_COMMANDS:
             raise ValueError(f"PageWindow: unsupported Meshcat command {cmd!r}")
+        path_str = lowered["path"] if shared is None else command.path.lower()
         path = [p for p in path_str.split("/") if p]
         if cmd == "set_object":
             node = find_node(self.tree, path)
