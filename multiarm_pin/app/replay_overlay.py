@@ -172,11 +172,12 @@ OVERLAY_JS = r"""
       rows.push("<div>arms: " + esc(names) + "</div>");
     }
     if (o.bodies.length) {
-      rows.push('<div>timeline: <span style="color:#ffd60a">\u2588</span> touching, ' +
-        '<span style="color:#8d99ae">\u2588</span> separated; ' +
-        '<span style="color:' + EVENT_COLORS.separation + '">\u25BC</span> separation ' +
-        '<span style="color:' + EVENT_COLORS.touchdown + '">\u25B2</span> touchdown ' +
-        '<span style="color:' + EVENT_COLORS.impact + '">\u25C6</span> impact</div>');
+      rows.push('<div>timeline: <span style="color:' + c.contact + '">\u2588</span> touching, ' +
+        '<span style="color:' + c.separated + '">\u2588</span> separated' +
+        (o.events.length ? '; <span style="color:' + EVENT_COLORS.separation +
+         '">\u25BC</span> separation <span style="color:' + EVENT_COLORS.touchdown +
+         '">\u25B2</span> touchdown <span style="color:' + EVENT_COLORS.impact +
+         '">\u25C6</span> impact' : "") + "</div>");
     }
     el("ma-legend").innerHTML = rows.join("");
   }
