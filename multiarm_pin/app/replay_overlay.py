@@ -194,11 +194,16 @@ OVERLAY_JS = r"""
     el("ma-end").textContent = "of " + fmt(o.t_end) + " s";
     legend(o);
     if (!nb) el("ma-timeline").style.display = "none";
-    const rowH = nb ? Math.max(7, Math.min(16, Math.floor(96 / nb))) : 0;
+    // Rows of at most 16 px, all of them in at most a quarter of the window (200 px);
+    // below 8 px a row has no label (hovering names it).
+    const gap = nb > 12 ? 1 : 2;
+    const maxH = Math.max(60, Math.min(200, 0.25 * window.innerHeight));
+    const rowH = nb ? Math.max(2, Math.min(16, Math.floor(maxH / nb) - gap)) : 0;
+    const pitch = rowH + gap, labelled = rowH >= 8;
     const gutter = 170, axisH = 18;
     let width = 0, shown = null;
     function layout() {
-      const w = canvas.clientWidth, h = nb * (rowH + 2) + axisH, r = window.devicePixelRatio || 1;
+      const w = canvas.clientWidth, h = nb * (pitch) + axisH, r = window.devicePixelRatio || 1;
       canvas.style.height = h + "px";
       canvas.width = Math.round(w * r);
       canvas.height = Math.round(h * r);
@@ -208,12 +213,12 @@ OVERLAY_JS = r"""
     }
     const x = t => gutter + (width - gutter - 8) * (t - t0) / (t1 - t0);
     function draw(t) {
-      const h = nb * (rowH + 2) + axisH;
+      const h = nb * (pitch) + axisH;
       ctx.clearRect(0, 0, width, h);
       ctx.font = Math.min(12, rowH + 1) + "px system-ui, sans-serif";
       ctx.textBaseline = "middle";
       o.bodies.forEach((b, i) => {
-        const y = i * (rowH + 2);
+        const y = i * (pitch);
         ctx.fillStyle = o.colors.separated;
         ctx.fillRect(x(t0), y, x(t1) - x(t0), rowH);
         b.runs.forEach((r, k) => {
@@ -224,18 +229,29 @@ OVERLAY_JS = r"""
             ctx.fillRect(x(r[0]), y + rowH * (1 - f), Math.max(x(end) - x(r[0]), 1), rowH * f);
           }
         });
-        ctx.fillStyle = "#f1f1f1";
-        ctx.fillText(b.name + "  " + countAt(b.runs, t) + "/" + b.contacts + " touching", 2,
-                     y + rowH / 2, gutter - 6);
+        if (labelled) {
+          ctx.fillStyle = "#f1f1f1";
+          ctx.fillText(b.name + "  " + countAt(b.runs, t) + "/" + b.contacts + " touching", 2,
+                       y + rowH / 2, gutter - 6);
+        }
       });
+      if (!labelled) {
+        const touching = o.bodies.reduce((n, b) => n + countAt(b.runs, t), 0);
+        const total = o.bodies.reduce((n, b) => n + b.contacts, 0);
+        ctx.fillStyle = "#f1f1f1";
+        ctx.font = "12px system-ui, sans-serif";
+        ctx.fillText(nb + " rows (arms, supports)", 2, 8, gutter - 6);
+        ctx.fillText(touching + "/" + total + " touching", 2, 24, gutter - 6);
+        ctx.fillText("hover a row: its name", 2, 40, gutter - 6);
+      }
       ctx.fillStyle = "rgba(15, 20, 35, 0.55)";  // not yet played
-      ctx.fillRect(x(t), 0, x(t1) - x(t) + 8, nb * (rowH + 2));
+      ctx.fillRect(x(t), 0, x(t1) - x(t) + 8, nb * (pitch));
       const rowOf = {};
       o.bodies.forEach((b, i) => { rowOf[b.name] = i; });
       for (const e of o.events) {
         const i = rowOf[e.body];
         if (i === undefined) continue;
-        const cx = x(e.t), cy = i * (rowH + 2) + rowH / 2, s = Math.max(3, rowH / 2);
+        const cx = x(e.t), cy = i * (pitch) + rowH / 2, s = Math.max(3, rowH / 2);
         ctx.fillStyle = EVENT_COLORS[e.impact ? "impact" : e.kind] || "#ffffff";
         ctx.strokeStyle = "#10131c";
         ctx.beginPath();
@@ -249,7 +265,7 @@ OVERLAY_JS = r"""
         }
         ctx.closePath(); ctx.fill(); ctx.stroke();
       }
-      const yAxis = nb * (rowH + 2) + axisH / 2;  // time axis
+      const yAxis = nb * (pitch) + axisH / 2;  // time axis
       ctx.fillStyle = "#b8c0cc";
       ctx.font = "11px system-ui, sans-serif";
       const span = t1 - t0, raw = span / 8, p = Math.pow(10, Math.floor(Math.log10(raw)));
@@ -259,7 +275,7 @@ OVERLAY_JS = r"""
         ctx.fillText(+v.toFixed(6) + " s", Math.min(x(v) - 8, width - 34), yAxis + 2);
       }
       ctx.fillStyle = "#ffffff";  // cursor
-      ctx.fillRect(x(t) - 1, 0, 2, nb * (rowH + 2) + 4);
+      ctx.fillRect(x(t) - 1, 0, 2, nb * (pitch) + 4);
     }
     function seek(t) {
       t = Math.min(Math.max(t, t0), t1);
@@ -272,6 +288,16 @@ OVERLAY_JS = r"""
       return t0 + (ev.clientX - r.left - gutter) / (width - gutter - 8) * (t1 - t0);
     }
     let dragging = false;
+    canvas.addEventListener("mousemove", ev => {  // a tooltip: the row, its events near
+      const r = canvas.getBoundingClientRect(), i = Math.floor((ev.clientY - r.top) / pitch);
+      const b = o.bodies[i];
+      if (!b || ev.clientX - r.left < gutter) { canvas.title = b ? b.name : ""; return; }
+      const tm = fromMouse(ev), px = (t1 - t0) / (width - gutter - 8);
+      const near = o.events.filter(e => e.body === b.name && Math.abs(e.t - tm) < 6 * px);
+      canvas.title = b.name + ": " + countAt(b.runs, tm) + "/" + b.contacts +
+        " touching at " + fmt(tm) + " s" + near.map(e => "\n" + fmt(e.t) + " s " +
+        eventName(e) + " " + e.label).join("");
+    });
     canvas.addEventListener("mousedown", ev => { dragging = true; seek(fromMouse(ev)); });
     window.addEventListener("mousemove", ev => { if (dragging) seek(fromMouse(ev)); });
     window.addEventListener("mouseup", () => { dragging = false; });
