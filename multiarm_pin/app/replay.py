@@ -25,8 +25,9 @@ viewer interpolates between keys, so a constant stretch plays the same from its 
 The page (:func:`write_replay_html`) holds each distinct mesh once and shows the simulated
 time, a legend and the contacts' timeline (:mod:`multiarm_pin.app.replay_overlay`).
 All positions are in the world frame [m]; forces [N]. The inputs (:class:`ReplayArm`,
-:class:`ReplayObject`, :class:`ReplaySupport`, :class:`ReplayContacts`) are defined and checked
-in :mod:`multiarm_pin.app.replay_scene` and re-exported here.
+:class:`ReplayObject`, :class:`ReplaySupport`, :class:`ReplayContacts` with its contact labels
+and :class:`ReplayEvent` s) are defined and checked in :mod:`multiarm_pin.app.replay_scene`
+and re-exported here.
 """
 
 from __future__ import annotations

@@ -180,6 +180,10 @@ def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> di
 def replay_parts(arms, obj, trajectory: dict):
     """Replay inputs (:mod:`multiarm_pin.app.replay`) from arms, object and trajectory arrays.
 
+    The contacts carry their labels (``contact_labels``), states (``contact_active``),
+    supports (``support_names``, ``support_planes``) and events (``event_t``,
+    ``event_kind``, ``event_contact``, ``event_impulse``: 0 when a file predates it).
+
     Returns:
         ``(replay_arms, replay_object, replay_contacts)``.
     """
