@@ -98,6 +98,7 @@ def test_page_carries_the_overlay(tmp_path):
     manifest, _ = decode_block(html)
     assert manifest["overlay"]["title"] == "box <on> table"
     assert "<title>box &lt;on&gt; table</title>" in html
+    assert "<on>" not in html  # escaped in the title and in the page's JSON (\u003c)
     assert [e["label"] for e in manifest["overlay"]["events"]] == ["table[0]", "left:tip[1]"]
 
 

@@ -125,7 +125,7 @@ def _reference_animation(vis, arms, obj, contacts, t, fps, force_scale):
                 node = at[f"arms/{arm.name}/visuals/{g.name}"]
                 node.set_transform(base @ M.homogeneous)
                 scale = np.asarray(g.meshScale, dtype=float)
-                if visual_mesh(g) is None and not np.allclose(scale, 1.0):
+                if not np.allclose(scale, 1.0) and visual_mesh(g) is None:  # (COLLADA: slow)
                     node.set_property("scale", "vector3", scale.tolist())
         T = np.eye(4)
         T[:3, :3] = quaternion_to_rotation(obj.quaternion[i])

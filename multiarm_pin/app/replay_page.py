@@ -414,7 +414,7 @@ class PageWindow:
         packed = base64.b64encode(zlib.compress(bytes(block), 9)).decode("ascii")
         return _COMPACT_PAGE.format(
             title=_html_text(self.title), mainminjs=mainminjs,
-            manifest=text.replace("</", "<\\/"), block=packed, loader_js=_LOADER_JS,
+            manifest=text.replace("<", "\\u003c"), block=packed, loader_js=_LOADER_JS,
             **(_OVERLAY_PARTS if self.overlay is not None else dict.fromkeys(_OVERLAY_PARTS, "")))
 
 
@@ -439,7 +439,7 @@ def decode_block(html: str) -> tuple[dict, bytes]:
                   html, re.S)
     if m is None or b is None:
         raise ValueError("not a compact replay page (no manifest or data block)")
-    return json.loads(m.group(1).replace("<\\/", "</")), zlib.decompress(
+    return json.loads(m.group(1)), zlib.decompress(
         base64.b64decode(b.group(1)))
 
 
