@@ -6,7 +6,9 @@ WebGL, no network services, a fresh profile per call.
 
 from __future__ import annotations
 
+import os
 import shutil
+import signal
 import subprocess
 import tempfile
 from pathlib import Path
@@ -25,11 +27,30 @@ FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-
          "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 
 
+TIMEOUT = 90
+"""Seconds one Chromium run may take (a run takes a few; a rare one never ends)."""
+
+
 def _run(args: list[str], url: str, budget_ms: int) -> subprocess.CompletedProcess:
-    with tempfile.TemporaryDirectory(prefix="chromium-profile-") as profile:
-        return subprocess.run([CHROMIUM, *FLAGS, f"--user-data-dir={profile}", *args,
-                               f"--virtual-time-budget={budget_ms}", url],
-                              check=True, capture_output=True, timeout=180)
+    """Run Chromium once; a run that hangs is killed with its process group and run again."""
+    for attempt in range(2):
+        with tempfile.TemporaryDirectory(prefix="chromium-profile-") as profile:
+            cmd = [CHROMIUM, *FLAGS, f"--user-data-dir={profile}", *args,
+                   f"--virtual-time-budget={budget_ms}", url]
+            proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                    start_new_session=True)
+            try:
+                out, err = proc.communicate(timeout=TIMEOUT)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.communicate()
+                if attempt:
+                    raise
+                continue
+            if proc.returncode:
+                raise subprocess.CalledProcessError(proc.returncode, cmd, out, err)
+            return subprocess.CompletedProcess(cmd, 0, out, err)
+    raise AssertionError("unreachable")
 
 
 def page_url(page: Path, fragment: str = "") -> str:

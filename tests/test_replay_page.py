@@ -19,6 +19,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import umsgpack
+from browser_helpers import needs_chromium, page_url, screenshot
 from meshcat import Visualizer
 from meshcat.commands import SetAnimation
 
@@ -357,3 +358,33 @@ def test_mesh_encoding_round_trips_past_16_bit_indices():
         assert header["vertices"] == len(used) and f2.max() == len(used) - 1
         np.testing.assert_allclose(v2[f2], v[f], rtol=0, atol=0.7 / 65535 / 2 + 1e-7)
         assert np.all(v2[:, 2] == np.float32(0.25))
+
+
+@needs_chromium
+def test_compact_page_draws_what_the_plain_page_draws(ur5, tmp_path):
+    """Headless Chromium: the compact page (meshes decoded by its script, materials by
+    three.js's MaterialLoader, colour groups) shows the plain page's picture.
+
+    Two UR5s in their COLLADA colours (several material groups a mesh) and one painted
+    grey, at rest; without the overlay, the same camera. Nearly every pixel matches (the
+    quantised vertices move edges by far less than a pixel); the arms cover a good part of
+    the view, so the comparison is not one of two empty scenes.
+    """
+    q = np.tile([0.0, -1.2, 1.6, -1.9, -1.57, 0.0], (2, 1))
+    arms = [ReplayArm("a", ur5.model, ur5.visual_model, pin.SE3.Identity(), q),
+            ReplayArm("b", ur5.model, ur5.visual_model,
+                      pin.SE3(np.eye(3), np.array([0.0, 0.8, 0.0])), q),
+            ReplayArm("c", ur5.model, ur5.visual_model,
+                      pin.SE3(np.eye(3), np.array([0.0, -0.8, 0.0])), q, (0.8, 0.8, 0.8, 1.0))]
+    images = {}
+    for name, compact in (("plain", False), ("compact", True), ("empty", True)):
+        vis = Visualizer(window=PageWindow(compact=compact))
+        anim = build_animation(vis, [] if name == "empty" else arms, None, None, [0.0, 0.1])
+        vis.set_animation(anim, play=True, repetitions=1)
+        page = tmp_path / f"{name}.html"
+        page.write_text(vis.static_html(), encoding="utf-8")
+        images[name] = screenshot(page_url(page), tmp_path / f"{name}.png", budget_ms=5000)
+    differ = np.any(np.abs(images["compact"] - images["plain"]) > 30, axis=2).mean()
+    drawn = np.any(np.abs(images["plain"] - images["empty"]) > 30, axis=2).mean()
+    assert drawn > 0.05, f"the arms cover only {drawn:.1%} of the view"
+    assert differ < 0.005, f"{differ:.2%} of the pixels differ ({drawn:.1%} drawn)"
