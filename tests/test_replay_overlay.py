@@ -87,6 +87,8 @@ def test_bad_labels_and_events_are_refused():
         ReplayContacts(c.points, c.forces, events=[ReplayEvent(0.1, "separation", 4)])
     with pytest.raises(InputError, match="not an event"):
         ReplayContacts(c.points, c.forces, events=[ReplayEvent(0.1, "bounce", 0)])
+    with pytest.raises(InputError, match="finite time and impulse"):
+        ReplayContacts(c.points, c.forces, events=[ReplayEvent(0.1, "touchdown", 0, np.nan)])
     with pytest.raises(InputError, match="ReplayEvent items"):
         ReplayContacts(c.points, c.forces, events=[(0.1, "separation", 0)])
 
@@ -189,3 +191,28 @@ def test_the_readmes_screenshot_command_works(tmp_path):
     assert img.shape == (800, 1280, 3)
     panel = img[15:120, 15:380]
     assert panel.mean() < 100 and np.sum(panel.min(axis=2) > 200) > 400  # the info panel
+
+
+def test_a_runs_page_marks_the_summarys_events(tmp_path, capsys):
+    """Through the command line: a box dropped on a table (touchdowns with and without an
+    impulse, rebounds); the page's timeline holds every event of summary.json, with its
+    time, kind, contact and impulse."""
+    import json
+
+    from multiarm_pin.app import cli
+    from multiarm_pin.data import data_path
+
+    out = tmp_path / "box"
+    assert cli.main(["run", str(data_path("scenarios", "box_on_table.yaml")), "--out",
+                     str(out), "--quiet"]) == 0
+    capsys.readouterr()
+    events = json.loads((out / "summary.json").read_text())["events"]
+    assert any(e["impulse"] > 0 for e in events) and any(e["impulse"] == 0 for e in events)
+    overlay = decode_block((out / "replay.html").read_text())[0]["overlay"]
+    assert [(e["t"], e["kind"], e["label"], e["body"], e["impulse"]) for e in
+            overlay["events"]] == [(e["t"], e["kind"], e["label"], e["body"], e["impulse"])
+                                   for e in events]
+    assert [e["impact"] for e in overlay["events"]] == [
+        e["kind"] == "touchdown" and e["impulse"] > 0 for e in events]
+    assert [b["name"] for b in overlay["bodies"]] == ["table"]
+    assert [s["name"] for s in overlay["supports"]] == ["table"]

@@ -188,9 +188,11 @@ class ReplayContacts:
             if not isinstance(e, ReplayEvent):
                 raise InputError(f"ReplayContacts.events: expected ReplayEvent items, got "
                                  f"{type(e).__name__}")
-            if e.kind not in EVENT_KINDS or not 0 <= e.contact < K or not math.isfinite(e.t):
+            if (e.kind not in EVENT_KINDS or not 0 <= e.contact < K or not math.isfinite(e.t)
+                    or not math.isfinite(e.impulse)):
                 raise InputError(f"ReplayContacts.events: {e} is not an event of one of the "
-                                 f"{K} contacts (kinds {', '.join(EVENT_KINDS)}, finite time)")
+                                 f"{K} contacts (kinds {', '.join(EVENT_KINDS)}, finite time "
+                                 "and impulse)")
 
 
 # ----------------------------------------------------------------------------- helpers

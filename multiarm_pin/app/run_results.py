@@ -222,7 +222,8 @@ def replay_parts(arms, obj, trajectory: dict):
         touching = trajectory.get("contact_active")
         K = trajectory["contact_points"].shape[1]
         kinds = [str(x) for x in trajectory.get("event_kind", [])]
-        impulses = trajectory.get("event_impulse", np.zeros(len(kinds)))
+        impulses = np.nan_to_num(np.asarray(trajectory.get("event_impulse", np.zeros(len(kinds))),
+                                            dtype=float), nan=0.0, posinf=0.0, neginf=0.0)
         events = [ReplayEvent(float(te), kind, int(k), float(p)) for te, kind, k, p in
                   zip(trajectory.get("event_t", []), kinds, trajectory.get("event_contact", []),
                       impulses, strict=True)
