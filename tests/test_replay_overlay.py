@@ -50,7 +50,7 @@ def _scene(n: int = 101):
     touching[t < T_TOUCH, 1] = False
     events = [ReplayEvent(T_SEPARATE, "separation", 2), ReplayEvent(T_TOUCH, "touchdown", 1,
                                                                    IMPULSE)]
-    table = ReplaySupport("table", [0.5, 0.0, 0.0], [0, 0, 1], 0.3)
+    table = ReplaySupport("table", [0.5, -1e-17, 0.0], [0, 0, 1], 0.3)
     contacts = ReplayContacts(points, forces, touching, [table], LABELS, events)
     return arms, obj, contacts, t
 
@@ -71,8 +71,8 @@ def test_overlay_data_groups_contacts_by_body_and_lists_events():
          "impulse": 0.0, "impact": False},
         {"t": T_TOUCH, "kind": "touchdown", "label": "left:tip[1]", "body": "left",
          "impulse": IMPULSE, "impact": True}]
-    assert data["supports"][0]["name"] == "table" and "normal (0, 0, 1)" in \
-        data["supports"][0]["plane"]
+    assert data["supports"][0] == {"name": "table", "color": "#6c584c",
+                                   "plane": "plane through (0.5, 0, 0) m, normal (0, 0, 1)"}
     assert data["force"] == {"m_per_n": 0.01, "max_n": pytest.approx(10.0)}
     assert overlay_data(t, None)["bodies"] == []
     assert body_of("a:b:c") == "a" and body_of("floor[12]") == "floor"

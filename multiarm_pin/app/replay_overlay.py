@@ -32,6 +32,12 @@ def _hex(color: int) -> str:
     return f"#{int(color):06x}"
 
 
+def _num(x) -> str:
+    """``x`` in 3 significant digits, round-off near zero written 0."""
+    v = float(x)
+    return f"{0.0 if abs(v) < 1e-9 else v:.3g}"
+
+
 def body_of(label: str) -> str:
     """The body of a contact label: ``"<arm>:<contact>"`` -> arm, ``"<support>[j]"`` -> support."""
     if ":" in label:
@@ -86,8 +92,8 @@ def overlay_data(t: np.ndarray, contacts: ReplayContacts | None, *, title: str =
         p, n = sp.center, sp.normal
         data["supports"].append({
             "name": sp.name, "color": _hex(c) if c is not None else "#6c584c",
-            "plane": f"plane through ({p[0]:.3g}, {p[1]:.3g}, {p[2]:.3g}) m, "
-                     f"normal ({n[0]:.3g}, {n[1]:.3g}, {n[2]:.3g})"})
+            "plane": f"plane through ({', '.join(_num(x) for x in p)}) m, "
+                     f"normal ({', '.join(_num(x) for x in n)})"})
     touching = (contacts.touching if contacts.touching is not None
                 else np.ones(contacts.points.shape[:2], dtype=bool))
     bodies: dict[str, list[int]] = {}
