@@ -19,6 +19,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import umsgpack
+from browser_helpers import needs_chromium, page_url, screenshot
 from meshcat import Visualizer
 from meshcat.commands import SetAnimation
 
@@ -125,7 +126,7 @@ def _reference_animation(vis, arms, obj, contacts, t, fps, force_scale):
                 node = at[f"arms/{arm.name}/visuals/{g.name}"]
                 node.set_transform(base @ M.homogeneous)
                 scale = np.asarray(g.meshScale, dtype=float)
-                if visual_mesh(g) is None and not np.allclose(scale, 1.0):
+                if not np.allclose(scale, 1.0) and visual_mesh(g) is None:  # (COLLADA: slow)
                     node.set_property("scale", "vector3", scale.tolist())
         T = np.eye(4)
         T[:3, :3] = quaternion_to_rotation(obj.quaternion[i])
@@ -208,7 +209,7 @@ def test_page_is_the_meshcat_servers_page(ur5):
     with contextlib.redirect_stdout(io.StringIO()):
         server = Visualizer()
     try:
-        page = PageWindow()
+        page = PageWindow(compact=False)
         vis = Visualizer(window=TeeWindow(server.window, page))
         anim = build_animation(vis, arms[:1], obj, contacts, t)
         vis.set_animation(anim, play=True, repetitions=1)
@@ -270,3 +271,120 @@ def test_written_page_equals_the_recorded_scene(ur5, tmp_path, monkeypatch):
     assert len(made) == 1
     assert path.read_text(encoding="utf-8") == made[0].static_html()
     assert made[0].window.tree["meshcat"]["arms"]["left"]["visuals"]
+
+
+# ----------------------------------------------------------------------------- issue 25
+def _fetch_payloads(html: str) -> list[bytes]:
+    """The packed commands of meshcat's page, in order."""
+    import base64
+    import re
+
+    return [base64.b64decode(m) for m in
+            re.findall(r'fetch\("data:application/octet-binary;base64,([A-Za-z0-9+/=]*)"\)',
+                       html)]
+
+
+def test_compact_page_holds_the_plain_pages_commands_and_each_mesh_once(ur5):
+    """The compact page is the plain page's commands, each mesh's set_object taken out.
+
+    Two UR5s in their COLLADA colours, two more each painted in one colour (coal's
+    triangles: other geometries than the COLLADA files', the same for both, with other
+    materials), an MP6 of primitives: the block holds the commands that are not meshes byte
+    for byte in the same order; the nodes name every mesh node, in order; each distinct
+    geometry is in it once, and decodes to the plain page's triangles within half a
+    quantum per axis.
+    """
+    import msgpack
+
+    from multiarm_pin.app.replay_page import QUANTUM, decode_block, decode_mesh
+
+    arms, obj, contacts, t = _scene(ur5, touching=True, n=40)
+    painted = [ReplayArm(f"painted{k}", ur5.model, ur5.visual_model,
+                         pin.SE3(np.eye(3), np.array([2.0, k, 0])), arms[0].q, (0.5, 0.5, c, 1.0))
+               for k, c in enumerate((0.5, 0.9))]
+    plain, compact = PageWindow(compact=False), PageWindow()
+    vis = Visualizer(window=TeeWindow(plain, compact))
+    anim = build_animation(vis, arms + painted, obj, contacts, t)
+    vis.set_animation(anim, play=True, repetitions=1)
+    manifest, block = decode_block(compact.get_scene())
+    payloads = _fetch_payloads(plain.get_scene())
+    commands = [block[a:a + n] for a, n in manifest["commands"]]
+    decoded = [msgpack.unpackb(p) for p in payloads]
+    is_mesh = ["/visuals/" in d["path"] and d["type"] == "set_object"
+               and d["object"]["geometries"][0]["type"] == "BufferGeometry" for d in decoded]
+    assert [p for p, m in zip(payloads, is_mesh, strict=True) if not m] == commands
+    mesh_commands = [d for d, m in zip(decoded, is_mesh, strict=True) if m]
+    assert [d["path"] for d in mesh_commands] == [n[0] for n in manifest["nodes"]]
+    n_ur5 = sum(visual_mesh(g) is not None for g in ur5.visual_model.geometryObjects)
+    assert len(manifest["nodes"]) == 4 * n_ur5 and len(manifest["meshes"]) == 2 * n_ur5
+    by_arm = [[n[1] for n in manifest["nodes"] if f"/arms/{a}/" in n[0]]
+              for a in ("left", "right", "painted0", "painted1")]
+    assert by_arm[0] == by_arm[1] and by_arm[2] == by_arm[3] and not set(by_arm[0]) & set(
+        by_arm[2])
+    colours = [[n[2] for n in manifest["nodes"] if f"/arms/{a}/" in n[0]]
+               for a in ("painted0", "painted1")]
+    assert not {k for m in colours[0] for k in m} & {k for m in colours[1] for k in m}
+    for d, (_, g, mats) in zip(mesh_commands, manifest["nodes"], strict=True):
+        geom = d["object"]["geometries"][0]["data"]
+        v = np.frombuffer(geom["attributes"]["position"]["array"].data, np.float32).reshape(-1, 3)
+        index = geom["index"]["array"]
+        f = np.frombuffer(index.data, np.uint16 if index.code == 0x14 else np.uint32)
+        f = f.reshape(-1, 3)
+        m = manifest["meshes"][g]
+        pos, idx = (block[a:a + n] for a, n in (m["positions"], m["index"]))
+        v2, f2 = decode_mesh(m, pos, idx)
+        step = np.asarray(m["step"])
+        assert np.all(np.abs(v2[f2] - v[f]) <= 0.5 * step + 1e-6 * np.abs(v[f]) + 1e-9)
+        assert np.all(step * QUANTUM <= np.ptp(v, axis=0) * (1 + 1e-6) + 1e-12)
+        assert m["groups"] == [[g["start"] // 3, g["count"] // 3] for g in
+                               geom.get("groups", [{"start": 0, "count": 3 * len(f)}])]
+        materials = d["object"]["materials"]
+        assert [manifest["materials"][k] for k in mats] == [
+            {k: v for k, v in mat.items() if k != "uuid"} for mat in materials]
+
+
+def test_mesh_encoding_round_trips_past_16_bit_indices():
+    from multiarm_pin.app.replay_page import decode_mesh, encode_mesh
+
+    rng = np.random.default_rng(5)
+    for n in (3, 70000):
+        v = rng.uniform(-0.3, 0.4, (n, 3)).astype(np.float32)
+        v[:, 2] = 0.25  # a flat axis: step 0
+        f = rng.integers(0, n, (2 * n, 3))
+        header, pos, idx = encode_mesh(v, f)
+        assert header["index_bits"] == (16 if n <= 2**16 else 32)
+        v2, f2 = decode_mesh(header, pos, idx)
+        used = np.unique(f)
+        assert header["vertices"] == len(used) and f2.max() == len(used) - 1
+        np.testing.assert_allclose(v2[f2], v[f], rtol=0, atol=0.7 / 65535 / 2 + 1e-7)
+        assert np.all(v2[:, 2] == np.float32(0.25))
+
+
+@needs_chromium
+def test_compact_page_draws_what_the_plain_page_draws(ur5, tmp_path):
+    """Headless Chromium: the compact page (meshes decoded by its script, materials by
+    three.js's MaterialLoader, colour groups) shows the plain page's picture.
+
+    Two UR5s in their COLLADA colours (several material groups a mesh) and one painted
+    grey, at rest; without the overlay, the same camera. Nearly every pixel matches (the
+    quantised vertices move edges by far less than a pixel); the arms cover a good part of
+    the view, so the comparison is not one of two empty scenes.
+    """
+    q = np.tile([0.0, -1.2, 1.6, -1.9, -1.57, 0.0], (2, 1))
+    arms = [ReplayArm("a", ur5.model, ur5.visual_model, pin.SE3.Identity(), q),
+            ReplayArm("b", ur5.model, ur5.visual_model,
+                      pin.SE3(np.eye(3), np.array([0.0, 0.8, 0.0])), q),
+            ReplayArm("c", ur5.model, ur5.visual_model,
+                      pin.SE3(np.eye(3), np.array([0.0, -0.8, 0.0])), q, (0.8, 0.8, 0.8, 1.0))]
+    images = {}
+    for name, compact in (("plain", False), ("compact", True), ("empty", True)):
+        vis = Visualizer(window=PageWindow(compact=compact))
+        anim = build_animation(vis, [] if name == "empty" else arms, None, None, [0.0, 0.1])
+        vis.set_animation(anim, play=True, repetitions=1)
+        page = tmp_path / f"{name}.html"
+        page.write_text(vis.static_html(), encoding="utf-8")
+        images[name] = screenshot(page_url(page), tmp_path / f"{name}.png", budget_ms=5000)
+    differ = np.any(np.abs(images["compact"] - images["plain"]) > 30, axis=2).mean()
+    drawn = np.any(np.abs(images["plain"] - images["empty"]) > 30, axis=2).mean()
+    assert drawn > 0.05, f"the arms cover only {drawn:.1%} of the view"
+    assert differ < 0.005, f"{differ:.2%} of the pixels differ ({drawn:.1%} drawn)"

@@ -16,13 +16,19 @@ The scene has three parts, all animated on one Meshcat timeline:
   one's is grey (``contacts/free_<k>``; the other sphere is scaled to nothing);
 - ``supports/<name>``: a thin slab on each support plane (``ReplayContacts.supports``),
   its top face on the plane, under the support's contact points (a support with an
-  ``extent``: its rectangle).
+  ``extent``: its rectangle), in the support's colour (``SUPPORT_COLORS`` in turn; the page's
+  legend names them).
 
-Samples are subsampled to ``fps`` frames per second (nearest sample in time, no
-interpolation), so a page's size grows with the duration, not with the integrator step.
+Samples are subsampled to ``fps`` frames per second (nearest sample in time), so a page's
+size grows with the duration, not with the integrator step. Each animation track is sent as
+float32 arrays (:class:`CompactTrack`), without the keys inside a run of equal values (the
+viewer interpolates between keys, so a constant stretch plays the same from its two ends).
+The page (:func:`write_replay_html`) holds each distinct mesh once and shows the simulated
+time, a legend and the contacts' timeline (:mod:`multiarm_pin.app.replay_overlay`).
 All positions are in the world frame [m]; forces [N]. The inputs (:class:`ReplayArm`,
-:class:`ReplayObject`, :class:`ReplaySupport`, :class:`ReplayContacts`) are defined and checked
-in :mod:`multiarm_pin.app.replay_scene` and re-exported here.
+:class:`ReplayObject`, :class:`ReplaySupport`, :class:`ReplayContacts` with its contact labels
+and :class:`ReplayEvent` s) are defined and checked in :mod:`multiarm_pin.app.replay_scene`
+and re-exported here.
 """
 
 from __future__ import annotations
@@ -39,12 +45,15 @@ import meshcat.animation
 import meshcat.geometry as mg
 import numpy as np
 import pinocchio as pin
+import umsgpack
 
 from multiarm_pin.app.replay_meshes import lambert_material, mesh_object, visual_mesh
+from multiarm_pin.app.replay_overlay import overlay_data
 from multiarm_pin.app.replay_page import page_visualizer
 from multiarm_pin.app.replay_scene import (
     ReplayArm,
     ReplayContacts,
+    ReplayEvent,
     ReplayObject,
     ReplaySupport,
     check_replay_inputs,
@@ -63,8 +72,10 @@ FORCE_COLOR = 0x2DC653
 """Colour of force arrows: green."""
 SEPARATED_COLOR = 0x8D99AE
 """Colour of the sphere of a separated (not touching) contact: grey."""
-SUPPORT_COLOR = 0x6C584C
-"""Colour of support slabs: brown."""
+SUPPORT_COLORS = (0x6C584C, 0x3D5A80, 0xA47148, 0x5E548E, 0x4A7C59, 0x9A8C98)
+"""Colours of the support slabs, in turn (brown first); the page's legend names each."""
+SUPPORT_COLOR = SUPPORT_COLORS[0]
+"""Colour of the first support's slab: brown."""
 SUPPORT_THICKNESS = 0.01
 """Thickness [m] of the slab drawn under a support plane."""
 CONTACT_RADIUS = 0.012
@@ -88,6 +99,37 @@ _SCENE_ROOT_ROTATION = np.array([[1.0, 0.0, 0.0, 0.0],
 
 _Y_TO_Z = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 """Rotation taking local z to local y (so ``_rotation_y_to(n) @ _Y_TO_Z`` maps z to n)."""
+
+
+class CompactTrack(meshcat.animation.AnimationTrack):
+    """An animation track lowered as float32 arrays, without the inner keys of constant runs.
+
+    ``frames`` (F,) and ``values`` (F, n) hold every frame, as meshcat's own track does; the
+    viewer gets ``times`` and ``values`` as ``Float32Array`` s (three.js's
+    ``KeyframeTrack.parse`` reads them instead of ``keys``), keeping frame ``i`` unless its
+    float32 value equals both neighbours' (the viewer's interpolation between the kept ends
+    of such a run gives the same values).
+    """
+
+    __slots__ = ()
+
+    def kept(self) -> np.ndarray:
+        """(F,) bool: the frames sent to the viewer."""
+        v = np.asarray(self.values, dtype=np.float32).reshape(len(self.frames), -1)
+        keep = np.ones(len(v), dtype=bool)
+        if len(v) > 2:
+            same = np.all(v[1:] == v[:-1], axis=1)
+            keep[1:-1] = ~(same[:-1] & same[1:])
+        return keep
+
+    def lower(self):
+        """The three.js track JSON: ``name``, ``type``, ``times`` and ``values`` (float32)."""
+        keep = self.kept()
+        v = np.asarray(self.values, dtype=np.float32).reshape(len(self.frames), -1)[keep]
+        times = np.asarray(self.frames, dtype=np.float32)[keep]
+        return {"name": "." + str(self.name), "type": str(self.jstype),
+                "times": umsgpack.Ext(0x17, times.tobytes()),
+                "values": umsgpack.Ext(0x17, np.ascontiguousarray(v).tobytes())}
 
 
 def _pose(R: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -293,6 +335,19 @@ def _frame_camera(vis, points: np.ndarray) -> None:
     set_camera(vis, centre, centre + distance * direction)
 
 
+def _force_scale(contacts: ReplayContacts | None, force_scale: float | None) -> float:
+    """Arrow length per newton [m/N]: ``force_scale``, else the longest force's inverse.
+
+    The longest force is drawn ``AUTO_FORCE_LENGTH`` long (1 m/N when no force is nonzero).
+    """
+    if force_scale is not None:
+        return force_scale
+    if contacts is None:
+        return 1.0
+    fmax = float(np.max(np.linalg.norm(contacts.forces, axis=2), initial=0.0))
+    return AUTO_FORCE_LENGTH / fmax if fmax > 0 else 1.0
+
+
 # ----------------------------------------------------------------------------- public API
 def build_animation(
     vis: meshcat.Visualizer,
@@ -345,10 +400,8 @@ def build_animation(
 
     n_contacts = 0 if contacts is None else contacts.points.shape[1]
     if contacts is not None:
-        if force_scale is None:
-            fmax = float(np.max(np.linalg.norm(contacts.forces, axis=2), initial=0.0))
-            force_scale = AUTO_FORCE_LENGTH / fmax if fmax > 0 else 1.0
-        for sp in contacts.supports:
+        force_scale = _force_scale(contacts, force_scale)
+        for j, sp in enumerate(contacts.supports):
             if sp.extent is None:
                 R = _rotation_y_to(sp.normal) @ _Y_TO_Z  # slab's local z along the normal
                 size = [2 * sp.half_size, 2 * sp.half_size, SUPPORT_THICKNESS]
@@ -356,7 +409,8 @@ def build_animation(
                 R = sp.rotation
                 size = [float(sp.extent[0]), float(sp.extent[1]), SUPPORT_THICKNESS]
             vis[f"supports/{sp.name}"].set_object(
-                mg.Box(size), mg.MeshLambertMaterial(color=SUPPORT_COLOR))
+                mg.Box(size),
+                mg.MeshLambertMaterial(color=SUPPORT_COLORS[j % len(SUPPORT_COLORS)]))
             vis[f"supports/{sp.name}"].set_transform(
                 _pose(R, sp.center - 0.5 * SUPPORT_THICKNESS * sp.normal))
         for k in range(n_contacts):
@@ -386,11 +440,12 @@ def build_animation(
         clip = anim.clips.get(key)
         if clip is None:
             clip = anim.clips[key] = meshcat.animation.AnimationClip(fps=anim.default_framerate)
-        clip.tracks[prop] = meshcat.animation.AnimationTrack(prop, jstype, list(frames), values)
+        clip.tracks[prop] = CompactTrack(prop, jstype, list(frames),
+                                         np.asarray(values, dtype=float))
 
     def transform_tracks(node: str, R: np.ndarray, p: np.ndarray) -> None:
-        track(node, "position", "vector3", p.tolist())
-        track(node, "quaternion", "quaternion", _js_quaternions(R).tolist())
+        track(node, "position", "vector3", p)
+        track(node, "quaternion", "quaternion", _js_quaternions(R))
 
     for d in drawers:
         H = d.pose_stack(d.arm.q[indices])
@@ -471,20 +526,25 @@ def write_replay_html(
     t,
     contacts: ReplayContacts | None = None,
     fps: float = 30,
+    title: str = "multiarm-pin replay",
 ) -> Path:
     """Write a self-contained HTML page that replays the motion offline.
 
-    The scene is built in this process (:mod:`multiarm_pin.app.replay_page`: the page a
-    Meshcat server would write, without starting one). The page inlines three.js and all
-    meshes; it needs no network.
+    The scene is built in this process (:mod:`multiarm_pin.app.replay_page`: Meshcat's
+    scene without starting its server) into the compact page: three.js inlined, each
+    distinct mesh once however many arms use it, everything in one compressed block, and
+    the overlay (simulated time, legend, contact timeline; see
+    :mod:`multiarm_pin.app.replay_overlay`). It needs no network.
 
     Args:
         path: output file (``.html``); its folder must exist.
         arms: arms to draw, each with (T, nq) ``q``.
         obj: the object ((T, 3) positions, (T, 4) quaternions ``[x, y, z, w]``) or None.
         t: (T,) strictly increasing sample times [s].
-        contacts: optional (T, K, 3) contact points [m] and forces on the object [N].
+        contacts: optional (T, K, 3) contact points [m] and forces on the object [N], with
+            their states, labels, events and supports.
         fps: frames per second of the replay.
+        title: the page's title and the overlay's heading.
 
     Returns:
         The path written.
@@ -499,6 +559,14 @@ def write_replay_html(
     vis = page_visualizer()
     anim = build_animation(vis, arms, obj, contacts, t, fps=fps)
     vis.set_animation(anim, play=True, repetitions=1)
+    n_supports = 0 if contacts is None else len(contacts.supports)
+    vis.window.title = str(title)
+    vis.window.overlay = overlay_data(
+        t, contacts, title=str(title), arm_names=[a.name for a in arms],
+        force_scale=None if contacts is None else _force_scale(contacts, None),
+        support_colors=[SUPPORT_COLORS[j % len(SUPPORT_COLORS)] for j in range(n_supports)],
+        colors={"object": OBJECT_COLOR, "contact": CONTACT_COLOR,
+                "separated": SEPARATED_COLOR, "force": FORCE_COLOR})
     path.write_text(vis.static_html(), encoding="utf-8")
     return path
 
@@ -579,7 +647,9 @@ def write_replay(result, system, path, fps: float = 30) -> Path:
 
 __all__ = [
     "ReplayArm",
+    "CompactTrack",
     "ReplayContacts",
+    "ReplayEvent",
     "ReplayObject",
     "ReplaySupport",
     "build_animation",

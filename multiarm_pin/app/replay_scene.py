@@ -150,6 +150,27 @@ class ReplaySupport:
         return np.column_stack([self.x_axis, np.cross(self.normal, self.x_axis), self.normal])
 
 
+EVENT_KINDS = ("separation", "touchdown")
+"""The kinds of :class:`ReplayEvent` (those of ``multiarm_pin.sim.contact_events.ContactEvent``)."""
+
+
+@dataclass(frozen=True)
+class ReplayEvent:
+    """A contact event shown on the replay's timeline.
+
+    Attributes:
+        t: time [s].
+        kind: ``"separation"`` or ``"touchdown"``.
+        contact: index of the contact in ``ReplayContacts`` (0 <= contact < K).
+        impulse: the impact's contact impulse [N s] (0: none, e.g. a separation by force).
+    """
+
+    t: float
+    kind: str
+    contact: int
+    impulse: float = 0.0
+
+
 @dataclass
 class ReplayContacts:
     """Contact points and forces over time (K contacts, fixed count).
@@ -159,12 +180,17 @@ class ReplayContacts:
         forces: (T, K, 3) force applied *on the object* at each point, world axes [N].
         touching: (T, K) bool, True where contact k touches (None: always touching).
         supports: support planes to draw (:class:`ReplaySupport`).
+        labels: (K,) contact names, ``"<arm>:<contact>"`` or ``"<support>[j]"`` (None:
+            ``"contact k"``); the timeline has one row per arm or support they name.
+        events: the contact events (:class:`ReplayEvent`) marked on the timeline.
     """
 
     points: np.ndarray
     forces: np.ndarray
     touching: np.ndarray | None = None
     supports: Sequence[ReplaySupport] = ()
+    labels: Sequence[str] | None = None
+    events: Sequence[ReplayEvent] = ()
 
     def __post_init__(self):
         self.points = as_array(self.points, (None, None, 3), "ReplayContacts.points (T, K, 3)")
@@ -179,6 +205,22 @@ class ReplayContacts:
             if not isinstance(sp, ReplaySupport):
                 raise InputError(f"ReplayContacts.supports: expected ReplaySupport items, got "
                                  f"{type(sp).__name__}")
+        K = self.points.shape[1]
+        if self.labels is not None:
+            labels = [str(x) for x in self.labels]
+            if len(labels) != K:
+                raise InputError(f"ReplayContacts.labels: expected {K} names (one per contact), "
+                                 f"got {len(labels)}")
+            self.labels = labels
+        for e in self.events:
+            if not isinstance(e, ReplayEvent):
+                raise InputError(f"ReplayContacts.events: expected ReplayEvent items, got "
+                                 f"{type(e).__name__}")
+            if (e.kind not in EVENT_KINDS or not 0 <= e.contact < K or not math.isfinite(e.t)
+                    or not math.isfinite(e.impulse)):
+                raise InputError(f"ReplayContacts.events: {e} is not an event of one of the "
+                                 f"{K} contacts (kinds {', '.join(EVENT_KINDS)}, finite time "
+                                 "and impulse)")
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -259,6 +301,8 @@ __all__ = [
     "ReplayObject",
     "ReplaySupport",
     "ReplayContacts",
+    "ReplayEvent",
+    "EVENT_KINDS",
     "frame_indices",
     "polyhedron_triangles",
 ]

@@ -16,7 +16,8 @@ its results folder:
   (``[lx, ly]`` [m], NaN for an infinite plane) and ``support_x_axes`` (S, 3) (the
   rectangles' x axes, world); ``external_wrench`` (T, 6);
   the contact events ``event_t`` (E,) [s], ``event_contact`` (E,) (index in K) and
-  ``event_kind`` (E,) (``separation`` / ``touchdown`` / ``off_edge``);
+  ``event_kind`` (E,) (``separation`` / ``touchdown`` / ``off_edge``) and
+  ``event_impulse`` (E,) (the impact's contact impulse [N s], 0 for none);
   ``kinetic_energy``, ``potential_energy`` (T,) [J]; ``momentum`` (T, 6);
   ``arm_wrench`` (T, n_arms, 6): each arm's wrench on the object ``[f; m]`` [N, N m], world
   axes, the moment about the COM (:meth:`SimulationResult.arm_wrench`); for each arm A
@@ -109,6 +110,7 @@ def system_trajectory_arrays(system, result) -> dict[str, np.ndarray]:
     out["event_t"] = np.array([e.t for e in result.events], dtype=float)
     out["event_contact"] = np.array([flat[e.block, e.row] for e in result.events], dtype=int)
     out["event_kind"] = np.array([e.kind for e in result.events], dtype=str)
+    out["event_impulse"] = np.array([e.impulse for e in result.events], dtype=float)
     out["arm_wrench"] = result.arm_wrench(n)
     saturated = getattr(result, "torque_limit", None) is not None
     for i, arm in enumerate(system.arms):
@@ -214,10 +216,20 @@ def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> di
 def replay_parts(arms, obj, trajectory: dict):
     """Replay inputs (:mod:`multiarm_pin.app.replay`) from arms, object and trajectory arrays.
 
+    The contacts carry their labels (``contact_labels``), states (``contact_active``),
+    supports (``support_names``, ``support_planes``) and events (``event_t``,
+    ``event_kind``, ``event_contact``, ``event_impulse``: 0 when a file predates it).
+
     Returns:
         ``(replay_arms, replay_object, replay_contacts)``.
     """
-    from multiarm_pin.app.replay import ReplayArm, ReplayContacts, ReplayObject, ReplaySupport
+    from multiarm_pin.app.replay import (
+        ReplayArm,
+        ReplayContacts,
+        ReplayEvent,
+        ReplayObject,
+        ReplaySupport,
+    )
 
     def finite(a, limit=1e12):  # a failed run may end on huge or NaN values: drawable
         return np.clip(np.nan_to_num(np.asarray(a, float), nan=0.0, posinf=limit,
@@ -253,10 +265,18 @@ def replay_parts(arms, obj, trajectory: dict):
             half = float(np.max(np.linalg.norm(pts - c, axis=1), initial=0.0)) + 0.1
             supports.append(ReplaySupport(str(name), c, n, half))
         touching = trajectory.get("contact_active")
+        K = trajectory["contact_points"].shape[1]
+        kinds = [str(x) for x in trajectory.get("event_kind", [])]
+        impulses = np.nan_to_num(np.asarray(trajectory.get("event_impulse", np.zeros(len(kinds))),
+                                            dtype=float), nan=0.0, posinf=0.0, neginf=0.0)
+        events = [ReplayEvent(float(te), kind, int(k), float(p)) for te, kind, k, p in
+                  zip(trajectory.get("event_t", []), kinds, trajectory.get("event_contact", []),
+                      impulses, strict=True)
+                  if 0 <= int(k) < K and np.isfinite(te)]
         rc = ReplayContacts(finite(trajectory["contact_points"], 1e6),
                             finite(trajectory["contact_forces"]),
                             None if touching is None else np.asarray(touching, dtype=bool),
-                            supports)
+                            supports, labels if len(labels) == K else None, events)
     return rarms, robj, rc
 
 

@@ -1,0 +1,344 @@
+"""The replay page's overlay: simulated time, legend, and the contacts on a timeline.
+
+Meshcat's viewer has animation controls (play, pause, a time slider in its closed control
+panel) but shows neither the simulated time nor what the colours mean. The compact page of
+:mod:`multiarm_pin.app.replay_page` adds, in HTML over the 3-D view:
+
+- top left, the simulated time ``t = t0 + animation time`` [s] of the frame shown, the
+  replay's end time, a play / pause button, and the last events before ``t``;
+- the legend: the object, yellow (touching) and grey (separated) contact spheres, the force
+  arrows' scale, and each support by name, colour and plane;
+- at the bottom, a timeline with one row per body that has contacts (each arm, each
+  support): the number of its contacts touching over time (yellow, the rest grey), its
+  contact events as markers (separation, touchdown, touchdown with an impact impulse), the
+  part after ``t`` dimmed and a cursor at ``t``. Clicking or dragging on it seeks (and
+  pauses); the page opened as ``replay.html#t=1.25`` starts paused at 1.25 s.
+
+The overlay reads the viewer's own animation clock (``viewer.animator.time``) on every
+browser frame, so its time is the one the scene shows. :func:`overlay_data` builds what the
+overlay draws; ``OVERLAY_HTML``, ``OVERLAY_CSS`` and ``OVERLAY_JS`` are its page parts.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from multiarm_pin.app.replay_scene import ReplayContacts
+
+
+def _hex(color: int) -> str:
+    return f"#{int(color):06x}"
+
+
+def _num(x) -> str:
+    """``x`` in 3 significant digits, round-off near zero written 0."""
+    v = float(x)
+    return f"{0.0 if abs(v) < 1e-9 else v:.3g}"
+
+
+def body_of(label: str) -> str:
+    """The body of a contact label: ``"<arm>:<contact>"`` -> arm, ``"<support>[j]"`` -> support."""
+    if ":" in label:
+        return label.split(":", 1)[0]
+    return label.split("[", 1)[0]
+
+
+def touching_runs(t: np.ndarray, counts: np.ndarray) -> list[list[float]]:
+    """``[[time [s], count], ...]``: ``counts`` (T,) from each time until the next, runs merged."""
+    change = np.flatnonzero(np.diff(counts)) + 1
+    starts = np.concatenate([[0], change])
+    return [[float(t[i]), int(counts[i])] for i in starts]
+
+
+def overlay_data(t: np.ndarray, contacts: ReplayContacts | None, *, title: str = "replay",
+                 arm_names: Sequence[str] = (), force_scale: float | None = None,
+                 support_colors: Sequence[int] = (), colors: dict[str, int] | None = None,
+                 ) -> dict:
+    """What the overlay draws (JSON-ready).
+
+    Args:
+        t: (T,) sample times [s].
+        contacts: the contacts (labels, touching states, events, supports), or None.
+        title: the page's heading (the scenario's name).
+        arm_names: the arms, in order.
+        force_scale: the force arrows' length per newton [m/N] (None: no arrows).
+        support_colors: 0xRRGGBB of each support's slab, in ``contacts.supports`` order.
+        colors: 0xRRGGBB of ``object``, ``contact``, ``separated``, ``force``.
+
+    Returns:
+        ``t0``, ``t_end`` [s]; ``title``; ``arms``; ``colors`` (CSS ``#rrggbb``); ``force``
+        (``{"m_per_n", "max_n"}`` or None); ``supports`` (name, colour, plane text);
+        ``bodies`` (name, ``contacts`` count, ``runs`` of touching counts, see
+        :func:`touching_runs`); ``events`` (``t``, ``kind``, ``label``, ``body``, ``impulse``
+        [N s], ``impact``: a touchdown with a positive impulse).
+    """
+    t = np.asarray(t, dtype=float)
+    colors = {k: _hex(v) for k, v in (colors or {}).items()}
+    data: dict = {"t0": float(t[0]), "t_end": float(t[-1]), "title": str(title),
+                  "arms": [str(a) for a in arm_names], "colors": colors, "force": None,
+                  "supports": [], "bodies": [], "events": []}
+    if contacts is None:
+        return data
+    K = contacts.points.shape[1]
+    labels = list(contacts.labels) if contacts.labels is not None else [
+        f"contact {k}" for k in range(K)]
+    if force_scale is not None and K:
+        fmax = float(np.max(np.linalg.norm(contacts.forces, axis=2), initial=0.0))
+        data["force"] = {"m_per_n": float(force_scale), "max_n": fmax}
+    for sp, c in zip(contacts.supports, list(support_colors) + [None] * len(contacts.supports),
+                     strict=False):
+        p, n = sp.center, sp.normal
+        data["supports"].append({
+            "name": sp.name, "color": _hex(c) if c is not None else "#6c584c",
+            "plane": f"plane through ({', '.join(_num(x) for x in p)}) m, "
+                     f"normal ({', '.join(_num(x) for x in n)})"})
+    touching = (contacts.touching if contacts.touching is not None
+                else np.ones(contacts.points.shape[:2], dtype=bool))
+    bodies: dict[str, list[int]] = {}
+    for k, lab in enumerate(labels):
+        bodies.setdefault(body_of(lab), []).append(k)
+    for name, cols in bodies.items():
+        counts = touching[:, cols].sum(axis=1)
+        data["bodies"].append({"name": name, "contacts": len(cols),
+                               "runs": touching_runs(t, counts)})
+    for e in contacts.events:
+        lab = labels[e.contact] if 0 <= e.contact < K else f"contact {e.contact}"
+        data["events"].append({"t": float(e.t), "kind": e.kind, "label": lab,
+                               "body": body_of(lab), "impulse": float(e.impulse),
+                               "impact": e.kind == "touchdown" and e.impulse > 0})
+    return data
+
+
+OVERLAY_HTML = """<div id="ma-info" class="ma-panel">
+<div id="ma-title"></div>
+<div><button id="ma-play" title="play / pause">&#9646;&#9646;</button>
+<span id="ma-time">t = &ndash;</span><span id="ma-end"></span></div>
+<div id="ma-events"></div>
+<div id="ma-legend"></div>
+</div>
+<div id="ma-timeline" class="ma-panel"><canvas id="ma-canvas"></canvas></div>
+"""
+
+OVERLAY_CSS = """
+.ma-panel {position: absolute; background: rgba(15, 20, 35, 0.78); color: #f1f1f1;
+  font: 13px/1.35 system-ui, -apple-system, "Segoe UI", "Liberation Sans", sans-serif;
+  border-radius: 6px; padding: 8px 10px; z-index: 10;}
+#ma-info {left: 10px; top: 10px; max-width: 400px;}
+#ma-title {font-weight: 600; margin-bottom: 2px;}
+#ma-time {font: 600 22px/1.2 ui-monospace, "DejaVu Sans Mono", "Liberation Mono", monospace;}
+#ma-end {color: #b8c0cc; margin-left: 6px;}
+#ma-play {background: #33415c; color: #fff; border: 0; border-radius: 4px; width: 28px;
+  height: 24px; margin-right: 6px; vertical-align: 3px; cursor: pointer;}
+#ma-events {color: #d8dde6; font-size: 12px; margin: 4px 0 6px 0;}
+#ma-legend div {margin: 1px 0; padding-left: 20px; text-indent: -20px;}
+.ma-sw {display: inline-block; width: 12px; height: 12px; margin-right: 6px;
+  vertical-align: -1px; border: 1px solid rgba(255,255,255,0.5);}
+.ma-dot {border-radius: 50%;}
+#ma-timeline {left: 10px; right: 10px; bottom: 10px; padding: 6px;}
+#ma-canvas {display: block; width: 100%; cursor: pointer;}
+"""
+
+# The overlay's script: runs after the loader's ``multiarmReplay`` (see replay_page).
+OVERLAY_JS = r"""
+(function () {
+  "use strict";
+  const EVENT_COLORS = {separation: "#4cc9f0", touchdown: "#ff9f1c", impact: "#f72585"};
+  const fmt = x => x.toFixed(3);
+  function el(id) { return document.getElementById(id); }
+  function esc(s) {
+    const d = document.createElement("div");
+    d.textContent = s;
+    return d.innerHTML;
+  }
+  function eventName(e) {
+    return e.kind === "touchdown" && e.impact ? "touchdown (impact " + e.impulse.toPrecision(3) +
+      " N s)" : e.kind;
+  }
+  function legend(o) {
+    const c = o.colors, rows = [];
+    const sw = (color, dot, text) => rows.push('<div><span class="ma-sw' + (dot ? " ma-dot" : "") +
+      '" style="background:' + color + '"></span>' + text + "</div>");
+    sw(c.object, false, "object");
+    if (o.bodies.length) {
+      sw(c.contact, true, "contact touching (held or pushing)");
+      sw(c.separated, true, "contact separated");
+    }
+    if (o.force) {
+      sw(c.force, false, "force on the object: arrow " + (1000 * o.force.m_per_n).toPrecision(3) +
+        " mm per N (longest " + o.force.max_n.toPrecision(3) + " N)");
+    }
+    for (const s of o.supports) {
+      sw(s.color, false, "support <b>" + esc(s.name) + "</b>: " + esc(s.plane));
+    }
+    if (o.arms.length) {
+      const names = o.arms.length <= 6 ? o.arms.join(", ") :
+        o.arms.slice(0, 6).join(", ") + ", \u2026 (" + o.arms.length + " arms)";
+      rows.push("<div>arms: " + esc(names) + "</div>");
+    }
+    if (o.bodies.length) {
+      rows.push('<div>timeline: <span style="color:' + c.contact + '">\u2588</span> touching, ' +
+        '<span style="color:' + c.separated + '">\u2588</span> separated' +
+        (o.events.length ? '; <span style="color:' + EVENT_COLORS.separation +
+         '">\u25BC</span> separation <span style="color:' + EVENT_COLORS.touchdown +
+         '">\u25B2</span> touchdown <span style="color:' + EVENT_COLORS.impact +
+         '">\u25C6</span> impact' : "") + "</div>");
+    }
+    el("ma-legend").innerHTML = rows.join("");
+  }
+  function countAt(runs, t) {
+    let n = runs.length ? runs[0][1] : 0;
+    for (const r of runs) { if (r[0] <= t + 1e-9) n = r[1]; else break; }
+    return n;
+  }
+  function start(o) {
+    const a = viewer.animator, canvas = el("ma-canvas"), ctx = canvas.getContext("2d");
+    const t0 = o.t0, t1 = Math.max(o.t_end, o.t0 + 1e-9);
+    const nb = o.bodies.length;
+    el("ma-title").textContent = o.title;
+    el("ma-end").textContent = "of " + fmt(o.t_end) + " s";
+    legend(o);
+    if (!nb) el("ma-timeline").style.display = "none";
+    // Rows of at most 16 px, all of them in at most a quarter of the window (200 px);
+    // below 8 px a row has no label (hovering names it).
+    const gap = nb > 12 ? 1 : 2;
+    const maxH = Math.max(60, Math.min(200, 0.25 * window.innerHeight));
+    const rowH = nb ? Math.max(2, Math.min(16, Math.floor(maxH / nb) - gap)) : 0;
+    const pitch = rowH + gap, labelled = rowH >= 8;
+    const gutter = 170, axisH = 18;
+    let width = 0, shown = null;
+    function layout() {
+      const w = canvas.clientWidth, h = nb * (pitch) + axisH, r = window.devicePixelRatio || 1;
+      canvas.style.height = h + "px";
+      canvas.width = Math.round(w * r);
+      canvas.height = Math.round(h * r);
+      ctx.setTransform(r, 0, 0, r, 0, 0);
+      width = w;
+      shown = null;
+    }
+    const x = t => gutter + (width - gutter - 8) * (t - t0) / (t1 - t0);
+    function draw(t) {
+      const h = nb * (pitch) + axisH;
+      ctx.clearRect(0, 0, width, h);
+      ctx.font = Math.min(12, rowH + 1) + "px system-ui, sans-serif";
+      ctx.textBaseline = "middle";
+      o.bodies.forEach((b, i) => {
+        const y = i * (pitch);
+        ctx.fillStyle = o.colors.separated;
+        ctx.fillRect(x(t0), y, x(t1) - x(t0), rowH);
+        b.runs.forEach((r, k) => {
+          const end = k + 1 < b.runs.length ? b.runs[k + 1][0] : t1;
+          const f = r[1] / b.contacts;
+          if (f > 0) {
+            ctx.fillStyle = o.colors.contact;
+            ctx.fillRect(x(r[0]), y + rowH * (1 - f), Math.max(x(end) - x(r[0]), 1), rowH * f);
+          }
+        });
+        if (labelled) {
+          ctx.fillStyle = "#f1f1f1";
+          ctx.fillText(b.name + "  " + countAt(b.runs, t) + "/" + b.contacts + " touching", 2,
+                       y + rowH / 2, gutter - 6);
+        }
+      });
+      if (!labelled) {
+        const touching = o.bodies.reduce((n, b) => n + countAt(b.runs, t), 0);
+        const total = o.bodies.reduce((n, b) => n + b.contacts, 0);
+        ctx.fillStyle = "#f1f1f1";
+        ctx.font = "12px system-ui, sans-serif";
+        ctx.fillText(nb + " rows (arms, supports)", 2, 8, gutter - 6);
+        ctx.fillText(touching + "/" + total + " touching", 2, 24, gutter - 6);
+        ctx.fillText("hover a row: its name", 2, 40, gutter - 6);
+      }
+      ctx.fillStyle = "rgba(15, 20, 35, 0.55)";  // not yet played
+      ctx.fillRect(x(t), 0, x(t1) - x(t) + 8, nb * (pitch));
+      const rowOf = {};
+      o.bodies.forEach((b, i) => { rowOf[b.name] = i; });
+      for (const e of o.events) {
+        const i = rowOf[e.body];
+        if (i === undefined) continue;
+        const cx = x(e.t), cy = i * (pitch) + rowH / 2, s = Math.max(3, rowH / 2);
+        ctx.fillStyle = EVENT_COLORS[e.impact ? "impact" : e.kind] || "#ffffff";
+        ctx.strokeStyle = "#10131c";
+        ctx.beginPath();
+        if (e.impact) {
+          ctx.moveTo(cx, cy - s); ctx.lineTo(cx + s, cy);
+          ctx.lineTo(cx, cy + s); ctx.lineTo(cx - s, cy);
+        } else if (e.kind === "separation") {
+          ctx.moveTo(cx - s, cy - s); ctx.lineTo(cx + s, cy - s); ctx.lineTo(cx, cy + s);
+        } else {
+          ctx.moveTo(cx - s, cy + s); ctx.lineTo(cx + s, cy + s); ctx.lineTo(cx, cy - s);
+        }
+        ctx.closePath(); ctx.fill(); ctx.stroke();
+      }
+      const yAxis = nb * (pitch) + axisH / 2;  // time axis
+      ctx.fillStyle = "#b8c0cc";
+      ctx.font = "11px system-ui, sans-serif";
+      const span = t1 - t0, raw = span / 8, p = Math.pow(10, Math.floor(Math.log10(raw)));
+      const step = [1, 2, 5, 10].map(m => m * p).find(v => v >= raw);
+      for (let v = Math.ceil(t0 / step) * step; v <= t1 + 1e-9; v += step) {
+        ctx.fillRect(x(v), yAxis - axisH / 2, 1, 4);
+        ctx.fillText(+v.toFixed(6) + " s", Math.min(x(v) - 8, width - 34), yAxis + 2);
+      }
+      ctx.fillStyle = "#ffffff";  // cursor
+      ctx.fillRect(x(t) - 1, 0, 2, nb * (pitch) + 4);
+    }
+    function seek(t) {
+      t = Math.min(Math.max(t, t0), t1);
+      a.pause();
+      a.seek(t - t0);
+      a.display_progress(t - t0);
+    }
+    function fromMouse(ev) {
+      const r = canvas.getBoundingClientRect();
+      return t0 + (ev.clientX - r.left - gutter) / (width - gutter - 8) * (t1 - t0);
+    }
+    let dragging = false;
+    canvas.addEventListener("mousemove", ev => {  // a tooltip: the row, its events near
+      const r = canvas.getBoundingClientRect(), i = Math.floor((ev.clientY - r.top) / pitch);
+      const b = o.bodies[i];
+      if (!b || ev.clientX - r.left < gutter) { canvas.title = b ? b.name : ""; return; }
+      const tm = fromMouse(ev), px = (t1 - t0) / (width - gutter - 8);
+      const near = o.events.filter(e => e.body === b.name && Math.abs(e.t - tm) < 6 * px);
+      canvas.title = b.name + ": " + countAt(b.runs, tm) + "/" + b.contacts +
+        " touching at " + fmt(tm) + " s" + near.map(e => "\n" + fmt(e.t) + " s " +
+        eventName(e) + " " + e.label).join("");
+    });
+    canvas.addEventListener("mousedown", ev => { dragging = true; seek(fromMouse(ev)); });
+    window.addEventListener("mousemove", ev => { if (dragging) seek(fromMouse(ev)); });
+    window.addEventListener("mouseup", () => { dragging = false; });
+    el("ma-play").addEventListener("click", () => {
+      if (a.playing) { a.pause(); } else {
+        if (a.time >= a.duration - 1e-6) a.reset();
+        a.play();
+      }
+    });
+    window.addEventListener("resize", layout);
+    const hash = /(?:^#|&)t=([0-9.eE+-]+)/.exec(location.hash);
+    if (hash) seek(parseFloat(hash[1]));
+    layout();
+    function tick() {
+      const t = Math.min(t0 + (a.time || 0), t1);
+      const key = t + ":" + a.playing;
+      if (key !== shown) {
+        shown = key;
+        el("ma-time").textContent = "t = " + fmt(t) + " s";
+        el("ma-play").innerHTML = a.playing ? "&#9646;&#9646;" : "&#9654;";
+        const past = o.events.filter(e => e.t <= t + 1e-9);
+        el("ma-events").innerHTML = !o.events.length ? (nb ? "no contact events" : "") :
+          (past.length ? past.slice(-3).reverse().map(e => fmt(e.t) + " s " +
+            esc(eventName(e)) + " <b>" + esc(e.label) + "</b>").join("<br>") : "no event yet") +
+          "<br>" + past.length + " of " + o.events.length + " events so far";
+        if (nb) draw(t);
+      }
+      requestAnimationFrame(tick);
+    }
+    tick();
+  }
+  multiarmReplay.ready.then(m => { if (m.overlay) start(m.overlay); });
+})();
+"""
+
+
+__all__ = ["OVERLAY_CSS", "OVERLAY_HTML", "OVERLAY_JS", "body_of", "overlay_data",
+           "touching_runs"]

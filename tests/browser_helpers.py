@@ -1,0 +1,72 @@
+"""Headless Chromium for the replay-page tests (a helper module, not a test file).
+
+The flags are the README's screenshot command: no sandbox (root in a container), software
+WebGL, no network services, a fresh profile per call.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser") or (
+    "/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None)
+
+needs_chromium = pytest.mark.skipif(
+    CHROMIUM is None, reason="chromium is not installed (make browser, or apt-get install -y "
+    "chromium); the browser tests of the replay page need it")
+
+FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+         "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+
+
+TIMEOUT = 90
+"""Seconds one Chromium run may take (a run takes a few; a rare one never ends)."""
+
+
+def _run(args: list[str], url: str, budget_ms: int) -> subprocess.CompletedProcess:
+    """Run Chromium once; a run that hangs is killed with its process group and run again."""
+    for attempt in range(2):
+        with tempfile.TemporaryDirectory(prefix="chromium-profile-") as profile:
+            cmd = [CHROMIUM, *FLAGS, f"--user-data-dir={profile}", *args,
+                   f"--virtual-time-budget={budget_ms}", url]
+            proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                    start_new_session=True)
+            try:
+                out, err = proc.communicate(timeout=TIMEOUT)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.communicate()
+                if attempt:
+                    raise
+                continue
+            if proc.returncode:
+                raise subprocess.CalledProcessError(proc.returncode, cmd, out, err)
+            return subprocess.CompletedProcess(cmd, 0, out, err)
+    raise AssertionError("unreachable")
+
+
+def page_url(page: Path, fragment: str = "") -> str:
+    """``file://`` URL of a page, with an optional ``#...`` fragment."""
+    return f"file://{Path(page).resolve()}{fragment}"
+
+
+def screenshot(url: str, png: Path, size=(1280, 800), budget_ms: int = 15000) -> np.ndarray:
+    """(H, W, 3) int RGB screenshot of ``url`` after ``budget_ms`` of virtual time."""
+    from PIL import Image
+
+    _run([f"--screenshot={png}", f"--window-size={size[0]},{size[1]}"], url, budget_ms)
+    return np.asarray(Image.open(png).convert("RGB"), dtype=int)
+
+
+def dump_dom(url: str, size=(1280, 800), budget_ms: int = 15000) -> str:
+    """The page's DOM (HTML) after its scripts ran for ``budget_ms`` of virtual time."""
+    out = _run(["--dump-dom", f"--window-size={size[0]},{size[1]}"], url, budget_ms)
+    return out.stdout.decode("utf-8", errors="replace")
