@@ -220,7 +220,9 @@ def write_plots(out_dir, trajectory: Mapping[str, np.ndarray], arm_names, title:
     ev_k = np.asarray(trajectory.get("event_contact", np.zeros(0, dtype=int)))
     events = list(zip(ev_t.tolist(), ev_kind.tolist(), strict=True))
     extra = []
-    if "contact_active" in trajectory and (len(ev_t) or len(support_names)):
+    from multiarm_pin.app.run_results import plot_names  # the one list of a run's files
+
+    if "contact_states.png" in plot_names(trajectory, support_names):
         extra.append(plot_contact_states(
             out / "contact_states.png", t, trajectory["contact_active"],
             trajectory["contact_labels"],

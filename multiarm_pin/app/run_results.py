@@ -175,6 +175,22 @@ def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> di
     }
 
 
+def plot_names(trajectory: dict, support_names=()) -> list[str]:
+    """The PNG files :func:`multiarm_pin.app.plots.write_plots` writes for a run, in order.
+
+    ``contact_states.png`` comes first when the run has contact events or supports.
+
+    Args:
+        trajectory: the ``trajectory.npz`` arrays (only ``contact_active`` and ``event_t``
+            are looked at).
+        support_names: the supports' names.
+    """
+    states = "contact_active" in trajectory and \
+        bool(len(trajectory.get("event_t", ())) or len(support_names))
+    return [*(["contact_states.png"] if states else []), "object_pose.png",
+            "contact_forces.png", "constraint_violation.png"]
+
+
 def replay_parts(arms, obj, trajectory: dict):
     """Replay inputs (:mod:`multiarm_pin.app.replay`) from arms, object and trajectory arrays.
 
@@ -296,6 +312,7 @@ __all__ = [
     "REPLAY_FPS",
     "REQUIRED_ARRAYS",
     "load_run",
+    "plot_names",
     "replay_parts",
     "run_status",
     "scenario_copy",
