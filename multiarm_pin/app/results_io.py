@@ -140,6 +140,13 @@ def is_mount_point(path: Path) -> bool:
     return os.path.realpath(path) in mount_points()
 
 
+def _read_only(path: Path) -> bool:
+    try:
+        return bool(os.statvfs(path).f_flag & os.ST_RDONLY)
+    except OSError:
+        return False
+
+
 def publishes_in_place(target: Path) -> bool:
     """Whether the results go into ``target`` file by file instead of by renaming it.
 
@@ -334,6 +341,10 @@ class ResultsWriter:
         """Lock the folder, check it, create the staging folder (raises OutputError)."""
         self.in_place = publishes_in_place(self.target)
         parent = self.target.parent
+        if self.in_place and not os.access(self.target, os.W_OK | os.X_OK):
+            why = "a read-only file system" if _read_only(self.target) else "not writable"
+            raise OutputError(f"{self.option} {self.target}: is a mount point on {why}: the "
+                              "results could not be written there; give a writable folder")
         if (self.target.exists() and not self.target.is_dir()) or not self.in_place and not (
                 parent.is_dir() and os.access(parent, os.W_OK | os.X_OK)):
             # no lock file can go there: raises its message (or creates the parent)

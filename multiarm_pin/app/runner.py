@@ -45,6 +45,7 @@ from multiarm_pin.app.scenario import (
 from multiarm_pin.app.scenario_checks import input_warnings
 from multiarm_pin.exceptions import (
     MultiArmError,
+    OutputError,
     RunFailedError,
     RunInterrupted,
     ScenarioError,
@@ -172,7 +173,10 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
                  overwrite: bool = False) -> RunOutput:
     """Simulate a scenario and write its results, atomically (:mod:`multiarm_pin.app.results_io`).
 
-    The output folder is checked before anything is simulated. If the simulation fails
+    The output folder is locked (one run at a time per folder) and checked before anything
+    is simulated; the trajectory and summary are written first, then the plots and page
+    (see :func:`_write_results`: a signal while writing keeps what was written). If the
+    simulation fails
     (a :class:`~multiarm_pin.exceptions.MultiArmError` once it has started) or is interrupted
     (Ctrl-C / SIGINT, SIGTERM), the samples simulated so far are written with
     ``summary.json`` ``"status"`` ``"failed"`` or ``"interrupted"``, ``"error"`` and
@@ -195,7 +199,10 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
 
     Raises:
         ScenarioError: invalid scenario or overrides (before anything is simulated).
-        OutputError: unusable output folder (before anything is simulated).
+        OutputError: unusable output folder, or another run writing into it (before
+            anything is simulated); :class:`~multiarm_pin.exceptions.ResultsNotMovedError`
+            after the simulation if the results could not be moved into it (``kept`` says
+            where they are).
         RunFailedError: the simulation failed after it started (partial results written).
         RunInterrupted: Ctrl-C or SIGTERM (partial results written when there were any).
     """
@@ -382,8 +389,6 @@ def _write_results(writer: ResultsWriter, signals: _RunSignals, built: BuiltScen
     traj = trajectory_arrays(built, result)
     files = {"trajectory": folder / "trajectory.npz", "scenario": folder / "scenario.yaml",
              "summary": folder / "summary.json"}
-    np.savez(files["trajectory"], **traj)
-    files["scenario"].write_text(scenario_copy(sc, T, solver), encoding="utf-8")
     summary = summarize(built, result, solver, wall)
     summary["input_warnings"] = list(input_warns)
     summary["requested"]["duration"] = T
@@ -393,7 +398,13 @@ def _write_results(writer: ResultsWriter, signals: _RunSignals, built: BuiltScen
         pending += plot_names(traj, [sp.name for sp in built.system.supports.supports])
     if html:
         pending.append("replay.html")
-    _write_summary(files, summary, pending, None)  # the plots and page still to come
+    try:
+        np.savez(files["trajectory"], **traj)
+        files["scenario"].write_text(scenario_copy(sc, T, solver), encoding="utf-8")
+        _write_summary(files, summary, pending, None)  # the plots and page still to come
+    except OSError as exc:  # e.g. a full disk: nothing whole to keep
+        raise OutputError(f"--out {target}: cannot write the results in {folder}: "
+                          f"{exc.strerror or exc}") from exc
     _say(f"  trajectory.npz, scenario.yaml, summary.json: {time.perf_counter() - start:.1f} s",
          quiet)
     steps = []
@@ -432,7 +443,11 @@ def _write_results(writer: ResultsWriter, signals: _RunSignals, built: BuiltScen
         notes.append(f"interrupted by {interrupt} while writing the results: "
                      f"{', '.join(missing)} not written (multiarm-pin replay DIR still replays "
                      "the run)")
-    _write_summary(files, summary, missing, interrupt, notes)
+    try:
+        _write_summary(files, summary, missing, interrupt, notes)
+    except OSError as exc:  # the first summary stays: it lists the plots and page as missing
+        print(f"warning: {folder / 'summary.json'} not updated: {exc.strerror or exc}",
+              file=sys.stderr, flush=True)
     writer.publish()
     later = signals.take_held()
     if interrupt is not None:
