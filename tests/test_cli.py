@@ -103,7 +103,9 @@ def test_second_sigint_while_writing_keeps_the_partial_trajectory(tmp_path):
 
 
 def test_a_second_run_into_the_same_folder_is_refused_naming_the_first(tmp_path):
-    a = write(tmp_path / "a.yaml", one_arm_scenario("first", duration=LONG))
+    # the first run lasts minutes (60 s simulated), the refusals a few seconds: it is still
+    # running when they come, and is interrupted after them
+    a = write(tmp_path / "a.yaml", one_arm_scenario("first", duration=60.0))
     b = write(tmp_path / "b.yaml", one_arm_scenario("second", mass=3.0))
     out = tmp_path / "out"
     run = CliProcess("run", a, "--out", out, "--no-html")
