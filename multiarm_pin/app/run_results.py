@@ -3,10 +3,11 @@
 ``multiarm-pin run SCENARIO.yaml`` (:func:`multiarm_pin.app.runner.run_scenario`) writes into
 its results folder:
 
-- ``trajectory.npz``: ``t`` (T,), ``object_position`` (T, 3), ``object_quaternion`` (T, 4,
-  ``[x, y, z, w]``), ``object_twist`` (T, 6, ``[ẋ; ω]`` world axes), for each arm A
-  ``q_A`` (T, nq), ``v_A`` (T, nv), ``tau_A`` (T, nv), ``mu_A`` (T, N_A) (contact multipliers
-  [N], positive = pushing), ``phi_A`` (T, N_A) (gaps [m]); ``constraint_violation`` (T,)
+- ``trajectory.npz`` (uncompressed): ``t`` (T,), ``object_position`` (T, 3),
+  ``object_quaternion`` (T, 4, ``[x, y, z, w]``), ``object_twist`` (T, 6, ``[ẋ; ω]`` world
+  axes), for each arm A ``q_A`` (T, nq), ``v_A`` (T, nv), ``tau_A`` (T, nv), ``mu_A``
+  (T, N_A) (contact multipliers [N], positive = pushing), ``phi_A`` (T, N_A) (gaps [m]);
+  ``constraint_violation`` (T,)
   = max |φ| over held contacts and the penetration of separated ones [m];
   ``contact_points`` (T, K, 3) [m] and ``contact_forces`` (T, K, 3) [N] (force on the
   object, world axes) of the K contacts of all arms in order, then of the supports;
@@ -22,7 +23,10 @@ its results folder:
   details (tool frame and offset, q0 and where it came from), ``status`` (``complete``,
   ``failed`` or ``interrupted``), ``error`` (the message, or null) and ``t_end`` (the last
   simulated time [s]);
-  ``events`` (every separation and touchdown: time, contact, arm or support).
+  ``events`` (every separation and touchdown: time, contact, arm or support); ``files``
+  (the files written, by role), ``missing_files`` (those a signal or an error left out:
+  plots, ``replay.html``) and ``write_interrupted`` (the signal that came while writing,
+  or null).
 - ``object_pose.png``, ``contact_forces.png``, ``constraint_violation.png``.
 - ``replay.html``: a self-contained Meshcat page replaying the run offline.
 - ``scenario.yaml``: the scenario (URDF paths absolute), so that ``multiarm-pin replay DIR``
