@@ -50,8 +50,7 @@ def child(scenario: str, out: str, duration: float | None, as_run: bool = False)
     """Run the phases of ``run_scenario`` in this (fresh) process; wall time [s] of each.
 
     ``as_run``: after the simulation, time the runner's own writing of every result file
-    (``runner._write_results``: the plots drawn meanwhile in a child process where it does
-    so) instead of each file alone.
+    and their move into place (``runner._write_results``) instead of each file alone.
     """
     times = {}
     t = time.perf_counter()
@@ -82,13 +81,17 @@ def child(scenario: str, out: str, duration: float | None, as_run: bool = False)
     folder.mkdir(parents=True, exist_ok=True)
     if as_run:
         t = time.perf_counter()
-        runner._write_results(folder, built, result, sc.simulation.solver, times["simulate"],
-                              T, sc, True, True, "complete", None, [])
+        with runner.ResultsWriter(folder, sc.file, overwrite=True) as writer, \
+                runner._RunSignals() as signals:
+            signals.hold()
+            runner._write_results(writer, signals, built, result, sc.simulation.solver,
+                                  times["simulate"], T, sc, True, True, "complete", None, [],
+                                  True)
         times["all result files (as run)"] = time.perf_counter() - t
         return times
     t = time.perf_counter()
     traj = trajectory_arrays(built, result)
-    np.savez_compressed(folder / "trajectory.npz", **traj)
+    np.savez(folder / "trajectory.npz", **traj)  # uncompressed, as the runner writes it
     times["trajectory"] = time.perf_counter() - t
     t = time.perf_counter()
     from multiarm_pin.app.plots import write_plots

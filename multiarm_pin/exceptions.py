@@ -148,6 +148,18 @@ class OutputError(MultiArmError, OSError):
     """The results folder cannot be used (a file, another run's results, not writable...)."""
 
 
+class ResultsNotMovedError(OutputError):
+    """A run's results were written but could not be moved into the results folder.
+
+    Attributes:
+        kept: the folder where they were written and are kept.
+    """
+
+    def __init__(self, message: str, kept):
+        self.kept = kept
+        super().__init__(message)
+
+
 class RunFailedError(MultiArmError):
     """A run failed after its simulation had started; what it simulated was written.
 

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import queue
+import shutil
 import subprocess
 import sys
 import threading
@@ -101,3 +103,39 @@ class CliProcess:
         code = self.proc.wait(timeout=timeout)
         self.thread.join(timeout=10)
         return code, out, "".join(self.stderr)
+
+
+def _mount(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(["mount", *args], capture_output=True, text=True, timeout=60)
+
+
+@contextlib.contextmanager
+def bind_mount(src: Path, dst: Path, read_only: bool = False):
+    """``dst`` made a bind mount of ``src`` (read-only if asked) inside the block.
+
+    Needs root (CI runs the tests as root); elsewhere, or where mounting is not allowed,
+    the test is skipped with the reason. Always unmounted when the block ends.
+    """
+    import pytest
+
+    if os.geteuid() != 0 or shutil.which("mount") is None:
+        pytest.skip("a bind mount needs root and mount(8) (CI runs the tests as root)")
+    src.mkdir(parents=True, exist_ok=True)
+    dst.mkdir(parents=True, exist_ok=True)
+    p = _mount("--bind", str(src), str(dst))
+    if p.returncode != 0:
+        pytest.skip(f"mount --bind is not allowed here: {p.stderr.strip()}")
+    try:
+        if read_only:
+            p = _mount("-o", "remount,ro,bind", str(dst))
+            assert p.returncode == 0, p.stderr
+        yield dst
+    finally:
+        unmount(dst)
+
+
+def unmount(path: Path) -> None:
+    """Unmount ``path`` (lazily if it is busy); nothing if it is not mounted."""
+    p = subprocess.run(["umount", str(path)], capture_output=True, text=True, timeout=60)
+    if p.returncode != 0 and "not mounted" not in p.stderr:
+        subprocess.run(["umount", "-l", str(path)], capture_output=True, timeout=60)

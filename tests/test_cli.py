@@ -6,11 +6,15 @@ depends on timing.
 """
 
 import json
+import os
 import signal
+from pathlib import Path
 
 import numpy as np
 import pytest
-from run_helpers import CliProcess, one_arm_scenario, run_cli, write
+from run_helpers import CliProcess, bind_mount, one_arm_scenario, run_cli, write
+
+from multiarm_pin.app.results_io import MARKER
 
 LONG = 5.0  # [s] simulated by the runs that get interrupted (2500 steps; never reached)
 
@@ -47,29 +51,144 @@ def test_signal_mid_simulation_keeps_a_complete_partial_folder(tmp_path, signum,
         assert "partial run (interrupted at t = " in p.stdout and "HTTP 200" in p.stdout
 
 
-def test_sigint_while_writing_keeps_old_or_new_results_whole(tmp_path):
+def test_sigint_while_writing_a_complete_run_keeps_it(tmp_path):
     sc = write(tmp_path / "s.yaml", one_arm_scenario(duration=0.004))
     out = tmp_path / "out"
     first = run_cli("run", sc, "--out", out, "--no-html", "--quiet")
     assert first.returncode == 0, first.stderr
-    old = (out / "summary.json").read_bytes()
-    old_files = sorted(p.name for p in out.iterdir())
-    # the replay page makes the write phase last seconds: the signal lands inside it
+    # the plots and the replay page take seconds after this line: the signal lands before
+    # they are done (held while the trajectory and summary are written, if it comes then)
     run = CliProcess("run", sc, "--out", out, "--duration", "0.02")
     assert run.wait_for("writing results to")
     run.proc.send_signal(signal.SIGINT)
     code, stdout, stderr = run.finish()
-    assert "Traceback" not in stderr
-    assert code in (0, 130)
-    new = _summary(out)
-    if (out / "summary.json").read_bytes() == old:  # interrupted: the old run, untouched
-        assert code == 130 and "left as it was" in stderr
-        assert sorted(p.name for p in out.iterdir()) == old_files
-    else:  # finished before the signal: the new run, complete
-        assert new["status"] == "complete" and new["requested"]["duration"] == 0.02
-        for f in new["files"].values():
-            assert (out / f).is_file(), f
+    assert code == 130, stderr
+    assert "Traceback" not in stderr and "while writing the results of the complete run" in stderr
+    s = _summary(out)  # the new run, kept: its simulation had finished
+    assert s["status"] == "complete" and s["requested"]["duration"] == 0.02
+    assert s["write_interrupted"] == "SIGINT" and "replay.html" in s["missing_files"]
+    for f in s["files"].values():
+        assert (out / f).is_file(), f
+    assert not any((out / f).exists() for f in s["missing_files"])
+    with np.load(out / "trajectory.npz") as z:
+        assert len(z["t"]) == s["samples"] == 11
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "s.yaml"]
+
+
+def test_second_sigint_while_writing_keeps_the_partial_trajectory(tmp_path):
+    sc = write(tmp_path / "s.yaml", one_arm_scenario(duration=LONG))
+    out = tmp_path / "out"
+    run = CliProcess("run", sc, "--out", out)  # with the replay page: seconds of writing
+    assert run.wait_for("elapsed"), "the run ended before its first progress line"
+    run.proc.send_signal(signal.SIGINT)
+    assert run.wait_for("writing results to")
+    run.proc.send_signal(signal.SIGINT)  # the second Ctrl-C: skips the plots and the page
+    code, stdout, stderr = run.finish()
+    assert code == 130, stderr
+    assert "Traceback" not in stderr
+    assert "another Ctrl-C skips the plots and page" in stderr  # said after the first one
+    assert "trajectory.npz, scenario.yaml, summary.json:" in stderr  # writing shows progress
+    assert "not written (interrupted again while writing)" in stderr
+    s = _summary(out)
+    assert s["status"] == "interrupted" and s["write_interrupted"] == "SIGINT"
+    assert "replay.html" in s["missing_files"] and 0 < s["t_end"] < LONG
+    with np.load(out / "trajectory.npz") as z:
+        assert len(z["t"]) == s["samples"] == round(s["t_end"] / 0.002) + 1
+    for f in s["files"].values():
+        assert (out / f).is_file(), f
+    assert not any((out / f).exists() for f in s["missing_files"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "s.yaml"]
+    p = run_cli("replay", out, "--no-block", "--fps", "10")  # what was kept replays
+    assert p.returncode == 0 and "HTTP 200" in p.stdout, p.stderr
+
+
+def test_a_second_run_into_the_same_folder_is_refused_naming_the_first(tmp_path):
+    # the first run lasts minutes (60 s simulated), the refusals a few seconds: it is still
+    # running when they come, and is interrupted after them
+    a = write(tmp_path / "a.yaml", one_arm_scenario("first", duration=60.0))
+    b = write(tmp_path / "b.yaml", one_arm_scenario("second", mass=3.0))
+    out = tmp_path / "out"
+    run = CliProcess("run", a, "--out", out, "--no-html")
+    try:
+        assert run.wait_for("elapsed"), "the first run ended before its first progress line"
+        for other in (b, a):  # another scenario, or the same one: refused all the same
+            p = run_cli("run", other, "--out", out, "--no-html", "--quiet")
+            assert p.returncode == 2, p.stderr
+            assert "another run is writing into this folder" in p.stderr, p.stderr
+            assert f"pid {run.proc.pid}, scenario {a}" in p.stderr, p.stderr
+            assert "Traceback" not in p.stderr
+    finally:
+        run.proc.send_signal(signal.SIGINT)
+        code, _, stderr = run.finish()
+    assert code == 130, stderr
+    assert _summary(out)["scenario_file"] == str(a)  # the first run's results, alone
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.yaml", "b.yaml", "out"]  # no lock
+
+
+def test_out_on_a_mount_point_is_written_in_place(tmp_path):
+    sc = write(tmp_path / "s.yaml", one_arm_scenario())
+    other = write(tmp_path / "o.yaml", one_arm_scenario("other", mass=3.0))
+    src, vol = tmp_path / "src", tmp_path / "vol"
+    with bind_mount(src, vol):  # a container volume: renaming it fails with EBUSY
+        p = run_cli("run", sc, "--out", vol, "--no-html")
+        assert p.returncode == 0, p.stderr
+        assert "is a mount point" in p.stderr and "one file at a time" in p.stderr
+        assert "writing results to" in p.stderr and "plots (3 PNG files):" in p.stderr
+        s = _summary(vol)
+        assert s["status"] == "complete" and sorted(s["files"].values()) == sorted(
+            f for f in os.listdir(src) if not f.startswith("."))
+        (vol / "replay.html").write_text("stale")  # a file of an older run
+        p = run_cli("run", sc, "--out", vol, "--no-html", "--quiet", "--duration", "0.01")
+        assert p.returncode == 0 and p.stderr == "", p.stderr  # --quiet: writing shows nothing
+        assert _summary(vol)["requested"]["duration"] == 0.01
+        assert not (vol / "replay.html").exists()  # replaced whole, file by file
+        assert sorted(os.listdir(vol)) == sorted([MARKER, *_summary(vol)["files"].values()])
+        p = run_cli("run", other, "--out", vol, "--no-html", "--quiet")
+        assert p.returncode == 2 and "holds the results of another run" in p.stderr, p.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o.yaml", "s.yaml", "src", "vol"]
+
+
+def test_out_on_a_read_only_mount_point_is_refused_before_simulating(tmp_path):
+    sc = write(tmp_path / "s.yaml", one_arm_scenario(duration=LONG))
+    src, vol = tmp_path / "src", tmp_path / "ro"
+    with bind_mount(src, vol, read_only=True):
+        p = run_cli("run", sc, "--out", vol, "--no-html")
+        assert p.returncode == 2, p.stderr
+        assert p.stderr.startswith(f"error: --out {vol}: is a mount point on a read-only file "
+                                   "system"), p.stderr
+        assert "elapsed" not in p.stderr and "writing" not in p.stderr  # nothing simulated
+        assert os.listdir(vol) == []
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ro", "s.yaml", "src"]
+
+
+def test_results_kept_where_written_when_the_final_move_fails(tmp_path):
+    sc = write(tmp_path / "s.yaml", one_arm_scenario(duration=LONG))
+    out = tmp_path / "out"
+    first = run_cli("run", sc, "--out", out, "--no-html", "--quiet", "--duration", "0.004")
+    assert first.returncode == 0, first.stderr
+    old = (out / "summary.json").read_bytes()
+    run = CliProcess("run", sc, "--out", out, "--no-html")
+    try:
+        assert run.wait_for("elapsed"), "the run ended before its first progress line"
+        # checked as a plain folder before the run; a volume mounted on it since: the move
+        # into place fails (EBUSY)
+        with bind_mount(tmp_path / "src", out):
+            run.proc.send_signal(signal.SIGINT)
+            code, stdout, stderr = run.finish()
+    finally:
+        if run.proc.poll() is None:
+            run.proc.kill()
+    assert code == 1, stderr
+    assert "cannot move the results into place" in stderr and "Traceback" not in stderr
+    kept = Path(stderr.split("results kept in: ")[1].split()[0])
+    assert kept.parent == tmp_path and kept.name.startswith(".out.tmp-")
+    s = _summary(kept)  # whole: trajectory, summary, plots
+    assert s["status"] == "interrupted" and s["missing_files"] == []
+    with np.load(kept / "trajectory.npz") as z:
+        assert len(z["t"]) == s["samples"]
+    assert (out / "summary.json").read_bytes() == old  # the old results, untouched
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == sorted([kept.name, "out", "s.yaml", "src"])  # nothing else left behind
 
 
 def test_exit_codes_and_no_tracebacks(tmp_path):

@@ -3,14 +3,20 @@
 import json
 import os
 import signal
+from pathlib import Path
 
 import pytest
 
 from multiarm_pin.app.results_io import (
+    LOCK_NAME,
     MARKER,
+    STAGING_PREFIX,
     ResultsWriter,
+    RunLock,
     deferred_signals,
+    is_mount_point,
     prepare_output,
+    publishes_in_place,
     run_identity,
     safe_component,
     write_atomic,
@@ -127,3 +133,60 @@ def test_deferred_signals_deliver_after_the_block():
             done.append("block finished")  # not interrupted inside
     assert done == ["block finished"]
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_run_lock_refuses_a_second_holder_names_it_and_is_removed(tmp_path):
+    sc = tmp_path / "s.yaml"
+    first = RunLock(tmp_path / ".out.lock", tmp_path / "out", sc)
+    first.acquire()
+    try:  # a second open file description of the same file: flock refuses it
+        with pytest.raises(OutputError, match=rf"another run is writing into this folder "
+                                              rf"\(pid {os.getpid()}, scenario {sc}, since "):
+            RunLock(tmp_path / ".out.lock", tmp_path / "out", tmp_path / "b.yaml").acquire()
+    finally:
+        first.release()
+    assert not (tmp_path / ".out.lock").exists()
+    again = RunLock(tmp_path / ".out.lock", tmp_path / "out", sc)
+    again.acquire()  # free again
+    again.release()
+
+
+def test_writer_holds_the_lock_until_it_ends(tmp_path):
+    sc = tmp_path / "s.yaml"
+    sc.write_text("")
+    with ResultsWriter(tmp_path / "out", sc) as w:
+        assert (tmp_path / ".out.lock").is_file() and not w.in_place
+        with pytest.raises(OutputError, match="another run is writing"), \
+                ResultsWriter(tmp_path / "out", tmp_path / "other.yaml"):
+            pass
+        w.publish()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "s.yaml"]
+
+
+def test_in_place_publication_replaces_the_files_one_by_one(tmp_path, monkeypatch):
+    import multiarm_pin.app.results_io as rio
+
+    sc = tmp_path / "s.yaml"
+    sc.write_text("")
+    out = _results(tmp_path / "out", sc)
+    (out / "replay.html").write_text("stale")
+    (out / f"{STAGING_PREFIX}old").mkdir()  # left by a killed run
+    monkeypatch.setattr(rio, "publishes_in_place", lambda target: True)  # as a mount point
+    with ResultsWriter(out, sc) as w:
+        assert w.in_place and w.path.parent == out and (out / LOCK_NAME).is_file()
+        (w.path / "trajectory.npz").write_bytes(b"new")
+        w.publish()
+    assert sorted(p.name for p in out.iterdir()) == [MARKER, "trajectory.npz"]
+    assert (out / "trajectory.npz").read_bytes() == b"new" and run_identity(out) == str(sc)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "s.yaml"]
+
+
+def test_mount_points_are_found_bind_mounts_of_the_same_file_system_too(tmp_path):
+    from run_helpers import bind_mount
+
+    assert not is_mount_point(tmp_path)
+    assert is_mount_point(Path("/"))
+    with bind_mount(tmp_path / "src", tmp_path / "vol"):
+        assert is_mount_point(tmp_path / "vol") and publishes_in_place(tmp_path / "vol")
+        assert not os.path.ismount(tmp_path / "vol")  # what os.path.ismount alone misses
+    assert not is_mount_point(tmp_path / "vol")

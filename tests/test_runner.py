@@ -4,6 +4,7 @@ import io
 import json
 import os
 import shutil
+import signal
 import subprocess
 from pathlib import Path
 
@@ -426,38 +427,75 @@ def test_version(capsys):
     assert capsys.readouterr().out.strip() == f"multiarm-pin {__version__}"
 
 
-def test_interrupt_while_writing_leaves_old_results_or_reports_new_ones(tmp_path, monkeypatch):
+def test_interrupt_while_writing_keeps_the_trajectory_and_summary(tmp_path, monkeypatch):
     import multiarm_pin.app.runner as runner
-    from multiarm_pin.exceptions import RunInterrupted
+    from multiarm_pin.app.run_results import plot_names
+    from multiarm_pin.exceptions import RunFailedError, RunInterrupted
 
     sc = write(tmp_path / "s.yaml", one_arm_scenario())
     out = tmp_path / "out"
-    fast = {"duration": 0.004, "html": False, "plots": False}
-    run_scenario(sc, out, **fast)
-    old = (out / "summary.json").read_bytes()
-    real_write, real_publish = runner._write_results, runner.ResultsWriter.publish
+    run_scenario(sc, out, duration=0.004, html=False, plots=False)
+    real_publish = runner.ResultsWriter.publish
 
-    def write_then_interrupt(*args, **kwargs):
-        real_write(*args, **kwargs)
-        raise KeyboardInterrupt
+    def plots_cut_short(folder, *args):
+        (folder / "object_pose.png").write_bytes(b"half a PNG")  # a file cut short
+        raise KeyboardInterrupt  # Ctrl-C while the plots are drawn
 
-    monkeypatch.setattr(runner, "_write_results", write_then_interrupt)
-    with pytest.raises(RunInterrupted, match="left as it was") as info:
-        run_scenario(sc, out, **fast)
-    assert info.value.out_dir is None and (out / "summary.json").read_bytes() == old
-
-    def publish_then_interrupt(self):
-        real_publish(self)
-        raise KeyboardInterrupt  # a signal held back during the swap arrives here
-
-    monkeypatch.setattr(runner, "_write_results", real_write)
-    monkeypatch.setattr(runner.ResultsWriter, "publish", publish_then_interrupt)
-    with pytest.raises(RunInterrupted, match="just after the results were written") as info:
-        run_scenario(sc, out, duration=0.006, html=False, plots=False)
-    assert info.value.out_dir == out.resolve()
-    s = _summary(out)
+    monkeypatch.setattr(runner, "_write_plots", plots_cut_short)
+    with pytest.raises(RunInterrupted, match="while writing the results of the complete "
+                                             "run: .*png not written") as info:
+        run_scenario(sc, out, duration=0.006, html=False, plots=True)
+    assert info.value.out_dir == out.resolve() and info.value.t_end == pytest.approx(0.006)
+    s = _summary(out)  # the new run, with what was written before the signal
     assert s["status"] == "complete" and s["t_end"] == pytest.approx(0.006)
+    with np.load(out / "trajectory.npz") as z:
+        assert len(z["t"]) == s["samples"] == 4
+    names = plot_names({"contact_active": 1, "event_t": []})
+    assert s["missing_files"] == names and s["write_interrupted"] == "SIGINT"
+    assert any("not written" in w for w in s["warnings"])
+    assert not any((out / n).exists() for n in names)
+    assert sorted(s["files"].values()) == ["scenario.yaml", "summary.json", "trajectory.npz"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "s.yaml"]
+
+    def publish_then_signal(self):
+        real_publish(self)
+        os.kill(os.getpid(), signal.SIGINT)  # held by the run: reported after the move
+
+    monkeypatch.undo()
+    monkeypatch.setattr(runner.ResultsWriter, "publish", publish_then_signal)
+    with pytest.raises(RunInterrupted, match="everything was written") as info:
+        run_scenario(sc, out, duration=0.008, html=False, plots=False)
+    s = _summary(out)
+    assert s["status"] == "complete" and s["t_end"] == pytest.approx(0.008)
+    assert s["missing_files"] == [] and s["write_interrupted"] is None
+
+    def page_fails(*args):
+        raise RuntimeError("no space for the page")
+
+    monkeypatch.undo()
+    monkeypatch.setattr(runner, "_write_page", page_fails)
+    with pytest.raises(RunFailedError, match="complete but replay page not written: "
+                                             "RuntimeError: no space"):
+        run_scenario(sc, out, duration=0.004, html=True, plots=False)
+    s = _summary(out)
+    assert s["missing_files"] == ["replay.html"] and s["status"] == "complete"
+    assert any("replay page not written" in w for w in s["warnings"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "s.yaml"]
+
+
+def test_plot_names_are_the_plots_written(run_dir, tmp_path):
+    from multiarm_pin.app.plots import write_plots
+    from multiarm_pin.app.run_results import plot_names
+
+    s = _summary(run_dir)
+    pngs = [f for f in s["files"].values() if f.endswith(".png")]
+    _, traj, _ = load_run(run_dir)
+    assert pngs == plot_names(traj) and "contact_states.png" not in pngs
+    traj = dict(traj, event_t=np.array([0.1]), event_kind=np.array(["separation"]),
+                event_contact=np.array([0]))  # one event: the contact states are drawn too
+    written = write_plots(tmp_path, traj, ["left", "right"])
+    assert [p.name for p in written] == plot_names(traj)
+    assert plot_names(traj)[0] == "contact_states.png"
 
 
 def test_a_bug_mid_run_keeps_the_partial_results_and_surfaces(tmp_path, monkeypatch):

@@ -27,7 +27,12 @@ from pathlib import Path
 
 from multiarm_pin.app import REPLAY_FPS
 from multiarm_pin.data import DEMO_SCENARIO, data_path, shipped_files
-from multiarm_pin.exceptions import MultiArmError, RunFailedError, RunInterrupted
+from multiarm_pin.exceptions import (
+    MultiArmError,
+    ResultsNotMovedError,
+    RunFailedError,
+    RunInterrupted,
+)
 
 # The work of each subcommand (numpy, Pinocchio, the compiled kernels, meshcat, Dask...) is
 # imported by the subcommand, so `multiarm-pin --help` or a bad argument answers at once.
@@ -268,8 +273,9 @@ def run_command(args: argparse.Namespace) -> int:
     """``multiarm-pin run``: simulate, write results, print where they are.
 
     Returns:
-        0 for a complete run, 1 for a run that failed after its simulation started, 130 for
-        an interrupted run (Ctrl-C, SIGTERM); partial results are written in both cases.
+        0 for a complete run, 1 for a run that failed after its simulation started (or whose
+        results could not be moved into ``--out``: the message says where they are kept), 130
+        for an interrupted run (Ctrl-C, SIGTERM); partial results are written in each case.
     """
     from multiarm_pin.app.runner import run_scenario
 
@@ -278,6 +284,10 @@ def run_command(args: argparse.Namespace) -> int:
         res = run_scenario(args.scenario, args.out, args.solver, args.duration,
                            quiet=bool(args.quiet), html=html,
                            overwrite=bool(getattr(args, "overwrite", False)))
+    except ResultsNotMovedError as exc:  # the run finished; its results are kept elsewhere
+        print(f"error: {exc}", file=sys.stderr)
+        print(f"results kept in: {exc.kept}", file=sys.stderr)
+        return 1
     except RunFailedError as exc:
         print(f"error: {exc}", file=sys.stderr)
         if exc.out_dir is not None:
@@ -315,8 +325,9 @@ def run_command(args: argparse.Namespace) -> int:
     print(f"results: {out}")
     print(f"  trajectory: {out / 'trajectory.npz'}")
     print(f"  summary:    {out / 'summary.json'}")
-    pngs = ("object_pose.png", "contact_forces.png", "constraint_violation.png")
-    print("  plots:      " + ", ".join(str(out / f) for f in pngs))
+    pngs = [p.name for p in res.files.values() if p.suffix == ".png"]
+    if pngs:
+        print("  plots:      " + ", ".join(str(out / f) for f in pngs))
     if "replay" in res.files:
         print(f"replay (open in a browser, works offline): {out / 'replay.html'}")
     print(f"live replay: multiarm-pin replay {out}")

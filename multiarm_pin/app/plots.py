@@ -301,47 +301,46 @@ def write_plots(out_dir, trajectory: Mapping[str, np.ndarray], arm_names, title:
     out = Path(out_dir)
     pre = f"{title}: " if title else ""
     t = trajectory["t"]
-    names = [*arm_names, *support_names]
     ev_t = np.asarray(trajectory.get("event_t", np.zeros(0)), dtype=float)
     ev_kind = np.asarray(trajectory.get("event_kind", np.zeros(0, dtype=str)))
     ev_k = np.asarray(trajectory.get("event_contact", np.zeros(0, dtype=int)))
     events = list(zip(ev_t.tolist(), ev_kind.tolist(), strict=True))
-    extra = []
-    if "contact_active" in trajectory and (len(ev_t) or len(support_names)):
-        extra.append(plot_contact_states(
+    from multiarm_pin.app.run_results import force_names, plot_names  # one list of files
+
+    wanted = plot_names(trajectory, support_names, arm_names)
+    written = []
+    if "contact_states.png" in wanted:
+        written.append(plot_contact_states(
             out / "contact_states.png", t, trajectory["contact_active"],
             trajectory["contact_labels"],
             list(zip(ev_t.tolist(), ev_kind.tolist(), ev_k.tolist(), strict=True)),
             pre + "contacts touching (bars); x separation or off edge, o touchdown"))
-    forces = names
-    if "arm_wrench" in trajectory and len(arm_names):
+    if "arm_wrenches.png" in wanted:
         w = np.asarray(trajectory["arm_wrench"])
-        extra.append(plot_arm_wrenches(
+        written.append(plot_arm_wrenches(
             out / "arm_wrenches.png", t, {a: w[:, i] for i, a in enumerate(arm_names)},
             pre + "each arm's wrench on the object (world axes, at the COM)", events))
-        uni = trajectory.get("unilateral_arms")
-        fingertips = set(np.asarray(uni, dtype=str).tolist()) if uni is not None else set()
-        forces = [a for a in arm_names if a in fingertips] + list(support_names)
-    if len(arm_names) and all(f"tau_limit_{a}" in trajectory for a in arm_names):
-        extra.append(plot_torque_ratios(
+    if "joint_torques.png" in wanted:
+        written.append(plot_torque_ratios(
             out / "joint_torques.png", t, {a: trajectory[f"tau_{a}"] for a in arm_names},
             {a: trajectory[f"tau_limit_{a}"] for a in arm_names},
             {a: trajectory[f"joint_names_{a}"] for a in arm_names
              if f"joint_names_{a}" in trajectory},
             title=pre + "joint torques / URDF effort limits (x: over the limit)"))
-    plots = [plot_object_pose(out / "object_pose.png", t, trajectory["object_position"],
-                              trajectory["object_quaternion"], pre + "object pose")]
-    if forces:
+    written.append(plot_object_pose(out / "object_pose.png", t, trajectory["object_position"],
+                                    trajectory["object_quaternion"], pre + "object pose"))
+    if "contact_forces.png" in wanted:
+        forces = force_names(trajectory, arm_names, support_names)
         every = [str(x) for x in np.asarray(trajectory.get("contact_labels", []), dtype=str)]
         legend = {a: [x for x in every if x.startswith((f"{a}:", f"{a}["))] for a in forces}
-        plots.append(plot_contact_forces(out / "contact_forces.png", t,
-                                         {a: trajectory[f"mu_{a}"] for a in forces},
-                                         pre + "contact forces (positive = pushing)", events,
-                                         legend))
-    plots.append(plot_constraint_violation(out / "constraint_violation.png", t,
-                                           trajectory["constraint_violation"],
-                                           pre + "constraint violation"))
-    return extra + plots
+        written.append(plot_contact_forces(out / "contact_forces.png", t,
+                                           {a: trajectory[f"mu_{a}"] for a in forces},
+                                           pre + "contact forces (positive = pushing)", events,
+                                           legend))
+    written.append(plot_constraint_violation(out / "constraint_violation.png", t,
+                                             trajectory["constraint_violation"],
+                                             pre + "constraint violation"))
+    return written
 
 
 __all__ = [

@@ -82,6 +82,7 @@ class ProgressBar(LineProgress):
         self.total_time = float(total_time)
         self.delay, self.min_interval = delay, min_interval
         self._last = -1.0
+        self._ended = False  # the end (100 %) was drawn
 
     def __call__(self, fraction: float) -> None:
         """Update with the fraction done (0..1)."""
@@ -92,8 +93,9 @@ class ProgressBar(LineProgress):
         if fraction < 1.0 and now - self._last < self.min_interval:
             return
         f = min(max(float(fraction), 0.0), 1.0)
-        if not self.due(f):
+        if f >= 1.0 and self._ended or not self.due(f):
             return
+        self._ended = f >= 1.0
         self._last = now
         eta = elapsed * (1 - f) / f if f > 0 else float("nan")
         self.draw(f, f"{100 * f:5.1f}% t = {f * self.total_time:.3f}/{self.total_time:.3f} s, "

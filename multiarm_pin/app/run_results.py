@@ -3,10 +3,11 @@
 ``multiarm-pin run SCENARIO.yaml`` (:func:`multiarm_pin.app.runner.run_scenario`) writes into
 its results folder:
 
-- ``trajectory.npz``: ``t`` (T,), ``object_position`` (T, 3), ``object_quaternion`` (T, 4,
-  ``[x, y, z, w]``), ``object_twist`` (T, 6, ``[ẋ; ω]`` world axes), for each arm A
-  ``q_A`` (T, nq), ``v_A`` (T, nv), ``tau_A`` (T, nv), ``mu_A`` (T, N_A) (contact multipliers
-  [N], positive = pushing), ``phi_A`` (T, N_A) (gaps [m]); ``constraint_violation`` (T,)
+- ``trajectory.npz`` (uncompressed): ``t`` (T,), ``object_position`` (T, 3),
+  ``object_quaternion`` (T, 4, ``[x, y, z, w]``), ``object_twist`` (T, 6, ``[ẋ; ω]`` world
+  axes), for each arm A ``q_A`` (T, nq), ``v_A`` (T, nv), ``tau_A`` (T, nv), ``mu_A``
+  (T, N_A) (contact multipliers [N], positive = pushing), ``phi_A`` (T, N_A) (gaps [m]);
+  ``constraint_violation`` (T,)
   = max |φ| over held contacts and the penetration of separated ones [m];
   ``contact_points`` (T, K, 3) [m] and ``contact_forces`` (T, K, 3) [N] (force on the
   object, world axes) of the K contacts of all arms in order, then of the supports;
@@ -31,7 +32,10 @@ its results folder:
   details (tool frame and offset, q0 and where it came from), ``status`` (``complete``,
   ``failed`` or ``interrupted``), ``error`` (the message, or null) and ``t_end`` (the last
   simulated time [s]);
-  ``events`` (every separation and touchdown: time, contact, arm or support).
+  ``events`` (every separation and touchdown: time, contact, arm or support); ``files``
+  (the files written, by role), ``missing_files`` (those a signal or an error left out:
+  plots, ``replay.html``) and ``write_interrupted`` (the signal that came while writing,
+  or null).
 - ``object_pose.png``, ``arm_wrenches.png``, ``joint_torques.png``, ``contact_forces.png``
   (fingertips and supports), ``constraint_violation.png``.
 - ``replay.html``: a self-contained Meshcat page replaying the run offline.
@@ -213,6 +217,49 @@ def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> di
     }
 
 
+def plot_names(trajectory: dict, support_names=(), arm_names=None) -> list[str]:
+    """The PNG files :func:`multiarm_pin.app.plots.write_plots` writes for a run, in order.
+
+    ``contact_states.png`` when the run has contact events or supports; ``arm_wrenches.png``
+    with the arms' wrenches (``arm_wrench``); ``joint_torques.png`` with every arm's effort
+    limits (``tau_limit_<arm>``); ``object_pose.png``; ``contact_forces.png`` when there are
+    forces at named points to show (fingertip arms, ``unilateral_arms``, or supports; every
+    arm's rows in a file without ``arm_wrench``); ``constraint_violation.png``.
+
+    Args:
+        trajectory: the ``trajectory.npz`` arrays (keys and the events' and arms' entries
+            named above are looked at).
+        support_names: the supports' names.
+        arm_names: the arms' names (default: those with a ``tau_limit_<arm>`` entry).
+    """
+    if arm_names is None:
+        arm_names = [k[len("tau_limit_"):] for k in trajectory if k.startswith("tau_limit_")]
+    arm_names, support_names = list(arm_names), list(support_names)
+    states = "contact_active" in trajectory and \
+        bool(len(trajectory.get("event_t", ())) or len(support_names))
+    wrench = "arm_wrench" in trajectory and bool(arm_names)
+    limits = bool(arm_names) and all(f"tau_limit_{a}" in trajectory for a in arm_names)
+    return [*(["contact_states.png"] if states else []),
+            *(["arm_wrenches.png"] if wrench else []),
+            *(["joint_torques.png"] if limits else []), "object_pose.png",
+            *(["contact_forces.png"] if force_names(trajectory, arm_names, support_names)
+              else []), "constraint_violation.png"]
+
+
+def force_names(trajectory: dict, arm_names, support_names) -> list[str]:
+    """The arms and supports whose multipliers ``contact_forces.png`` shows.
+
+    With the arms' wrenches in the file, the fingertip arms (``unilateral_arms``) and the
+    supports: their multipliers are forces at named points, a weld's six rows are not (its
+    wrench says what it does). Without them (an older file), every arm and support.
+    """
+    if "arm_wrench" not in trajectory or not len(arm_names):
+        return [*arm_names, *support_names]
+    uni = trajectory.get("unilateral_arms")
+    fingertips = set(np.asarray(uni, dtype=str).tolist()) if uni is not None else set()
+    return [a for a in arm_names if a in fingertips] + list(support_names)
+
+
 def replay_parts(arms, obj, trajectory: dict):
     """Replay inputs (:mod:`multiarm_pin.app.replay`) from arms, object and trajectory arrays.
 
@@ -361,6 +408,8 @@ __all__ = [
     "REPLAY_FPS",
     "REQUIRED_ARRAYS",
     "load_run",
+    "force_names",
+    "plot_names",
     "replay_parts",
     "run_status",
     "scenario_copy",

@@ -9,10 +9,12 @@ partial results of a failed or interrupted run. :func:`serve_run` replays a resu
 
 from __future__ import annotations
 
-import contextlib
 import json
+import os
+import shutil
 import signal
 import sys
+import tempfile
 import threading
 import time
 import urllib.request
@@ -24,15 +26,11 @@ import numpy as np
 from multiarm_pin.app.diagnosis import describe_failure
 from multiarm_pin.app.precheck import precheck_warnings
 from multiarm_pin.app.progress import ProgressBar
-from multiarm_pin.app.results_io import (
-    ResultsWriter,
-    deferred_signals,
-    prepare_output,
-    safe_component,
-)
+from multiarm_pin.app.results_io import ResultsWriter, safe_component, write_atomic
 from multiarm_pin.app.run_results import (
     REPLAY_FPS,
     load_run,
+    plot_names,
     replay_parts,
     scenario_copy,
     summarize,
@@ -108,21 +106,63 @@ class _Terminated(KeyboardInterrupt):  # noqa: N818 (an interrupt, not an error)
     signal_name = "SIGTERM"
 
 
-@contextlib.contextmanager
-def _sigterm_interrupts():
-    """SIGTERM raises :class:`_Terminated` inside the block (main thread only)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
+class _RunSignals:
+    """SIGINT and SIGTERM during a run: the first one interrupts, later ones wait their turn.
 
-    def handler(signum, frame):
-        raise _Terminated("terminated by SIGTERM")
+    While *armed*, a signal raises ``KeyboardInterrupt`` (SIGINT) or :class:`_Terminated`
+    (SIGTERM) in the main thread and disarms: the signals that follow are held, so the code
+    handling the interrupt (writing the trajectory and summary) is never cut short by a
+    second Ctrl-C. :meth:`arm` raises the first held one at once, or arms again.
+    Installed in the main thread only (elsewhere signals cannot be handled: it does nothing).
+    """
 
-    previous = signal.signal(signal.SIGTERM, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self):
+        self.armed = True
+        self.held: list[int] = []
+        self._previous: dict | None = None
+
+    def __enter__(self) -> _RunSignals:
+        if threading.current_thread() is threading.main_thread():
+            self._previous = {s: signal.signal(s, self._handler) for s in self.SIGNALS}
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._previous is not None:
+            for s, h in self._previous.items():
+                signal.signal(s, signal.SIG_DFL if h is None else h)
+            self._previous = None
+
+    @staticmethod
+    def _raise(signum: int):
+        if signum == signal.SIGTERM:
+            raise _Terminated("terminated by SIGTERM")
+        raise KeyboardInterrupt
+
+    def _handler(self, signum, frame) -> None:
+        if self.armed:
+            self.armed = False
+            self._raise(signum)
+        self.held.append(signum)
+
+    def hold(self) -> None:
+        """Hold the signals that come from now on (:meth:`arm` raises them)."""
+        self.armed = False
+
+    def arm(self) -> None:
+        """Raise the first held signal now (the others are dropped), or arm."""
+        if self.held:
+            signum = self.held[0]
+            self.held.clear()
+            self._raise(signum)
+        self.armed = True
+
+    def take_held(self) -> str | None:
+        """The name of the first held signal (None if none), and forget them."""
+        name = signal.Signals(self.held[0]).name if self.held else None
+        self.held.clear()
+        return name
 
 
 def _say(message: str, quiet: bool) -> None:
@@ -135,7 +175,10 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
                  overwrite: bool = False) -> RunOutput:
     """Simulate a scenario and write its results, atomically (:mod:`multiarm_pin.app.results_io`).
 
-    The output folder is checked before anything is simulated. If the simulation fails
+    The output folder is locked (one run at a time per folder) and checked before anything
+    is simulated; the trajectory and summary are written first, then the plots and page
+    (see :func:`_write_results`: a signal while writing keeps what was written). If the
+    simulation fails
     (a :class:`~multiarm_pin.exceptions.MultiArmError` once it has started) or is interrupted
     (Ctrl-C / SIGINT, SIGTERM), the samples simulated so far are written with
     ``summary.json`` ``"status"`` ``"failed"`` or ``"interrupted"``, ``"error"`` and
@@ -158,7 +201,10 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
 
     Raises:
         ScenarioError: invalid scenario or overrides (before anything is simulated).
-        OutputError: unusable output folder (before anything is simulated).
+        OutputError: unusable output folder, or another run writing into it (before
+            anything is simulated); :class:`~multiarm_pin.exceptions.ResultsNotMovedError`
+            after the simulation if the results could not be moved into it (``kept`` says
+            where they are).
         RunFailedError: the simulation failed after it started (partial results written).
         RunInterrupted: Ctrl-C or SIGTERM (partial results written when there were any).
     """
@@ -183,9 +229,14 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
     solver = solver or sim.solver
     T = float(duration) if duration is not None else sim.duration
     dt = sim.dt
-    target = prepare_output(out if out is not None else Path("results") / safe_component(sc.name),
-                            sc.file, overwrite)
-    with ResultsWriter(target, sc.file) as writer, _sigterm_interrupts():
+    writer = ResultsWriter(out if out is not None else Path("results") / safe_component(sc.name),
+                           sc.file, overwrite)
+    with writer, _RunSignals() as signals:
+        target = writer.target
+        if writer.in_place:
+            _say(f"note: {target} is a mount point (or its parent cannot be written): the "
+                 "results are moved into it one file at a time (each file atomically), not "
+                 "as a whole folder", quiet)
         built = build_scenario(sc, load_visuals=html)
         controller = make_controller(built)
         n_samples = int(np.floor(T / dt + 1e-9)) + 1
@@ -201,17 +252,24 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
             print(f"warning: {w}", file=sys.stderr, flush=True)
         bar = None if quiet else ProgressBar(f"{safe_component(sc.name)}", T)
         t0 = time.perf_counter()
-        status, error, internal = "complete", None, None
+        status, error, internal, signal_name = "complete", None, None, None
+        result = None
         try:
             result = simulate_built(built, controller, T, dt, solver, bar)
-        except KeyboardInterrupt as exc:
-            result, status = partial_result(exc), "interrupted"
-            error = f"interrupted by {getattr(exc, 'signal_name', 'SIGINT')}"
-            signal_name = getattr(exc, "signal_name", "SIGINT")
-            if result is None or len(result.t) == 0:
-                raise RunInterrupted(f"{sc.file}: {error} before the first sample; nothing "
-                                     "written", None, None, signal_name) from None
+            signals.hold()
+        except KeyboardInterrupt as exc:  # the signal handler holds the signals that follow
+            if result is not None:  # just after the simulation ended: an interrupt of the write
+                signals.held.append(signal.SIGTERM if isinstance(exc, _Terminated)
+                                    else signal.SIGINT)
+            else:
+                result, status = partial_result(exc), "interrupted"
+                signal_name = getattr(exc, "signal_name", "SIGINT")
+                error = f"interrupted by {signal_name}"
+                if result is None or len(result.t) == 0:
+                    raise RunInterrupted(f"{sc.file}: {error} before the first sample; "
+                                         "nothing written", None, None, signal_name) from None
         except MultiArmError as exc:
+            signals.hold()
             result = partial_result(exc)
             if result is None:  # refused before integrating: an input error
                 raise ScenarioError(sc.file, "", str(exc)) from exc
@@ -223,6 +281,7 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
                 key = "controller" if "controller" in str(exc) else ""
                 raise ScenarioError(sc.file, key, f"the simulation cannot start: {exc}") from exc
         except Exception as exc:  # a bug: keep what was simulated, then let it surface
+            signals.hold()
             result, internal = partial_result(exc), exc
             if result is None or len(result.t) == 0:
                 raise
@@ -233,33 +292,35 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
                 bar.close()
         wall = time.perf_counter() - t0
         t_end = float(result.t[-1])
-        try:
-            _say(f"writing results to {target}", quiet)
-            files, traj, summary = _write_results(writer.path, built, result, solver, wall,
-                                                  T, sc, html, plots, status, error,
-                                                  input_warns)
-            writer.publish()
-        except KeyboardInterrupt as exc:
-            name = getattr(exc, "signal_name", "SIGINT")
-            if writer.published:  # the signal was held back during the swap: all written
-                raise RunInterrupted(f"interrupted by {name} just after the results were "
-                                     f"written to {target} (status {status})", t_end, target,
-                                     name) from None
-            raise RunInterrupted(f"interrupted by {name} while writing the results; {target} "
-                                 "left as it was", t_end, None, name) from None
-        except OSError as exc:
-            raise OutputError(f"--out {target}: cannot write the results: "
-                              f"{exc.strerror or exc}") from exc
-    files = {k: target / p.name for k, p in files.items()}
+        if status == "interrupted":
+            _say(f"{error} at t = {t_end:.6g} s of {T:g} s: writing the partial results "
+                 "(the trajectory and summary first; another Ctrl-C skips the plots and page)",
+                 quiet)
+        written = _write_results(writer, signals, built, result, solver, wall, T, sc, html,
+                                 plots, status, error, input_warns, quiet)
+    files, traj, summary = written.files, written.trajectory, written.summary
     if internal is not None:
         _say(f"partial results (status failed, t_end = {t_end:.6g} s) in {target}", False)
         raise internal
+    missing = (f"; {', '.join(written.missing)} not written (interrupted again while writing)"
+               if written.missing and written.interrupt else "")
+    missing += "".join(f"; {p}" for p in written.problems)
     if status == "interrupted":
         raise RunInterrupted(f"{sc.file}: {error} at t = {t_end:.6g} s of {T:g} s; partial "
-                             f"results in {target}", t_end, target, signal_name)
+                             f"results in {target}{missing}", t_end, target, signal_name)
+    if written.interrupt is not None:
+        what = (f"{', '.join(written.missing)} not written" if written.missing else
+                "everything was written")
+        raise RunInterrupted(f"{sc.file}: interrupted by {written.interrupt} while writing the "
+                             f"results of the {status} run: {what}; the trajectory and summary "
+                             f"are in {target}", t_end, target, written.interrupt)
     if status == "failed":
         raise RunFailedError(f"{error}; partial results (t = 0 .. {t_end:.6g} s) in {target}",
                              t_end, target, error)
+    if written.problems:
+        raise RunFailedError(f"{sc.file}: the run is complete but {'; '.join(written.problems)}"
+                             f"; the trajectory and summary are in {target}", t_end, target,
+                             written.problems[0])
     return RunOutput(target, built, result, traj, summary, files)
 
 
@@ -288,39 +349,163 @@ def simulate_built(built: BuiltScenario, controller, duration: float, dt: float,
                         external_wrench=built.scenario.object.external_wrench or None)
 
 
-def _write_results(folder: Path, built: BuiltScenario, result, solver: str, wall: float,
-                   T: float, sc: Scenario, html: bool, plots: bool, status: str,
-                   error: str | None, input_warns: list[str]) -> tuple[dict, dict, dict]:
-    """Write every result file into ``folder``; returns (files by role, arrays, summary)."""
+@dataclass
+class _Written:
+    """What :func:`_write_results` wrote and published.
+
+    Attributes:
+        files: every file in the results folder, by role.
+        trajectory: the arrays of ``trajectory.npz``.
+        summary: the content of ``summary.json``.
+        missing: the files not written because of an interrupt while writing.
+        interrupt: the signal (``"SIGINT"``, ``"SIGTERM"``) that came while writing, or None.
+        problems: why a plot or the page could not be written (one message each).
+    """
+
+    files: dict
+    trajectory: dict
+    summary: dict
+    missing: list
+    interrupt: str | None
+    problems: list
+
+
+def _write_results(writer: ResultsWriter, signals: _RunSignals, built: BuiltScenario, result,
+                   solver: str, wall: float, T: float, sc: Scenario, html: bool, plots: bool,
+                   status: str, error: str | None, input_warns: list[str],
+                   quiet: bool) -> _Written:
+    """Write the results into the writer's staging folder and publish them.
+
+    First, with signals held back, ``trajectory.npz`` (uncompressed: written at disk speed),
+    ``scenario.yaml`` and ``summary.json`` (its ``missing_files`` lists the plots and page
+    still to come); then, interruptible, the plots and the replay page, each into a name
+    of its own and renamed when whole; then, signals held again, the final ``summary.json``
+    and the move into place. A signal during the plots or page stops them: the folder is
+    published without them and the summary says which files are missing and why
+    (``write_interrupted``, a warning). Prints each step unless ``quiet``.
+
+    Raises:
+        ResultsNotMovedError: the move into place failed (the staging folder is kept).
+    """
+    folder, target = writer.path, writer.target
+    start = time.perf_counter()
+    _say(f"writing results to {target}", quiet)
     traj = trajectory_arrays(built, result)
-    files = {}
-    files["trajectory"] = folder / "trajectory.npz"
-    # a signal inside savez would leave its ZipFile half-closed, whose destructor then prints
-    # a traceback at exit: deliver it right after (the temporary folder is dropped whole)
-    with deferred_signals():
-        np.savez_compressed(files["trajectory"], **traj)
+    files = {"trajectory": folder / "trajectory.npz", "scenario": folder / "scenario.yaml",
+             "summary": folder / "summary.json"}
     summary = summarize(built, result, solver, wall)
     summary["input_warnings"] = list(input_warns)
     summary["requested"]["duration"] = T
     summary.update(status=status, error=error, t_end=float(result.t[-1]))
-    files["scenario"] = folder / "scenario.yaml"
-    files["scenario"].write_text(scenario_copy(sc, T, solver), encoding="utf-8")
+    pending = []
     if plots:
-        from multiarm_pin.app.plots import write_plots
-
-        for p in write_plots(folder, traj, [a.name for a in built.arms], sc.name,
-                             [sp.name for sp in built.system.supports.supports]):
-            files[p.stem] = p
+        pending += plot_names(traj, [sp.name for sp in built.system.supports.supports],
+                              [a.name for a in built.system.arms])
     if html:
-        from multiarm_pin.app.replay import write_replay_html
+        pending.append("replay.html")
+    try:
+        np.savez(files["trajectory"], **traj)
+        files["scenario"].write_text(scenario_copy(sc, T, solver), encoding="utf-8")
+        _write_summary(files, summary, pending, None)  # the plots and page still to come
+    except OSError as exc:  # e.g. a full disk: nothing whole to keep
+        raise OutputError(f"--out {target}: cannot write the results in {folder}: "
+                          f"{exc.strerror or exc}") from exc
+    _say(f"  trajectory.npz, scenario.yaml, summary.json: {time.perf_counter() - start:.1f} s",
+         quiet)
+    steps = []
+    if plots:
+        steps.append((f"plots ({len(pending) - int(html)} PNG files)",
+                      lambda: _write_plots(folder, built, sc, traj)))
+    if html:
+        steps.append(("replay page", lambda: {"replay": _write_page(folder, built, traj)}))
+    interrupt, problems = None, []
+    try:
+        signals.arm()  # a signal held while the first files were written stops here
+        for label, write in steps:
+            step = time.perf_counter()
+            _say(f"  {label}...", quiet)
+            try:
+                files.update(write())
+            except Exception as exc:  # noqa: BLE001 - the trajectory and summary stay kept
+                problems.append(f"{label.split(' (')[0]} not written: {type(exc).__name__}: "
+                                f"{exc}")
+                print(f"warning: {problems[-1]}", file=sys.stderr, flush=True)
+                continue
+            _say(f"  {label}: {time.perf_counter() - step:.1f} s", quiet)
+        signals.hold()
+    except KeyboardInterrupt as exc:  # the handler holds the signals that follow
+        interrupt = getattr(exc, "signal_name", "SIGINT")
+    written = {p.name for p in files.values()}
+    for p in list(folder.iterdir()):  # a plot or page cut short
+        if p.name not in written:
+            if p.is_dir():
+                shutil.rmtree(p, ignore_errors=True)
+            else:
+                p.unlink()
+    missing = [name for name in pending if name not in written]
+    notes = list(problems)
+    if interrupt is not None and missing:
+        notes.append(f"interrupted by {interrupt} while writing the results: "
+                     f"{', '.join(missing)} not written (multiarm-pin replay DIR still replays "
+                     "the run)")
+    try:
+        _write_summary(files, summary, missing, interrupt, notes)
+    except OSError as exc:  # the first summary stays: it lists the plots and page as missing
+        print(f"warning: {folder / 'summary.json'} not updated: {exc.strerror or exc}",
+              file=sys.stderr, flush=True)
+    writer.publish()
+    later = signals.take_held()
+    if interrupt is not None:
+        _say(f"  interrupted by {interrupt}: {', '.join(missing) or 'nothing'} not written", quiet)
+    elif later is not None:
+        interrupt = later  # held during the final move: the results are all there
+    _say(f"results written to {target} in {time.perf_counter() - start:.1f} s", quiet)
+    return _Written({k: target / p.name for k, p in files.items()}, traj, summary, missing,
+                    interrupt, problems)
 
-        rarms, robj, rc = replay_parts(built.arms, built.obj, traj)
-        files["replay"] = write_replay_html(folder / "replay.html", rarms, robj, traj["t"],
-                                            rc, fps=REPLAY_FPS)
-    files["summary"] = folder / "summary.json"
+
+def _write_summary(files: dict, summary: dict, missing: list, interrupt: str | None,
+                   notes: list[str] = ()) -> None:
+    """Write ``summary.json`` atomically, with the files written, those missing and why."""
     summary["files"] = {k: p.name for k, p in files.items()}
-    files["summary"].write_text(json.dumps(summary, indent=2), encoding="utf-8")
-    return files, traj, summary
+    summary["missing_files"] = list(missing)
+    summary["write_interrupted"] = interrupt
+    summary["warnings"] += [n for n in notes if n not in summary["warnings"]]
+    write_atomic(files["summary"], json.dumps(summary, indent=2).encode("utf-8"))
+
+
+def _write_plots(folder: Path, built: BuiltScenario, sc: Scenario, traj: dict) -> dict:
+    """The PNG plots, drawn into a folder of their own, moved beside the others when all are.
+
+    Returns:
+        The plots in ``folder`` by role (their stems).
+    """
+    from multiarm_pin.app.plots import write_plots
+
+    part = Path(tempfile.mkdtemp(prefix=".plots-", dir=folder))
+    try:
+        written = write_plots(part, traj, [a.name for a in built.arms], sc.name,
+                              [sp.name for sp in built.system.supports.supports])
+        out = {}
+        for p in written:
+            os.replace(p, folder / p.name)
+            out[p.stem] = folder / p.name
+        return out
+    finally:
+        shutil.rmtree(part, ignore_errors=True)
+
+
+def _write_page(folder: Path, built: BuiltScenario, traj: dict) -> Path:
+    """``replay.html``, written under another name and renamed when whole."""
+    from multiarm_pin.app.replay import write_replay_html
+
+    rarms, robj, rc = replay_parts(built.arms, built.obj, traj)
+    part = folder / ".replay.html.part"
+    write_replay_html(part, rarms, robj, traj["t"], rc, fps=REPLAY_FPS,
+                      title=f"{built.scenario.name}: multiarm-pin replay")
+    final = folder / "replay.html"
+    os.replace(part, final)
+    return final
 
 
 def serve_run(run_dir, fps: float = REPLAY_FPS, open_browser: bool = False):

@@ -13,12 +13,15 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import signal
+import threading
 import time
 import uuid
 from collections.abc import Callable
 from pathlib import Path
 
 from multiarm_pin.app.progress import LineProgress
+from multiarm_pin.app.results_io import deferred_signals
 from multiarm_pin.exceptions import StudyError
 from multiarm_pin.study.case import CaseTask, run_case
 from multiarm_pin.study.spec import Case, StudySpec, load_study
@@ -29,10 +32,13 @@ TABLE_FLUSH_INTERVAL = 2.0
 per case in any case)."""
 SCHEDULER_TIMEOUT = 10.0
 """Seconds to wait for a user's scheduler before giving up."""
+WORKER_PRELOAD = "multiarm_pin.study.worker_setup"
+"""The module each worker of the local cluster runs at its start (it ignores SIGINT)."""
 LOCAL_CLUSTER_CONFIG = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.tick.interval": "1s",
     "distributed.admin.system-monitor.gil.enabled": False,
+    "distributed.worker.preload": [WORKER_PRELOAD],
 }
 """Dask settings of the local cluster :func:`local_cluster` starts (not of a user's cluster).
 
@@ -53,7 +59,8 @@ settings, while the case's own CPU time differed by at most ~5 %. Hence:
   the GIL every 1 ms to measure this very contention.
 
 The Nanny hands the configuration active at its creation to its worker process, also
-when it restarts a worker that died.
+when it restarts a worker that died; ``worker.preload`` runs :data:`WORKER_PRELOAD` in each
+(see :func:`_workers_ignore_sigint`).
 """
 
 
@@ -118,9 +125,51 @@ def local_cluster(workers: int):
     import dask.config
     from distributed import LocalCluster
 
-    with dask.config.set(LOCAL_CLUSTER_CONFIG):
-        return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                            dashboard_address=None, silence_logs=logging.ERROR)
+    cluster = None
+    try:
+        # a Ctrl-C while the cluster starts is held until it is up (then closed whole)
+        with dask.config.set(LOCAL_CLUSTER_CONFIG), _workers_ignore_sigint(), \
+                deferred_signals((signal.SIGINT,)):
+            # the scheduler's HTTP server (no dashboard) on a free local port: no warning
+            # when another cluster holds Dask's default port
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=logging.ERROR,
+                                   scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
+    except BaseException:  # a Ctrl-C held during the start arrives as it ends
+        if cluster is not None:
+            with contextlib.suppress(Exception):
+                cluster.close()
+        raise
+    return cluster
+
+
+@contextlib.contextmanager
+def _workers_ignore_sigint():
+    """Worker processes started inside the block ignore SIGINT: the driver alone handles it.
+
+    A terminal's Ctrl-C goes to its whole foreground process group, the local cluster's
+    worker processes too, whose event loops would each die printing a traceback. The
+    workers are forked from multiprocessing's fork server (``multiprocessing-method:
+    forkserver`` inside the block), which is started here, if it is not running yet, with
+    SIGINT ignored: an ignored disposition survives ``exec``, Python leaves an ignored
+    SIGINT ignored, and the server hands it to every process it forks. SIGINT is ignored in
+    the driver only while the server process is launched (it is not waited for). Each
+    worker also ignores SIGINT from its start on (:data:`WORKER_PRELOAD`), a worker the
+    Nanny restarts later too. Main thread only (elsewhere: the preload alone).
+    """
+    import dask.config
+
+    if threading.current_thread() is threading.main_thread():
+        from multiprocessing import forkserver
+
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            forkserver.ensure_running()
+        finally:
+            signal.signal(signal.SIGINT, signal.default_int_handler if previous is None
+                          else previous)
+    with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
+        yield
 
 
 class Study:
@@ -291,4 +340,5 @@ def _lost_row(task: CaseTask, exc: BaseException) -> dict:
     return row
 
 
-__all__ = ["LOCAL_CLUSTER_CONFIG", "CaseProgress", "Study", "connect", "local_cluster"]
+__all__ = ["LOCAL_CLUSTER_CONFIG", "WORKER_PRELOAD", "CaseProgress", "Study", "connect",
+           "local_cluster"]

@@ -165,3 +165,9 @@ def test_killed_worker_tasks_rerun_elsewhere(client, tmp_path):
     assert rerun, killed
     for cid in rerun:
         assert int(rows[cid]["worker"].split(":")[1]) != killed["pid"]
+    # every worker ignores SIGINT, the one the Nanny started again in place of the killed one
+    # too (WORKER_PRELOAD): a terminal's Ctrl-C is the driver's alone
+    client.wait_for_workers(2, timeout=300)
+    ignored = client.run(lambda: (os.getpid(), signal.getsignal(signal.SIGINT) == signal.SIG_IGN))
+    assert len(ignored) == 2 and killed["pid"] not in {pid for pid, _ in ignored.values()}
+    assert all(ign for _, ign in ignored.values()), ignored
