@@ -133,7 +133,7 @@ def test_out_on_a_mount_point_is_written_in_place(tmp_path):
         p = run_cli("run", sc, "--out", vol, "--no-html")
         assert p.returncode == 0, p.stderr
         assert "is a mount point" in p.stderr and "one file at a time" in p.stderr
-        assert "writing results to" in p.stderr and "plots (3 PNG files):" in p.stderr
+        assert "writing results to" in p.stderr and "plots (4 PNG files):" in p.stderr
         s = _summary(vol)
         assert s["status"] == "complete" and sorted(s["files"].values()) == sorted(
             f for f in os.listdir(src) if not f.startswith("."))

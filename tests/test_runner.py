@@ -450,7 +450,10 @@ def test_interrupt_while_writing_keeps_the_trajectory_and_summary(tmp_path, monk
     assert s["status"] == "complete" and s["t_end"] == pytest.approx(0.006)
     with np.load(out / "trajectory.npz") as z:
         assert len(z["t"]) == s["samples"] == 4
-    names = plot_names({"contact_active": 1, "event_t": []})
+    with np.load(out / "trajectory.npz") as z:
+        names = plot_names({k: z[k] for k in z.files}, arm_names=["a"])
+    assert names == ["arm_wrenches.png", "joint_torques.png", "object_pose.png",
+                     "constraint_violation.png"]  # a weld: its wrench, no contact forces
     assert s["missing_files"] == names and s["write_interrupted"] == "SIGINT"
     assert any("not written" in w for w in s["warnings"])
     assert not any((out / n).exists() for n in names)
