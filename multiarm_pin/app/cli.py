@@ -235,6 +235,11 @@ def run_command(args: argparse.Namespace) -> int:
         e0 = s["events"][0]
         print(f"  {len(s['events'])} contact events (separations, touchdowns); first: "
               f"{e0['kind']} of {e0['label']} at t = {e0['t']:.4g} s")
+    if s.get("feasible") is False:
+        from multiarm_pin.app.run_results import feasibility_lines
+
+        for line in feasibility_lines(s):
+            print(line)
     for w in s["warnings"][:10]:
         print(f"  warning: {w}")
     if len(s["warnings"]) > 10:

@@ -28,6 +28,7 @@ from multiarm_pin.app.results_io import (
     prepare_output,
     safe_component,
 )
+from multiarm_pin.app.run_feasibility import apply_policies, check_initial_state
 from multiarm_pin.app.run_results import (
     REPLAY_FPS,
     load_run,
@@ -194,6 +195,7 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
                                 f"needing ~{need / 2**30:.3g} GiB of memory (limit "
                                 f"{limit / 2**30:.3g} GiB, half the machine's memory); shorten "
                                 "the duration or lengthen simulation.dt")
+        scene = check_initial_state(built)  # bodies colliding at t = 0: bad input
         input_warns = input_warnings(built, T)
         for w in input_warns:
             print(f"warning: {w}", file=sys.stderr, flush=True)
@@ -228,12 +230,13 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
             if bar is not None:
                 bar.close()
         wall = time.perf_counter() - t0
+        result, status, error, feasibility = apply_policies(built, result, scene, status, error)
         t_end = float(result.t[-1])
         try:
             _say(f"writing results to {target}", quiet)
             files, traj, summary = _write_results(writer.path, built, result, solver, wall,
                                                   T, sc, html, plots, status, error,
-                                                  input_warns)
+                                                  input_warns, feasibility.as_summary())
             writer.publish()
         except KeyboardInterrupt as exc:
             name = getattr(exc, "signal_name", "SIGINT")
@@ -286,7 +289,8 @@ def simulate_built(built: BuiltScenario, controller, duration: float, dt: float,
 
 def _write_results(folder: Path, built: BuiltScenario, result, solver: str, wall: float,
                    T: float, sc: Scenario, html: bool, plots: bool, status: str,
-                   error: str | None, input_warns: list[str]) -> tuple[dict, dict, dict]:
+                   error: str | None, input_warns: list[str],
+                   feasibility: dict | None = None) -> tuple[dict, dict, dict]:
     """Write every result file into ``folder``; returns (files by role, arrays, summary)."""
     traj = trajectory_arrays(built, result)
     files = {}
@@ -299,6 +303,7 @@ def _write_results(folder: Path, built: BuiltScenario, result, solver: str, wall
     summary["input_warnings"] = list(input_warns)
     summary["requested"]["duration"] = T
     summary.update(status=status, error=error, t_end=float(result.t[-1]))
+    summary.update(feasibility or {})
     files["scenario"] = folder / "scenario.yaml"
     files["scenario"].write_text(scenario_copy(sc, T, solver), encoding="utf-8")
     if plots:

@@ -1,0 +1,497 @@
+"""Collisions of a system's bodies: arms, object, supports and ground, with Pinocchio and coal.
+
+:class:`CollisionScene` puts every body of a :class:`~multiarm_pin.system.MultiArmSystem` into
+one Pinocchio model and one geometry model: each arm's collision geometry
+(:mod:`multiarm_pin.feasibility.arm_geometry`, names prefixed ``<arm>/``), the object's convex
+polyhedron on a free-flyer joint (so that a sample's configuration is ``[q; x_o; quat_o]``,
+the quaternion ``[x, y, z, w]``), each support as a slab under its plane, and a ground
+half-space ``z <= height``. Its pairs, each in one category:
+
+- ``arm_self``: two links of one arm (the pairs of :class:`ArmGeometry.self_pairs`);
+- ``arm_arm``: a link of one arm and a link of another;
+- ``arm_object``: a link and the object. The links that carry the arm's grasp (on the tool's
+  joint or after it) may touch the object at the grasp: a penetration of theirs whose point
+  on the object lies within :data:`JOINT_ZONE_RADIUS` of one of the arm's contact points is
+  the grasp itself, not a collision (and these pairs are left out of the clearance);
+- ``arm_support``: a link and a support's slab;
+- ``arm_ground``: a link and the ground. An arm whose base stands on the ground (base
+  origin within :data:`MOUNT_TOLERANCE` of it, z axis up) rests its base links (the
+  geometry fixed to the world) on it: those pairs are left out.
+
+Distances are coal's (``pin.computeDistances``, signed: negative = penetration depth [m]) on
+the convex hulls of the meshes, which are lower bounds of the meshes' distances. A pair
+whose hull penetrates is measured again on the meshes themselves (coal BVH models); only a
+mesh penetration is a collision.
+
+Slabs: a support is an infinite plane in the dynamics; its slab is a box of thickness
+:data:`SLAB_THICKNESS` under the plane, a square around the object's support points at the
+scene's reference state, :data:`SLAB_MARGIN` wider than they reach on each side (the square
+the replay draws).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from multiarm_pin.feasibility.arm_geometry import ArmGeometry, arm_collision_geometry
+from multiarm_pin.feasibility.batch_kinematics import joint_placements
+
+CATEGORIES = ("arm_self", "arm_arm", "arm_object", "arm_support", "arm_ground")
+"""Pair categories, in the order of :attr:`CollisionScene.category` codes."""
+
+JOINT_ZONE_RADIUS = 0.05
+"""Radius [m] around each contact point of an arm's grasp inside which its carrying links
+may touch or enter the object (the grasp, not a collision)."""
+
+MOUNT_TOLERANCE = 0.01
+"""Largest distance [m] between an arm's base origin and the ground for it to stand on it."""
+
+SLAB_THICKNESS = 0.05
+"""Thickness [m] of a support's slab (under its plane)."""
+
+SLAB_MARGIN = 0.1
+"""Margin [m] of a support's slab beyond the object's support points."""
+
+PENETRATION_TOLERANCE = 1e-6
+"""Depth [m] beyond which a penetration counts (round-off of touching surfaces)."""
+
+
+@dataclass(frozen=True)
+class Collision:
+    """One pair of bodies in collision at one state.
+
+    Attributes:
+        category: one of :data:`CATEGORIES`.
+        arm: the (first) arm's name.
+        link: its link's name.
+        other: the other body (``"<arm>/<link>"``, ``"object"``, the support's name or
+            ``"ground"``).
+        distance: signed distance [m] (negative: penetration depth), on the meshes.
+        point: (3,) world point of the penetration on the first body [m].
+    """
+
+    category: str
+    arm: str
+    link: str
+    other: str
+    distance: float
+    point: np.ndarray
+
+    def describe(self) -> str:
+        """One line: both bodies and the depth."""
+        return (f"{self.arm}/{self.link} and {self.other} interpenetrate by "
+                f"{-self.distance * 1e3:.3g} mm at {np.round(self.point, 4).tolist()} m")
+
+
+@dataclass(frozen=True)
+class ScanResult:
+    """What :meth:`CollisionScene.scan` found along a run.
+
+    Attributes:
+        clearance: per category of :data:`CATEGORIES`, the smallest hull distance over the run
+            [m] (grasp pairs left out), or None when the category has no pair.
+        hits: per pair index, its collisions ``(sample, distance [m] on the meshes, point
+            (3,) on the first body)`` in time order.
+        measured: number of (sample, pair) distances computed exactly.
+    """
+
+    clearance: dict
+    hits: dict
+    measured: int
+
+
+def _prefixed(model: pin.Model, geom: pin.GeometryModel, prefix: str):
+    """Copies of a model and its geometry with every name (but the universe) prefixed."""
+    out = pin.Model(model)
+    for j in range(1, out.njoints):
+        out.names[j] = prefix + out.names[j]
+    for k in range(out.nframes):
+        f = out.frames[k]
+        if f.name != "universe":
+            f.name = prefix + f.name
+            out.frames[k] = f
+    g = geom.copy()
+    for k in range(g.ngeoms):
+        o = g.geometryObjects[k]
+        o.name = prefix + o.name
+        g.geometryObjects[k] = o
+    return out, g
+
+
+def _object_convex(shape) -> coal.Convex:
+    """The object's polyhedron as a coal convex (its vertices; coal takes their hull)."""
+    pts = coal.StdVec_Vec3s()
+    for p in np.asarray(shape.vertices, float):
+        pts.append(p)
+    return coal.Convex.convexHull(pts, False, "")
+
+
+class CollisionScene:
+    """Every body of a system in one Pinocchio geometry model (see the module docstring).
+
+    Args:
+        system: the :class:`~multiarm_pin.system.MultiArmSystem`.
+        state: the reference state (the slabs are sized around the object's support points
+            there); None: the object at the origin.
+        ground: height [m] of the ground plane ``z = ground``, or None for no ground.
+
+    Attributes:
+        pairs: (P, 2) geometry indices of each checked pair (hull and mesh models alike).
+        category: (P,) index into :data:`CATEGORIES`.
+        arm_of_pair: (P,) index of the pair's (first) arm.
+        grasp_pair: (P,) True for a carrying link against the object.
+        names: name of each geometry object (``"<arm>/<link>"``, ``"object"``, ...).
+    """
+
+    def __init__(self, system, state=None, ground: float | None = 0.0):
+        self.system = system
+        self.ground = None if ground is None else float(ground)
+        model = pin.Model()
+        hull, mesh = pin.GeometryModel(), pin.GeometryModel()
+        names, owner, link = [], [], []
+        geoms: list[ArmGeometry] = []
+        offsets = []
+        for i, arm in enumerate(system.arms):
+            ag = arm_collision_geometry(arm)
+            geoms.append(ag)
+            m_h, g_h = _prefixed(ag.model, ag.hull, f"{arm.name}/")
+            _, g_m = _prefixed(ag.model, ag.mesh, f"{arm.name}/")
+            offsets.append(hull.ngeoms)
+            model_h, hull = pin.appendModel(model, m_h, hull, g_h, 0, pin.SE3.Identity())
+            _, mesh = pin.appendModel(model, m_h, mesh, g_m, 0, pin.SE3.Identity())
+            model = model_h
+            names += [f"{arm.name}/{n}" for n in ag.names]
+            owner += [i] * len(ag.names)
+            link += list(ag.names)
+        self.nq_arms = model.nq
+        jid = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "object")
+        fid = model.addFrame(pin.Frame("object", jid, 0, pin.SE3.Identity(),
+                                       pin.FrameType.BODY))
+        convex = _object_convex(system.obj.shape)
+        self.object_index = hull.ngeoms
+        for g in (hull, mesh):
+            g.addGeometryObject(pin.GeometryObject("object", jid, fid, pin.SE3.Identity(),
+                                                   convex))
+        names.append("object")
+        owner.append(-1)
+        link.append("object")
+        self.support_index = []
+        for sp, half in zip(system.supports.supports, self._slab_halves(state), strict=True):
+            box = coal.Box(2 * half, 2 * half, SLAB_THICKNESS)
+            placement = self._slab_placement(sp, state)
+            self.support_index.append(hull.ngeoms)
+            for g in (hull, mesh):
+                g.addGeometryObject(pin.GeometryObject(sp.name, 0, 0, placement, box))
+            names.append(sp.name)
+            owner.append(-1)
+            link.append(sp.name)
+        self.ground_index = None
+        if self.ground is not None:
+            self.ground_index = hull.ngeoms
+            half_space = coal.Halfspace(np.array([0.0, 0.0, 1.0]), self.ground)
+            for g in (hull, mesh):
+                g.addGeometryObject(pin.GeometryObject("ground", 0, 0, pin.SE3.Identity(),
+                                                       half_space))
+            names.append("ground")
+            owner.append(-1)
+            link.append("ground")
+        self.model, self.hull, self.mesh = model, hull, mesh
+        self.names, self.owner, self.link = names, owner, link
+        self.arm_geometry = geoms
+        self._pairs(system, geoms, offsets)
+        self.data = model.createData()
+        self.hull_data = pin.GeometryData(hull)
+        self.mesh_data = pin.GeometryData(mesh)
+
+    # ------------------------------------------------------------------ construction
+    def _slab_halves(self, state) -> list[float]:
+        """Half side [m] of each support's slab (see the module docstring)."""
+        sup = self.system.supports
+        out = []
+        pos = np.zeros(3) if state is None else np.asarray(state.obj.position)
+        R = np.eye(3) if state is None else state.obj.rotation
+        for k, sp in enumerate(sup.supports):
+            pts = pos + np.asarray(sp.points) @ R.T
+            pts = pts - ((pts - sp.point) @ sp.normal)[:, None] * sp.normal
+            c = pts.mean(axis=0)
+            out.append(float(np.max(np.linalg.norm(pts - c, axis=1), initial=0.0)) + SLAB_MARGIN)
+            del k
+        return out
+
+    def _slab_placement(self, sp, state) -> pin.SE3:
+        """The slab's placement: its top face on the plane, centred under the support points."""
+        n = np.asarray(sp.normal, float)
+        pos = np.zeros(3) if state is None else np.asarray(state.obj.position)
+        R_o = np.eye(3) if state is None else state.obj.rotation
+        pts = pos + np.asarray(sp.points) @ R_o.T
+        pts = pts - ((pts - sp.point) @ n)[:, None] * n
+        c = pts.mean(axis=0)
+        x = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+        x /= np.linalg.norm(x)
+        R = np.column_stack([x, np.cross(n, x), n])
+        return pin.SE3(R, c - 0.5 * SLAB_THICKNESS * n)
+
+    def _pairs(self, system, geoms: list[ArmGeometry], offsets: list[int]) -> None:
+        pairs, cat, arm_of, grasp = [], [], [], []
+
+        def add(a, b, c, i, g=False):
+            pairs.append((a, b))
+            cat.append(CATEGORIES.index(c))
+            arm_of.append(i)
+            grasp.append(g)
+
+        mounted = [self._stands_on_ground(arm) for arm in system.arms]
+        for i, (ag, off) in enumerate(zip(geoms, offsets, strict=True)):
+            for a, b in ag.self_pairs:
+                add(off + a, off + b, "arm_self", i)
+            for j in range(i + 1, len(geoms)):
+                for a in range(len(ag.names)):
+                    for b in range(len(geoms[j].names)):
+                        add(off + a, offsets[j] + b, "arm_arm", i)
+            joints = [g.parentJoint for g in ag.hull.geometryObjects]
+            for a in range(len(ag.names)):
+                add(off + a, self.object_index, "arm_object", i, a in ag.carrier)
+                for s in self.support_index:
+                    add(off + a, s, "arm_support", i)
+                if self.ground_index is not None and not (mounted[i] and joints[a] == 0):
+                    add(off + a, self.ground_index, "arm_ground", i)
+        meta = {}
+        for (a, b), c, i, g in zip(pairs, cat, arm_of, grasp, strict=True):
+            meta[(a, b)] = (c, i, g)
+            self.hull.addCollisionPair(pin.CollisionPair(a, b))
+            self.mesh.addCollisionPair(pin.CollisionPair(a, b))
+        # the geometry model keeps its pairs in its own order: read them back
+        order = [(int(cp.first), int(cp.second)) for cp in self.hull.collisionPairs]
+        if order != [(int(cp.first), int(cp.second)) for cp in self.mesh.collisionPairs]:
+            raise RuntimeError("hull and mesh geometry models ordered their pairs differently")
+        self.pairs = np.array(order, dtype=int).reshape(-1, 2)
+        self.category = np.array([meta[o][0] for o in order], dtype=int)
+        self.arm_of_pair = np.array([meta[o][1] for o in order], dtype=int)
+        self.grasp_pair = np.array([meta[o][2] for o in order], dtype=bool)
+
+    def _stands_on_ground(self, arm) -> bool:
+        """True if the arm's base origin is on the ground with its z axis up."""
+        if self.ground is None:
+            return False
+        b = arm.base_placement
+        return (abs(float(b.translation[2]) - self.ground) <= MOUNT_TOLERANCE
+                and float(b.rotation[2, 2]) > 1.0 - 1e-6)
+
+    # ------------------------------------------------------------------ queries
+    def configuration(self, q: np.ndarray, position: np.ndarray,
+                      quaternion: np.ndarray) -> np.ndarray:
+        """The scene model's configuration ``[q; x_o; quat_o]`` (nq + 7,)."""
+        return np.concatenate([q, position, quaternion])
+
+    def hull_distances(self, q_scene: np.ndarray) -> np.ndarray:
+        """(P,) signed distances [m] of every pair on the hulls at a configuration."""
+        pin.computeDistances(self.model, self.data, self.hull, self.hull_data, q_scene)
+        return np.array([r.min_distance for r in self.hull_data.distanceResults])
+
+    def mesh_distance(self, q_scene: np.ndarray, k: int) -> tuple[float, np.ndarray,
+                                                                   np.ndarray]:
+        """Signed distance [m] of pair ``k`` on the meshes, and its two nearest points (3,).
+
+        The placements are those of the last :meth:`hull_distances` call when ``q_scene``
+        is the same; they are recomputed here anyway (one pair: cheap).
+        """
+        pin.updateGeometryPlacements(self.model, self.data, self.mesh, self.mesh_data, q_scene)
+        r = pin.computeDistance(self.mesh, self.mesh_data, int(k))
+        return float(r.min_distance), np.array(r.getNearestPoint1()), \
+            np.array(r.getNearestPoint2())
+
+    def hull_points(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """The nearest points (3,) of pair ``k`` on the hulls, from the last distances."""
+        r = self.hull_data.distanceResults[int(k)]
+        return np.array(r.getNearestPoint1()), np.array(r.getNearestPoint2())
+
+    def pair_names(self, k: int) -> tuple[str, str, str]:
+        """``(arm, link, other body)`` of pair ``k``."""
+        a, b = self.pairs[k]
+        arm = self.system.arms[self.owner[a]].name
+        return arm, self.link[a], self.names[b]
+
+    def collisions(self, q_scene: np.ndarray, contact_points: list[np.ndarray] | None = None,
+                   distances: np.ndarray | None = None) -> list[Collision]:
+        """The pairs in collision at a configuration (on the meshes; grasps excepted).
+
+        Args:
+            q_scene: (nq + 7,) from :meth:`configuration`.
+            contact_points: per arm, (N_i, 3) its grasp's contact points in the world [m]
+                (None: no grasp exception, every carrying link's penetration counts).
+            distances: the hull distances at ``q_scene`` if already computed.
+        """
+        d = self.hull_distances(q_scene) if distances is None else distances
+        out = []
+        for k in np.flatnonzero(d < -PENETRATION_TOLERANCE):
+            dist, p1, p2 = self.mesh_distance(q_scene, k)
+            if dist >= -PENETRATION_TOLERANCE:
+                continue
+            if self.grasp_pair[k] and contact_points is not None and self._at_grasp(
+                    k, p2, contact_points):
+                continue
+            arm, link, other = self.pair_names(k)
+            out.append(Collision(CATEGORIES[self.category[k]], arm, link, other, dist, p1))
+        return out
+
+    # ------------------------------------------------------------------ along a run
+    def _spheres(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Bounding sphere of every geometry in its own frame.
+
+        Returns:
+            centres (G, 3) [m], radii (G,) [m], and whether each moves (G,) bool (on a
+            joint, not the world).
+        """
+        G = self.hull.ngeoms
+        c, r, moving = np.zeros((G, 3)), np.zeros(G), np.zeros(G, dtype=bool)
+        for g in range(G):
+            o = self.hull.geometryObjects[g]
+            moving[g] = o.parentJoint != 0
+            if g == self.ground_index:
+                continue
+            shape = o.geometry
+            shape.computeLocalAABB()
+            c[g] = o.placement.act(np.array(shape.aabb_center))
+            r[g] = float(shape.aabb_radius)
+        return c, r, moving
+
+    def scan(self, q: np.ndarray, object_position: np.ndarray, object_quaternion: np.ndarray,
+             contact_points: list[np.ndarray] | None = None) -> ScanResult:
+        """Collisions and clearances at every sample of a run.
+
+        A lower bound of every pair's distance at every sample comes first, vectorised:
+        bounding spheres of the links, the object's face planes, the slab's box, the ground's
+        plane. Only the (sample, pair) whose bound is not above zero are measured (on the
+        hulls, then on the meshes where a hull penetrates); each category's clearance is
+        then found by measuring its pairs in increasing order of their bound until the bound
+        exceeds the smallest distance measured (branch and bound: the exact minimum over
+        the samples, on the hulls).
+
+        Args:
+            q: (T, nq) arms' configurations.
+            object_position: (T, 3) [m].
+            object_quaternion: (T, 4) ``[x, y, z, w]``.
+            contact_points: per arm, (T, N_i, 3) its grasp's contact points [m] (None: no
+                grasp exception).
+
+        Returns:
+            :class:`ScanResult`.
+        """
+        T = len(q)
+        P = len(self.pairs)
+        c_local, radius, _ = self._spheres()
+        G = len(radius)
+        configs = np.concatenate([q, object_position, object_quaternion], axis=1)
+        R, p = joint_placements(self.model, configs)
+        joint = np.array([o.parentJoint for o in self.hull.geometryObjects], dtype=int)
+        in_joint = np.array([self.hull.geometryObjects[g].placement.act(c_local[g])
+                             for g in range(G)]).reshape(G, 3)
+        centres = np.einsum("tgij,gj->tgi", R[:, joint], in_joint) + p[:, joint]
+        model, data = self.model, self.data
+        lower = self._lower_bounds(centres, radius, object_position, object_quaternion)
+        exact = np.full((T, P), np.nan)
+        todo = lower <= PENETRATION_TOLERANCE
+        self._measure(configs, exact, todo)
+        clearance = {}
+        for ci, name in enumerate(CATEGORIES):
+            cols = np.flatnonzero((self.category == ci) & ~self.grasp_pair)
+            if not len(cols):
+                clearance[name] = None
+                continue
+            clearance[name] = self._category_minimum(configs, exact, lower, cols)
+        hits: dict[int, list] = {}
+        for s, k in zip(*np.nonzero(exact < -PENETRATION_TOLERANCE), strict=True):
+            pin.updateGeometryPlacements(model, data, self.mesh, self.mesh_data, configs[s])
+            if not pin.computeCollision(self.mesh, self.mesh_data, int(k)):
+                continue
+            r = pin.computeDistance(self.mesh, self.mesh_data, int(k))
+            dist = float(r.min_distance)
+            if dist >= -PENETRATION_TOLERANCE:
+                continue
+            if self.grasp_pair[k] and contact_points is not None:
+                cps = [np.asarray(c)[s] for c in contact_points]
+                if self._at_grasp(k, np.array(r.getNearestPoint2()), cps):
+                    continue
+            hits.setdefault(int(k), []).append((int(s), dist, np.array(r.getNearestPoint1())))
+        return ScanResult(clearance, hits, int(np.count_nonzero(~np.isnan(exact))))
+
+    def _lower_bounds(self, centres, radius, position, quaternion) -> np.ndarray:
+        """(T, P) lower bounds of every pair's distance [m] at every sample."""
+        a, b = self.pairs[:, 0], self.pairs[:, 1]
+        T = len(centres)
+        lower = np.full((T, len(a)), -np.inf)
+        ca, ra = centres[:, a], radius[a]
+        obj = b == self.object_index
+        if np.any(obj):
+            from scipy.spatial.transform import Rotation
+
+            R = Rotation.from_quat(quaternion).as_matrix()  # [x, y, z, w], (T, 3, 3)
+            local = np.einsum("tji,tpj->tpi", R, ca[:, obj] - position[:, None])
+            shape = self.system.obj.shape
+            plane = np.max(local @ shape.normals.T - shape.offsets, axis=2)
+            lower[:, obj] = plane - ra[obj]
+        if self.ground_index is not None:
+            gnd = b == self.ground_index
+            lower[:, gnd] = ca[:, gnd, 2] - self.ground - ra[gnd]
+        for s in self.support_index:
+            sup = b == s
+            if not np.any(sup):
+                continue
+            o = self.hull.geometryObjects[s]
+            half = np.array(o.geometry.halfSide)
+            local = (ca[:, sup] - o.placement.translation) @ o.placement.rotation
+            outside = np.maximum(np.abs(local) - half, 0.0)
+            lower[:, sup] = np.linalg.norm(outside, axis=2) - ra[sup]
+        links = ~obj & (b != (self.ground_index if self.ground_index is not None else -1))
+        links &= ~np.isin(b, self.support_index)
+        lower[:, links] = (np.linalg.norm(ca[:, links] - centres[:, b[links]], axis=2)
+                           - ra[links] - radius[b[links]])
+        return lower
+
+    def _measure(self, configs, exact, todo) -> None:
+        """Hull distances of the (sample, pair) marked in ``todo`` into ``exact``."""
+        model, data, hull, hd = self.model, self.data, self.hull, self.hull_data
+        for s in np.flatnonzero(todo.any(axis=1)):
+            pin.updateGeometryPlacements(model, data, hull, hd, configs[s])
+            for k in np.flatnonzero(todo[s]):
+                exact[s, k] = pin.computeDistance(hull, hd, int(k)).min_distance
+
+    def _category_minimum(self, configs, exact, lower, cols) -> float:
+        """The smallest hull distance over samples and the pairs ``cols`` (branch and bound)."""
+        sub = exact[:, cols]
+        best = float(np.nanmin(sub)) if np.any(~np.isnan(sub)) else np.inf
+        lb = np.where(np.isnan(sub), lower[:, cols], np.inf)
+        order = np.argsort(lb, axis=None)
+        model, data, hull, hd = self.model, self.data, self.hull, self.hull_data
+        for flat in order:
+            s, j = np.unravel_index(flat, lb.shape)
+            if lb[s, j] >= best:
+                break
+            pin.updateGeometryPlacements(model, data, hull, hd, configs[s])
+            k = int(cols[j])
+            exact[s, k] = pin.computeDistance(hull, hd, k).min_distance
+            best = min(best, float(exact[s, k]))
+        return best
+
+    def _at_grasp(self, k: int, point_on_object: np.ndarray, contact_points) -> bool:
+        pts = np.asarray(contact_points[self.arm_of_pair[k]]).reshape(-1, 3)
+        if not len(pts):
+            return False
+        return float(np.min(np.linalg.norm(pts - point_on_object, axis=1))) <= JOINT_ZONE_RADIUS
+
+
+__all__ = [
+    "CATEGORIES",
+    "JOINT_ZONE_RADIUS",
+    "MOUNT_TOLERANCE",
+    "PENETRATION_TOLERANCE",
+    "SLAB_MARGIN",
+    "SLAB_THICKNESS",
+    "Collision",
+    "CollisionScene",
+    "ScanResult",
+]
