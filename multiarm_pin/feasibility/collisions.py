@@ -24,9 +24,9 @@ whose hull penetrates is measured again on the meshes themselves (coal BVH model
 mesh penetration is a collision.
 
 Slabs: a support is an infinite plane in the dynamics; its slab is a box of thickness
-:data:`SLAB_THICKNESS` under the plane, a square around the object's support points at the
-scene's reference state, :data:`SLAB_MARGIN` wider than they reach on each side (the square
-the replay draws).
+:data:`SLAB_THICKNESS` under the plane, the rectangle that bounds the object's support points
+at the scene's reference state (x axis: the world x axis projected on the plane), widened by
+:data:`SLAB_MARGIN` on each side.
 """
 
 from __future__ import annotations
@@ -53,8 +53,13 @@ MOUNT_TOLERANCE = 0.01
 SLAB_THICKNESS = 0.05
 """Thickness [m] of a support's slab (under its plane)."""
 
-SLAB_MARGIN = 0.1
-"""Margin [m] of a support's slab beyond the object's support points."""
+SLAB_MARGIN = 0.0
+"""Margin [m] of a support's slab beyond the object's support points (none: a support is
+where the object's support points rest, as a stand under some points of a face)."""
+
+GJK_TOLERANCE = 1e-11
+"""Tolerance of coal's GJK on the hulls' distances [m] (its default, 1e-6, leaves the
+distance of two hulls uncertain by about 1e-7 m)."""
 
 PENETRATION_TOLERANCE = 1e-6
 """Depth [m] beyond which a penetration counts (round-off of touching surfaces)."""
@@ -115,6 +120,7 @@ def _prefixed(model: pin.Model, geom: pin.GeometryModel, prefix: str):
             f.name = prefix + f.name
             out.frames[k] = f
     g = geom.copy()
+    g.removeAllCollisionPairs()
     for k in range(g.ngeoms):
         o = g.geometryObjects[k]
         o.name = prefix + o.name
@@ -180,9 +186,9 @@ class CollisionScene:
         owner.append(-1)
         link.append("object")
         self.support_index = []
-        for sp, half in zip(system.supports.supports, self._slab_halves(state), strict=True):
-            box = coal.Box(2 * half, 2 * half, SLAB_THICKNESS)
-            placement = self._slab_placement(sp, state)
+        for sp, (half, placement) in zip(system.supports.supports, self._slabs(state),
+                                         strict=True):
+            box = coal.Box(2 * half[0], 2 * half[1], SLAB_THICKNESS)
             self.support_index.append(hull.ngeoms)
             for g in (hull, mesh):
                 g.addGeometryObject(pin.GeometryObject(sp.name, 0, 0, placement, box))
@@ -199,6 +205,8 @@ class CollisionScene:
             names.append("ground")
             owner.append(-1)
             link.append("ground")
+        for g in (hull, mesh):  # pin.appendModel pairs the geometry it appends: ours instead
+            g.removeAllCollisionPairs()
         self.model, self.hull, self.mesh = model, hull, mesh
         self.names, self.owner, self.link = names, owner, link
         self.arm_geometry = geoms
@@ -206,34 +214,28 @@ class CollisionScene:
         self.data = model.createData()
         self.hull_data = pin.GeometryData(hull)
         self.mesh_data = pin.GeometryData(mesh)
+        for req in self.hull_data.distanceRequests:
+            req.gjk_tolerance = GJK_TOLERANCE
 
     # ------------------------------------------------------------------ construction
-    def _slab_halves(self, state) -> list[float]:
-        """Half side [m] of each support's slab (see the module docstring)."""
-        sup = self.system.supports
+    def _slabs(self, state) -> list[tuple[np.ndarray, pin.SE3]]:
+        """Half sides (2,) [m] and placement of each support's slab (module docstring)."""
         out = []
         pos = np.zeros(3) if state is None else np.asarray(state.obj.position)
-        R = np.eye(3) if state is None else state.obj.rotation
-        for k, sp in enumerate(sup.supports):
-            pts = pos + np.asarray(sp.points) @ R.T
-            pts = pts - ((pts - sp.point) @ sp.normal)[:, None] * sp.normal
-            c = pts.mean(axis=0)
-            out.append(float(np.max(np.linalg.norm(pts - c, axis=1), initial=0.0)) + SLAB_MARGIN)
-            del k
-        return out
-
-    def _slab_placement(self, sp, state) -> pin.SE3:
-        """The slab's placement: its top face on the plane, centred under the support points."""
-        n = np.asarray(sp.normal, float)
-        pos = np.zeros(3) if state is None else np.asarray(state.obj.position)
         R_o = np.eye(3) if state is None else state.obj.rotation
-        pts = pos + np.asarray(sp.points) @ R_o.T
-        pts = pts - ((pts - sp.point) @ n)[:, None] * n
-        c = pts.mean(axis=0)
-        x = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
-        x /= np.linalg.norm(x)
-        R = np.column_stack([x, np.cross(n, x), n])
-        return pin.SE3(R, c - 0.5 * SLAB_THICKNESS * n)
+        for sp in self.system.supports.supports:
+            n = np.asarray(sp.normal, float)
+            x = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+            x = np.cross(x, n)
+            x /= np.linalg.norm(x)
+            R = np.column_stack([x, np.cross(n, x), n])
+            pts = pos + np.asarray(sp.points) @ R_o.T
+            uv = (pts - sp.point) @ R[:, :2]
+            lo, hi = uv.min(axis=0), uv.max(axis=0)
+            centre = sp.point + R[:, :2] @ (0.5 * (lo + hi))
+            half = 0.5 * (hi - lo) + SLAB_MARGIN
+            out.append((half, pin.SE3(R, centre - 0.5 * SLAB_THICKNESS * n)))
+        return out
 
     def _pairs(self, system, geoms: list[ArmGeometry], offsets: list[int]) -> None:
         pairs, cat, arm_of, grasp = [], [], [], []
@@ -261,14 +263,17 @@ class CollisionScene:
                     add(off + a, self.ground_index, "arm_ground", i)
         meta = {}
         for (a, b), c, i, g in zip(pairs, cat, arm_of, grasp, strict=True):
-            meta[(a, b)] = (c, i, g)
+            meta[(min(a, b), max(a, b))] = (c, i, g)
             self.hull.addCollisionPair(pin.CollisionPair(a, b))
             self.mesh.addCollisionPair(pin.CollisionPair(a, b))
         # the geometry model keeps its pairs in its own order: read them back
-        order = [(int(cp.first), int(cp.second)) for cp in self.hull.collisionPairs]
-        if order != [(int(cp.first), int(cp.second)) for cp in self.mesh.collisionPairs]:
+        order = [(min(int(cp.first), int(cp.second)), max(int(cp.first), int(cp.second)))
+                 for cp in self.hull.collisionPairs]
+        if [(int(cp.first), int(cp.second)) for cp in self.hull.collisionPairs] != \
+                [(int(cp.first), int(cp.second)) for cp in self.mesh.collisionPairs]:
             raise RuntimeError("hull and mesh geometry models ordered their pairs differently")
-        self.pairs = np.array(order, dtype=int).reshape(-1, 2)
+        self.pairs = np.array([(int(cp.first), int(cp.second))
+                               for cp in self.hull.collisionPairs], dtype=int).reshape(-1, 2)
         self.category = np.array([meta[o][0] for o in order], dtype=int)
         self.arm_of_pair = np.array([meta[o][1] for o in order], dtype=int)
         self.grasp_pair = np.array([meta[o][2] for o in order], dtype=bool)

@@ -1,0 +1,191 @@
+"""Feasibility checks against independent references: rnea + Jᵀw, the URDF's effort limits,
+coal.distance on the same shapes and placements, and hand-placed collisions."""
+
+from __future__ import annotations
+
+import json
+import xml.etree.ElementTree as ET
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+import yaml
+
+from multiarm_pin.app.runner import simulate_built
+from multiarm_pin.app.scenario import build_scenario
+from multiarm_pin.app.scenario.schema import parse_scenario
+from multiarm_pin.exceptions import ScenarioError
+from multiarm_pin.feasibility import CATEGORIES, CollisionScene, check_design, feasibility_report
+from multiarm_pin.feasibility.collisions import GJK_TOLERANCE
+from multiarm_pin.sim.controllers import make_controller
+from tests.run_helpers import run_cli, write
+
+DEMO = "scenarios/two_ur5_box.yaml"
+
+
+def _demo(mass=4.0, duration=0.02, extra=None):
+    data = yaml.safe_load(open(DEMO, encoding="utf-8"))
+    data["object"]["mass"] = mass
+    data["controller"] = {"type": "object_pd", "kp": 100.0, "kd": 20.0}  # hold it still
+    data["simulation"]["duration"] = duration
+    data.update(extra or {})
+    return data
+
+
+@pytest.fixture(scope="module")
+def held():
+    built = build_scenario(parse_scenario(_demo(), DEMO), load_visuals=False)
+    ctrl = make_controller("object_pd", built.system, kp=100.0, kd=20.0)
+    result = simulate_built(built, ctrl, 0.02, 0.002, "object_first")
+    return built, result
+
+
+def _urdf_efforts(arm) -> dict:
+    from multiarm_pin.feasibility.arm_geometry import _loader_paths
+
+    urdf = _loader_paths("ur5")[0]
+    root = ET.parse(urdf).getroot()
+    return {j.get("name"): float(j.find("limit").get("effort")) for j in root.iter("joint")
+            if j.find("limit") is not None}
+
+
+def test_torques_are_gravity_plus_jacobian_transpose_wrench(held):
+    built, result = held
+    system = built.system
+    for i, arm in enumerate(system.arms):
+        sq, sv = system.arm_set.q_slices[i], system.arm_set.v_slices[i]
+        N = int(system.constraint_set.N[i])
+        data = arm.model.createData()
+        for k in range(len(result.t)):
+            q, v, qdd = result.q[k, sq], result.v[k, sv], result.qdd[k, sv]
+            tool = arm.tool_placement(q).translation
+            f = result.mu[k, i, :N, None] * result.normals[k, i, :N]  # on the object
+            r = result.contact_points[k, i, :N] - tool
+            w = np.concatenate([f.sum(axis=0), np.cross(r, f).sum(axis=0)])
+            pin.computeJointJacobians(arm.model, data, q)
+            pin.framesForwardKinematics(arm.model, data, q)
+            J = pin.getFrameJacobian(arm.model, data, arm.tool_frame_id,
+                                     pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+            expected = pin.rnea(arm.model, data, q, v, qdd) + J.T @ w
+            np.testing.assert_allclose(result.tau[k, sv], expected, rtol=0, atol=1e-8)
+    assert np.abs(result.qdd).max() < 1e-3  # held still: rnea is the gravity torque
+
+
+def test_peak_torque_ratio_from_urdf_effort(held):
+    built, result = held
+    report = feasibility_report(built.system, result)
+    assert report.feasible, report.violations
+    efforts = _urdf_efforts(built.arms[0])
+    for i, arm in enumerate(built.system.arms):
+        tau = result.tau[:, built.system.arm_set.v_slices[i]]
+        for c, name in enumerate(list(arm.model.names)[1:]):
+            ratio = np.abs(tau[:, c]).max() / efforts[name]
+            assert report.limits[arm.name][name]["peak_torque_ratio"] == pytest.approx(
+                ratio, rel=1e-12)
+
+
+def _geometry_placement(scene, g, state):
+    """World placement of geometry g computed from the arm's own model (not the scene's)."""
+    o = scene.hull.geometryObjects[g]
+    if scene.names[g] == "object":
+        return pin.SE3(state.obj.rotation, state.obj.position)
+    if scene.owner[g] < 0:
+        return o.placement
+    i = scene.owner[g]
+    arm = scene.system.arms[i]
+    ag = scene.arm_geometry[i]
+    local = g - sum(len(x.names) for x in scene.arm_geometry[:i])
+    ao = ag.hull.geometryObjects[local]
+    data = arm.model.createData()
+    pin.forwardKinematics(arm.model, data, state.q[scene.system.arm_set.q_slices[i]])
+    return data.oMi[ao.parentJoint] * ao.placement
+
+
+def _coal_distance(scene, k, state):
+    a, b = (int(x) for x in scene.pairs[k])
+    ta, tb = (_geometry_placement(scene, g, state) for g in (a, b))
+    ga, gb = scene.hull.geometryObjects[a].geometry, scene.hull.geometryObjects[b].geometry
+    req = coal.DistanceRequest()
+    req.gjk_tolerance = GJK_TOLERANCE
+    return coal.distance(ga, coal.Transform3s(ta.rotation, ta.translation), gb,
+                         coal.Transform3s(tb.rotation, tb.translation), req,
+                         coal.DistanceResult())
+
+
+def test_clearances_equal_coal_distance(held):
+    built, result = held
+    system = built.system
+    scene = CollisionScene(system, built.initial_state)
+    report = check_design(system, built.initial_state, scene=scene)
+    run = feasibility_report(system, result, scene=scene)
+    for ci, name in enumerate(CATEGORIES):
+        cols = np.flatnonzero((scene.category == ci) & ~scene.grasp_pair)
+        if not len(cols):
+            assert report.clearance[name] is None
+            continue
+        at0 = min(_coal_distance(scene, k, built.initial_state) for k in cols)
+        assert report.clearance[name] == pytest.approx(at0, abs=1e-9)
+        along = min(_coal_distance(scene, k, result.state(s)) for k in cols
+                    for s in range(len(result.t)))
+        assert run.clearance[name] == pytest.approx(along, abs=1e-9)
+        assert run.clearance[name] > 0
+
+
+def test_four_tonne_box_is_infeasible_and_stop_exits_1(tmp_path):
+    f = write(tmp_path / "heavy.yaml", yaml.safe_dump(_demo(mass=4000.0, duration=0.01)))
+    p = run_cli("run", f, "--out", tmp_path / "r", "--no-html", "--quiet")
+    assert p.returncode == 0, p.stderr
+    s = json.loads((tmp_path / "r" / "summary.json").read_text())
+    assert s["feasible"] is False and "NOT FEASIBLE" in p.stdout
+    kinds = {v["kind"] for v in s["violations"]}
+    assert "torque" in kinds
+    v = next(v for v in s["violations"] if v["kind"] == "torque")
+    assert abs(v["value"]) > v["limit"] and v["t_first"] == 0.0
+    f2 = write(tmp_path / "heavy_stop.yaml", yaml.safe_dump(
+        _demo(mass=4000.0, duration=0.01, extra={"limits": {"torque": "stop"}})))
+    p = run_cli("run", f2, "--out", tmp_path / "r2", "--no-html", "--quiet")
+    assert p.returncode == 1, p.stderr
+    s = json.loads((tmp_path / "r2" / "summary.json").read_text())
+    assert s["status"] == "failed" and "limits.torque" in s["error"] and s["t_end"] == 0.0
+
+
+def _one_ur5(tmp_path, name, q0, pose, extra=""):
+    text = f"""name: {name}
+object:
+  shape: {{type: box, size: [0.4, 0.3, 0.2]}}
+  mass: 1.0
+  pose: {{position: {pose}}}
+arms:
+  - name: a
+    robot: ur5
+    q0: {q0}
+    joint: {{type: weld}}
+controller: {{type: gravity_compensation}}
+simulation: {{duration: 0.02, dt: 0.002}}
+{extra}"""
+    return write(tmp_path / f"{name}.yaml", text)
+
+
+@pytest.mark.parametrize("case, q0, pose, extra, pair", [
+    ("base_in_box", [0.0, -1.2, 1.6, -0.4, 1.57, 0.0], [0.0, 0.0, 0.05], "",
+     ("a/base_link", "object")),
+    ("link_under_ground", [0.0, 0.6, 0.0, 0.0, 0.0, 0.0], [1.5, 0.0, 1.0], "",
+     ("a/", "ground")),
+])
+def test_hand_placed_collisions_at_start_exit_2(tmp_path, case, q0, pose, extra, pair):
+    f = _one_ur5(tmp_path, case, q0, pose, extra)
+    p = run_cli("run", f, "--out", tmp_path / "r", "--no-html", "--quiet")
+    assert p.returncode == 2, p.stdout + p.stderr
+    assert "collide at the initial state" in p.stderr
+    assert pair[0] in p.stderr and pair[1] in p.stderr and "mm" in p.stderr
+
+
+def test_two_arms_crossing_named(tmp_path):
+    data = _demo()
+    data["arms"][1]["base"]["position"] = [0.0, 0.3, 0.0]
+    with pytest.raises(ScenarioError):  # placed so that it collides, or unreachable: refused
+        built = build_scenario(parse_scenario(data, "x.yaml"), load_visuals=False)
+        from multiarm_pin.app.run_feasibility import check_initial_state
+
+        check_initial_state(built)
