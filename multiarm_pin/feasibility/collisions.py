@@ -161,18 +161,27 @@ class CollisionScene:
         names, owner, link = [], [], []
         geoms: list[ArmGeometry] = []
         offsets = []
-        for i, arm in enumerate(system.arms):
+        for arm in system.arms:
             ag = arm_collision_geometry(arm)
             geoms.append(ag)
             m_h, g_h = _prefixed(ag.model, ag.hull, f"{arm.name}/")
             _, g_m = _prefixed(ag.model, ag.mesh, f"{arm.name}/")
-            offsets.append(hull.ngeoms)
             model_h, hull = pin.appendModel(model, m_h, hull, g_h, 0, pin.SE3.Identity())
             _, mesh = pin.appendModel(model, m_h, mesh, g_m, 0, pin.SE3.Identity())
             model = model_h
-            names += [f"{arm.name}/{n}" for n in ag.names]
-            owner += [i] * len(ag.names)
-            link += list(ag.names)
+        # pin.appendModel may order the geometry objects its own way: find them by name
+        for arm, ag in zip(system.arms, geoms, strict=True):
+            ids = np.array([hull.getGeometryId(f"{arm.name}/{o.name}")
+                            for o in ag.hull.geometryObjects], dtype=int)
+            if not np.array_equal(ids, [mesh.getGeometryId(f"{arm.name}/{o.name}")
+                                        for o in ag.hull.geometryObjects]):
+                raise RuntimeError("hull and mesh geometry models ordered their objects "
+                                   "differently")
+            offsets.append(ids)
+        names, owner, link = [""] * hull.ngeoms, [-1] * hull.ngeoms, [""] * hull.ngeoms
+        for i, (arm, ag) in enumerate(zip(system.arms, geoms, strict=True)):
+            for a, g in enumerate(offsets[i]):
+                names[g], owner[g], link[g] = f"{arm.name}/{ag.names[a]}", i, ag.names[a]
         self.nq_arms = model.nq
         jid = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "object")
         fid = model.addFrame(pin.Frame("object", jid, 0, pin.SE3.Identity(),
@@ -249,18 +258,18 @@ class CollisionScene:
         mounted = [self._stands_on_ground(arm) for arm in system.arms]
         for i, (ag, off) in enumerate(zip(geoms, offsets, strict=True)):
             for a, b in ag.self_pairs:
-                add(off + a, off + b, "arm_self", i)
+                add(int(off[a]), int(off[b]), "arm_self", i)
             for j in range(i + 1, len(geoms)):
                 for a in range(len(ag.names)):
                     for b in range(len(geoms[j].names)):
-                        add(off + a, offsets[j] + b, "arm_arm", i)
+                        add(int(off[a]), int(offsets[j][b]), "arm_arm", i)
             joints = [g.parentJoint for g in ag.hull.geometryObjects]
             for a in range(len(ag.names)):
-                add(off + a, self.object_index, "arm_object", i, a in ag.carrier)
+                add(int(off[a]), self.object_index, "arm_object", i, a in ag.carrier)
                 for s in self.support_index:
-                    add(off + a, s, "arm_support", i)
+                    add(int(off[a]), s, "arm_support", i)
                 if self.ground_index is not None and not (mounted[i] and joints[a] == 0):
-                    add(off + a, self.ground_index, "arm_ground", i)
+                    add(int(off[a]), self.ground_index, "arm_ground", i)
         meta = {}
         for (a, b), c, i, g in zip(pairs, cat, arm_of, grasp, strict=True):
             meta[(min(a, b), max(a, b))] = (c, i, g)
