@@ -61,6 +61,14 @@ GJK_TOLERANCE = 1e-11
 """Tolerance of coal's GJK on the hulls' distances [m] (its default, 1e-6, leaves the
 distance of two hulls uncertain by about 1e-7 m)."""
 
+ADVANCE_FRACTION = 0.5
+"""A measured pair is measured again where its bound falls below this fraction of the distance
+measured (:meth:`CollisionScene.scan`)."""
+
+ADVANCE_WINDOW = 64
+"""Samples ahead over which a measured pair's distance is bounded before it is measured again
+(:meth:`CollisionScene.scan`)."""
+
 PENETRATION_TOLERANCE = 1e-6
 """Depth [m] beyond which a penetration counts (round-off of touching surfaces)."""
 
@@ -377,13 +385,11 @@ class CollisionScene:
              contact_points: list[np.ndarray] | None = None) -> ScanResult:
         """Collisions and clearances at every sample of a run.
 
-        A lower bound of every pair's distance at every sample comes first, vectorised:
-        bounding spheres of the links, the object's face planes, the slab's box, the ground's
-        plane. Only the (sample, pair) whose bound is not above zero are measured (on the
-        hulls, then on the meshes where a hull penetrates); each category's clearance is
-        then found by measuring its pairs in increasing order of their bound until the bound
-        exceeds the smallest distance measured (branch and bound: the exact minimum over
-        the samples, on the hulls).
+        Each pair is measured on the hulls where it may come closer and bounded from below
+        elsewhere (:meth:`_advance`, conservative advancement); a pair whose hulls penetrate
+        is measured on the meshes. Each category's clearance is then the exact minimum over
+        the samples, on the hulls: the samples whose bound is below the smallest measured
+        distance are measured until none is (:meth:`_category_minimum`).
 
         Args:
             q: (T, nq) arms' configurations.
@@ -404,12 +410,11 @@ class CollisionScene:
         joint = np.array([o.parentJoint for o in self.hull.geometryObjects], dtype=int)
         in_joint = np.array([self.hull.geometryObjects[g].placement.act(c_local[g])
                              for g in range(G)]).reshape(G, 3)
-        centres = np.einsum("tgij,gj->tgi", R[:, joint], in_joint) + p[:, joint]
+        reach = np.linalg.norm(in_joint, axis=1) + radius  # any point's distance to its joint
         model, data = self.model, self.data
-        lower = self._lower_bounds(centres, radius, object_position, object_quaternion)
         exact = np.full((T, P), np.nan)
-        todo = lower <= PENETRATION_TOLERANCE
-        self._measure(configs, exact, todo)
+        skip = self._ground_distances(R, p, joint, exact)
+        lower = self._advance(configs, R, p, joint, reach, exact, skip)
         clearance = {}
         for ci, name in enumerate(CATEGORIES):
             cols = np.flatnonzero((self.category == ci) & ~self.grasp_pair)
@@ -432,6 +437,100 @@ class CollisionScene:
                     continue
             hits.setdefault(int(k), []).append((int(s), dist, np.array(r.getNearestPoint1())))
         return ScanResult(clearance, hits, int(np.count_nonzero(~np.isnan(exact))))
+
+    def _ground_distances(self, R, p, joint, exact) -> np.ndarray:
+        """The ground pairs' distances at every sample from the hulls' vertices, into ``exact``.
+
+        The distance of a convex hull (or a box) to the half-space ``z <= h`` is its lowest
+        vertex's height above ``h``. Returns (P,) bool, the pairs so measured.
+        """
+        done = np.zeros(len(self.pairs), dtype=bool)
+        if self.ground_index is None:
+            return done
+        for k in np.flatnonzero(self.pairs[:, 1] == self.ground_index):
+            g = int(self.pairs[k, 0])
+            o = self.hull.geometryObjects[g]
+            shape = o.geometry
+            if hasattr(shape, "points"):
+                pts = np.asarray(shape.points(), float)
+            elif hasattr(shape, "halfSide"):
+                h = np.array(shape.halfSide)
+                pts = np.array([[x, y, z] for x in (-h[0], h[0]) for y in (-h[1], h[1])
+                                for z in (-h[2], h[2])])
+            else:
+                continue
+            local = pts @ o.placement.rotation.T + o.placement.translation
+            j = joint[g]
+            z = local @ R[:, j, 2, :].T + p[:, j, 2][None]  # (V, T)
+            exact[:, k] = z.min(axis=0) - self.ground
+            done[k] = True
+        return done
+
+    def _advance(self, configs, R, p, joint, reach, exact, skip) -> np.ndarray:
+        """Measure every pair at the samples where it may come closer; bound it elsewhere.
+
+        Conservative advancement at sample resolution: after measuring pair ``(a, b)`` at
+        sample ``s`` (distance ``d``), its distance at a later sample ``s'`` is at least
+        ``d - (|Δp| + ‖ΔR‖_F ρ_a)``, where ``Δp``, ``ΔR`` are the change of ``a``'s joint
+        placement seen from ``b``'s joint between ``s`` and ``s'`` and ``ρ_a`` bounds the
+        distance of ``a``'s points to its joint (any point of ``a`` moves relative to ``b``
+        by at most that much). The pair is measured again at the first sample of the next
+        :data:`ADVANCE_WINDOW` where that bound falls to :data:`ADVANCE_FRACTION` of ``d``
+        (at the next sample when ``d`` is not above the tolerance).
+
+        Args:
+            configs: (T, nq + 7) the scene's configurations.
+            R: (T, njoints, 3, 3) joint axes -> world axes.
+            p: (T, njoints, 3) joint origins [m].
+            joint: (G,) each geometry's joint.
+            reach: (G,) ``ρ`` [m].
+            exact: (T, P) filled with the measured hull distances (NaN elsewhere).
+            skip: (P,) pairs already measured at every sample.
+
+        Returns:
+            (T, P) lower bounds of the distances [m] (the measured value where measured).
+        """
+        T, P = exact.shape
+        lower = np.full((T, P), -np.inf)
+        ja, jb = joint[self.pairs[:, 0]], joint[self.pairs[:, 1]]
+        rho = reach[self.pairs[:, 0]]
+        due = np.where(skip, T, 0)
+        lower[:, skip] = exact[:, skip]
+        model, data, hull, hd = self.model, self.data, self.hull, self.hull_data
+        W = ADVANCE_WINDOW
+        self.visits = 0
+        while True:
+            s = int(due.min())
+            if s >= T:
+                break
+            ks = np.flatnonzero(due == s)
+            self.visits += 1
+            pin.updateGeometryPlacements(model, data, hull, hd, configs[s])
+            d = np.array([pin.computeDistance(hull, hd, int(k)).min_distance for k in ks])
+            exact[s, ks] = d
+            lower[s, ks] = d
+            near = d <= PENETRATION_TOLERANCE
+            due[ks[near]] = s + 1
+            far, dfar = ks[~near], d[~near]
+            end = min(T, s + 1 + W)
+            if not len(far) or end <= s + 1:
+                due[far] = s + 1
+                continue
+            # a's joint seen from b's joint at s and at s + 1 .. end - 1
+            Rw, pw = R[s:end], p[s:end]
+            Rb, pb = Rw[:, jb[far]], pw[:, jb[far]]
+            Ra, pa = Rw[:, ja[far]], pw[:, ja[far]]
+            Rbt = np.swapaxes(Rb, -1, -2)
+            rel_R = Rbt @ Ra
+            rel_p = (Rbt @ (pa - pb)[..., None])[..., 0]
+            move = (np.linalg.norm(rel_p[1:] - rel_p[0], axis=2)
+                    + np.linalg.norm(rel_R[1:] - rel_R[0], axis=(2, 3)) * rho[far])
+            bound = dfar - move  # (window, k)
+            lower[s + 1:end, far] = np.maximum(lower[s + 1:end, far], bound)
+            weak = bound <= ADVANCE_FRACTION * dfar
+            first = np.where(weak.any(axis=0), weak.argmax(axis=0), end - s - 1)
+            due[far] = s + 1 + first
+        return lower
 
     def _lower_bounds(self, centres, radius, position, quaternion) -> np.ndarray:
         """(T, P) lower bounds of every pair's distance [m] at every sample."""
@@ -475,20 +574,25 @@ class CollisionScene:
                 exact[s, k] = pin.computeDistance(hull, hd, int(k)).min_distance
 
     def _category_minimum(self, configs, exact, lower, cols) -> float:
-        """The smallest hull distance over samples and the pairs ``cols`` (branch and bound)."""
+        """The smallest hull distance over samples and the pairs ``cols`` (branch and bound).
+
+        Samples in increasing order of their smallest bound; at each, the pairs whose bound
+        is below the smallest distance measured so far are measured; it stops at the first
+        sample whose smallest bound is not below it.
+        """
+        model, data, hull, hd = self.model, self.data, self.hull, self.hull_data
         sub = exact[:, cols]
         best = float(np.nanmin(sub)) if np.any(~np.isnan(sub)) else np.inf
         lb = np.where(np.isnan(sub), lower[:, cols], np.inf)
-        order = np.argsort(lb, axis=None)
-        model, data, hull, hd = self.model, self.data, self.hull, self.hull_data
-        for flat in order:
-            s, j = np.unravel_index(flat, lb.shape)
-            if lb[s, j] >= best:
+        row = lb.min(axis=1)
+        for s in np.argsort(row, kind="stable"):
+            if row[s] >= best:
                 break
             pin.updateGeometryPlacements(model, data, hull, hd, configs[s])
-            k = int(cols[j])
-            exact[s, k] = pin.computeDistance(hull, hd, k).min_distance
-            best = min(best, float(exact[s, k]))
+            for j in np.flatnonzero(lb[s] < best):
+                k = int(cols[j])
+                exact[s, k] = pin.computeDistance(hull, hd, k).min_distance
+                best = min(best, float(exact[s, k]))
         return best
 
     def _at_grasp(self, k: int, point_on_object: np.ndarray, contact_points) -> bool:

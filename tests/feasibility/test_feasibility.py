@@ -182,10 +182,66 @@ def test_hand_placed_collisions_at_start_exit_2(tmp_path, case, q0, pose, extra,
 
 
 def test_two_arms_crossing_named(tmp_path):
+    # the right arm's base moved next to the left one's: its links cross the left arm's
     data = _demo()
-    data["arms"][1]["base"]["position"] = [0.0, 0.3, 0.0]
-    with pytest.raises(ScenarioError):  # placed so that it collides, or unreachable: refused
-        built = build_scenario(parse_scenario(data, "x.yaml"), load_visuals=False)
-        from multiarm_pin.app.run_feasibility import check_initial_state
+    data["arms"][1]["base"]["position"] = [0.0, 0.25, 0.0]
+    data["arms"][1]["joint"] = {"type": "weld"}
+    data["arms"][1]["q0"] = [1.2, -1.2, 1.6, -0.4, 1.57, 0.0]
+    del data["arms"][1]["q_seed"]
+    f = write(tmp_path / "crossing.yaml", yaml.safe_dump(data))
+    p = run_cli("run", f, "--out", tmp_path / "r", "--no-html", "--quiet")
+    assert p.returncode == 2, p.stdout + p.stderr
+    assert "collide at the initial state" in p.stderr
+    assert any(f"left/{link} and right/" in p.stderr or f"right/{link} and left/" in p.stderr
+               for link in ("base_link", "shoulder_link", "upper_arm_link", "forearm_link",
+                            "wrist_1_link", "wrist_2_link", "wrist_3_link", "ee_link"))
 
-        check_initial_state(built)
+
+def test_fingertip_inside_the_table_named(tmp_path):
+    # pick_from_table's stand under the whole bottom face: the -z fingertip is inside it
+    data = yaml.safe_load(open("scenarios/pick_from_table.yaml", encoding="utf-8"))
+    data["supports"][0]["points"] = "vertices"
+    for arm in data["arms"]:
+        arm["urdf"] = str((__import__("pathlib").Path("scenarios") / arm["urdf"]).resolve())
+    f = write(tmp_path / "table.yaml", yaml.safe_dump(data))
+    p = run_cli("run", f, "--out", tmp_path / "r", "--no-html", "--quiet")
+    assert p.returncode == 2, p.stdout + p.stderr
+    assert "three_finger/fingertip_3 and table" in p.stderr
+
+
+def test_collision_along_a_run_has_its_time_and_stop_exits_1(tmp_path):
+    # the demo lowered to the floor: the arms' wrists reach the ground on the way
+    data = _demo(duration=0.6)
+    data["controller"]["waypoints"] = [{"t": 0.6, "position": [0.5, 0.0, 0.05]}]
+    f = write(tmp_path / "down.yaml", yaml.safe_dump(data))
+    p = run_cli("run", f, "--out", tmp_path / "r", "--no-html", "--quiet")
+    assert p.returncode == 0, p.stderr
+    s = json.loads((tmp_path / "r" / "summary.json").read_text())
+    hits = [v for v in s["violations"] if v["kind"] == "collision" and v["other"] == "ground"]
+    assert hits and s["feasible"] is False, s["violations"]
+    t_first = min(v["t_first"] for v in hits)
+    assert 0.0 < t_first < 0.6 and s["clearance"]["arm_ground"] < 0
+    data["limits"] = {"collision": "stop"}
+    f = write(tmp_path / "down_stop.yaml", yaml.safe_dump(data))
+    p = run_cli("run", f, "--out", tmp_path / "r2", "--no-html", "--quiet")
+    assert p.returncode == 1, p.stderr
+    s2 = json.loads((tmp_path / "r2" / "summary.json").read_text())
+    assert s2["status"] == "failed" and "limits.collision" in s2["error"]
+    assert s2["t_end"] == pytest.approx(min(v["t_first"] for v in s2["violations"]
+                                            if v["kind"] == "collision"))
+
+
+def test_scenario_limits_and_ground_keys_are_validated():
+    data = _demo()
+    data["limits"] = {"torque": "saturate"}
+    with pytest.raises(ScenarioError, match=r"limits\.torque"):
+        parse_scenario(data, "x.yaml")
+    data["limits"] = {"speed": "stop"}
+    with pytest.raises(ScenarioError, match=r"limits"):
+        parse_scenario(data, "x.yaml")
+    data["limits"] = {"collision": "stop"}
+    data["ground"] = None
+    sc = parse_scenario(data, "x.yaml")
+    assert sc.limits.stops() == ("collision",) and sc.ground is None
+    data["ground"] = {"height": -0.1}
+    assert parse_scenario(data, "x.yaml").ground == -0.1
