@@ -20,8 +20,8 @@ half-space ``z <= height``. Its pairs, each in one category:
 
 Distances are coal's (``pin.computeDistances``, signed: negative = penetration depth [m]) on
 the convex hulls of the meshes, which are lower bounds of the meshes' distances. A pair
-whose hull penetrates is measured again on the meshes themselves (coal BVH models); only a
-mesh penetration is a collision.
+whose hull penetrates is checked again on the meshes themselves (coal BVH models); only a
+mesh collision is a collision (its depth: :meth:`CollisionScene.mesh_penetration`).
 
 Slabs: a support is an infinite plane in the dynamics; its slab is a box of thickness
 :data:`SLAB_THICKNESS` under the plane, the rectangle that bounds the object's support points
@@ -83,8 +83,9 @@ class Collision:
         link: its link's name.
         other: the other body (``"<arm>/<link>"``, ``"object"``, the support's name or
             ``"ground"``).
-        distance: signed distance [m] (negative: penetration depth), on the meshes.
-        point: (3,) world point of the penetration on the first body [m].
+        distance: signed distance [m] (negative: penetration depth), on the meshes
+            (:meth:`CollisionScene.mesh_penetration`).
+        point: (3,) world point of the penetration [m].
     """
 
     category: str
@@ -233,6 +234,9 @@ class CollisionScene:
         self.mesh_data = pin.GeometryData(mesh)
         for req in self.hull_data.distanceRequests:
             req.gjk_tolerance = GJK_TOLERANCE
+        for req in self.mesh_data.collisionRequests:  # triangle contacts: depth and point
+            req.enable_contact = True
+            req.num_max_contacts = 64
 
     # ------------------------------------------------------------------ construction
     def _slabs(self, state) -> list[tuple[np.ndarray, pin.SE3]]:
@@ -326,6 +330,28 @@ class CollisionScene:
         return float(r.min_distance), np.array(r.getNearestPoint1()), \
             np.array(r.getNearestPoint2())
 
+    def mesh_penetration(self, q_scene: np.ndarray, k: int):
+        """Pair ``k`` on the meshes: None if apart, else ``(depth, point on the first body)``.
+
+        ``depth`` [m] is negative: coal's signed distance where it gives one (a mesh against
+        a convex shape), else the deepest of the triangle contacts' penetration depths (two
+        meshes, whose distance coal reports as 0 once they overlap).
+        """
+        pin.updateGeometryPlacements(self.model, self.data, self.mesh, self.mesh_data, q_scene)
+        if not pin.computeCollision(self.mesh, self.mesh_data, int(k)):
+            return None
+        res = self.mesh_data.collisionResults[int(k)]
+        contacts = [res.getContact(i) for i in range(res.numContacts())]
+        r = pin.computeDistance(self.mesh, self.mesh_data, int(k))
+        depth, point = float(r.min_distance), np.array(r.getNearestPoint1())
+        if contacts:
+            c = min(contacts, key=lambda c: c.penetration_depth)
+            if c.penetration_depth < depth:
+                depth, point = float(c.penetration_depth), np.array(c.pos)
+        if depth >= -PENETRATION_TOLERANCE:
+            return None
+        return depth, point
+
     def hull_points(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """The nearest points (3,) of pair ``k`` on the hulls, from the last distances."""
         r = self.hull_data.distanceResults[int(k)]
@@ -350,14 +376,15 @@ class CollisionScene:
         d = self.hull_distances(q_scene) if distances is None else distances
         out = []
         for k in np.flatnonzero(d < -PENETRATION_TOLERANCE):
-            dist, p1, p2 = self.mesh_distance(q_scene, k)
-            if dist >= -PENETRATION_TOLERANCE:
+            hit = self.mesh_penetration(q_scene, k)
+            if hit is None:
                 continue
             if self.grasp_pair[k] and contact_points is not None and self._at_grasp(
-                    k, p2, contact_points):
+                    k, hit[1], contact_points):
                 continue
             arm, link, other = self.pair_names(k)
-            out.append(Collision(CATEGORIES[self.category[k]], arm, link, other, dist, p1))
+            out.append(Collision(CATEGORIES[self.category[k]], arm, link, other, hit[0],
+                                 hit[1]))
         return out
 
     # ------------------------------------------------------------------ along a run
@@ -411,7 +438,6 @@ class CollisionScene:
         in_joint = np.array([self.hull.geometryObjects[g].placement.act(c_local[g])
                              for g in range(G)]).reshape(G, 3)
         reach = np.linalg.norm(in_joint, axis=1) + radius  # any point's distance to its joint
-        model, data = self.model, self.data
         exact = np.full((T, P), np.nan)
         skip = self._ground_distances(R, p, joint, exact)
         lower = self._advance(configs, R, p, joint, reach, exact, skip)
@@ -424,18 +450,14 @@ class CollisionScene:
             clearance[name] = self._category_minimum(configs, exact, lower, cols)
         hits: dict[int, list] = {}
         for s, k in zip(*np.nonzero(exact < -PENETRATION_TOLERANCE), strict=True):
-            pin.updateGeometryPlacements(model, data, self.mesh, self.mesh_data, configs[s])
-            if not pin.computeCollision(self.mesh, self.mesh_data, int(k)):
-                continue
-            r = pin.computeDistance(self.mesh, self.mesh_data, int(k))
-            dist = float(r.min_distance)
-            if dist >= -PENETRATION_TOLERANCE:
+            hit = self.mesh_penetration(configs[s], k)
+            if hit is None:
                 continue
             if self.grasp_pair[k] and contact_points is not None:
                 cps = [np.asarray(c)[s] for c in contact_points]
-                if self._at_grasp(k, np.array(r.getNearestPoint2()), cps):
+                if self._at_grasp(k, hit[1], cps):
                     continue
-            hits.setdefault(int(k), []).append((int(s), dist, np.array(r.getNearestPoint1())))
+            hits.setdefault(int(k), []).append((int(s), hit[0], hit[1]))
         return ScanResult(clearance, hits, int(np.count_nonzero(~np.isnan(exact))))
 
     def _ground_distances(self, R, p, joint, exact) -> np.ndarray:
