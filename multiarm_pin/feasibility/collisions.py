@@ -483,7 +483,9 @@ class CollisionScene:
                 continue
             local = pts @ o.placement.rotation.T + o.placement.translation
             j = joint[g]
-            z = local @ R[:, j, 2, :].T + p[:, j, 2][None]  # (V, T)
+            Rz = R[:, j, 2, :]  # (T, 3); sums of products, not a BLAS call (small operands)
+            z = (local[:, 0, None] * Rz[None, :, 0] + local[:, 1, None] * Rz[None, :, 1]
+                 + local[:, 2, None] * Rz[None, :, 2] + p[None, :, j, 2])  # (V, T)
             exact[:, k] = z.min(axis=0) - self.ground
             done[k] = True
         return done
