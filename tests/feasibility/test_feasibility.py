@@ -19,9 +19,27 @@ from multiarm_pin.exceptions import ScenarioError
 from multiarm_pin.feasibility import CATEGORIES, CollisionScene, check_design, feasibility_report
 from multiarm_pin.feasibility.collisions import GJK_TOLERANCE
 from multiarm_pin.sim.controllers import make_controller
-from tests.run_helpers import run_cli, write
+from tests.run_helpers import write
 
 DEMO = "scenarios/two_ur5_box.yaml"
+
+
+def run_cli(*args):
+    """``multiarm-pin ARGS`` in this process: ``(returncode, stdout, stderr)``."""
+    import contextlib
+    import io
+
+    from multiarm_pin.app.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main([str(a) for a in args])
+    return _Done(code, out.getvalue(), err.getvalue())
+
+
+class _Done:
+    def __init__(self, returncode, stdout, stderr):
+        self.returncode, self.stdout, self.stderr = returncode, stdout, stderr
 
 
 def _demo(mass=4.0, duration=0.02, extra=None):
@@ -243,3 +261,15 @@ def test_scenario_limits_and_ground_keys_are_validated():
     assert sc.limits.stops() == ("collision",) and sc.ground is None
     data["ground"] = {"height": -0.1}
     assert parse_scenario(data, "x.yaml").ground == -0.1
+
+
+def test_a_base_rests_on_the_ground_it_stands_on(held):
+    built, _ = held
+    on = check_design(built.system, built.initial_state)  # every UR5 base mesh reaches below 0
+    assert on.feasible and on.clearance["arm_ground"] > 0
+    scene = CollisionScene(built.system, built.initial_state, ground=0.0)
+    names = {scene.pair_names(k) for k in range(len(scene.pairs))}
+    assert ("left", "base_link", "ground") not in names
+    raised = check_design(built.system, built.initial_state, ground=0.05)  # not its floor
+    pairs = {(v.arm, v.link, v.other) for v in raised.violations if v.kind == "collision"}
+    assert ("left", "base_link", "ground") in pairs and ("right", "base_link", "ground") in pairs
