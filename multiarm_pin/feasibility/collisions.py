@@ -61,6 +61,10 @@ GJK_TOLERANCE = 1e-11
 """Tolerance of coal's GJK on the hulls' distances [m] (its default, 1e-6, leaves the
 distance of two hulls uncertain by about 1e-7 m)."""
 
+CLEARANCE_TOLERANCE = 1e-10
+"""How far [m] above the exact minimum over the samples a reported clearance may be (a pair
+whose bound is within it of the smallest distance found is not measured again)."""
+
 ADVANCE_FRACTION = 0.5
 """A measured pair is measured again where its bound falls below this fraction of the distance
 measured (:meth:`CollisionScene.scan`)."""
@@ -68,6 +72,10 @@ measured (:meth:`CollisionScene.scan`)."""
 ADVANCE_WINDOW = 64
 """Samples ahead over which a measured pair's distance is bounded before it is measured again
 (:meth:`CollisionScene.scan`)."""
+
+ADVANCE_STRIDE = 16
+"""A pair due at a later sample is measured at the last multiple of this many samples before
+it, so that pairs share their samples (one placement update for all of them)."""
 
 PENETRATION_TOLERANCE = 1e-6
 """Depth [m] beyond which a penetration counts (round-off of touching surfaces)."""
@@ -439,8 +447,8 @@ class CollisionScene:
                              for g in range(G)]).reshape(G, 3)
         reach = np.linalg.norm(in_joint, axis=1) + radius  # any point's distance to its joint
         exact = np.full((T, P), np.nan)
-        skip = self._ground_distances(R, p, joint, exact)
-        lower = self._advance(configs, R, p, joint, reach, exact, skip)
+        skip, ground = self._ground_distances(R, p, joint, exact)
+        lower = self._advance(configs, R, p, joint, reach, exact, skip, ground)
         clearance = {}
         for ci, name in enumerate(CATEGORIES):
             cols = np.flatnonzero((self.category == ci) & ~self.grasp_pair)
@@ -460,15 +468,25 @@ class CollisionScene:
             hits.setdefault(int(k), []).append((int(s), hit[0], hit[1]))
         return ScanResult(clearance, hits, int(np.count_nonzero(~np.isnan(exact))))
 
-    def _ground_distances(self, R, p, joint, exact) -> np.ndarray:
-        """The ground pairs' distances at every sample from the hulls' vertices, into ``exact``.
+    def _ground_distances(self, R, p, joint, exact) -> tuple[np.ndarray, np.ndarray]:
+        """The ground pairs' distances from the hulls' vertices, where they matter.
 
         The distance of a convex hull (or a box) to the half-space ``z <= h`` is its lowest
-        vertex's height above ``h``. Returns (P,) bool, the pairs so measured.
+        vertex's height above ``h``; the lowest corner of the hull's bounding box (in its
+        joint frame) bounds it from below. The bound of every pair comes first; the exact
+        distance (into ``exact``) only where the bound is below the smallest exact distance
+        found (or below the penetration tolerance), the pair of the lowest bound first.
+
+        Returns:
+            ``(done (P,) bool, lower (T, P))``: the ground pairs handled here and their
+            lower bounds (the exact distance where computed).
         """
-        done = np.zeros(len(self.pairs), dtype=bool)
+        T, P = exact.shape
+        done = np.zeros(P, dtype=bool)
+        lower = np.full((T, P), -np.inf)
         if self.ground_index is None:
-            return done
+            return done, lower
+        points = {}
         for k in np.flatnonzero(self.pairs[:, 1] == self.ground_index):
             g = int(self.pairs[k, 0])
             o = self.hull.geometryObjects[g]
@@ -482,15 +500,34 @@ class CollisionScene:
             else:
                 continue
             local = pts @ o.placement.rotation.T + o.placement.translation
-            j = joint[g]
-            Rz = R[:, j, 2, :]  # (T, 3); sums of products, not a BLAS call (small operands)
-            z = (local[:, 0, None] * Rz[None, :, 0] + local[:, 1, None] * Rz[None, :, 1]
-                 + local[:, 2, None] * Rz[None, :, 2] + p[None, :, j, 2])  # (V, T)
-            exact[:, k] = z.min(axis=0) - self.ground
+            lo, hi = local.min(axis=0), local.max(axis=0)
+            corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                                for z in (lo[2], hi[2])])
+            points[k] = local
+            lower[:, k] = self._lowest(corners, R[:, joint[g], 2, :], p[:, joint[g], 2])
             done[k] = True
-        return done
+        best = np.inf
+        for k in sorted(points, key=lambda k: float(lower[:, k].min())):
+            rows = np.flatnonzero(lower[:, k] < max(best, PENETRATION_TOLERANCE))
+            if not len(rows):
+                continue
+            g = int(self.pairs[k, 0])
+            d = self._lowest(points[k], R[rows, joint[g], 2, :], p[rows, joint[g], 2])
+            exact[rows, k] = lower[rows, k] = d
+            best = min(best, float(d.min()))
+        return done, lower
 
-    def _advance(self, configs, R, p, joint, reach, exact, skip) -> np.ndarray:
+    def _lowest(self, local: np.ndarray, Rz: np.ndarray, pz: np.ndarray) -> np.ndarray:
+        """(T,) height above the ground [m] of the lowest of ``local`` (V, 3) points.
+
+        ``Rz`` (T, 3): the joint's third rotation row; ``pz`` (T,): its origin's height.
+        Sums of products, not a BLAS call (small operands).
+        """
+        z = (local[:, 0, None] * Rz[None, :, 0] + local[:, 1, None] * Rz[None, :, 1]
+             + local[:, 2, None] * Rz[None, :, 2])
+        return z.min(axis=0) + pz - self.ground
+
+    def _advance(self, configs, R, p, joint, reach, exact, skip, bounds) -> np.ndarray:
         """Measure every pair at the samples where it may come closer; bound it elsewhere.
 
         Conservative advancement at sample resolution: after measuring pair ``(a, b)`` at
@@ -509,7 +546,8 @@ class CollisionScene:
             joint: (G,) each geometry's joint.
             reach: (G,) ``ρ`` [m].
             exact: (T, P) filled with the measured hull distances (NaN elsewhere).
-            skip: (P,) pairs already measured at every sample.
+            skip: (P,) pairs already handled (bounded at every sample, measured where needed).
+            bounds: (T, P) their lower bounds.
 
         Returns:
             (T, P) lower bounds of the distances [m] (the measured value where measured).
@@ -519,7 +557,7 @@ class CollisionScene:
         ja, jb = joint[self.pairs[:, 0]], joint[self.pairs[:, 1]]
         rho = reach[self.pairs[:, 0]]
         due = np.where(skip, T, 0)
-        lower[:, skip] = exact[:, skip]
+        lower[:, skip] = bounds[:, skip]
         model, data, hull, hd = self.model, self.data, self.hull, self.hull_data
         W = ADVANCE_WINDOW
         self.visits = 0
@@ -541,19 +579,20 @@ class CollisionScene:
                 due[far] = s + 1
                 continue
             # a's joint seen from b's joint at s and at s + 1 .. end - 1
+            # a's joint seen from b's joint at s .. end - 1
             Rw, pw = R[s:end], p[s:end]
-            Rb, pb = Rw[:, jb[far]], pw[:, jb[far]]
-            Ra, pa = Rw[:, ja[far]], pw[:, ja[far]]
-            Rbt = np.swapaxes(Rb, -1, -2)
-            rel_R = Rbt @ Ra
-            rel_p = (Rbt @ (pa - pb)[..., None])[..., 0]
-            move = (np.linalg.norm(rel_p[1:] - rel_p[0], axis=2)
-                    + np.linalg.norm(rel_R[1:] - rel_R[0], axis=(2, 3)) * rho[far])
+            Rbt = np.swapaxes(Rw[:, jb[far]], -1, -2)
+            rel_R = Rbt @ Rw[:, ja[far]]
+            rel_p = (Rbt @ (pw[:, ja[far]] - pw[:, jb[far]])[..., None])[..., 0]
+            dR, dp = rel_R[1:] - rel_R[0], rel_p[1:] - rel_p[0]
+            move = (np.sqrt(np.einsum("tki,tki->tk", dp, dp))
+                    + np.sqrt(np.einsum("tkij,tkij->tk", dR, dR)) * rho[far])
             bound = dfar - move  # (window, k)
             lower[s + 1:end, far] = np.maximum(lower[s + 1:end, far], bound)
             weak = bound <= ADVANCE_FRACTION * dfar
             first = np.where(weak.any(axis=0), weak.argmax(axis=0), end - s - 1)
-            due[far] = s + 1 + first
+            # measured earlier than needed at a multiple of ADVANCE_STRIDE: pairs share samples
+            due[far] = np.maximum(s + 1, (s + 1 + first) // ADVANCE_STRIDE * ADVANCE_STRIDE)
         return lower
 
     def _lower_bounds(self, centres, radius, position, quaternion) -> np.ndarray:
@@ -601,8 +640,9 @@ class CollisionScene:
         """The smallest hull distance over samples and the pairs ``cols`` (branch and bound).
 
         Samples in increasing order of their smallest bound; at each, the pairs whose bound
-        is below the smallest distance measured so far are measured; it stops at the first
-        sample whose smallest bound is not below it.
+        is below the smallest distance measured so far (less :data:`CLEARANCE_TOLERANCE`)
+        are measured; it stops at the first sample whose smallest bound is not below it. The
+        result is within :data:`CLEARANCE_TOLERANCE` above the exact minimum.
         """
         model, data, hull, hd = self.model, self.data, self.hull, self.hull_data
         sub = exact[:, cols]
@@ -610,10 +650,10 @@ class CollisionScene:
         lb = np.where(np.isnan(sub), lower[:, cols], np.inf)
         row = lb.min(axis=1)
         for s in np.argsort(row, kind="stable"):
-            if row[s] >= best:
+            if row[s] >= best - CLEARANCE_TOLERANCE:
                 break
             pin.updateGeometryPlacements(model, data, hull, hd, configs[s])
-            for j in np.flatnonzero(lb[s] < best):
+            for j in np.flatnonzero(lb[s] < best - CLEARANCE_TOLERANCE):
                 k = int(cols[j])
                 exact[s, k] = pin.computeDistance(hull, hd, k).min_distance
                 best = min(best, float(exact[s, k]))
@@ -628,6 +668,7 @@ class CollisionScene:
 
 __all__ = [
     "CATEGORIES",
+    "CLEARANCE_TOLERANCE",
     "JOINT_ZONE_RADIUS",
     "MOUNT_TOLERANCE",
     "PENETRATION_TOLERANCE",
