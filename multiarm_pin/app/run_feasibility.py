@@ -64,11 +64,15 @@ def apply_policies(built, result, scene, status: str, error: str | None):
     Returns:
         ``(result, status, error, report)``: when a ``stop`` kind was violated, the record up
         to and including the sample of its first violation, status ``"failed"`` and the
-        error naming it (unless the run had already failed earlier).
+        error naming it (unless the run had already failed earlier). An interrupted run
+        is checked against the limits only (its results are written at once).
     """
     from multiarm_pin.feasibility import feasibility_report
 
     sc = built.scenario
+    if status == "interrupted":  # write what was simulated at once: the limits only
+        return result, status, error, feasibility_report(built.system, result,
+                                                         ground=sc.ground, collisions=False)
     report = feasibility_report(built.system, result, ground=sc.ground, scene=scene)
     first = report.first(sc.limits.stops())
     if first is not None and (status == "complete" or first.t_first < float(result.t[-1])):
