@@ -101,10 +101,15 @@ class FeasibilityReport:
         return min(vs, key=lambda v: v.t_first) if vs else None
 
     def as_summary(self) -> dict:
-        """``summary.json``'s feasibility keys: feasible, violations, limits, clearance."""
+        """``summary.json``'s feasibility keys.
+
+        ``feasible``, ``violations``, ``limits``, ``clearance`` and ``collisions_checked``
+        (False for an interrupted run, checked against the limits only).
+        """
         return {"feasible": self.feasible,
                 "violations": [v.as_dict() for v in self.violations],
-                "limits": self.limits, "clearance": self.clearance}
+                "limits": self.limits, "clearance": self.clearance,
+                "collisions_checked": self.collisions_checked}
 
     def describe(self, max_lines: int = 8) -> list[str]:
         """Lines for people: the violations (at most ``max_lines``)."""
