@@ -397,11 +397,11 @@ class CollisionScene:
 
     # ------------------------------------------------------------------ along a run
     def _spheres(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Bounding sphere of every geometry in its own frame.
+        """Bounding sphere of every geometry.
 
         Returns:
-            centres (G, 3) [m], radii (G,) [m], and whether each moves (G,) bool (on a
-            joint, not the world).
+            centres (G, 3) in the frame of the geometry's joint [m], radii (G,) [m], and
+            whether each moves (G,) bool (on a joint, not the world).
         """
         G = self.hull.ngeoms
         c, r, moving = np.zeros((G, 3)), np.zeros(G), np.zeros(G, dtype=bool)
@@ -443,12 +443,12 @@ class CollisionScene:
         configs = np.concatenate([q, object_position, object_quaternion], axis=1)
         R, p = joint_placements(self.model, configs)
         joint = np.array([o.parentJoint for o in self.hull.geometryObjects], dtype=int)
-        in_joint = np.array([self.hull.geometryObjects[g].placement.act(c_local[g])
-                             for g in range(G)]).reshape(G, 3)
+        in_joint = c_local.reshape(G, 3)  # _spheres gives the centres in the joints' frames
         reach = np.linalg.norm(in_joint, axis=1) + radius  # any point's distance to its joint
         exact = np.full((T, P), np.nan)
         skip, ground = self._ground_distances(R, p, joint, exact)
-        lower = self._advance(configs, R, p, joint, reach, exact, skip, ground)
+        opens = self._grasp_openings(R, p, joint, in_joint, radius, contact_points, T)
+        lower = self._advance(configs, R, p, joint, reach, exact, skip, ground, opens)
         clearance = {}
         for ci, name in enumerate(CATEGORIES):
             cols = np.flatnonzero((self.category == ci) & ~self.grasp_pair)
@@ -527,7 +527,33 @@ class CollisionScene:
              + local[:, 2, None] * Rz[None, :, 2])
         return z.min(axis=0) + pz - self.ground
 
-    def _advance(self, configs, R, p, joint, reach, exact, skip, bounds) -> np.ndarray:
+    def _grasp_openings(self, R, p, joint, in_joint, radius, contact_points, T):
+        """(T + 1, P) the first sample from each sample on where a pair can collide.
+
+        A carrying link whose bounding sphere lies, at a sample, within
+        :data:`JOINT_ZONE_RADIUS` of one of its arm's contact points touches the object
+        (if at all) at the grasp: no collision there, and it is left out of the
+        clearances; such samples are skipped (a fingertip on its face, every sample).
+        Every other pair may collide at every sample (its own index).
+        """
+        P = len(self.pairs)
+        opens = np.broadcast_to(np.arange(T + 1)[:, None], (T + 1, P)).copy()
+        if contact_points is None:
+            return opens
+        for k in np.flatnonzero(self.grasp_pair):
+            g = int(self.pairs[k, 0])
+            cps = np.asarray(contact_points[self.arm_of_pair[k]]).reshape(T, -1, 3)
+            if not cps.shape[1]:
+                continue
+            c = np.einsum("tij,j->ti", R[:, joint[g]], in_joint[g]) + p[:, joint[g]]
+            near = np.min(np.linalg.norm(cps - c[:, None], axis=2), axis=1) + radius[g]
+            inside = near <= JOINT_ZONE_RADIUS
+            nxt = np.where(inside, T, np.arange(T))
+            opens[:T, k] = np.minimum.accumulate(nxt[::-1])[::-1]
+        return opens
+
+    def _advance(self, configs, R, p, joint, reach, exact, skip, bounds,
+                 opens) -> np.ndarray:
         """Measure every pair at the samples where it may come closer; bound it elsewhere.
 
         Conservative advancement at sample resolution: after measuring pair ``(a, b)`` at
@@ -548,6 +574,7 @@ class CollisionScene:
             exact: (T, P) filled with the measured hull distances (NaN elsewhere).
             skip: (P,) pairs already handled (bounded at every sample, measured where needed).
             bounds: (T, P) their lower bounds.
+            opens: (T + 1, P) from :meth:`_grasp_openings` (samples a pair skips).
 
         Returns:
             (T, P) lower bounds of the distances [m] (the measured value where measured).
@@ -556,7 +583,7 @@ class CollisionScene:
         lower = np.full((T, P), -np.inf)
         ja, jb = joint[self.pairs[:, 0]], joint[self.pairs[:, 1]]
         rho = reach[self.pairs[:, 0]]
-        due = np.where(skip, T, 0)
+        due = np.where(skip, T, opens[0])
         lower[:, skip] = bounds[:, skip]
         model, data, hull, hd = self.model, self.data, self.hull, self.hull_data
         W = ADVANCE_WINDOW
@@ -572,11 +599,11 @@ class CollisionScene:
             exact[s, ks] = d
             lower[s, ks] = d
             near = d <= PENETRATION_TOLERANCE
-            due[ks[near]] = s + 1
+            due[ks[near]] = opens[s + 1, ks[near]]
             far, dfar = ks[~near], d[~near]
             end = min(T, s + 1 + W)
             if not len(far) or end <= s + 1:
-                due[far] = s + 1
+                due[far] = opens[s + 1, far]
                 continue
             # a's joint seen from b's joint at s and at s + 1 .. end - 1
             # a's joint seen from b's joint at s .. end - 1
@@ -592,49 +619,9 @@ class CollisionScene:
             weak = bound <= ADVANCE_FRACTION * dfar
             first = np.where(weak.any(axis=0), weak.argmax(axis=0), end - s - 1)
             # measured earlier than needed at a multiple of ADVANCE_STRIDE: pairs share samples
-            due[far] = np.maximum(s + 1, (s + 1 + first) // ADVANCE_STRIDE * ADVANCE_STRIDE)
+            due[far] = opens[np.maximum(s + 1, (s + 1 + first) // ADVANCE_STRIDE
+                                        * ADVANCE_STRIDE), far]
         return lower
-
-    def _lower_bounds(self, centres, radius, position, quaternion) -> np.ndarray:
-        """(T, P) lower bounds of every pair's distance [m] at every sample."""
-        a, b = self.pairs[:, 0], self.pairs[:, 1]
-        T = len(centres)
-        lower = np.full((T, len(a)), -np.inf)
-        ca, ra = centres[:, a], radius[a]
-        obj = b == self.object_index
-        if np.any(obj):
-            from scipy.spatial.transform import Rotation
-
-            R = Rotation.from_quat(quaternion).as_matrix()  # [x, y, z, w], (T, 3, 3)
-            local = np.einsum("tji,tpj->tpi", R, ca[:, obj] - position[:, None])
-            shape = self.system.obj.shape
-            plane = np.max(local @ shape.normals.T - shape.offsets, axis=2)
-            lower[:, obj] = plane - ra[obj]
-        if self.ground_index is not None:
-            gnd = b == self.ground_index
-            lower[:, gnd] = ca[:, gnd, 2] - self.ground - ra[gnd]
-        for s in self.support_index:
-            sup = b == s
-            if not np.any(sup):
-                continue
-            o = self.hull.geometryObjects[s]
-            half = np.array(o.geometry.halfSide)
-            local = (ca[:, sup] - o.placement.translation) @ o.placement.rotation
-            outside = np.maximum(np.abs(local) - half, 0.0)
-            lower[:, sup] = np.linalg.norm(outside, axis=2) - ra[sup]
-        links = ~obj & (b != (self.ground_index if self.ground_index is not None else -1))
-        links &= ~np.isin(b, self.support_index)
-        lower[:, links] = (np.linalg.norm(ca[:, links] - centres[:, b[links]], axis=2)
-                           - ra[links] - radius[b[links]])
-        return lower
-
-    def _measure(self, configs, exact, todo) -> None:
-        """Hull distances of the (sample, pair) marked in ``todo`` into ``exact``."""
-        model, data, hull, hd = self.model, self.data, self.hull, self.hull_data
-        for s in np.flatnonzero(todo.any(axis=1)):
-            pin.updateGeometryPlacements(model, data, hull, hd, configs[s])
-            for k in np.flatnonzero(todo[s]):
-                exact[s, k] = pin.computeDistance(hull, hd, int(k)).min_distance
 
     def _category_minimum(self, configs, exact, lower, cols) -> float:
         """The smallest hull distance over samples and the pairs ``cols`` (branch and bound).
