@@ -563,7 +563,8 @@ class CollisionScene:
         distance of ``a``'s points to its joint (any point of ``a`` moves relative to ``b``
         by at most that much). The pair is measured again at the first sample of the next
         :data:`ADVANCE_WINDOW` where that bound falls to :data:`ADVANCE_FRACTION` of ``d``
-        (at the next sample when ``d`` is not above the tolerance).
+        (to ``-PENETRATION_TOLERANCE`` for a grasp pair or a touching one: they matter only
+        once they may penetrate; at the next sample while it penetrates).
 
         Args:
             configs: (T, nq + 7) the scene's configurations.
@@ -598,14 +599,13 @@ class CollisionScene:
             d = np.array([pin.computeDistance(hull, hd, int(k)).min_distance for k in ks])
             exact[s, ks] = d
             lower[s, ks] = d
-            near = d <= PENETRATION_TOLERANCE
+            near = d < -PENETRATION_TOLERANCE  # penetrating: every sample (its hits)
             due[ks[near]] = opens[s + 1, ks[near]]
             far, dfar = ks[~near], d[~near]
             end = min(T, s + 1 + W)
             if not len(far) or end <= s + 1:
                 due[far] = opens[s + 1, far]
                 continue
-            # a's joint seen from b's joint at s and at s + 1 .. end - 1
             # a's joint seen from b's joint at s .. end - 1
             Rw, pw = R[s:end], p[s:end]
             Rbt = np.swapaxes(Rw[:, jb[far]], -1, -2)
@@ -616,7 +616,10 @@ class CollisionScene:
                     + np.sqrt(np.einsum("tkij,tkij->tk", dR, dR)) * rho[far])
             bound = dfar - move  # (window, k)
             lower[s + 1:end, far] = np.maximum(lower[s + 1:end, far], bound)
-            weak = bound <= ADVANCE_FRACTION * dfar
+            # grasp pairs and touching pairs matter only once they may penetrate
+            target = np.where(self.grasp_pair[far] | (dfar <= PENETRATION_TOLERANCE),
+                              -PENETRATION_TOLERANCE, ADVANCE_FRACTION * dfar)
+            weak = bound <= target
             first = np.where(weak.any(axis=0), weak.argmax(axis=0), end - s - 1)
             # measured earlier than needed at a multiple of ADVANCE_STRIDE: pairs share samples
             due[far] = opens[np.maximum(s + 1, (s + 1 + first) // ADVANCE_STRIDE
