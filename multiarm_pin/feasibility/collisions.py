@@ -606,14 +606,18 @@ class CollisionScene:
             if not len(far) or end <= s + 1:
                 due[far] = opens[s + 1, far]
                 continue
-            # a's joint seen from b's joint at s .. end - 1
+            # a's joint seen from b's joint at s .. end - 1, once per pair of joints
+            key = ja[far] * R.shape[1] + jb[far]
+            uniq, inv = np.unique(key, return_inverse=True)
+            ua, ub = uniq // R.shape[1], uniq % R.shape[1]
             Rw, pw = R[s:end], p[s:end]
-            Rbt = np.swapaxes(Rw[:, jb[far]], -1, -2)
-            rel_R = Rbt @ Rw[:, ja[far]]
-            rel_p = (Rbt @ (pw[:, ja[far]] - pw[:, jb[far]])[..., None])[..., 0]
+            Rbt = np.swapaxes(Rw[:, ub], -1, -2)
+            rel_R = Rbt @ Rw[:, ua]
+            rel_p = (Rbt @ (pw[:, ua] - pw[:, ub])[..., None])[..., 0]
             dR, dp = rel_R[1:] - rel_R[0], rel_p[1:] - rel_p[0]
-            move = (np.sqrt(np.einsum("tki,tki->tk", dp, dp))
-                    + np.sqrt(np.einsum("tkij,tkij->tk", dR, dR)) * rho[far])
+            shift = np.sqrt(np.einsum("tki,tki->tk", dp, dp))[:, inv]
+            turn = np.sqrt(np.einsum("tkij,tkij->tk", dR, dR))[:, inv]
+            move = shift + turn * rho[far]
             bound = dfar - move  # (window, k)
             lower[s + 1:end, far] = np.maximum(lower[s + 1:end, far], bound)
             # grasp pairs and touching pairs matter only once they may penetrate
