@@ -299,3 +299,34 @@ def test_scan_equals_every_pair_at_every_sample():
         assert scan.clearance[name] == pytest.approx(brute[:, cols].min(), abs=2e-10)
     assert not scan.hits
     assert scan.measured < brute.size / 2  # most (sample, pair) were bounded, not measured
+
+
+def test_arm_limits_are_the_urdf_limits_and_statistics_find_the_first_time(held):
+    from multiarm_pin.feasibility.arm_geometry import _loader_paths
+    from multiarm_pin.feasibility.limits import arm_limits, limit_statistics
+
+    built, _ = held
+    arm = built.arms[0]
+    root = ET.parse(_loader_paths("ur5")[0]).getroot()
+    urdf = {j.get("name"): j.find("limit") for j in root.iter("joint")
+            if j.find("limit") is not None}
+    lim = arm_limits(arm)
+    for c, name in enumerate(lim.joints):
+        tag = urdf[name]
+        assert lim.effort[c] == float(tag.get("effort"))
+        assert lim.velocity[c] == float(tag.get("velocity"))
+        assert (lim.lower[c], lim.upper[c]) == (float(tag.get("lower")), float(tag.get("upper")))
+    # synthetic samples: joint 1 passes its velocity limit at t = 0.3, joint 2 its upper
+    # position limit at t = 0.2, joint 0 reaches exactly its effort limit (not beyond)
+    t = np.linspace(0.0, 0.5, 6)
+    q = np.zeros((6, 6))
+    q[2:, 2] = lim.upper[2] + 0.01
+    v = np.zeros((6, 6))
+    v[3:, 1] = 1.5 * lim.velocity[1]
+    tau = np.zeros((6, 6))
+    tau[4, 0] = -lim.effort[0]
+    stats = limit_statistics(lim, t, q, v, tau)
+    assert stats[0].t_torque is None and stats[0].peak_torque_ratio == 1.0
+    assert stats[1].t_velocity == pytest.approx(0.3) and stats[1].peak_velocity_ratio == 1.5
+    assert stats[2].t_position == pytest.approx(0.2)
+    assert stats[2].position_margin == pytest.approx(-0.01)
