@@ -123,7 +123,7 @@ def limit_statistics(limits: ArmLimits, t: np.ndarray, q: np.ndarray, v: np.ndar
             vr = float(ratio.max()) if len(ratio) else 0.0
             t_v = _first(ratio > 1.0 + RATIO_TOLERANCE, t)
         i = limits.q_index[c]
-        if i >= 0 and (np.isfinite(limits.lower[c]) or np.isfinite(limits.upper[c])):
+        if i >= 0 and len(q) and (np.isfinite(limits.lower[c]) or np.isfinite(limits.upper[c])):
             m = np.minimum(q[:, i] - limits.lower[c], limits.upper[c] - q[:, i])
             k = int(np.argmin(m))
             margin, worst = float(m[k]), float(q[k, i])

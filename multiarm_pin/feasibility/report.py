@@ -135,7 +135,8 @@ def feasibility_report(system, result, *, ground: float | None = 0.0, collisions
 
     Args:
         system: the simulated :class:`~multiarm_pin.system.MultiArmSystem`.
-        result: its :class:`~multiarm_pin.sim.result.SimulationResult` (partial results too).
+        result: its :class:`~multiarm_pin.sim.result.SimulationResult` (partial results too;
+            samples from the first non-finite one on are not checked).
         ground: height [m] of the ground plane, or None for none.
         collisions: also check collisions (False: limits only; ``clearance`` is empty).
         scene: a :class:`CollisionScene` of the system to reuse (built otherwise).
@@ -143,14 +144,20 @@ def feasibility_report(system, result, *, ground: float | None = 0.0, collisions
     Returns:
         :class:`FeasibilityReport`.
     """
-    t = np.asarray(result.t)
+    # a failed run may end on non-finite samples: the checks are of the finite ones before
+    finite = np.all(np.isfinite(result.q), axis=1) & np.all(
+        np.isfinite(result.v), axis=1) & np.all(np.isfinite(result.tau), axis=1) & np.all(
+        np.isfinite(result.object_position), axis=1) & np.all(
+        np.isfinite(result.object_quaternion), axis=1)
+    n = len(finite) if finite.all() else int(np.argmin(finite))
+    t = np.asarray(result.t)[:n]
     violations, limits = [], {}
     aset = system.arm_set
     for i, arm in enumerate(system.arms):
         lim = arm_limits(arm)
-        q = result.q[:, aset.q_slices[i]]
-        v = result.v[:, aset.v_slices[i]]
-        tau = result.tau[:, aset.v_slices[i]]
+        q = result.q[:n, aset.q_slices[i]]
+        v = result.v[:n, aset.v_slices[i]]
+        tau = result.tau[:n, aset.v_slices[i]]
         stats = limit_statistics(lim, t, q, v, tau)
         per = {}
         for c, (name, st) in enumerate(zip(lim.joints, stats, strict=True)):
@@ -173,10 +180,11 @@ def feasibility_report(system, result, *, ground: float | None = 0.0, collisions
                                             st.t_position, st.worst_q, float(bound)))
         limits[arm.name] = per
     clearance = {}
-    if collisions and system.n_arms and len(t):
+    if collisions and system.n_arms and n:
         scene = scene or CollisionScene(system, result.state(0), ground)
-        scan = scene.scan(result.q, result.object_position, result.object_quaternion,
-                          _grasp_points(system, result))
+        scan = scene.scan(result.q[:n], result.object_position[:n],
+                          result.object_quaternion[:n],
+                          [c[:n] for c in _grasp_points(system, result)])
         clearance = {k: _none_if_inf(v) for k, v in scan.clearance.items()}
         for k, hits in scan.hits.items():
             arm, link, other = scene.pair_names(k)

@@ -330,3 +330,17 @@ def test_arm_limits_are_the_urdf_limits_and_statistics_find_the_first_time(held)
     assert stats[1].t_velocity == pytest.approx(0.3) and stats[1].peak_velocity_ratio == 1.5
     assert stats[2].t_position == pytest.approx(0.2)
     assert stats[2].position_margin == pytest.approx(-0.01)
+
+
+def test_a_run_ending_on_nan_is_checked_up_to_it(held):
+    import dataclasses
+
+    built, result = held
+    q = result.q.copy()
+    q[-1] = np.nan  # a failed run's last sample
+    broken = dataclasses.replace(result, q=q)
+    report = feasibility_report(built.system, broken)
+    whole = feasibility_report(built.system, result)
+    assert report.feasible and report.clearance.keys() == whole.clearance.keys()
+    assert all(v is None or v >= whole.clearance[k] - 1e-12
+               for k, v in report.clearance.items())
