@@ -6,8 +6,9 @@ specs, :func:`make_joint`; contacts on faces, :class:`Grasp`, :func:`contact_on_
 the arms by inverse kinematics (:func:`ik_tool_placement`, :func:`ik_frame_points`), build the
 system (:class:`MultiArmSystem`), control (:class:`MinimumJerkTrajectory`,
 :func:`make_controller`), simulate (:func:`simulate`), analyse (:class:`SimulationResult`,
-:func:`form_closure`) and replay (:func:`write_replay`); or do it all from a scenario file
-(:func:`load_scenario`, :func:`build_scenario`). Every placement is a ``pin.SE3``.
+:func:`form_closure`; is it physically possible: :func:`check_design` before,
+:func:`feasibility_report` after) and replay (:func:`write_replay`); or do it all from a
+scenario file (:func:`load_scenario`, :func:`build_scenario`). Every placement is a ``pin.SE3``.
 
 Everything else stays importable from its layer: :mod:`multiarm_pin.model` (arms, kinematics,
 IK), :mod:`multiarm_pin.grasp` (thesis ch. 2), :mod:`multiarm_pin.constraints` (ch. 3),
@@ -41,6 +42,10 @@ _LAZY = {
     "simulate": "multiarm_pin.sim.simulation",
     "MinimumJerkTrajectory": "multiarm_pin.sim.trajectories",
     "MultiArmSystem": "multiarm_pin.system",
+    "FeasibilityReport": "multiarm_pin.feasibility",
+    "Violation": "multiarm_pin.feasibility",
+    "check_design": "multiarm_pin.feasibility",
+    "feasibility_report": "multiarm_pin.feasibility",
     "SystemState": "multiarm_pin.system",
 }
 
@@ -86,6 +91,10 @@ __all__ = [
     "SimulationResult",
     # analysis and replay
     "form_closure",
+    "check_design",
+    "feasibility_report",
+    "FeasibilityReport",
+    "Violation",
     "write_replay",
     # scenario files
     "build_scenario",

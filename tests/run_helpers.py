@@ -27,7 +27,7 @@ def one_arm_scenario(name: str = "one_ur5", duration: float = 0.02, dt: float = 
 object:
   shape: {{type: box, size: [0.4, 0.3, 0.2]}}
   mass: {mass}
-  pose: {{position: [0.5, 0.0, 0.3]}}
+  pose: {{position: [0.8, 0.11, 0.24]}}  # the tool on its -x face (no collision at t = 0)
 arms:
   - name: a
     robot: ur5

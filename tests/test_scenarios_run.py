@@ -7,6 +7,7 @@ import pytest
 
 from multiarm_pin.app.runner import run_scenario
 from multiarm_pin.app.scenario import load_scenario
+from multiarm_pin.exceptions import ScenarioError
 from multiarm_pin.spatial import quaternion_to_rotation
 
 SCENARIOS = sorted((Path(__file__).resolve().parent.parent / "scenarios").glob("*.yaml"))
@@ -19,13 +20,24 @@ def test_the_examples_are_there():
             "mp6_pair_box"} <= names
 
 
-@pytest.mark.parametrize("path", SCENARIOS, ids=[p.stem for p in SCENARIOS])
+COLLIDING = {"fingertips_form_closure": "its top_corner gripper starts 0.13 m inside the box and "
+                                       "the seventh arm's idle fingertips 6 cm inside it (issue "
+                                       "23: the grasp needs a redesign)"}
+"""Shipped scenarios whose initial state collides (refused as bad input), with why."""
+
+
+@pytest.mark.parametrize("path", [
+    pytest.param(p, marks=pytest.mark.xfail(reason=COLLIDING[p.stem], strict=True,
+                                            raises=ScenarioError))
+    if p.stem in COLLIDING else p for p in SCENARIOS], ids=[p.stem for p in SCENARIOS])
 def test_scenario_runs_and_is_physical(path, tmp_path):
     sc = load_scenario(path)
     assert all(a.q0 is None for a in sc.arms), "examples place their arms by IK"
     res = run_scenario(path, tmp_path, duration=DURATION, html=False, plots=False)
     r, s, built = res.result, res.summary, res.built
     assert s["finite"]
+    assert s["feasible"], s["violations"]  # within the URDF's limits, nothing colliding
+    assert all(v is None or v > 0 for v in s["clearance"].values()), s["clearance"]
     assert s["steps"] == round(DURATION / sc.simulation.dt)
     assert s["max_constraint_violation"] < 1e-6
     # Newton-Euler of the object from the recorded forces (independent of the solver):

@@ -318,6 +318,11 @@ def run_command(args: argparse.Namespace) -> int:
         kinds = ", ".join(sorted({str(e.get("kind")) for e in s["events"]}))
         print(f"  {len(s['events'])} contact events ({kinds}); first: "
               f"{e0['kind']} of {e0['label']} at t = {e0['t']:.4g} s")
+    if s.get("feasible") is False:
+        from multiarm_pin.app.run_results import feasibility_lines
+
+        for line in feasibility_lines(s):
+            print(line)
     for w in s["warnings"][:10]:
         print(f"  warning: {w}")
     if len(s["warnings"]) > 10:

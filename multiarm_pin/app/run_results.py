@@ -35,7 +35,8 @@ its results folder:
   ``events`` (every separation and touchdown: time, contact, arm or support); ``files``
   (the files written, by role), ``missing_files`` (those a signal or an error left out:
   plots, ``replay.html``) and ``write_interrupted`` (the signal that came while writing,
-  or null).
+  or null); ``feasible``, ``violations``, ``limits`` and ``clearance``
+  (:meth:`multiarm_pin.feasibility.FeasibilityReport.as_summary`).
 - ``object_pose.png``, ``arm_wrenches.png``, ``joint_torques.png``, ``contact_forces.png``
   (fingertips and supports), ``constraint_violation.png``.
 - ``replay.html``: a self-contained Meshcat page replaying the run offline.
@@ -391,6 +392,20 @@ def load_run(run_dir) -> tuple[Scenario, dict, dict]:
     return sc, traj, summary
 
 
+def feasibility_lines(summary: dict, max_lines: int = 8) -> list[str]:
+    """The short block the command line prints for a run that was not feasible."""
+    vs = summary.get("violations") or []
+    out = [f"  NOT FEASIBLE: {len(vs)} violation(s) (summary.json 'violations'):"]
+    for v in vs[:max_lines]:
+        what = (f"{v['arm']}/{v['link']} and {v['other']}" if v["kind"] == "collision"
+                else f"{v['arm']} joint {v['joint']}")
+        out.append(f"    {v['kind']}: {what} from t = {v['t_first']:.4g} s, value "
+                   f"{v['value']:.4g} (limit {v['limit']:.4g})")
+    if len(vs) > max_lines:
+        out.append(f"    ... {len(vs) - max_lines} more")
+    return out
+
+
 def run_status(summary: dict) -> str:
     """One line describing a run's status from its summary (``complete`` or partial)."""
     status = summary.get("status", "complete")
@@ -406,6 +421,7 @@ def run_status(summary: dict) -> str:
 
 __all__ = [
     "REPLAY_FPS",
+    "feasibility_lines",
     "REQUIRED_ARRAYS",
     "load_run",
     "force_names",

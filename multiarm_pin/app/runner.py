@@ -27,6 +27,7 @@ from multiarm_pin.app.diagnosis import describe_failure
 from multiarm_pin.app.precheck import precheck_warnings
 from multiarm_pin.app.progress import ProgressBar
 from multiarm_pin.app.results_io import ResultsWriter, safe_component, write_atomic
+from multiarm_pin.app.run_feasibility import apply_policies, check_initial_state
 from multiarm_pin.app.run_results import (
     REPLAY_FPS,
     load_run,
@@ -247,6 +248,7 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
                                 f"needing ~{need / 2**30:.3g} GiB of memory (limit "
                                 f"{limit / 2**30:.3g} GiB, half the machine's memory); shorten "
                                 "the duration or lengthen simulation.dt")
+        scene = check_initial_state(built)  # bodies colliding at t = 0: bad input
         input_warns = input_warnings(built, T) + precheck_warnings(built, dt)
         for w in input_warns:
             print(f"warning: {w}", file=sys.stderr, flush=True)
@@ -291,13 +293,15 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
             if bar is not None:
                 bar.close()
         wall = time.perf_counter() - t0
+        result, status, error, feasibility = apply_policies(built, result, scene, status, error)
         t_end = float(result.t[-1])
         if status == "interrupted":
             _say(f"{error} at t = {t_end:.6g} s of {T:g} s: writing the partial results "
                  "(the trajectory and summary first; another Ctrl-C skips the plots and page)",
                  quiet)
         written = _write_results(writer, signals, built, result, solver, wall, T, sc, html,
-                                 plots, status, error, input_warns, quiet)
+                                 plots, status, error, input_warns, quiet,
+                                 feasibility.as_summary())
     files, traj, summary = written.files, written.trajectory, written.summary
     if internal is not None:
         _say(f"partial results (status failed, t_end = {t_end:.6g} s) in {target}", False)
@@ -373,7 +377,7 @@ class _Written:
 def _write_results(writer: ResultsWriter, signals: _RunSignals, built: BuiltScenario, result,
                    solver: str, wall: float, T: float, sc: Scenario, html: bool, plots: bool,
                    status: str, error: str | None, input_warns: list[str],
-                   quiet: bool) -> _Written:
+                   quiet: bool, feasibility: dict | None = None) -> _Written:
     """Write the results into the writer's staging folder and publish them.
 
     First, with signals held back, ``trajectory.npz`` (uncompressed: written at disk speed),
@@ -397,6 +401,7 @@ def _write_results(writer: ResultsWriter, signals: _RunSignals, built: BuiltScen
     summary["input_warnings"] = list(input_warns)
     summary["requested"]["duration"] = T
     summary.update(status=status, error=error, t_end=float(result.t[-1]))
+    summary.update(feasibility or {})
     pending = []
     if plots:
         pending += plot_names(traj, [sp.name for sp in built.system.supports.supports],

@@ -28,6 +28,8 @@ object, the controller and the simulation settings (format in the README)::
         restitution: 0.0                     # 0 <= e <= 1
         extent: [1.2, 0.8]                   # optional: a rectangle [lx, ly] [m] around point
         x_axis: [1, 0, 0]                    # optional: its x side (world, onto the plane)
+    limits: {torque: report, velocity: report, position: report, collision: report}  # or stop
+    ground: {height: 0.0}                    # the floor (collisions); null: no floor
 
 The object may carry ``external_wrench: [{from: s, to: s, wrench: [fx, fy, fz, mx, my,
 mz]}]`` (at the COM, world axes [N, N m], over each interval). A joint may say ``unilateral:
@@ -77,6 +79,7 @@ from multiarm_pin.app.scenario.specs import (
     ContactSpec,
     ControllerSpec,
     JointSpec,
+    LimitsSpec,
     ObjectSpec,
     Scenario,
     SimulationSpec,
@@ -91,7 +94,9 @@ from multiarm_pin.yaml_reader import Reader, describe, load_yaml_file
 
 # ----------------------------------------------------------------------------- parsing
 _TOP_KEYS = ("name", "description", "gravity", "object", "arms", "controller", "simulation",
-             "supports")
+             "supports", "limits", "ground")
+_LIMIT_KEYS = ("torque", "velocity", "position", "collision")
+_POLICIES = ("report", "stop")
 _OBJECT_KEYS = ("shape", "mass", "inertia", "pose", "twist", "external_wrench")
 _ARM_KEYS = ("name", "robot", "urdf", "tool_frame", "tool_offset", "base", "locked_joints",
              "q0", "q_seed", "v0", "joint")
@@ -155,8 +160,24 @@ def parse_scenario(data, file: str = "<scenario>") -> Scenario:
     for a, spec in zip(clean["arms"], arms, strict=True):
         if spec.urdf is not None:
             a["urdf"] = spec.urdf
+    limits = _parse_limits(root.get("limits")) if "limits" in d else LimitsSpec()
+    ground = _parse_ground(root.get("ground")) if "ground" in d else 0.0
     return Scenario(name, file, description, gravity, obj, arms, controller, sim, clean,
-                    supports)
+                    supports, limits, ground)
+
+
+def _parse_limits(r: Reader) -> LimitsSpec:
+    """``limits: {torque: report | stop, velocity: ..., position: ..., collision: ...}``."""
+    d = r.mapping(_LIMIT_KEYS)
+    return LimitsSpec(**{k: r.get(k).string(_POLICIES) for k in d})
+
+
+def _parse_ground(r: Reader) -> float | None:
+    """``ground: {height: h}`` [m] (the plane z = h), or ``ground: null`` for none."""
+    if r.value is None:
+        return None
+    r.mapping(("height",), required=("height",))
+    return r.get("height").number()
 
 
 def _parse_supports(r: Reader) -> tuple[SupportSpec, ...]:

@@ -180,6 +180,26 @@ class SimulationSpec:
 
 
 @dataclass(frozen=True)
+class LimitsSpec:
+    """What a run does when a limit is exceeded: ``"report"`` or ``"stop"`` per kind.
+
+    Attributes:
+        torque, velocity, position, collision: the policy of each kind
+        (:data:`~multiarm_pin.feasibility.POLICIES`).
+    """
+
+    torque: str = "report"
+    velocity: str = "report"
+    position: str = "report"
+    collision: str = "report"
+
+    def stops(self) -> tuple[str, ...]:
+        """The kinds whose first violation ends the run."""
+        return tuple(k for k in ("torque", "velocity", "position", "collision")
+                     if getattr(self, k) == "stop")
+
+
+@dataclass(frozen=True)
 class Scenario:
     """A validated scenario file.
 
@@ -188,6 +208,8 @@ class Scenario:
         gravity: (3,) [m/s^2] world. object: :class:`ObjectSpec`. arms: the arms.
         controller: :class:`ControllerSpec`. simulation: :class:`SimulationSpec`.
         data: the parsed YAML mapping (URDF paths made absolute), for copying the scenario.
+        supports: the supports. limits: :class:`LimitsSpec`. ground: height [m] of the
+        ground plane ``z = ground`` (collisions), or None for no ground.
     """
 
     name: str
@@ -200,6 +222,8 @@ class Scenario:
     simulation: SimulationSpec
     data: dict
     supports: tuple[SupportSpec, ...] = ()
+    limits: LimitsSpec = LimitsSpec()
+    ground: float | None = 0.0
 
 
 __all__ = [
@@ -212,6 +236,7 @@ __all__ = [
     "ContactSpec",
     "ControllerSpec",
     "JointSpec",
+    "LimitsSpec",
     "ObjectSpec",
     "Scenario",
     "SimulationSpec",

@@ -1,0 +1,32 @@
+"""Physically possible, or it says so: joint limits and collisions of a design and of a run.
+
+- :mod:`.limits`: the URDF's position, velocity and effort limits of every arm joint, and how
+  recorded samples use them.
+- :mod:`.arm_geometry`: each arm's collision geometry (convex hulls of its URDF's meshes) and
+  the self-collision pairs its SRDF leaves.
+- :mod:`.batch_kinematics`: joint placements at every recorded sample at once.
+- :mod:`.collisions`: every body of a system (arms, object, supports' slabs, ground) in one
+  Pinocchio geometry model; collisions and clearances at a state and along a run.
+- :mod:`.report`: :func:`feasibility_report` of a run, :func:`check_design` of a state.
+"""
+
+from multiarm_pin.feasibility.collisions import CATEGORIES, CollisionScene
+from multiarm_pin.feasibility.report import (
+    LIMIT_KINDS,
+    POLICIES,
+    FeasibilityReport,
+    Violation,
+    check_design,
+    feasibility_report,
+)
+
+__all__ = [
+    "CATEGORIES",
+    "LIMIT_KINDS",
+    "POLICIES",
+    "CollisionScene",
+    "FeasibilityReport",
+    "Violation",
+    "check_design",
+    "feasibility_report",
+]
