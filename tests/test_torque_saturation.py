@@ -92,3 +92,35 @@ def test_bad_limits_are_refused(heavy, bad):
     system, state, start, _ = heavy
     with pytest.raises(InputError, match="torque_limit"):
         mp.simulate(system, state, None, 0.01, DT, torque_limit=bad)
+
+
+def test_a_scenario_saturates_with_limits_torque_saturate(tmp_path):
+    """Through the command line: ``limits: {torque: saturate}`` on one UR5 holding 60 kg with
+    ``object_pd`` (it needs more than twice its limits): the applied torques stay within the
+    URDF efforts, the commanded ones are recorded beside them and exceed them."""
+    import json
+
+    from run_helpers import one_arm_scenario, run_cli, write
+
+    sc = write(tmp_path / "s.yaml", one_arm_scenario(
+        mass=60.0, duration=0.02, controller="{type: object_pd}",
+        extra="limits: {torque: saturate}\n"))
+    p = run_cli("run", sc, "--out", tmp_path / "out", "--no-html", "--quiet")
+    assert p.returncode == 0, p.stderr
+    with np.load(tmp_path / "out" / "trajectory.npz") as z:
+        tau, cmd, lim = z["tau_a"], z["tau_commanded_a"], z["tau_limit_a"]
+    assert lim.tolist() == [150.0, 150.0, 150.0, 28.0, 28.0, 28.0]
+    assert (np.abs(tau) <= lim * (1.0 + 1e-12)).all()
+    assert (np.abs(cmd) / lim).max() > 1.5
+    assert np.array_equal(tau, np.clip(cmd, -lim, lim))
+    s = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert any("torque saturation" in w for w in s["warnings"])
+    assert not any(v["kind"] == "torque" for v in s["violations"])  # applied: within
+
+
+def test_saturate_is_only_a_torque_policy(tmp_path):
+    from run_helpers import one_arm_scenario, run_cli, write
+
+    sc = write(tmp_path / "s.yaml", one_arm_scenario(extra="limits: {velocity: saturate}\n"))
+    p = run_cli("run", sc, "--out", tmp_path / "out", "--no-html", "--quiet")
+    assert p.returncode == 2 and "limits.velocity" in p.stderr and "Traceback" not in p.stderr

@@ -65,20 +65,16 @@ class StaticTorque:
 
 def joint_names(arm) -> list[str]:
     """(nv,) the name of the joint owning each velocity coordinate of an arm's model."""
-    model = arm.model
-    names = [""] * model.nv
-    for jid in range(1, model.njoints):
-        j = model.joints[jid]
-        for c in range(j.idx_v, j.idx_v + j.nv):
-            names[c] = model.names[jid]
-    return names
+    from multiarm_pin.feasibility.limits import arm_limits
+
+    return list(arm_limits(arm).joints)
 
 
 def effort_limits(arm) -> np.ndarray:
     """(nv,) the URDF effort limits [N m or N] of an arm (``inf`` where none is given)."""
-    e = np.array(arm.model.effortLimit, dtype=float)
-    e[~np.isfinite(e) | (e <= 0) | (e > 1e10)] = np.inf
-    return e
+    from multiarm_pin.feasibility.limits import arm_limits
+
+    return arm_limits(arm).effort
 
 
 def static_torques(system, state, supports: bool = False) -> tuple[np.ndarray, str]:

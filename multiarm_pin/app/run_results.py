@@ -118,26 +118,18 @@ def system_trajectory_arrays(system, result) -> dict[str, np.ndarray]:
     out["event_impulse"] = np.array([e.impulse for e in result.events], dtype=float)
     out["arm_wrench"] = result.arm_wrench(n)
     saturated = getattr(result, "torque_limit", None) is not None
+    from multiarm_pin.feasibility.limits import arm_limits
+
     for i, arm in enumerate(system.arms):
-        lim = np.asarray(arm.model.effortLimit, dtype=float)[: arm.nv].copy()
-        lim[~(lim > 0.0)] = np.inf  # a URDF without <limit effort>: none
-        out[f"tau_limit_{arm.name}"] = lim
-        out[f"joint_names_{arm.name}"] = np.array(velocity_names(arm.model), dtype=str)
+        limits = arm_limits(arm)  # the URDF's (inf: none given)
+        out[f"tau_limit_{arm.name}"] = limits.effort
+        out[f"joint_names_{arm.name}"] = np.array(limits.joints, dtype=str)
         if saturated:
             out[f"tau_commanded_{arm.name}"] = result.tau_commanded[:, aset.v_slices[i]]
     uni = system.contact_unilateral[:n].any(axis=1) if n else np.zeros(0, dtype=bool)
     out["unilateral_arms"] = np.array([a.name for a, u in zip(system.arms, uni, strict=True)
                                        if u], dtype=str)
     return {k: np.ascontiguousarray(v) for k, v in out.items()}
-
-
-def velocity_names(model: pin.Model) -> list[str]:
-    """The name of each of the ``nv`` velocity coordinates of ``model``.
-
-    A joint's name, with ``[k]`` added on joints of several coordinates.
-    """
-    return [model.names[j] if model.nvs[j] == 1 else f"{model.names[j]}[{k}]"
-            for j in range(1, model.njoints) for k in range(model.nvs[j])]
 
 
 def summarize(built: BuiltScenario, result, solver: str, wall_time: float) -> dict:

@@ -332,6 +332,9 @@ def simulate_built(built: BuiltScenario, controller, duration: float, dt: float,
                    progress=None):
     """Simulate a built scenario with its simulation settings (integrator, Baumgarte).
 
+    With ``limits: {torque: saturate}`` the actuators clip the applied torques to the arms'
+    URDF effort limits (``simulate(torque_limit=...)``).
+
     Args:
         built: the built scenario.
         controller: its controller (:func:`make_controller`) or None.
@@ -346,11 +349,17 @@ def simulate_built(built: BuiltScenario, controller, duration: float, dt: float,
     from multiarm_pin.sim.simulation import simulate
 
     sim = built.scenario.simulation
+    limit = None
+    if built.scenario.limits.torque == "saturate" and built.system.n_arms:
+        from multiarm_pin.feasibility.limits import arm_limits
+
+        limit = np.concatenate([arm_limits(a).effort for a in built.system.arms])
     with np.errstate(over="ignore", invalid="ignore"):  # NaN/inf are caught and reported
         return simulate(built.system, built.initial_state, controller, duration, dt,
                         integrator=sim.integrator, solver=solver, baumgarte=sim.baumgarte,
                         progress=progress,
-                        external_wrench=built.scenario.object.external_wrench or None)
+                        external_wrench=built.scenario.object.external_wrench or None,
+                        torque_limit=limit)
 
 
 @dataclass

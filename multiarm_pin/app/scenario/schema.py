@@ -28,7 +28,8 @@ object, the controller and the simulation settings (format in the README)::
         restitution: 0.0                     # 0 <= e <= 1
         extent: [1.2, 0.8]                   # optional: a rectangle [lx, ly] [m] around point
         x_axis: [1, 0, 0]                    # optional: its x side (world, onto the plane)
-    limits: {torque: report, velocity: report, position: report, collision: report}  # or stop
+    limits: {torque: report, velocity: report, position: report, collision: report}  # or stop;
+                                             # torque also saturate (clip to the URDF effort)
     ground: {height: 0.0}                    # the floor (collisions); null: no floor
 
 The object may carry ``external_wrench: [{from: s, to: s, wrench: [fx, fy, fz, mx, my,
@@ -97,6 +98,7 @@ _TOP_KEYS = ("name", "description", "gravity", "object", "arms", "controller", "
              "supports", "limits", "ground")
 _LIMIT_KEYS = ("torque", "velocity", "position", "collision")
 _POLICIES = ("report", "stop")
+_TORQUE_POLICIES = ("report", "saturate", "stop")
 _OBJECT_KEYS = ("shape", "mass", "inertia", "pose", "twist", "external_wrench")
 _ARM_KEYS = ("name", "robot", "urdf", "tool_frame", "tool_offset", "base", "locked_joints",
              "q0", "q_seed", "v0", "joint")
@@ -167,9 +169,14 @@ def parse_scenario(data, file: str = "<scenario>") -> Scenario:
 
 
 def _parse_limits(r: Reader) -> LimitsSpec:
-    """``limits: {torque: report | stop, velocity: ..., position: ..., collision: ...}``."""
+    """The ``limits:`` block: a policy per kind (``torque`` may also ``saturate``).
+
+    ``{torque: report | saturate | stop, velocity: report | stop, position: ...,
+    collision: ...}``.
+    """
     d = r.mapping(_LIMIT_KEYS)
-    return LimitsSpec(**{k: r.get(k).string(_POLICIES) for k in d})
+    return LimitsSpec(**{k: r.get(k).string(_TORQUE_POLICIES if k == "torque"
+                                            else _POLICIES) for k in d})
 
 
 def _parse_ground(r: Reader) -> float | None:

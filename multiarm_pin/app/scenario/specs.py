@@ -183,9 +183,13 @@ class SimulationSpec:
 class LimitsSpec:
     """What a run does when a limit is exceeded: ``"report"`` or ``"stop"`` per kind.
 
+    ``torque`` may also be ``"saturate"``: the actuators clip the applied torque to their
+    URDF effort limits inside the dynamics (``simulate(torque_limit=...)``; the commanded
+    torque is recorded beside it), so the torque limit is never exceeded.
+
     Attributes:
         torque, velocity, position, collision: the policy of each kind
-        (:data:`~multiarm_pin.feasibility.POLICIES`).
+        (:data:`~multiarm_pin.feasibility.POLICIES`; ``torque`` also ``"saturate"``).
     """
 
     torque: str = "report"
