@@ -90,6 +90,7 @@ def _simulation_case(task: CaseTask) -> tuple[dict, dict]:
     from multiarm_pin.app.runner import input_warnings, make_controller, simulate_built, summarize
     from multiarm_pin.app.scenario import build_scenario, parse_scenario
     from multiarm_pin.exceptions import ScenarioError
+    from multiarm_pin.feasibility import feasibility_report
     from multiarm_pin.study.metrics import simulation_metrics
     from multiarm_pin.study.spec import apply_overrides
 
@@ -107,7 +108,9 @@ def _simulation_case(task: CaseTask) -> tuple[dict, dict]:
     wall = time.perf_counter() - t0
     summary = summarize(built, result, sim.solver, wall)
     summary["input_warnings"] = list(warnings)
-    values = simulation_metrics(built, result, controller, summary)
+    report = feasibility_report(built.system, result, ground=sc.ground)
+    summary.update(report.as_summary())
+    values = simulation_metrics(built, result, controller, summary, report)
     return values, {"run": summary, "metrics": values}
 
 

@@ -16,6 +16,14 @@ Simulation metrics (mode ``simulate``), each a float (NaN when it does not apply
   effort limits; NaN when no joint has one);
 - ``within_limits``: 1.0 when the run stayed finite, no joint exceeded its effort limit and
   no unilateral contact pulled or separated, else 0.0;
+- ``feasible``: 1.0 when the run's feasibility report
+  (:func:`multiarm_pin.feasibility.feasibility_report`: joint limits and collisions at every
+  recorded sample, as ``summary.json``'s ``feasible``) found no violation, else 0.0;
+- ``min_clearance`` [m]: the smallest distance between two bodies that may not touch over
+  the run (the least of the report's ``clearance`` categories; negative: a penetration;
+  NaN without arms);
+- ``torque_limit_ratio[<arm>]``: ``torque_limit_ratio`` of one arm (one metric per arm of
+  the base scenario, by its name);
 - ``wall_time`` [s]: the simulation's wall time.
 
 Grasp metrics (mode ``grasp``): ``form_closure`` (1.0/0.0), ``margin`` (LP margin ε*),
@@ -28,20 +36,35 @@ import numpy as np
 
 SIMULATION_METRICS = ("max_constraint_violation", "min_contact_force", "separations",
                       "tracking_error", "tracking_error_rotation", "peak_joint_torque",
-                      "torque_limit_ratio", "within_limits", "wall_time")
-"""Metrics of mode ``simulate``."""
+                      "torque_limit_ratio", "within_limits", "feasible", "min_clearance",
+                      "wall_time")
+"""Metrics of mode ``simulate`` (besides one ``torque_limit_ratio[<arm>]`` per arm)."""
 GRASP_METRICS = ("form_closure", "margin", "epsilon", "rank", "wall_time")
 """Metrics of mode ``grasp``."""
-BOOLEAN_METRICS = ("within_limits", "form_closure")
+BOOLEAN_METRICS = ("within_limits", "feasible", "form_closure")
 """Metrics that are verdicts (1.0 true, 0.0 false): the report plots their fraction."""
 
 
-def metric_names(mode: str) -> tuple[str, ...]:
-    """Metric names of a study mode (``simulate`` or ``grasp``)."""
-    return SIMULATION_METRICS if mode == "simulate" else GRASP_METRICS
+def arm_metric(arm: str) -> str:
+    """The name of one arm's peak torque ratio metric: ``torque_limit_ratio[<arm>]``."""
+    return f"torque_limit_ratio[{arm}]"
 
 
-def simulation_metrics(built, result, controller, summary: dict) -> dict[str, float]:
+def metric_names(mode: str, arm_names=()) -> tuple[str, ...]:
+    """Metric names of a study mode (``simulate`` or ``grasp``).
+
+    Args:
+        mode: the study mode.
+        arm_names: the base scenario's arms (``simulate``: one ``torque_limit_ratio[<arm>]``
+            each, after the others).
+    """
+    if mode != "simulate":
+        return GRASP_METRICS
+    return SIMULATION_METRICS + tuple(arm_metric(a) for a in arm_names)
+
+
+def simulation_metrics(built, result, controller, summary: dict,
+                       feasibility=None) -> dict[str, float]:
     """Every simulation metric of one run (see the module docstring).
 
     Args:
@@ -49,9 +72,11 @@ def simulation_metrics(built, result, controller, summary: dict) -> dict[str, fl
         result: its :class:`~multiarm_pin.sim.simulation.SimulationResult`.
         controller: the controller used (its ``trajectory`` gives the reference), or None.
         summary: the run's ``summary.json`` content (:func:`multiarm_pin.app.runner.summarize`).
+        feasibility: the run's :class:`~multiarm_pin.feasibility.FeasibilityReport` (``feasible``,
+            ``min_clearance``, the per-arm ratios), or None (those are NaN).
 
     Returns:
-        ``{name: float}`` for every name in :data:`SIMULATION_METRICS`.
+        ``{name: float}`` for every name of :func:`metric_names` with the built arms.
     """
     system = built.system
     uni = np.asarray(system.unilateral, dtype=bool)
@@ -81,7 +106,29 @@ def simulation_metrics(built, result, controller, summary: dict) -> dict[str, fl
         "torque_limit_ratio": ratio,
         "within_limits": 1.0 if ok else 0.0,
         "wall_time": float(summary["wall_time"]),
+        **feasibility_metrics(built, feasibility),
     }
+
+
+def feasibility_metrics(built, report) -> dict[str, float]:
+    """``feasible``, ``min_clearance`` [m] and ``torque_limit_ratio[<arm>]`` of a report.
+
+    Args:
+        built: the built scenario (its arms' names).
+        report: a :class:`~multiarm_pin.feasibility.FeasibilityReport`, or None (all NaN).
+    """
+    arms = [a.name for a in built.arms]
+    if report is None:
+        return {"feasible": float("nan"), "min_clearance": float("nan"),
+                **{arm_metric(a): float("nan") for a in arms}}
+    gaps = [float(v) for v in report.clearance.values() if v is not None]
+    out = {"feasible": 1.0 if report.feasible else 0.0,
+           "min_clearance": min(gaps) if gaps else float("nan")}
+    for a in arms:
+        ratios = [j["peak_torque_ratio"] for j in report.limits.get(a, {}).values()
+                  if j.get("peak_torque_ratio") is not None]
+        out[arm_metric(a)] = float(max(ratios)) if ratios else float("nan")
+    return out
 
 
 def count_separations(summary: dict, unilateral_mu: np.ndarray) -> int:
@@ -159,6 +206,8 @@ def grasp_metrics(grasp, length_scale: float = 1.0) -> dict[str, float]:
 
 __all__ = [
     "BOOLEAN_METRICS",
+    "arm_metric",
+    "feasibility_metrics",
     "GRASP_METRICS",
     "SIMULATION_METRICS",
     "count_separations",

@@ -310,7 +310,9 @@ def parse_study(data, file: str = "<study>") -> StudySpec:
             raise StudyError(f, f"parameters[{i}]", f"{p!r} is also fixed in 'set'")
     from multiarm_pin.study.metrics import metric_names
 
-    allowed = metric_names(mode)
+    arms = base_data.get("arms") if isinstance(base_data, dict) else None
+    allowed = metric_names(mode, [str(a["name"]) for a in (arms or [])
+                                  if isinstance(a, dict) and "name" in a])
     metrics = data.get("metrics", list(allowed))
     if not isinstance(metrics, list) or not metrics:
         raise StudyError(f, "metrics", f"expected a list of metric names among "

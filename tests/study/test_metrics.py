@@ -97,3 +97,30 @@ def test_run_case_turns_every_failure_into_a_row():
                         {"object.mass": -2.0}, ("max_constraint_violation",))
     row = run_case(bad_mass)["row"]
     assert row["status"] == "error" and "object.mass" in row["error"]
+
+
+def test_feasibility_metrics_of_a_case_match_its_run_and_the_urdf():
+    """``feasible``, ``min_clearance`` and each arm's ``torque_limit_ratio[<arm>]`` of the
+    demo's case: the per-arm ratios recomputed here from the case's recorded torques would
+    need the record; instead they are checked against the summary's per-joint peaks (the
+    feasibility report) and their maximum against ``torque_limit_ratio`` (computed from the
+    torques and the models' effort limits by another function)."""
+    from multiarm_pin.study.metrics import arm_metric, metric_names
+
+    f = SCENARIOS / "two_ur5_box.yaml"
+    data = yaml.safe_load(f.read_text())
+    names = metric_names("simulate", ["left", "right"])
+    assert names[-2:] == (arm_metric("left"), arm_metric("right"))
+    task = CaseTask("case_00000", "k", 0, {}, "simulate", str(f), data,
+                    {"simulation.duration": 0.1}, names)
+    out = run_case(task)
+    row, run = out["row"], out["summary"]["run"]
+    assert row["status"] == "ok", row["error"]
+    assert row["feasible"] == 1.0 and run["feasible"] is True
+    gaps = [v for v in run["clearance"].values() if v is not None]
+    assert row["min_clearance"] == min(gaps) and 0.0 < row["min_clearance"] < 0.1
+    per_arm = [row[arm_metric(a)] for a in ("left", "right")]
+    for a, r in zip(("left", "right"), per_arm, strict=True):
+        peaks = [j["peak_torque_ratio"] for j in run["limits"][a].values()]
+        assert r == max(peaks) and 0.05 < r < 1.0
+    assert max(per_arm) == pytest.approx(row["torque_limit_ratio"], rel=1e-12)
