@@ -20,9 +20,7 @@ def test_the_examples_are_there():
             "mp6_pair_box"} <= names
 
 
-COLLIDING = {"fingertips_form_closure": "its top_corner gripper starts 0.13 m inside the box and "
-                                       "the seventh arm's idle fingertips 6 cm inside it (issue "
-                                       "23: the grasp needs a redesign)"}
+COLLIDING: dict[str, str] = {}
 """Shipped scenarios whose initial state collides (refused as bad input), with why."""
 
 
