@@ -16,7 +16,7 @@ arms:
     robot: ur5
     tool_frame: tool0
     base: {{position: [0.0, 0.55, 0.0], rpy: [0, 0, 0]}}
-    q_seed: [0.0, -1.2, 1.6, -0.4, 1.57, 0.0]
+    q_seed: [-3.4, -2.1, -1.6, 0.5, 0.3, -3.1]  # the demo's elbow-up left arm (no collision)
     joint:
       type: weld
       placement_in_object: {{position: [0.0, 0.2, 0.0], rpy: [1.5707963267948966, 0, 0]}}

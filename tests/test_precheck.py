@@ -19,7 +19,7 @@ from multiarm_pin.app.scenario import build_scenario, load_scenario
 from multiarm_pin.model.arm import Arm
 
 SHIPPED = sorted((REPO / "scenarios").glob("*.yaml"))
-BOX_CENTRE = np.array([0.5, 0.0, 0.3])  # one_arm_scenario's object position [m]
+BOX_CENTRE = np.array([0.8, 0.11, 0.24])  # one_arm_scenario's object position [m]
 
 THREE_DIGITS = 6e-3  # relative tolerance of a number printed with 3 significant digits
 

@@ -420,15 +420,22 @@ def test_registry_robot_loads_with_its_hand_or_flange_and_runs_a_weld(robot, tmp
     assert tool.parentJoint == arm.model.njoints - 1
     assert arm.model.nv == {"panda": 7, "panda_collision": 7, "xarm7": 7}.get(robot, 6)
     q0 = _mid_configuration(arm)
-    p = arm.tool_placement(q0).translation
+    tool = arm.tool_placement(q0)
+    # the box 5 cm beyond the flange along the tool's z axis, its axes the tool's (a weld
+    # needs no touch: nothing of the arm inside it); no floor: this mid-range pose is not a
+    # stance
+    centre = tool.translation + (0.05 + 0.05) * tool.rotation[:, 2]
+    quat = pin.Quaternion(tool.rotation).coeffs()  # [x, y, z, w]
     data = {
         "name": f"weld_{robot}",
-        "object": {"shape": {"type": "box", "size": [0.2, 0.2, 0.2]}, "mass": 1.0,
-                   "pose": {"position": [float(x) for x in p + [0.0, 0.0, 0.1]]}},
+        "object": {"shape": {"type": "box", "size": [0.1, 0.1, 0.1]}, "mass": 1.0,
+                   "pose": {"position": [float(x) for x in centre],
+                            "quaternion": [float(x) for x in quat]}},
         "arms": [{"name": "a", "robot": robot, "q0": [float(x) for x in q0],
                   "joint": {"type": "weld"}}],
         "controller": {"type": "gravity_compensation"},
         "simulation": {"duration": 0.006, "dt": 0.002},
+        "ground": None,
     }
     sc = parse_scenario(data, str(tmp_path / "s.yaml"))
     res = run_scenario(sc, tmp_path / "out", html=False, plots=False)

@@ -11,9 +11,10 @@ time with the URDF's ``<collision>`` geometry (Pinocchio's ``buildGeomFromUrdf``
 - ``mesh``: the same geometry with the meshes themselves (coal BVH models), for confirming a
   penetration that a hull reports.
 - ``self_pairs``: the pairs of geometry objects of the arm that may collide: every pair but
-  those on the same joint (rigidly attached to each other), those that the robot's SRDF
-  disables (example-robot-data ships one for most arms: adjacent links and links that never
-  meet), and, without an SRDF (URDF arms), those on adjacent joints.
+  those on the same joint (rigidly attached to each other), those on adjacent joints (their
+  joint keeps them apart; the kinova's SRDF does not list its first two links, whose hulls
+  overlap), and those that the robot's SRDF disables (example-robot-data ships one for most
+  arms: links that never meet).
 - ``carrier``: the geometry objects on the tool's joint and every joint after it (the wrist
   flange, a gripper, its fingertips): the links that carry the grasp's contacts.
 
@@ -168,8 +169,8 @@ def _arm_geometry(source: str, names: tuple, base_key: tuple, tool_joint: int) -
         ja, jb = joints[a], joints[b]
         if ja == jb:
             continue  # rigidly attached to each other
-        if not srdf and (placed.parents[ja] == jb or placed.parents[jb] == ja):
-            continue  # adjacent links (no SRDF to say which pairs never meet)
+        if placed.parents[ja] == jb or placed.parents[jb] == ja:
+            continue  # adjacent links: their joint keeps them apart (an SRDF may omit them)
         pairs.append((a, b))
     carrier_joints = _descendants(placed, tool_joint)
     carrier = frozenset(k for k, j in enumerate(joints) if j in carrier_joints)

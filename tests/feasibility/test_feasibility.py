@@ -251,7 +251,7 @@ def test_collision_along_a_run_has_its_time_and_stop_exits_1(tmp_path):
 
 def test_scenario_limits_and_ground_keys_are_validated():
     data = _demo()
-    data["limits"] = {"torque": "saturate"}
+    data["limits"] = {"torque": "clip"}
     with pytest.raises(ScenarioError, match=r"limits\.torque"):
         parse_scenario(data, "x.yaml")
     data["limits"] = {"speed": "stop"}
