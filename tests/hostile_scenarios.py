@@ -51,74 +51,51 @@ def two_ur5_welds(name: str = "two_ur5", mass: float = 4.0, quaternion: str = "[
                                 waypoints=waypoints, duration=duration, dt=dt)
 
 
-SIX_FINGERTIPS = """name: six_fingertips
+_TWO_GRIPPERS = """name: {name}
 object:
-  shape: {type: box, size: [0.8, 0.6, 0.4]}
+  shape: {{type: box, size: [0.8, 0.6, 0.4]}}
   mass: 4.0
-  pose: {position: [0.0, 0.0, 0.9]}
+  pose: {{position: [0.0, 0.0, 0.9]}}
 arms:
   - name: four_finger
     urdf: mp6/mp6_4f.urdf
     tool_frame: tool0
-    base: {position: [1.0, 0.45, 0.5], rpy: [0, 0, 2.5]}
+    base: {{position: [1.0, 0.45, 0.5], rpy: [0, 0, 2.5]}}
     q_seed: [0.8, -1.15, 1.05, 0.6, 0.9, -0.8]
     joint:
       type: fingertips
       tip_radius: 0.015
       contacts:
-        - {tip: fingertip_1, face: +x, point: [0.4, 0.25, 0.15]}
-        - {tip: fingertip_2, face: +y, point: [0.35, 0.3, 0.15]}
-        - {tip: fingertip_3, face: +z, point: [0.38, 0.25, 0.2]}
-  - name: three_finger
+        - {{tip: fingertip_1, face: +x, point: [0.4, 0.25, 0.15]}}
+        - {{tip: fingertip_2, face: +y, point: [0.35, 0.3, 0.15]}}
+        - {{tip: fingertip_3, face: +z, point: [0.38, 0.25, 0.2]}}
+{fourth}  - name: three_finger
     urdf: mp6/mp6.urdf
     tool_frame: tool0
-    base: {position: [-0.8, -0.7, 0.0], rpy: [0, 0, 0.8]}
+    base: {{position: [-0.8, -0.7, 0.0], rpy: [0, 0, 0.8]}}
     q_seed: [0.0, 0.0, -1.4, 0.0, 0.7, -0.75]
     joint:
       type: fingertips
       tip_radius: 0.015
       contacts:
-        - {tip: fingertip_1, face: -x, point: [-0.4, -0.25, -0.15]}
-        - {tip: fingertip_2, face: -y, point: [-0.35, -0.3, -0.15]}
-        - {tip: fingertip_3, face: -z, point: [-0.38, -0.25, -0.2]}
+        - {{tip: fingertip_1, face: -x, point: [-0.4, -0.25, -0.15]}}
+        - {{tip: fingertip_2, face: -y, point: [-0.35, -0.3, -0.15]}}
+        - {{tip: fingertip_3, face: -z, point: [-0.38, -0.25, -0.2]}}
+{tail}"""
+"""The two corner grippers of two_gripper_form_closure.yaml (``{fourth}``: the four-finger
+gripper's fourth contact, or nothing; ``{tail}``: controller and simulation)."""
+
+SIX_FINGERTIPS = _TWO_GRIPPERS.format(name="six_fingertips", fourth="", tail="""\
 controller: {type: object_pd, margin: 5.0}
 simulation: {duration: 0.01, integrator: rk4, dt: 0.002, solver: object_first}
-"""
+""")
 """The two corner grippers of two_gripper_form_closure.yaml with six fingertips (the
 four-finger gripper's fourth left out): six frictionless contacts are never form closure."""
 
 
-GRIPPERS_STRETCHED = """name: grippers_stretched
-object:
-  shape: {type: box, size: [0.8, 0.6, 0.4]}
-  mass: 4.0
-  pose: {position: [0.0, 0.0, 0.9]}
-arms:
-  - name: four_finger
-    urdf: mp6/mp6_4f.urdf
-    tool_frame: tool0
-    base: {position: [1.0, 0.45, 0.5], rpy: [0, 0, 2.5]}
-    q_seed: [0.8, -1.15, 1.05, 0.6, 0.9, -0.8]
-    joint:
-      type: fingertips
-      tip_radius: 0.015
-      contacts:
-        - {tip: fingertip_1, face: +x, point: [0.4, 0.25, 0.15]}
-        - {tip: fingertip_2, face: +y, point: [0.35, 0.3, 0.15]}
-        - {tip: fingertip_3, face: +z, point: [0.38, 0.25, 0.2]}
-        - {tip: fingertip_4, face: +z, point: [0.23, 0.25, 0.2]}
-  - name: three_finger
-    urdf: mp6/mp6.urdf
-    tool_frame: tool0
-    base: {position: [-0.8, -0.7, 0.0], rpy: [0, 0, 0.8]}
-    q_seed: [0.0, 0.0, -1.4, 0.0, 0.7, -0.75]
-    joint:
-      type: fingertips
-      tip_radius: 0.015
-      contacts:
-        - {tip: fingertip_1, face: -x, point: [-0.4, -0.25, -0.15]}
-        - {tip: fingertip_2, face: -y, point: [-0.35, -0.3, -0.15]}
-        - {tip: fingertip_3, face: -z, point: [-0.38, -0.25, -0.2]}
+GRIPPERS_STRETCHED = _TWO_GRIPPERS.format(
+    name="grippers_stretched",
+    fourth="        - {tip: fingertip_4, face: +z, point: [0.23, 0.25, 0.2]}\n", tail="""\
 controller:
   type: object_pd
   margin: 5.0
@@ -126,7 +103,7 @@ controller:
     - {t: 1.5, position: [-1.2, -1.0, 0.9]}
 simulation: {duration: 0.5, integrator: rk4, dt: 0.002, solver: object_first,
              baumgarte: {alpha: 5.0, beta: 5.0}}
-"""
+""")
 """The 7-contact two-gripper grasp of two_gripper_form_closure.yaml asked to carry the box
 1.6 m away, out of four_finger's reach: its elbow stretches through 0 (its singularity) near
 t = 0.33 s, its shoulder torque goes far over the 200 N m limit, and the run ends in an

@@ -117,7 +117,7 @@ def system_trajectory_arrays(system, result) -> dict[str, np.ndarray]:
     out["event_kind"] = np.array([e.kind for e in result.events], dtype=str)
     out["event_impulse"] = np.array([e.impulse for e in result.events], dtype=float)
     out["arm_wrench"] = result.arm_wrench(n)
-    saturated = getattr(result, "torque_limit", None) is not None
+    saturated = result.torque_limit is not None
     from multiarm_pin.feasibility.limits import arm_limits
 
     for i, arm in enumerate(system.arms):

@@ -383,9 +383,7 @@ class Stepper:
                     return new
                 t, state = t + h, new
                 self._leave(t, ending[1], ending[0], state=state)
-                sol, _, _, rows = self.evaluate(t, state)
-                if self.separations(t, sol, rows):
-                    sol = self.evaluate(t, state)[0]
+                sol = self._settled(t, state)
                 if t_end - t <= ce.TIME_TOLERANCE:
                     return state
                 continue
@@ -395,20 +393,26 @@ class Stepper:
                 # the row reaching the plane is beside the rectangle: no touchdown, the step
                 # is split there (that row is fallen now)
                 state = s_e
-                sol, _, _, rows = self.evaluate(t, state)
-                if self.separations(t, sol, rows):
-                    sol = self.evaluate(t, state)[0]
+                sol = self._settled(t, state)
                 if t_end - t <= ce.TIME_TOLERANCE:
                     return state
                 continue
             state, joined = self._impact(t, s_e, watch)
-            sol, _, _, rows = self.evaluate(t, state)
-            if self.separations(t, sol, rows, keep=joined):
-                sol = self.evaluate(t, state)[0]
+            sol = self._settled(t, state, keep=joined)
             if t_end - t <= ce.TIME_TOLERANCE:
                 return state
         raise DynamicsError(f"t = {t:.6g} s: more than {ce.MAX_EVENTS_PER_STEP} contact events "
                             "in one step")
+
+    def _settled(self, t: float, state: SystemState, keep=None) -> Solution:
+        """The solution at ``(t, state)`` once the rows it lets go have left the active set.
+
+        ``keep``: rows that may not leave (as :meth:`separations` takes it).
+        """
+        sol, _, _, rows = self.evaluate(t, state)
+        if self.separations(t, sol, rows, keep=keep):
+            sol = self.evaluate(t, state)[0]
+        return sol
 
     def _leave(self, t: float, leaving: np.ndarray, kind: str, rows: ContactRows | None = None,
                state: SystemState | None = None) -> None:
