@@ -260,3 +260,22 @@ def test_a_box_sliding_down_a_finite_ramp_leaves_its_lower_edge_at_the_closed_fo
     before = r.t < t_star
     np.testing.assert_allclose(r.object_position[before] @ e,
                                0.5 * G * np.sin(theta) * r.t[before] ** 2, atol=1e-12)
+
+
+def test_a_run_off_the_edge_has_a_replay_page(tmp_path):
+    """The replay takes every kind of contact event: ``off_edge`` markers on its timeline
+    (the page's events are its trajectory's, kind by kind)."""
+    from multiarm_pin.app.replay import write_replay_html
+    from multiarm_pin.app.run_results import replay_parts, system_trajectory_arrays
+
+    F, t_star = 4.0, 0.2195
+    d = F * t_star**2 / (2 * M)
+    system, state = _box_system(_table(-1.0, A / 2 + d), [0.0, 0.0, C / 2])
+    r = simulate(system, state, None, 0.3, 0.01, "rk4",
+                 external_wrench=WrenchSchedule([(0.0, 10.0, [F, 0, 0, 0, 0, 0])]))
+    assert any(e.kind == "off_edge" for e in r.events)
+    traj = system_trajectory_arrays(system, r)
+    arms, obj, contacts = replay_parts([], system.obj, traj)
+    assert [e.kind for e in contacts.events] == [e.kind for e in r.events]
+    page = write_replay_html(tmp_path / "replay.html", arms, obj, traj["t"], contacts)
+    assert page.stat().st_size > 0

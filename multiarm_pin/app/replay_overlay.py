@@ -144,7 +144,8 @@ OVERLAY_CSS = """
 OVERLAY_JS = r"""
 (function () {
   "use strict";
-  const EVENT_COLORS = {separation: "#4cc9f0", touchdown: "#ff9f1c", impact: "#f72585"};
+  const EVENT_COLORS = {separation: "#4cc9f0", touchdown: "#ff9f1c", impact: "#f72585",
+                        off_edge: "#c77dff"};
   const fmt = x => x.toFixed(3);
   function el(id) { return document.getElementById(id); }
   function esc(s) {
@@ -264,7 +265,7 @@ OVERLAY_JS = r"""
         if (e.impact) {
           ctx.moveTo(cx, cy - s); ctx.lineTo(cx + s, cy);
           ctx.lineTo(cx, cy + s); ctx.lineTo(cx - s, cy);
-        } else if (e.kind === "separation") {
+        } else if (e.kind === "separation" || e.kind === "off_edge") {
           ctx.moveTo(cx - s, cy - s); ctx.lineTo(cx + s, cy - s); ctx.lineTo(cx, cy + s);
         } else {
           ctx.moveTo(cx - s, cy + s); ctx.lineTo(cx + s, cy + s); ctx.lineTo(cx, cy - s);

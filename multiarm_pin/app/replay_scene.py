@@ -16,6 +16,7 @@ import pinocchio as pin
 
 from multiarm_pin.exceptions import InputError
 from multiarm_pin.model.polyhedron import Polyhedron
+from multiarm_pin.sim.contact_events import EVENT_KINDS as CONTACT_EVENT_KINDS
 from multiarm_pin.spatial import as_array
 
 
@@ -150,8 +151,8 @@ class ReplaySupport:
         return np.column_stack([self.x_axis, np.cross(self.normal, self.x_axis), self.normal])
 
 
-EVENT_KINDS = ("separation", "touchdown")
-"""The kinds of :class:`ReplayEvent` (those of ``multiarm_pin.sim.contact_events.ContactEvent``)."""
+EVENT_KINDS = CONTACT_EVENT_KINDS
+"""The kinds of :class:`ReplayEvent`: those of the simulation's contact events."""
 
 
 @dataclass(frozen=True)

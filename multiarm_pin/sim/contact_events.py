@@ -126,6 +126,10 @@ MAX_EVENTS_PER_STEP = 50
 """Touchdowns handled within one step before the simulation gives up (DynamicsError)."""
 
 
+EVENT_KINDS = ("separation", "touchdown", "off_edge")
+"""The kinds of :class:`ContactEvent`."""
+
+
 @dataclass(frozen=True)
 class ContactEvent:
     """A unilateral contact separating, touching down or losing its support off an edge.
@@ -162,6 +166,7 @@ class ContactEvent:
 
 __all__ = [
     "EDGE_TIME_TOLERANCE",
+    "EVENT_KINDS",
     "GAP_TOLERANCE",
     "LIFT_ACCELERATION",
     "LOST_GAP",
