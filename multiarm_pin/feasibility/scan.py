@@ -1,0 +1,457 @@
+"""Collisions along a run, stretch by stretch: each pair measured only where it may come closer.
+
+:class:`RunScan` takes a run's samples in stretches (:meth:`RunScan.extend`: the whole run at
+once after it, or each stretch the simulation records while it runs, for a ``stop`` policy)
+and finds every sample where a pair of :class:`~multiarm_pin.feasibility.CollisionScene`'s
+bodies interpenetrates, and the clearance of each category over the samples
+(:meth:`RunScan.result`).
+
+Conservative advancement at sample resolution, along the path: for each pair of joints
+``(a, b)`` that carry a pair's bodies, the path length of ``a``'s placement seen from ``b``,
+``C(s) = Σ_{t < s} |Δp_t| + ρ ‖ΔR_t‖_F`` (``Δ`` between consecutive samples, ``ρ`` bounding
+the distance of the first body's points to its joint), bounds how far any point of the first
+body has moved relative to the second between two samples: a pair measured at sample ``s``
+(distance ``d``) is at least ``d - (C(s') - C(s))`` apart at any ``s'`` (and at any earlier
+sample, from a later measurement). It is measured again at the first sample where that bound
+falls to :data:`ADVANCE_FRACTION` of ``d`` (to ``-PENETRATION_TOLERANCE`` for a grasp pair or a
+touching one, which matter only once they may penetrate; at every sample while it penetrates),
+found by a binary search of the monotone ``C``. A pair that stays far is measured once.
+Ground pairs are bounded by the lowest corner of their hull's box and measured from the hull's
+vertices (exact for a half-space). A hull penetration is checked on the meshes
+(:meth:`CollisionScene.mesh_penetration`); a carrying link within the grasp zone of its arm's
+contact points is skipped at those samples (the grasp, not a collision).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from multiarm_pin.feasibility.batch_kinematics import joint_placements
+
+ADVANCE_FRACTION = 0.5
+"""A measured pair is measured again where its bound falls below this fraction of the distance
+measured."""
+
+ADVANCE_STRIDE = 16
+"""A pair due at a later sample is measured at the last multiple of this many samples before
+it, so that pairs share their samples (one placement update for all of them)."""
+
+CLEARANCE_TOLERANCE = 1e-10
+"""How far [m] above the exact minimum over the samples a reported clearance may be (a pair
+whose bound is within it of the smallest distance found is not measured again)."""
+
+PATH_BLOCK = 128
+"""Samples per block of the path lengths' computation (its arrays stay in the CPU cache)."""
+
+
+@dataclass(frozen=True)
+class ScanResult:
+    """What :class:`RunScan` found along a run.
+
+    Attributes:
+        clearance: per category of :data:`~multiarm_pin.feasibility.collisions.CATEGORIES`,
+            the smallest hull distance over the run [m] (grasp pairs left out), or None when
+            the category has no pair.
+        hits: per pair index, its collisions ``(sample, distance [m] on the meshes, point
+            (3,) on the first body)`` in time order.
+        measured: number of (sample, pair) distances computed exactly.
+    """
+
+    clearance: dict
+    hits: dict
+    measured: int
+
+
+class _ScanGeometry:
+    """What a scan needs of a scene that does not depend on the run (built once per scene)."""
+
+    def __init__(self, scene):
+        hull = scene.hull
+        G = hull.ngeoms
+        centre, radius = np.zeros((G, 3)), np.zeros(G)
+        for g in range(G):
+            if g == scene.ground_index:
+                continue
+            o = hull.geometryObjects[g]
+            shape = o.geometry
+            shape.computeLocalAABB()
+            centre[g] = o.placement.act(np.array(shape.aabb_center))  # in its joint's frame
+            radius[g] = float(shape.aabb_radius)
+        self.joint = np.array([o.parentJoint for o in hull.geometryObjects], dtype=int)
+        self.centre, self.radius = centre, radius
+        reach = np.linalg.norm(centre, axis=1) + radius  # any point's distance to its joint
+        pairs = scene.pairs
+        P = len(pairs)
+        ja, jb = self.joint[pairs[:, 0]], self.joint[pairs[:, 1]]
+        key = ja * scene.model.njoints + jb
+        uniq, self.joint_pair = np.unique(key, return_inverse=True)
+        self.ua, self.ub = uniq // scene.model.njoints, uniq % scene.model.njoints
+        self.rho = reach[pairs[:, 0]]
+        # ground pairs of hulls and boxes: from their vertices (others are measured by coal)
+        self.vertices = {}  # ground pair -> (vertices (V, 3), box corners (8, 3)) in joint
+        self.ground = np.zeros(P, dtype=bool)
+        for k in (np.flatnonzero(pairs[:, 1] == scene.ground_index)
+                  if scene.ground_index is not None else ()):
+            o = hull.geometryObjects[int(pairs[k, 0])]
+            shape = o.geometry
+            if hasattr(shape, "points"):
+                pts = np.asarray(shape.points(), float)
+            elif hasattr(shape, "halfSide"):
+                h = np.array(shape.halfSide)
+                pts = np.array([[x, y, z] for x in (-h[0], h[0]) for y in (-h[1], h[1])
+                                for z in (-h[2], h[2])])
+            else:
+                continue
+            local = pts @ o.placement.rotation.T + o.placement.translation
+            lo, hi = local.min(axis=0), local.max(axis=0)
+            corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                                for z in (lo[2], hi[2])])
+            self.vertices[int(k)] = (local, corners)
+            self.ground[k] = True
+
+
+def scan_geometry(scene) -> _ScanGeometry:
+    """The scene's run-independent scan data (built at the first scan, then kept)."""
+    geo = getattr(scene, "_scan_geometry", None)
+    if geo is None:
+        geo = scene._scan_geometry = _ScanGeometry(scene)
+    return geo
+
+
+class RunScan:
+    """Collisions and clearances of a run whose samples come in stretches (module docstring).
+
+    Args:
+        scene: the :class:`~multiarm_pin.feasibility.CollisionScene` of the run's system.
+        capacity: the run's number of samples T (at most this many are extended).
+
+    Attributes:
+        n: samples scanned so far.
+        hits: per pair index, its collisions ``(sample, depth [m], point (3,))``.
+    """
+
+    def __init__(self, scene, capacity: int):
+        from multiarm_pin.feasibility.collisions import PENETRATION_TOLERANCE
+
+        self.scene = scene
+        self.geo = scan_geometry(scene)
+        self.tol = PENETRATION_TOLERANCE
+        T, P, U = int(capacity), len(scene.pairs), len(self.geo.ua)
+        self.T = T
+        self.n = 0
+        self.configs = np.zeros((T, scene.model.nq))
+        self.path_shift = np.zeros((T, U))  # Σ |Δp| of each joint pair's relative placement
+        self.path_turn = np.zeros((T, U))  # Σ ‖ΔR‖_F
+        self.exact = np.full((T, P), np.nan)
+        self.ground_lower = np.full((T, P), -np.inf)  # ground pairs' bounds (exact if measured)
+        self.ground_best = np.inf
+        never = T  # a sample index no stretch reaches
+        self.due = np.where(self.geo.ground, never, 0)
+        self.pending = np.zeros(P, dtype=bool)  # its bound holds over every sample so far
+        self.last = np.full(P, -1)
+        self.budget = np.zeros(P)
+        self.hits: dict[int, list] = {}
+        self._last_rel = None  # joints' (R (J, 3, 3), p (J, 3)) at sample n - 1
+
+    # ------------------------------------------------------------------ stretches
+    def extend(self, q: np.ndarray, object_position: np.ndarray, object_quaternion: np.ndarray,
+               contact_points: list[np.ndarray] | None = None) -> int | None:
+        """Scan the next samples of the run.
+
+        Args:
+            q: (m, nq) arms' configurations of samples ``n .. n + m - 1``.
+            object_position: (m, 3) [m].
+            object_quaternion: (m, 4) ``[x, y, z, w]``.
+            contact_points: per arm, (m, N_i, 3) its grasp's contact points [m] (None: no
+                grasp exception).
+
+        Returns:
+            The first sample (run index) of these with a collision, or None.
+        """
+        n0, m = self.n, len(q)
+        n1 = n0 + m
+        if n1 > self.T:
+            raise ValueError(f"RunScan: {n1} samples exceed its capacity {self.T}")
+        if not m:
+            return None
+        scene = self.scene
+        configs = self.configs
+        configs[n0:n1] = np.concatenate([q, object_position, object_quaternion], axis=1)
+        R, p = joint_placements(scene.model, configs[n0:n1])
+        self._paths(R, p, n0, n1)
+        opens = self._openings(R, p, contact_points, n0, n1)
+        self._ground(R, p, n0, n1)
+        # pairs whose bound held to the last stretch's end: where does it fail in this one?
+        waiting = np.flatnonzero(self.pending)
+        if len(waiting):
+            s2, found = self._first_exceeding(waiting, n0, n1)
+            self.pending[waiting[found]] = False
+            self.due[waiting[found]] = np.maximum(n0, s2[found] // ADVANCE_STRIDE
+                                                  * ADVANCE_STRIDE)
+        live = (self.due >= n0) & (self.due < n1)
+        self.due[live] = opens[self.due[live] - n0, np.flatnonzero(live)]
+        self._advance(opens, n0, n1)
+        self.n = n1
+        return self._check_hits(contact_points, n0, n1)
+
+    def _paths(self, R, p, n0: int, n1: int) -> None:
+        """:meth:`_block_paths` in blocks of :data:`PATH_BLOCK` samples (in cache)."""
+        for b0 in range(n0, n1, PATH_BLOCK):
+            b1 = min(n1, b0 + PATH_BLOCK)
+            self._block_paths(R[b0 - n0:b1 - n0], p[b0 - n0:b1 - n0], b0, b1)
+
+    def _block_paths(self, R, p, n0: int, n1: int) -> None:
+        """The joint pairs' path lengths ``C`` at samples ``n0 .. n1 - 1``.
+
+        From each joint's world increment between consecutive samples, ``A = R(t) R(t-1)ᵀ``:
+        the relative placement ``(R_bᵀ R_a, R_bᵀ w)`` (``w = p_a - p_b``) of a joint pair
+        changes by ``‖ΔR_rel‖_F = ‖A_a - A_b‖_F`` and ``|Δp_rel| = |w(t) - A_b w(t-1)|``
+        (both exact and without cancellation).
+        """
+        ua, ub = self.geo.ua, self.geo.ub
+        m = n1 - n0
+        if self._last_rel is None:
+            R_prev = np.concatenate([R[:1], R[:-1]])
+            p_prev = np.concatenate([p[:1], p[:-1]])
+        else:
+            R_prev = np.concatenate([self._last_rel[0][None], R[:-1]])
+            p_prev = np.concatenate([self._last_rel[1][None], p[:-1]])
+        # joint-first layouts (J, ..., m): gathering by joint copies contiguous blocks
+        A = np.ascontiguousarray(np.moveaxis(R @ np.swapaxes(R_prev, -1, -2), 0, -1)
+                                 ).reshape(-1, 9, m)  # (J, 9, m)
+        pc = np.ascontiguousarray(np.moveaxis(p, 0, -1))  # (J, 3, m)
+        qc = np.ascontiguousarray(np.moveaxis(p_prev, 0, -1))
+        Ab = A[ub]  # (U, 9, m)
+        D = A[ua] - Ab
+        turn = np.sqrt(np.einsum("uim,uim->um", D, D)).T  # (m, U)
+        w = pc[ua] - pc[ub]  # (U, 3, m)
+        w0 = qc[ua] - qc[ub]
+        shift2 = np.zeros((len(ua), m))
+        for i in range(3):
+            e = w[:, i] - (Ab[:, 3 * i] * w0[:, 0] + Ab[:, 3 * i + 1] * w0[:, 1]
+                           + Ab[:, 3 * i + 2] * w0[:, 2])
+            shift2 += e * e
+        shift = np.sqrt(shift2).T
+        base_s = self.path_shift[n0 - 1] if n0 else 0.0
+        base_t = self.path_turn[n0 - 1] if n0 else 0.0
+        self.path_shift[n0:n1] = base_s + np.cumsum(shift, axis=0)
+        self.path_turn[n0:n1] = base_t + np.cumsum(turn, axis=0)
+        self._last_rel = (R[-1].copy(), p[-1].copy())
+
+    def _path(self, s: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """``C`` of pairs ``k`` at samples ``s`` (same shapes) [m]."""
+        u = self.geo.joint_pair[k]
+        return self.path_shift[s, u] + self.geo.rho[k] * self.path_turn[s, u]
+
+    def _first_exceeding(self, ks: np.ndarray, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
+        """First sample in ``[lo, hi)`` where each pair's bound falls to its target.
+
+        That is where ``C(s) - C(last) > budget`` (``C`` is non-decreasing: a binary search).
+
+        Returns:
+            ``(samples (K,), found (K,) bool)``.
+        """
+        thr = self._path(self.last[ks], ks) + self.budget[ks]
+        a = np.full(len(ks), lo)
+        b = np.full(len(ks), hi)
+        while True:
+            open_ = a < b
+            if not open_.any():
+                break
+            mid = np.minimum((a + b) // 2, hi - 1)
+            over = self._path(mid, ks) > thr
+            b = np.where(open_ & over, mid, b)
+            a = np.where(open_ & ~over, mid + 1, a)
+        return a, a < hi
+
+    def _openings(self, R, p, contact_points, n0: int, n1: int) -> np.ndarray:
+        """(m + 1, P) from each sample of the stretch on, the first where a pair can collide.
+
+        Run indices; ``n1``: none in the stretch.
+
+        A carrying link whose bounding sphere lies, at a sample, within
+        :data:`~multiarm_pin.feasibility.collisions.JOINT_ZONE_RADIUS` of one of its arm's
+        contact points touches the object (if at all) at the grasp: such samples are skipped.
+        Every other pair may collide at every sample (its own index).
+        """
+        from multiarm_pin.feasibility.collisions import JOINT_ZONE_RADIUS
+
+        scene, geo = self.scene, self.geo
+        m, P = n1 - n0, len(scene.pairs)
+        opens = np.broadcast_to(np.arange(n0, n1 + 1)[:, None], (m + 1, P)).copy()
+        if contact_points is None:
+            return opens
+        for k in np.flatnonzero(scene.grasp_pair):
+            g = int(scene.pairs[k, 0])
+            cps = np.asarray(contact_points[scene.arm_of_pair[k]]).reshape(m, -1, 3)
+            if not cps.shape[1]:
+                continue
+            j = geo.joint[g]
+            c = np.einsum("tij,j->ti", R[:, j], geo.centre[g]) + p[:, j]
+            near = np.min(np.linalg.norm(cps - c[:, None], axis=2), axis=1) + geo.radius[g]
+            nxt = np.where(near <= JOINT_ZONE_RADIUS, n1, np.arange(n0, n1))
+            opens[:m, k] = np.minimum.accumulate(nxt[::-1])[::-1]
+        return opens
+
+    def _ground(self, R, p, n0: int, n1: int) -> None:
+        """The ground pairs at samples ``n0 .. n1 - 1``: bounds, and exact where they matter.
+
+        The distance of a convex hull (or a box) to the half-space ``z <= h`` is its lowest
+        vertex's height above ``h``; the lowest corner of the hull's box (in its joint frame)
+        bounds it from below. The exact distance only where the bound is below the smallest
+        exact distance found so far (or below the penetration tolerance).
+        """
+        geo, joint = self.geo, self.geo.joint
+        if not geo.vertices:
+            return
+        pairs = self.scene.pairs
+        low = self.ground_lower[n0:n1]
+        for k, (_, corners) in geo.vertices.items():
+            j = joint[int(pairs[k, 0])]
+            low[:, k] = self._lowest(corners, R[:, j, 2, :], p[:, j, 2])
+        order = sorted(geo.vertices, key=lambda k: float(low[:, k].min()))
+        for k in order:
+            rows = np.flatnonzero(low[:, k] < max(self.ground_best, self.tol))
+            if not len(rows):
+                continue
+            j = joint[int(pairs[k, 0])]
+            d = self._lowest(geo.vertices[k][0], R[rows, j, 2, :], p[rows, j, 2])
+            self.exact[n0 + rows, k] = low[rows, k] = d
+            self.ground_best = min(self.ground_best, float(d.min()))
+
+    def _lowest(self, local: np.ndarray, Rz: np.ndarray, pz: np.ndarray) -> np.ndarray:
+        """(m,) height above the ground [m] of the lowest of ``local`` (V, 3) points.
+
+        ``Rz`` (m, 3): the joint's third rotation row; ``pz`` (m,): its origin's height.
+        Sums of products, not a BLAS call (small operands).
+        """
+        z = (local[:, 0, None] * Rz[None, :, 0] + local[:, 1, None] * Rz[None, :, 1]
+             + local[:, 2, None] * Rz[None, :, 2])
+        return z.min(axis=0) + pz - self.scene.ground
+
+    def _advance(self, opens: np.ndarray, n0: int, n1: int) -> None:
+        """Measure every pair due in the stretch, and find when each is due again."""
+        scene, due, tol = self.scene, self.due, self.tol
+        model, data, hull, hd = scene.model, scene.data, scene.hull, scene.hull_data
+        while True:
+            s = int(due.min())
+            if s >= n1:
+                break
+            ks = np.flatnonzero(due == s)
+            pin.updateGeometryPlacements(model, data, hull, hd, self.configs[s])
+            d = np.array([pin.computeDistance(hull, hd, int(k)).min_distance for k in ks])
+            self.exact[s, ks] = d
+            self.last[ks] = s
+            near = d < -tol  # penetrating: every sample (its hits)
+            due[ks[near]] = opens[s + 1 - n0, ks[near]]
+            far, dfar = ks[~near], d[~near]
+            if not len(far):
+                continue
+            # grasp pairs and touching pairs matter only once they may penetrate
+            target = np.where(scene.grasp_pair[far] | (dfar <= tol), -tol,
+                              ADVANCE_FRACTION * dfar)
+            self.budget[far] = dfar - target
+            s2, found = self._first_exceeding(far, s + 1, n1)
+            self.pending[far[~found]] = True
+            due[far[~found]] = self.T
+            hit, at = far[found], s2[found]
+            # measured earlier than needed at a multiple of ADVANCE_STRIDE: pairs share samples
+            at = np.maximum(s + 1, at // ADVANCE_STRIDE * ADVANCE_STRIDE)
+            due[hit] = opens[at - n0, hit]
+
+    def _check_hits(self, contact_points, n0: int, n1: int) -> int | None:
+        """The hull penetrations of the stretch checked on the meshes; the first hit's sample."""
+        scene = self.scene
+        first = None
+        rows, cols = np.nonzero(self.exact[n0:n1] < -self.tol)
+        for i, k in sorted(zip(rows.tolist(), cols.tolist(), strict=True)):
+            s = n0 + i
+            hit = scene.mesh_penetration(self.configs[s], k)
+            if hit is None:
+                continue
+            if scene.grasp_pair[k] and contact_points is not None:
+                cps = [np.asarray(c)[i] for c in contact_points]
+                if scene.at_grasp(k, hit[1], cps):
+                    continue
+            self.hits.setdefault(int(k), []).append((s, hit[0], hit[1]))
+            first = s if first is None else min(first, s)
+        return first
+
+    # ------------------------------------------------------------------ the whole run
+    def lower_bounds(self) -> np.ndarray:
+        """(n, P) lower bounds of every pair's hull distance at every sample scanned [m].
+
+        The measured value where measured; elsewhere the best of the bounds from the
+        measurements before and after (``d ± (C(s') - C(s))``); the ground pairs' own.
+        """
+        n, P = self.n, len(self.scene.pairs)
+        exact = self.exact[:n]
+        C = self._path(np.arange(n)[:, None], np.arange(P)[None, :])
+        ahead = np.where(np.isnan(exact), -np.inf, exact + C)
+        behind = np.where(np.isnan(exact), -np.inf, exact - C)
+        lower = np.maximum(np.maximum.accumulate(ahead, axis=0) - C,
+                           np.maximum.accumulate(behind[::-1], axis=0)[::-1] + C)
+        g = self.geo.ground
+        lower[:, g] = self.ground_lower[:n, g]
+        return lower
+
+    def result(self) -> ScanResult:
+        """Clearances of the samples scanned, and the hits (branch and bound per category).
+
+        Each category's clearance is the exact minimum over the samples on the hulls: the
+        samples whose bound is below the smallest measured distance are measured until none
+        is (within :data:`CLEARANCE_TOLERANCE`).
+        """
+        from multiarm_pin.feasibility.collisions import CATEGORIES
+
+        scene = self.scene
+        lower = self.lower_bounds()
+        clearance = {}
+        for ci, name in enumerate(CATEGORIES):
+            cols = np.flatnonzero((scene.category == ci) & ~scene.grasp_pair)
+            clearance[name] = (self._category_minimum(lower, cols) if len(cols) and self.n
+                               else None)
+        measured = int(np.count_nonzero(~np.isnan(self.exact[:self.n])))
+        return ScanResult(clearance, {k: list(v) for k, v in self.hits.items()}, measured)
+
+    def _category_minimum(self, lower: np.ndarray, cols: np.ndarray) -> float:
+        """The smallest hull distance over the samples and the pairs ``cols`` [m].
+
+        Branch and bound, pair by pair (the pair of the smallest bound first): the sample of
+        the pair's smallest lower bound is measured, and the measurement bounds the pair at
+        the other samples (``d - |C(s') - C(s)|``), until none of its bounds is below the
+        smallest distance measured (less :data:`CLEARANCE_TOLERANCE`).
+        """
+        scene = self.scene
+        model, data, hull, hd = scene.model, scene.data, scene.hull, scene.hull_data
+        n = self.n
+        sub = self.exact[:n, cols]
+        best = float(np.nanmin(sub)) if np.any(~np.isnan(sub)) else np.inf
+        bounds = np.where(np.isnan(sub), lower[:, cols], np.inf)  # measured: not again
+        samples = np.arange(n)
+        self.visits = 0
+        for j in np.argsort(bounds.min(axis=0), kind="stable"):
+            k = int(cols[j])
+            bound = bounds[:, j].copy()
+            C = None
+            while True:
+                s = int(np.argmin(bound))
+                if bound[s] >= best - CLEARANCE_TOLERANCE:
+                    break
+                if C is None:
+                    C = self._path(samples, np.full(n, k))
+                pin.updateGeometryPlacements(model, data, hull, hd, self.configs[s])
+                d = pin.computeDistance(hull, hd, k).min_distance
+                self.visits += 1
+                self.exact[s, k] = d
+                best = min(best, d)
+                np.maximum(bound, d - np.abs(C - C[s]), out=bound)
+                bound[s] = np.inf
+        return best
+
+
+__all__ = ["ADVANCE_FRACTION", "ADVANCE_STRIDE", "CLEARANCE_TOLERANCE", "RunScan", "ScanResult",
+           "scan_geometry"]
