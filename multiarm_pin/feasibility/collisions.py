@@ -354,7 +354,7 @@ class CollisionScene:
             hit = self.mesh_penetration(q_scene, k)
             if hit is None:
                 continue
-            if self.grasp_pair[k] and contact_points is not None and self._at_grasp(
+            if self.grasp_pair[k] and contact_points is not None and self.at_grasp(
                     k, hit[1], contact_points):
                 continue
             arm, link, other = self.pair_names(k)
