@@ -46,7 +46,7 @@ def run_monitors(built, scene) -> tuple:
 
 
 def apply_policies(built, result, scene, status: str, error: str | None,
-                   stopped: str | None = None):
+                   stopped: str | None = None, monitors=()):
     """The run's feasibility report, and the error of a run its ``stop`` policies ended.
 
     Args:
@@ -57,6 +57,8 @@ def apply_policies(built, result, scene, status: str, error: str | None,
         error: the run's error so far.
         stopped: the message of the :class:`~multiarm_pin.exceptions.RunStoppedError` that
             ended the run, if one did.
+        monitors: the run's monitors (:func:`run_monitors`): a collision monitor's scan of
+            a whole run is reused.
 
     Returns:
         ``(status, error, report)``: a stopped run is failed, its error naming the first
@@ -69,7 +71,9 @@ def apply_policies(built, result, scene, status: str, error: str | None,
     if status == "interrupted":  # write what was simulated at once: the limits only
         return status, error, feasibility_report(built.system, result, ground=sc.ground,
                                                  collisions=False)
-    report = feasibility_report(built.system, result, ground=sc.ground, scene=scene)
+    scans = [m.scan for m in monitors if getattr(m, "scan", None) is not None]
+    report = feasibility_report(built.system, result, ground=sc.ground, scene=scene,
+                                scan=scans[0] if scans else None)
     if stopped is not None:
         first = report.first(sc.limits.stops())
         what = (f"limits.{first.kind}: stop: {first.describe()}" if first is not None

@@ -257,9 +257,9 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
         t0 = time.perf_counter()
         status, error, internal, signal_name = "complete", None, None, None
         result, stopped = None, None
+        monitors = run_monitors(built, scene)
         try:
-            result = simulate_built(built, controller, T, dt, solver, bar,
-                                    monitors=run_monitors(built, scene))
+            result = simulate_built(built, controller, T, dt, solver, bar, monitors=monitors)
             signals.hold()
         except KeyboardInterrupt as exc:  # the signal handler holds the signals that follow
             if result is not None:  # just after the simulation ended: an interrupt of the write
@@ -298,7 +298,8 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
             if bar is not None:
                 bar.close()
         wall = time.perf_counter() - t0
-        status, error, feasibility = apply_policies(built, result, scene, status, error, stopped)
+        status, error, feasibility = apply_policies(built, result, scene, status, error, stopped,
+                                                    monitors)
         t_end = float(result.t[-1])
         if status == "interrupted":
             _say(f"{error} at t = {t_end:.6g} s of {T:g} s: writing the partial results "

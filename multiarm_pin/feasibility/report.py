@@ -144,7 +144,7 @@ def _grasp_points(system, result) -> list[np.ndarray]:
 
 
 def feasibility_report(system, result, *, ground: float | None = 0.0, collisions: bool = True,
-                       scene: CollisionScene | None = None) -> FeasibilityReport:
+                       scene: CollisionScene | None = None, scan=None) -> FeasibilityReport:
     """Check every recorded sample of a run against the joint limits and for collisions.
 
     Args:
@@ -154,6 +154,9 @@ def feasibility_report(system, result, *, ground: float | None = 0.0, collisions
         ground: height [m] of the ground plane, or None for none.
         collisions: also check collisions (False: limits only; ``clearance`` is empty).
         scene: a :class:`CollisionScene` of the system to reuse (built otherwise).
+        scan: the :class:`~multiarm_pin.feasibility.scan.RunScan` of ``scene`` that a
+            collision monitor fed while the run ran; reused when it holds exactly the
+            samples checked here (a complete run), else the samples are scanned here.
 
     Returns:
         :class:`FeasibilityReport`.
@@ -196,9 +199,12 @@ def feasibility_report(system, result, *, ground: float | None = 0.0, collisions
     clearance = {}
     if collisions and system.n_arms and n:
         scene = scene or CollisionScene(system, result.state(0), ground)
-        scan = scene.scan(result.q[:n], result.object_position[:n],
-                          result.object_quaternion[:n],
-                          [c[:n] for c in _grasp_points(system, result)])
+        if scan is not None and scan.scene is scene and scan.n == n:
+            scan = scan.result()
+        else:
+            scan = scene.scan(result.q[:n], result.object_position[:n],
+                              result.object_quaternion[:n],
+                              [c[:n] for c in _grasp_points(system, result)])
         clearance = {k: _none_if_inf(v) for k, v in scan.clearance.items()}
         # a link of several geometries: one violation per pair of names
         by_names: dict[tuple, list] = {}

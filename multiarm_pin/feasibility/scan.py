@@ -8,7 +8,7 @@ bodies interpenetrates, and the clearance of each category over the samples
 
 Conservative advancement at sample resolution, along the path: for each pair of joints
 ``(a, b)`` that carry a pair's bodies, the path length of ``a``'s placement seen from ``b``,
-``C(s) = Σ_{t < s} |Δp_t| + ρ ‖ΔR_t‖_F`` (``Δ`` between consecutive samples, ``ρ`` bounding
+``C(s) = Σ_{t < s} |Δp_t| + ρ ‖ΔR_t‖_2`` (``Δ`` between consecutive samples, ``ρ`` bounding
 the distance of the first body's points to its joint), bounds how far any point of the first
 body has moved relative to the second between two samples: a pair measured at sample ``s``
 (distance ``d``) is at least ``d - (C(s') - C(s))`` apart at any ``s'`` (and at any earlier
@@ -144,7 +144,7 @@ class RunScan:
         self.n = 0
         self.configs = np.zeros((T, scene.model.nq))
         self.path_shift = np.zeros((T, U))  # Σ |Δp| of each joint pair's relative placement
-        self.path_turn = np.zeros((T, U))  # Σ ‖ΔR‖_F
+        self.path_turn = np.zeros((T, U))  # Σ ‖ΔR‖_2
         self.exact = np.full((T, P), np.nan)
         self.ground_lower = np.full((T, P), -np.inf)  # ground pairs' bounds (exact if measured)
         self.ground_best = np.inf
@@ -208,8 +208,9 @@ class RunScan:
 
         From each joint's world increment between consecutive samples, ``A = R(t) R(t-1)ᵀ``:
         the relative placement ``(R_bᵀ R_a, R_bᵀ w)`` (``w = p_a - p_b``) of a joint pair
-        changes by ``‖ΔR_rel‖_F = ‖A_a - A_b‖_F`` and ``|Δp_rel| = |w(t) - A_b w(t-1)|``
-        (both exact and without cancellation).
+        changes by ``‖ΔR_rel‖_F = ‖A_a - A_b‖_F`` (its spectral norm, which bounds how far a
+        point moves per metre from the joint, is that over √2) and
+        ``|Δp_rel| = |w(t) - A_b w(t-1)|`` (both exact and without cancellation).
         """
         ua, ub = self.geo.ua, self.geo.ub
         m = n1 - n0
@@ -226,7 +227,10 @@ class RunScan:
         qc = np.ascontiguousarray(np.moveaxis(p_prev, 0, -1))
         Ab = A[ub]  # (U, 9, m)
         D = A[ua] - Ab
-        turn = np.sqrt(np.einsum("uim,uim->um", D, D)).T  # (m, U)
+        # ‖ΔR‖_2 = ‖ΔR‖_F / √2 for a difference of rotations (R1 - R2 = R1 (I - Q), Q a
+        # rotation by θ: singular values 2 sin(θ/2) twice and 0): a point at ρ from the
+        # joint moves by at most ρ ‖ΔR‖_2
+        turn = np.sqrt(0.5 * np.einsum("uim,uim->um", D, D)).T  # (m, U)
         w = pc[ua] - pc[ub]  # (U, 3, m)
         w0 = qc[ua] - qc[ub]
         shift2 = np.zeros((len(ua), m))
@@ -249,22 +253,26 @@ class RunScan:
     def _first_exceeding(self, ks: np.ndarray, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
         """First sample in ``[lo, hi)`` where each pair's bound falls to its target.
 
-        That is where ``C(s) - C(last) > budget`` (``C`` is non-decreasing: a binary search).
+        That is where ``C(s) - C(last) > budget`` (``C`` is non-decreasing: a binary search,
+        all pairs at once, on the flat arrays).
 
         Returns:
             ``(samples (K,), found (K,) bool)``.
         """
-        thr = self._path(self.last[ks], ks) + self.budget[ks]
+        U = self.path_shift.shape[1]
+        shift, turn = self.path_shift.reshape(-1), self.path_turn.reshape(-1)
+        u = self.geo.joint_pair[ks]
+        rho = self.geo.rho[ks]
+        at = self.last[ks] * U + u
+        thr = shift.take(at) + rho * turn.take(at) + self.budget[ks]
         a = np.full(len(ks), lo)
         b = np.full(len(ks), hi)
-        while True:
-            open_ = a < b
-            if not open_.any():
-                break
-            mid = np.minimum((a + b) // 2, hi - 1)
-            over = self._path(mid, ks) > thr
-            b = np.where(open_ & over, mid, b)
-            a = np.where(open_ & ~over, mid + 1, a)
+        for _ in range(max(1, int(hi - lo).bit_length())):
+            mid = (a + b) >> 1
+            at = np.minimum(mid, hi - 1) * U + u
+            over = shift.take(at) + rho * turn.take(at) > thr
+            b = np.where(over, mid, b)
+            a = np.where(over | (a >= b), a, mid + 1)
         return a, a < hi
 
     def _openings(self, R, p, contact_points, n0: int, n1: int) -> np.ndarray:
@@ -381,15 +389,21 @@ class RunScan:
         return first
 
     # ------------------------------------------------------------------ the whole run
+    def _paths_of_all(self, n: int) -> np.ndarray:
+        """(n, P) ``C`` of every pair at the first ``n`` samples [m]."""
+        u = self.geo.joint_pair
+        return (self.path_shift[:n].take(u, axis=1)
+                + self.geo.rho * self.path_turn[:n].take(u, axis=1))
+
     def lower_bounds(self) -> np.ndarray:
         """(n, P) lower bounds of every pair's hull distance at every sample scanned [m].
 
         The measured value where measured; elsewhere the best of the bounds from the
         measurements before and after (``d ± (C(s') - C(s))``); the ground pairs' own.
         """
-        n, P = self.n, len(self.scene.pairs)
+        n = self.n
         exact = self.exact[:n]
-        C = self._path(np.arange(n)[:, None], np.arange(P)[None, :])
+        C = self._paths_of_all(n)
         ahead = np.where(np.isnan(exact), -np.inf, exact + C)
         behind = np.where(np.isnan(exact), -np.inf, exact - C)
         lower = np.maximum(np.maximum.accumulate(ahead, axis=0) - C,
@@ -420,10 +434,13 @@ class RunScan:
     def _category_minimum(self, lower: np.ndarray, cols: np.ndarray) -> float:
         """The smallest hull distance over the samples and the pairs ``cols`` [m].
 
-        Branch and bound, pair by pair (the pair of the smallest bound first): the sample of
-        the pair's smallest lower bound is measured, and the measurement bounds the pair at
-        the other samples (``d - |C(s') - C(s)|``), until none of its bounds is below the
-        smallest distance measured (less :data:`CLEARANCE_TOLERANCE`).
+        Branch and bound, pair by pair (the pair of the smallest bound first), over its
+        samples in increasing order of their bound: a sample whose bound is below the
+        smallest distance measured (less :data:`CLEARANCE_TOLERANCE`) is measured, and its
+        distance ``d`` raises the pair's bounds at the samples around it
+        (``d - |C(s') - C(s)|``, where that is above them); the pair is done at the first
+        sample whose bound is not below the smallest distance (bounds only rise, and that
+        distance only falls).
         """
         scene = self.scene
         model, data, hull, hd = scene.model, scene.data, scene.hull, scene.hull_data
@@ -431,24 +448,30 @@ class RunScan:
         sub = self.exact[:n, cols]
         best = float(np.nanmin(sub)) if np.any(~np.isnan(sub)) else np.inf
         bounds = np.where(np.isnan(sub), lower[:, cols], np.inf)  # measured: not again
-        samples = np.arange(n)
         self.visits = 0
+        configs = self.configs
         for j in np.argsort(bounds.min(axis=0), kind="stable"):
             k = int(cols[j])
             bound = bounds[:, j].copy()
+            order = np.argsort(bound, kind="stable")
             C = None
-            while True:
-                s = int(np.argmin(bound))
+            for s in order.tolist():
+                if bounds[s, j] >= best - CLEARANCE_TOLERANCE:
+                    break  # its first bound: every later one is at least as large
                 if bound[s] >= best - CLEARANCE_TOLERANCE:
-                    break
+                    continue  # raised by a measurement near it
                 if C is None:
-                    C = self._path(samples, np.full(n, k))
-                pin.updateGeometryPlacements(model, data, hull, hd, self.configs[s])
+                    u = self.geo.joint_pair[k]
+                    C = self.path_shift[:n, u] + self.geo.rho[k] * self.path_turn[:n, u]
+                pin.updateGeometryPlacements(model, data, hull, hd, configs[s])
                 d = pin.computeDistance(hull, hd, k).min_distance
                 self.visits += 1
                 self.exact[s, k] = d
                 best = min(best, d)
-                np.maximum(bound, d - np.abs(C - C[s]), out=bound)
+                reach = d - best + CLEARANCE_TOLERANCE  # where the new bound is of use
+                lo = int(np.searchsorted(C, C[s] - reach, side="left"))
+                hi = int(np.searchsorted(C, C[s] + reach, side="right"))
+                np.maximum(bound[lo:hi], d - np.abs(C[lo:hi] - C[s]), out=bound[lo:hi])
                 bound[s] = np.inf
         return best
 
