@@ -43,6 +43,9 @@ CLEARANCE_TOLERANCE = 1e-10
 """How far [m] above the exact minimum over the samples a reported clearance may be (a pair
 whose bound is within it of the smallest distance found is not measured again)."""
 
+KEPT_PLACEMENTS = 1_000_000
+"""Largest samples x joints whose placements a scan keeps (96 bytes each)."""
+
 PATH_BLOCK = 128
 """Samples per block of the path lengths' computation (its arrays stay in the CPU cache)."""
 
@@ -90,12 +93,10 @@ class _ScanGeometry:
         uniq, self.joint_pair = np.unique(key, return_inverse=True)
         self.ua, self.ub = uniq // scene.model.njoints, uniq % scene.model.njoints
         self.rho = reach[pairs[:, 0]]
-        # ground pairs of hulls and boxes: from their vertices (others are measured by coal)
-        self.vertices = {}  # ground pair -> (vertices (V, 3), box corners (8, 3)) in joint
-        self.ground = np.zeros(P, dtype=bool)
-        for k in (np.flatnonzero(pairs[:, 1] == scene.ground_index)
-                  if scene.ground_index is not None else ()):
-            o = hull.geometryObjects[int(pairs[k, 0])]
+        # the hulls' and boxes' vertices in their joints' frames (None: another shape)
+        self.hull_vertices = []
+        for g in range(G):
+            o = hull.geometryObjects[g]
             shape = o.geometry
             if hasattr(shape, "points"):
                 pts = np.asarray(shape.points(), float)
@@ -104,8 +105,17 @@ class _ScanGeometry:
                 pts = np.array([[x, y, z] for x in (-h[0], h[0]) for y in (-h[1], h[1])
                                 for z in (-h[2], h[2])])
             else:
+                self.hull_vertices.append(None)
                 continue
-            local = pts @ o.placement.rotation.T + o.placement.translation
+            self.hull_vertices.append(pts @ o.placement.rotation.T + o.placement.translation)
+        # ground pairs of hulls and boxes: from their vertices (others are measured by coal)
+        self.vertices = {}  # ground pair -> (vertices (V, 3), box corners (8, 3)) in joint
+        self.ground = np.zeros(P, dtype=bool)
+        for k in (np.flatnonzero(pairs[:, 1] == scene.ground_index)
+                  if scene.ground_index is not None else ()):
+            local = self.hull_vertices[int(pairs[k, 0])]
+            if local is None:
+                continue
             lo, hi = local.min(axis=0), local.max(axis=0)
             corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
                                 for z in (lo[2], hi[2])])
@@ -155,6 +165,12 @@ class RunScan:
         self.budget = np.zeros(P)
         self.hits: dict[int, list] = {}
         self._last_rel = None  # joints' (R (J, 3, 3), p (J, 3)) at sample n - 1
+        J = scene.model.njoints
+        # every joint's placement at every sample, for the clearances' separating-axis
+        # bounds; recomputed where needed instead when a run is too long to keep them
+        kept = T * J <= KEPT_PLACEMENTS
+        self._R = np.empty((T, J, 3, 3)) if kept else None
+        self._p = np.empty((T, J, 3)) if kept else None
 
     # ------------------------------------------------------------------ stretches
     def extend(self, q: np.ndarray, object_position: np.ndarray, object_quaternion: np.ndarray,
@@ -181,6 +197,8 @@ class RunScan:
         configs = self.configs
         configs[n0:n1] = np.concatenate([q, object_position, object_quaternion], axis=1)
         R, p = joint_placements(scene.model, configs[n0:n1])
+        if self._R is not None:
+            self._R[n0:n1], self._p[n0:n1] = R, p
         self._paths(R, p, n0, n1)
         opens = self._openings(R, p, contact_points, n0, n1)
         self._ground(R, p, n0, n1)
@@ -431,16 +449,44 @@ class RunScan:
         measured = int(np.count_nonzero(~np.isnan(self.exact[:self.n])))
         return ScanResult(clearance, {k: list(v) for k, v in self.hits.items()}, measured)
 
+    def _placements(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every joint's ``(R (m, J, 3, 3), p (m, J, 3))`` at some scanned samples."""
+        if self._R is not None:
+            return self._R[samples], self._p[samples]
+        return joint_placements(self.scene.model, self.configs[samples])
+
+    def _separation(self, k: int, normal: np.ndarray, s: int, samples: np.ndarray
+                    ) -> np.ndarray | None:
+        """Lower bounds [m] of pair ``k``'s hull distance at ``samples``, along one axis.
+
+        The gap of the two hulls along ``normal`` (world, from the first body to the
+        second, at sample ``s``) carried with the second body: ``min n·y - max n·x`` over
+        their vertices, a lower bound of their distance at any placement (projection on
+        a unit vector shortens distances). None if a body has no vertices.
+        """
+        geo, scene = self.geo, self.scene
+        a, b = (int(g) for g in scene.pairs[k])
+        Va, Vb = geo.hull_vertices[a], geo.hull_vertices[b]
+        if Va is None or Vb is None:
+            return None
+        ja, jb = geo.joint[a], geo.joint[b]
+        R, p = self._placements(np.concatenate([[s], samples]))
+        n_b = R[0, jb].T @ normal  # the axis in the second body's joint frame
+        low_b = float((Vb @ n_b).min())
+        nw = R[1:, jb] @ n_b  # (m, 3) the axis at each sample, world
+        u = np.einsum("mji,mj->mi", R[1:, ja], nw)  # in the first body's joint frame
+        high_a = (u @ Va.T).max(axis=1)
+        return low_b + np.einsum("mi,mi->m", nw, p[1:, jb] - p[1:, ja]) - high_a
+
     def _category_minimum(self, lower: np.ndarray, cols: np.ndarray) -> float:
         """The smallest hull distance over the samples and the pairs ``cols`` [m].
 
-        Branch and bound, pair by pair (the pair of the smallest bound first), over its
-        samples in increasing order of their bound: a sample whose bound is below the
-        smallest distance measured (less :data:`CLEARANCE_TOLERANCE`) is measured, and its
-        distance ``d`` raises the pair's bounds at the samples around it
-        (``d - |C(s') - C(s)|``, where that is above them); the pair is done at the first
-        sample whose bound is not below the smallest distance (bounds only rise, and that
-        distance only falls).
+        Branch and bound, pair by pair (the pair of the smallest bound first): the sample
+        of the pair's smallest bound below the smallest distance measured (less
+        :data:`CLEARANCE_TOLERANCE`) is measured, and the measurement raises the pair's
+        bounds at the other samples: ``d - |C(s') - C(s)|`` where that is above them, and
+        the gap along the measured closest direction (:meth:`_separation`) at the samples
+        still below; until none is below.
         """
         scene = self.scene
         model, data, hull, hd = scene.model, scene.data, scene.hull, scene.hull_data
@@ -453,28 +499,38 @@ class RunScan:
         for j in np.argsort(bounds.min(axis=0), kind="stable"):
             k = int(cols[j])
             bound = bounds[:, j].copy()
-            order = np.argsort(bound, kind="stable")
             C = None
-            for s in order.tolist():
-                if bounds[s, j] >= best - CLEARANCE_TOLERANCE:
-                    break  # its first bound: every later one is at least as large
-                if bound[s] >= best - CLEARANCE_TOLERANCE:
-                    continue  # raised by a measurement near it
+            while True:
+                below = np.flatnonzero(bound < best - CLEARANCE_TOLERANCE)
+                if not len(below):
+                    break
+                s = int(below[np.argmin(bound[below])])
                 if C is None:
                     u = self.geo.joint_pair[k]
                     C = self.path_shift[:n, u] + self.geo.rho[k] * self.path_turn[:n, u]
                 pin.updateGeometryPlacements(model, data, hull, hd, configs[s])
-                d = pin.computeDistance(hull, hd, k).min_distance
+                r = pin.computeDistance(hull, hd, k)
+                d = r.min_distance
                 self.visits += 1
                 self.exact[s, k] = d
                 best = min(best, d)
-                reach = d - best + CLEARANCE_TOLERANCE  # where the new bound is of use
+                bound[s] = np.inf
+                reach = d - best + CLEARANCE_TOLERANCE  # where the path bound is of use
                 lo = int(np.searchsorted(C, C[s] - reach, side="left"))
                 hi = int(np.searchsorted(C, C[s] + reach, side="right"))
                 np.maximum(bound[lo:hi], d - np.abs(C[lo:hi] - C[s]), out=bound[lo:hi])
-                bound[s] = np.inf
+                if d <= self.tol:
+                    continue  # touching or penetrating: no separating axis
+                rest = below[bound[below] < best - CLEARANCE_TOLERANCE]
+                if len(rest):
+                    axis = np.asarray(r.getNearestPoint2()) - np.asarray(r.getNearestPoint1())
+                    norm = float(np.linalg.norm(axis))
+                    gap = self._separation(k, axis / norm, s, rest) if norm > 0 else None
+                    if gap is not None:
+                        bound[rest] = np.fmax(bound[rest], gap)  # NaN: no bound
         return best
 
 
-__all__ = ["ADVANCE_FRACTION", "ADVANCE_STRIDE", "CLEARANCE_TOLERANCE", "RunScan", "ScanResult",
+__all__ = ["ADVANCE_FRACTION", "ADVANCE_STRIDE", "CLEARANCE_TOLERANCE", "KEPT_PLACEMENTS",
+           "RunScan", "ScanResult",
            "scan_geometry"]

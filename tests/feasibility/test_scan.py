@@ -80,3 +80,27 @@ def test_a_run_scanned_in_stretches_equals_one_scan():
     for name, value in whole.clearance.items():
         assert parts.clearance[name] == pytest.approx(value, abs=2e-10) if value is not None \
             else parts.clearance[name] is None
+
+
+def test_clearances_equal_every_pair_at_every_sample_of_the_demo():
+    # the demo carrying its box: pairs at nearly constant distance (a wrist and the tool's
+    # box turning about each other), pairs bounded along the measured closest axis
+    from multiarm_pin.feasibility.collisions import CATEGORIES
+    from tests.feasibility.collision_cases import DEMO
+
+    data, _ = ALONG_A_RUN["wrists_to_the_floor"][0]()
+    data["controller"]["waypoints"] = [{"t": 0.5, "position": [0.45, 0.1, 0.5],
+                                        "rpy": [0.0, 0.0, 0.3]}]
+    data["simulation"]["duration"] = 0.5
+    built, scene, result = _run(lambda: (data, str(DEMO)))
+    scan = scene.scan(result.q, result.object_position, result.object_quaternion, None)
+    brute = np.array([scene.hull_distances(scene.configuration(
+        result.q[s], result.object_position[s], result.object_quaternion[s]))
+        for s in range(len(result.t))])
+    for ci, name in enumerate(CATEGORIES):
+        cols = (scene.category == ci) & ~scene.grasp_pair
+        if not cols.any():
+            assert scan.clearance[name] is None
+            continue
+        assert scan.clearance[name] == pytest.approx(brute[:, cols].min(), abs=2e-10), name
+    assert scan.measured < brute.size / 4
