@@ -20,6 +20,12 @@ Ground pairs are bounded by the lowest corner of their hull's box and measured f
 vertices (exact for a half-space). A hull penetration is checked on the meshes
 (:meth:`CollisionScene.mesh_penetration`); a carrying link within the grasp zone of its arm's
 contact points is skipped at those samples (the grasp, not a collision).
+
+Clearances (:meth:`RunScan.result`): per category, branch and bound over each pair's samples,
+from the bounds above; a measurement also bounds its pair at the other samples by the gap of
+the two hulls along the measured closest axis, carried with the second body (a separating-axis
+bound from the hulls' vertices), which holds a pair at nearly constant distance (two links
+turning about each other) with a few measurements.
 """
 
 from __future__ import annotations
