@@ -16,10 +16,11 @@ sample, from a later measurement). It is measured again at the first sample wher
 falls to :data:`ADVANCE_FRACTION` of ``d`` (to ``-PENETRATION_TOLERANCE`` for a grasp pair or a
 touching one, which matter only once they may penetrate; at every sample while it penetrates),
 found by a binary search of the monotone ``C``. A pair that stays far is measured once.
-Ground pairs are bounded by the lowest corner of their hull's box and measured from the hull's
-vertices (exact for a half-space). A hull penetration is checked on the meshes
-(:meth:`CollisionScene.mesh_penetration`); a carrying link within the grasp zone of its arm's
-contact points is skipped at those samples (the grasp, not a collision).
+Ground pairs: the lowest point of a round shape exactly, of a hull bounded by the lowest
+corner of its box and measured from its vertices (exact for a half-space). A hull
+penetration is checked on the meshes (:meth:`CollisionScene.mesh_penetration`); a carrying
+link within the grasp zone of its arm's contact points is skipped at those samples (the
+grasp, not a collision).
 
 Clearances (:meth:`RunScan.result`): per category, branch and bound over each pair's samples,
 from the bounds above; a measurement also bounds its pair at the other samples by the gap of
@@ -99,34 +100,61 @@ class _ScanGeometry:
         uniq, self.joint_pair = np.unique(key, return_inverse=True)
         self.ua, self.ub = uniq // scene.model.njoints, uniq % scene.model.njoints
         self.rho = reach[pairs[:, 0]]
-        # the hulls' and boxes' vertices in their joints' frames (None: another shape)
-        self.hull_vertices = []
+        # each body's support function in its joint's frame (None: a shape without one)
+        self.hull_vertices = []  # hulls' and boxes' vertices (V, 3), in the joint frame
+        self.round = []  # spheres, cylinders, capsules: (R, t, radius, half length, kind)
         for g in range(G):
             o = hull.geometryObjects[g]
             shape = o.geometry
+            M = o.placement
+            pts, rnd = None, None
             if hasattr(shape, "points"):
                 pts = np.asarray(shape.points(), float)
             elif hasattr(shape, "halfSide"):
                 h = np.array(shape.halfSide)
                 pts = np.array([[x, y, z] for x in (-h[0], h[0]) for y in (-h[1], h[1])
                                 for z in (-h[2], h[2])])
-            else:
-                self.hull_vertices.append(None)
-                continue
-            self.hull_vertices.append(pts @ o.placement.rotation.T + o.placement.translation)
-        # ground pairs of hulls and boxes: from their vertices (others are measured by coal)
-        self.vertices = {}  # ground pair -> (vertices (V, 3), box corners (8, 3)) in joint
+            elif type(shape).__name__ in ("Sphere", "Cylinder", "Capsule"):
+                kind = type(shape).__name__
+                rnd = (np.array(M.rotation), np.array(M.translation), float(shape.radius),
+                       float(getattr(shape, "halfLength", 0.0)), kind)
+            self.hull_vertices.append(None if pts is None else pts @ M.rotation.T
+                                      + M.translation)
+            self.round.append(rnd)
+        # ground pairs with a support function: the lowest point, exactly (others: coal)
+        self.vertices = {}  # ground pair of a polytope -> box corners (8, 3) in joint
         self.ground = np.zeros(P, dtype=bool)
         for k in (np.flatnonzero(pairs[:, 1] == scene.ground_index)
                   if scene.ground_index is not None else ()):
-            local = self.hull_vertices[int(pairs[k, 0])]
-            if local is None:
+            a = int(pairs[k, 0])
+            local = self.hull_vertices[a]
+            if local is not None:
+                lo, hi = local.min(axis=0), local.max(axis=0)
+                self.vertices[int(k)] = np.array([[x, y, z] for x in (lo[0], hi[0])
+                                                  for y in (lo[1], hi[1])
+                                                  for z in (lo[2], hi[2])])
+            elif self.round[a] is None:
                 continue
-            lo, hi = local.min(axis=0), local.max(axis=0)
-            corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                                for z in (lo[2], hi[2])])
-            self.vertices[int(k)] = (local, corners)
             self.ground[k] = True
+
+    def support(self, g: int, u: np.ndarray) -> np.ndarray | None:
+        """``max u·x`` over geometry ``g`` (x in its joint's frame) for directions u (m, 3).
+
+        A polytope's vertices; a sphere, cylinder (axis z of its frame) or capsule in closed
+        form. None for another shape.
+        """
+        V = self.hull_vertices[g]
+        if V is not None:
+            return (u @ V.T).max(axis=1)
+        rnd = self.round[g]
+        if rnd is None:
+            return None
+        R, t, r, h, kind = rnd
+        ug = u @ R  # the directions in the shape's frame
+        out = u @ t + h * np.abs(ug[:, 2])
+        if kind == "Cylinder":
+            return out + r * np.hypot(ug[:, 0], ug[:, 1])
+        return out + r * np.linalg.norm(u, axis=1)
 
 
 def scan_geometry(scene) -> _ScanGeometry:
@@ -331,26 +359,37 @@ class RunScan:
     def _ground(self, R, p, n0: int, n1: int) -> None:
         """The ground pairs at samples ``n0 .. n1 - 1``: bounds, and exact where they matter.
 
-        The distance of a convex hull (or a box) to the half-space ``z <= h`` is its lowest
-        vertex's height above ``h``; the lowest corner of the hull's box (in its joint frame)
-        bounds it from below. The exact distance only where the bound is below the smallest
-        exact distance found so far (or below the penetration tolerance).
+        The distance of a convex body to the half-space ``z <= h`` is the height of its
+        lowest point above ``h`` (its support function along ``-z``): exact for the round
+        shapes at once; a polytope's is bounded from below by the lowest corner of its box
+        (in its joint frame) first, and computed from its vertices only where that bound is
+        below the smallest distance found so far (or below the penetration tolerance).
         """
         geo, joint = self.geo, self.geo.joint
-        if not geo.vertices:
+        ks = np.flatnonzero(geo.ground)
+        if not len(ks):
             return
         pairs = self.scene.pairs
         low = self.ground_lower[n0:n1]
-        for k, (_, corners) in geo.vertices.items():
-            j = joint[int(pairs[k, 0])]
-            low[:, k] = self._lowest(corners, R[:, j, 2, :], p[:, j, 2])
-        order = sorted(geo.vertices, key=lambda k: float(low[:, k].min()))
-        for k in order:
+
+        def lowest(k, rows):  # exact heights above the ground at rows of the stretch
+            g = int(pairs[k, 0])
+            j = joint[g]
+            return p[rows, j, 2] - geo.support(g, -R[rows, j, 2, :]) - self.scene.ground
+
+        every = np.arange(n1 - n0)
+        for k in ks:
+            if k in geo.vertices:
+                j = joint[int(pairs[k, 0])]
+                low[:, k] = self._lowest(geo.vertices[k], R[:, j, 2, :], p[:, j, 2])
+            else:
+                self.exact[n0:n1, k] = low[:, k] = lowest(k, every)
+                self.ground_best = min(self.ground_best, float(low[:, k].min()))
+        for k in sorted(geo.vertices, key=lambda k: float(low[:, k].min())):
             rows = np.flatnonzero(low[:, k] < max(self.ground_best, self.tol))
             if not len(rows):
                 continue
-            j = joint[int(pairs[k, 0])]
-            d = self._lowest(geo.vertices[k][0], R[rows, j, 2, :], p[rows, j, 2])
+            d = lowest(k, rows)
             self.exact[n0 + rows, k] = low[rows, k] = d
             self.ground_best = min(self.ground_best, float(d.min()))
 
@@ -413,28 +452,79 @@ class RunScan:
         return first
 
     # ------------------------------------------------------------------ the whole run
-    def _paths_of_all(self, n: int) -> np.ndarray:
-        """(n, P) ``C`` of every pair at the first ``n`` samples [m]."""
-        u = self.geo.joint_pair
-        return (self.path_shift[:n].take(u, axis=1)
-                + self.geo.rho * self.path_turn[:n].take(u, axis=1))
+    def _column_path(self, k: int) -> np.ndarray:
+        """(n,) ``C`` of pair ``k`` at the samples scanned [m]."""
+        u = self.geo.joint_pair[k]
+        return self.path_shift[:self.n, u] + self.geo.rho[k] * self.path_turn[:self.n, u]
 
-    def lower_bounds(self) -> np.ndarray:
-        """(n, P) lower bounds of every pair's hull distance at every sample scanned [m].
+    def column_bound(self, k: int) -> np.ndarray:
+        """(n,) lower bounds of pair ``k``'s hull distance at the samples scanned [m].
 
         The measured value where measured; elsewhere the best of the bounds from the
-        measurements before and after (``d ± (C(s') - C(s))``); the ground pairs' own.
+        measurements before and after (``d - |C(s') - C(s)|``); a ground pair's own.
         """
         n = self.n
-        exact = self.exact[:n]
-        C = self._paths_of_all(n)
-        ahead = np.where(np.isnan(exact), -np.inf, exact + C)
-        behind = np.where(np.isnan(exact), -np.inf, exact - C)
-        lower = np.maximum(np.maximum.accumulate(ahead, axis=0) - C,
-                           np.maximum.accumulate(behind[::-1], axis=0)[::-1] + C)
-        g = self.geo.ground
-        lower[:, g] = self.ground_lower[:n, g]
-        return lower
+        if self.geo.ground[k]:
+            return self.ground_lower[:n, k].copy()
+        d = self.exact[:n, k]
+        C = self._column_path(k)
+        missing = np.isnan(d)
+        ahead = np.maximum.accumulate(np.where(missing, -np.inf, d + C)) - C
+        behind = np.maximum.accumulate(np.where(missing, -np.inf, d - C)[::-1])[::-1] + C
+        bound = np.maximum(ahead, behind)
+        spheres = self._sphere_bound(k)
+        if spheres is not None:
+            bound = np.maximum(bound, spheres)
+        return np.where(missing, bound, d)
+
+    def _sphere_bound(self, k: int) -> np.ndarray | None:
+        """(n,) the gap between pair ``k``'s bounding spheres at every sample [m].
+
+        A lower bound of the hulls' distance; None without the placements kept, for a
+        ground pair, or a body without a sphere.
+        """
+        geo = self.geo
+        a, b = (int(g) for g in self.scene.pairs[k])
+        if self._R is None or geo.ground[k] or not (geo.radius[a] and geo.radius[b]):
+            return None
+        n = self.n
+        ja, jb = geo.joint[a], geo.joint[b]
+        R, p = self._R[:n], self._p[:n]
+        ea, eb = geo.centre[a], geo.centre[b]
+        gap = p[:, ja] - p[:, jb]  # (n, 3): sums of products on strided views, no matmul
+        for i in range(3):
+            gap += R[:, ja, :, i] * ea[i] - R[:, jb, :, i] * eb[i]
+        return np.sqrt(np.einsum("ni,ni->n", gap, gap)) - geo.radius[a] - geo.radius[b]
+
+    def _column_minima(self) -> np.ndarray:
+        """(P,) lower bounds of each pair's smallest hull distance over the samples [m].
+
+        From its measurements alone: between two consecutive ones ``(d_a, C_a)``,
+        ``(d_b, C_b)`` the bounds are at least ``(d_a + d_b - (C_b - C_a)) / 2``; before the
+        first and after the last, ``d - |C - C(end)|``. ``-inf`` for a pair never measured.
+        """
+        n, P = self.n, len(self.scene.pairs)
+        geo = self.geo
+        out = np.full(P, -np.inf)
+        k, s = np.nonzero(~np.isnan(self.exact[:n].T))  # by pair, then by sample
+        if len(k):
+            d = self.exact[s, k]
+            u, rho = geo.joint_pair[k], geo.rho[k]
+            C = self.path_shift[s, u] + rho * self.path_turn[s, u]
+            C0 = self.path_shift[0, u] + rho * self.path_turn[0, u]
+            Cn = self.path_shift[n - 1, u] + rho * self.path_turn[n - 1, u]
+            new = np.concatenate([[True], k[1:] != k[:-1]])
+            end = np.concatenate([k[1:] != k[:-1], [True]])
+            val = np.where(new, d - (C - C0), np.inf)
+            val = np.minimum(val, np.where(end, d - (Cn - C), np.inf))
+            seg = np.full(len(k), np.inf)
+            seg[:-1] = 0.5 * (d[:-1] + d[1:] - (C[1:] - C[:-1]))
+            val = np.minimum(val, np.where(end, np.inf, seg))
+            starts = np.flatnonzero(new)
+            out[k[starts]] = np.minimum.reduceat(val, starts)
+        g = np.flatnonzero(geo.ground)
+        out[g] = self.ground_lower[:n, g].min(axis=0)
+        return out
 
     def result(self) -> ScanResult:
         """Clearances of the samples scanned, and the hits (branch and bound per category).
@@ -446,65 +536,71 @@ class RunScan:
         from multiarm_pin.feasibility.collisions import CATEGORIES
 
         scene = self.scene
-        lower = self.lower_bounds()
+        minima = self._column_minima() if self.n else None
         clearance = {}
         for ci, name in enumerate(CATEGORIES):
             cols = np.flatnonzero((scene.category == ci) & ~scene.grasp_pair)
-            clearance[name] = (self._category_minimum(lower, cols) if len(cols) and self.n
+            clearance[name] = (self._category_minimum(cols, minima) if len(cols) and self.n
                                else None)
         measured = int(np.count_nonzero(~np.isnan(self.exact[:self.n])))
         return ScanResult(clearance, {k: list(v) for k, v in self.hits.items()}, measured)
 
-    def _placements(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Every joint's ``(R (m, J, 3, 3), p (m, J, 3))`` at some scanned samples."""
+    def _placements(self, samples: np.ndarray, joints) -> tuple[np.ndarray, np.ndarray]:
+        """``(R (m, j, 3, 3), p (m, j, 3))`` of some joints at some scanned samples."""
+        joints = np.asarray(joints)
         if self._R is not None:
-            return self._R[samples], self._p[samples]
-        return joint_placements(self.scene.model, self.configs[samples])
+            return (self._R[samples[:, None], joints[None, :]],
+                    self._p[samples[:, None], joints[None, :]])
+        R, p = joint_placements(self.scene.model, self.configs[samples])
+        return R[:, joints], p[:, joints]
 
     def _separation(self, k: int, normal: np.ndarray, s: int, samples: np.ndarray
                     ) -> np.ndarray | None:
         """Lower bounds [m] of pair ``k``'s hull distance at ``samples``, along one axis.
 
         The gap of the two hulls along ``normal`` (world, from the first body to the
-        second, at sample ``s``) carried with the second body: ``min n·y - max n·x`` over
-        their vertices, a lower bound of their distance at any placement (projection on
-        a unit vector shortens distances). None if a body has no vertices.
+        second, at sample ``s``) carried with the second body: ``min n·y - max n·x`` from
+        their support functions, a lower bound of their distance at any placement
+        (projection on a unit vector shortens distances). None if a body has none.
         """
         geo, scene = self.geo, self.scene
         a, b = (int(g) for g in scene.pairs[k])
-        Va, Vb = geo.hull_vertices[a], geo.hull_vertices[b]
-        if Va is None or Vb is None:
+        if geo.support(a, np.zeros((1, 3))) is None or geo.support(b, np.zeros((1, 3))) is None:
             return None
-        ja, jb = geo.joint[a], geo.joint[b]
-        R, p = self._placements(np.concatenate([[s], samples]))
-        n_b = R[0, jb].T @ normal  # the axis in the second body's joint frame
-        low_b = float((Vb @ n_b).min())
-        nw = R[1:, jb] @ n_b  # (m, 3) the axis at each sample, world
-        u = np.einsum("mji,mj->mi", R[1:, ja], nw)  # in the first body's joint frame
-        high_a = (u @ Va.T).max(axis=1)
-        return low_b + np.einsum("mi,mi->m", nw, p[1:, jb] - p[1:, ja]) - high_a
+        R, p = self._placements(np.concatenate([[s], samples]), [geo.joint[a], geo.joint[b]])
+        n_b = R[0, 1].T @ normal  # the axis in the second body's joint frame
+        low_b = -float(geo.support(b, -n_b[None])[0])  # min n·y over the second body
+        nw = R[1:, 1] @ n_b  # (m, 3) the axis at each sample, world
+        u = np.einsum("mji,mj->mi", R[1:, 0], nw)  # in the first body's joint frame
+        high_a = geo.support(a, u)
+        return low_b + np.einsum("mi,mi->m", nw, p[1:, 1] - p[1:, 0]) - high_a
 
-    def _category_minimum(self, lower: np.ndarray, cols: np.ndarray) -> float:
+    def _category_minimum(self, cols: np.ndarray, minima: np.ndarray) -> float:
         """The smallest hull distance over the samples and the pairs ``cols`` [m].
 
-        Branch and bound, pair by pair (the pair of the smallest bound first): the sample
-        of the pair's smallest bound below the smallest distance measured (less
-        :data:`CLEARANCE_TOLERANCE`) is measured, and the measurement raises the pair's
-        bounds at the other samples: ``d - |C(s') - C(s)|`` where that is above them, and
-        the gap along the measured closest direction (:meth:`_separation`) at the samples
-        still below; until none is below.
+        Branch and bound, pair by pair (the pair of the smallest bound first, only those
+        whose bound (``minima``, :meth:`_column_minima`) is below the smallest distance
+        measured, less :data:`CLEARANCE_TOLERANCE`): the sample of the pair's smallest
+        bound (:meth:`column_bound`) below it is measured, and the measurement raises the
+        pair's bounds at the other samples: ``d - |C(s') - C(s)|`` where that is above them,
+        and the gap along the measured closest direction (:meth:`_separation`) at the
+        samples still below; until none is below.
         """
         scene = self.scene
         model, data, hull, hd = scene.model, scene.data, scene.hull, scene.hull_data
         n = self.n
         sub = self.exact[:n, cols]
         best = float(np.nanmin(sub)) if np.any(~np.isnan(sub)) else np.inf
-        bounds = np.where(np.isnan(sub), lower[:, cols], np.inf)  # measured: not again
         self.visits = 0
         configs = self.configs
-        for j in np.argsort(bounds.min(axis=0), kind="stable"):
+        for j in np.argsort(minima[cols], kind="stable"):
             k = int(cols[j])
-            bound = bounds[:, j].copy()
+            if minima[k] >= best - CLEARANCE_TOLERANCE:
+                break  # and every later pair's bound is at least as large
+            bound = self.column_bound(k)
+            bound[~np.isnan(self.exact[:n, k])] = np.inf  # measured: not again
+            if bound.min() >= best - CLEARANCE_TOLERANCE:
+                continue
             C = None
             while True:
                 below = np.flatnonzero(bound < best - CLEARANCE_TOLERANCE)
@@ -512,8 +608,7 @@ class RunScan:
                     break
                 s = int(below[np.argmin(bound[below])])
                 if C is None:
-                    u = self.geo.joint_pair[k]
-                    C = self.path_shift[:n, u] + self.geo.rho[k] * self.path_turn[:n, u]
+                    C = self._column_path(k)
                 pin.updateGeometryPlacements(model, data, hull, hd, configs[s])
                 r = pin.computeDistance(hull, hd, k)
                 d = r.min_distance
