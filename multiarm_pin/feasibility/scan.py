@@ -23,10 +23,11 @@ link within the grasp zone of its arm's contact points is skipped at those sampl
 grasp, not a collision).
 
 Clearances (:meth:`RunScan.result`): per category, branch and bound over each pair's samples,
-from the bounds above; a measurement also bounds its pair at the other samples by the gap of
-the two hulls along the measured closest axis, carried with the second body (a separating-axis
-bound from the hulls' vertices), which holds a pair at nearly constant distance (two links
-turning about each other) with a few measurements.
+from the bounds above (and the gap of the pair's bounding spheres); a measurement also bounds
+its pair at the other samples by the gap of the two bodies along the measured closest axis,
+carried with the second body (a separating-axis bound from their support functions), which
+holds a pair at nearly constant distance (two links turning about each other) with a few
+measurements.
 """
 
 from __future__ import annotations
