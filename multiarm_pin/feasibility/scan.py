@@ -145,8 +145,9 @@ class _ScanGeometry:
         form. None for another shape.
         """
         V = self.hull_vertices[g]
-        if V is not None:
-            return (u @ V.T).max(axis=1)
+        if V is not None:  # sums of products, not a BLAS call (an inner dimension of 3)
+            return (u[:, 0, None] * V[:, 0] + u[:, 1, None] * V[:, 1]
+                    + u[:, 2, None] * V[:, 2]).max(axis=1)
         rnd = self.round[g]
         if rnd is None:
             return None
