@@ -12,7 +12,9 @@ For n = 2, 4, 8, 16, 32, 64 UR5s each welded to one large box (the systems of
 - ``t_closed_ref``: the reference closed loop (numpy controller, numpy blocks and solver)
   at small n, to show what the compiled path saves;
 - ``rtf``: real-time factor (simulated time / wall time) of a whole ``simulate`` run with
-  ``object_pd`` (RK4, dt = 2 ms; the scenario's own settings for scenarios).
+  ``object_pd`` (RK4, dt = 2 ms; the scenario's own settings for scenarios);
+- the feasibility checks of the demo (issue 23: at most +20 %): the run without them and
+  with them, as interleaved rounds (``feasibility_overhead.py``'s :func:`measure`).
 
 Per-call times are medians of interleaved single calls (``Timer`` of ``solver_vs_kkt.py``:
 one call of each function per round, so that load changes hit all alike), each ratio timed
@@ -57,6 +59,9 @@ for _p in (str(ROOT), str(HERE)):
     if _p not in sys.path:
         sys.path.insert(0, _p)
 
+from feasibility_overhead import TARGET as FEASIBILITY_TARGET  # noqa: E402
+from feasibility_overhead import measure as measure_feasibility  # noqa: E402
+from feasibility_overhead import table as feasibility_table  # noqa: E402
 from report_tables import general, int_list, write_rows_csv  # noqa: E402
 from solver_vs_kkt import Timer, build_bench, build_peer, environment  # noqa: E402
 
@@ -295,7 +300,8 @@ def _x(x: float) -> str:
     return "-" if not math.isfinite(x) else f"{x:.2f}"
 
 
-def targets(weld: Sequence[Row], scen: Sequence[Row], cold: dict | None) -> list[str]:
+def targets(weld: Sequence[Row], scen: Sequence[Row], cold: dict | None,
+            feasibility: Sequence[dict] = ()) -> list[str]:
     """The issue's targets, each with its measured value and met / NOT met."""
     out = []
 
@@ -322,6 +328,12 @@ def targets(weld: Sequence[Row], scen: Sequence[Row], cold: dict | None) -> list
     for r in scen:
         line(r.rtf >= 10.0, f"{r.case}: at least 10x faster than real time (RTF {r.rtf:.2f})"
              + (f"; {r.note}" if r.note else ""))
+    for r in feasibility:
+        line(r["ratio"] <= FEASIBILITY_TARGET,
+             f"{r['scenario']}: the feasibility checks after the run add at most "
+             f"{100 * FEASIBILITY_TARGET:.0f} % to simulate's wall time "
+             f"({100 * r['ratio']:.0f} %; the run with every stop monitor and its report "
+             f"{100 * r['monitored_ratio']:+.0f} %; the scene {r['scene'] * 1e3:.0f} ms more)")
     if cold is not None:
         line(cold["compile"] < 10.0, f"cold-start compile of the demo under 10 s, as installed "
              f"({cold['compile']:.1f} s; with the JIT alone {cold['jit']['compile']:.1f} s)")
@@ -329,7 +341,8 @@ def targets(weld: Sequence[Row], scen: Sequence[Row], cold: dict | None) -> list
 
 
 def write_report(path: Path, weld: Sequence[Row], scen: Sequence[Row], cold: dict | None,
-                 env: dict, args: argparse.Namespace, wall: float) -> None:
+                 env: dict, args: argparse.Namespace, wall: float,
+                 feasibility: Sequence[dict] = ()) -> None:
     lines = ["# Closed-loop benchmark (object_pd)", "", "## Environment", ""]
     lines += [f"- {k}: {v}" for k, v in env.items()]
     lines += ["", "## Method", "",
@@ -373,6 +386,16 @@ def write_report(path: Path, weld: Sequence[Row], scen: Sequence[Row], cold: dic
                      f"{_us(r.t_closed_ref_s)} | {_x(r.closed_over_open)} | "
                      f"{_x(r.t_closed_run_s / r.t_open_s)} | {r.sim_time_s:g} | "
                      f"{r.wall_s:.2f} | {_x(r.rtf)} | {r.note} |")
+    lines += ["", "## Feasibility checks (issue 23)", "",
+              "Interleaved rounds per scenario: `simulate_built`; the run's "
+              "`feasibility_report` (limits and collisions at every recorded sample, the "
+              "`CollisionScene` built beforehand, as the runner does); `simulate_built` with "
+              "the monitors of `limits: {torque, velocity, position, collision: stop}` and its "
+              "report (which reuses the collision monitor's scan). Ratios are medians of the "
+              "per-round ratios to the first run; `scene` is the scene's construction "
+              "(once per run, the arms' hulls cached per process).", ""]
+    lines += list(feasibility_table(list(feasibility))) if feasibility else [
+        "Not measured in this run."]
     lines += ["", "## Cold start", ""]
     if cold is None:
         lines.append("Not measured in this run (`--quick` or `--no-cold`).")
@@ -389,7 +412,7 @@ def write_report(path: Path, weld: Sequence[Row], scen: Sequence[Row], cold: dic
                   f"{ins['cold']:.1f} | {ins['warm']:.1f} | {ins['compile']:.1f} |",
                   f"| JIT alone (`MULTIARM_PIN_AOT=0`: every kernel compiled at first use) | "
                   f"{jit['cold']:.1f} | {jit['warm']:.1f} | {jit['compile']:.1f} |"]
-    lines += ["", "## Targets", ""] + targets(weld, scen, cold) + [""]
+    lines += ["", "## Targets", ""] + targets(weld, scen, cold, feasibility) + [""]
     path.write_text("\n".join(lines), encoding="utf-8")
 
 
@@ -438,6 +461,10 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     p.add_argument("--no-cold", action="store_true", help="skip the cold-start measurement")
     p.add_argument("--cold-duration", type=float, default=0.5,
                    help="simulated time of the cold-start runs [s]")
+    p.add_argument("--feasibility", default="two_ur5_box",
+                   help="comma-separated scenarios of the feasibility rows ('' for none)")
+    p.add_argument("--feasibility-repeat", type=int, default=None,
+                   help="interleaved rounds of the feasibility rows")
     p.add_argument("--out", type=Path, default=HERE / "results")
     p.add_argument("--quick", action="store_true",
                    help="smoke run: 2 and 4 arms, one scenario for 0.02 s, no cold start")
@@ -451,6 +478,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     args.repeat = args.repeat or (5 if q else 200)
     args.states = args.states or (3 if q else 8)
     args.no_cold = args.no_cold or q
+    args.feasibility = [n for n in args.feasibility.split(",") if n]
+    args.feasibility_repeat = args.feasibility_repeat or (2 if q else 9)
     return args
 
 
@@ -463,12 +492,18 @@ def main(argv: Sequence[str] | None = None) -> int:
                   budget_s=0.5 if args.quick else 3.0)
     weld = weld_rows(args.arms, timer, args.states, args.sim)
     scen = scenario_rows(args.scenarios, timer, args.duration)
+    feasibility = [measure_feasibility(name, args.feasibility_repeat,
+                                       0.1 if args.quick else None)
+                   for name in args.feasibility]
+    for r in feasibility:
+        print(f"feasibility {r['scenario']}: checks {100 * r['ratio']:.0f} % of simulate, "
+              f"stop monitors and report {100 * r['monitored_ratio']:+.0f} %", flush=True)
     cold = None if args.no_cold else cold_start(args.cold_duration)
     if cold is not None:
         print(f"cold start: {cold}", flush=True)
     wall = time.perf_counter() - t0
     write_rows_csv(weld + scen, args.out / "closed_loop.csv", Row, general)
-    write_report(args.out / "closed_loop.md", weld, scen, cold, env, args, wall)
+    write_report(args.out / "closed_loop.md", weld, scen, cold, env, args, wall, feasibility)
     plot(weld, args.out / "closed_loop.png")
     print(f"wrote {args.out / 'closed_loop.csv'}, closed_loop.md, closed_loop.png")
     return 0

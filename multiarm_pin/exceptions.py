@@ -124,6 +124,24 @@ class DynamicsError(MultiArmError, ArithmeticError):
     """The equations of motion have no solution, or the state is invalid (NaN, inconsistent)."""
 
 
+class RunStoppedError(MultiArmError):
+    """A run ended at the first violation a monitor of its ``stop`` policies found.
+
+    Raised by :func:`~multiarm_pin.sim.simulation.simulate` (``monitors=``) as soon as the
+    stretch of samples holding the violation has been recorded; its ``partial_result``
+    (:func:`~multiarm_pin.sim.simulation.partial_result`) ends at that sample.
+
+    Attributes:
+        monitor: the name of the monitor that stopped it (``"limits.collision"``...).
+        sample: the index of the violating sample (the last one kept).
+        t: its time [s].
+    """
+
+    def __init__(self, message: str, monitor: str, sample: int, t: float):
+        self.monitor, self.sample, self.t = monitor, int(sample), float(t)
+        super().__init__(message)
+
+
 class ScenarioError(MultiArmError, ValueError):
     """A scenario file is invalid.
 

@@ -19,7 +19,8 @@ def test_quick_closed_loop_benchmark(tmp_path):
     assert (tmp_path / "closed_loop.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     report = (tmp_path / "closed_loop.md").read_text()
     for heading in ("## Environment", "git commit", "## Method", "## n UR5s welded",
-                    "## Shipped scenarios", "## Cold start", "## Targets"):
+                    "## Shipped scenarios", "## Feasibility checks", "## Cold start",
+                    "## Targets"):
         assert heading in report, heading
     with (tmp_path / "closed_loop.csv").open() as f:
         rows = list(csv.DictReader(f))

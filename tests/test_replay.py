@@ -717,3 +717,42 @@ def test_supports_get_their_own_colours():
                for c in window.commands if c["type"] == "set_object"
                and "/supports/" in c["path"]}
     assert colours == {"floor": SUPPORT_COLORS[0], "wall": SUPPORT_COLORS[1]}
+
+
+def test_colliding_links_are_drawn_red_while_they_collide(ur5):
+    """A link's red copy is shown (its own geometry scaled to nothing) exactly at the frames
+    of its collision samples; the other links have no copy."""
+    from multiarm_pin.app.replay import COLLIDING_COLOR
+
+    arms, obj, contacts, t = _two_ur5_scene(ur5)
+    mask = (t >= 0.5) & (t <= 1.2)
+    arms[0] = ReplayArm(arms[0].name, arms[0].model, arms[0].visual_model,
+                        arms[0].base_placement, arms[0].q, colliding={"forearm_link": mask})
+    window = RecordingWindow()
+    vis = Visualizer(window=window)
+    fps = 10
+    anim = build_animation(vis, arms, obj, contacts, t, fps=fps)
+    idx = frame_indices(t, fps)
+    model = ur5.model
+    forearm = [g.name for g in ur5.visual_model.geometryObjects
+               if model.frames[g.parentFrame].name == "forearm_link"]
+    paths = [p.lower() for p in anim.clips]
+    copies = [p.split("/colliding/visuals/")[1] for p in paths if "/colliding/" in p]
+    assert forearm and sorted(copies) == sorted(n.lower() for n in forearm)
+    for name in forearm:
+        _, red = _track(anim, f"arms/left/colliding/visuals/{name}", "scale")
+        _, own = _track(anim, f"arms/left/visuals/{name}", "scale")
+        red, own = np.reshape(red, (-1, 3))[:, 0], np.reshape(own, (-1, 3))[:, 0]
+        np.testing.assert_array_equal(red > 0.5, mask[idx])
+        np.testing.assert_array_equal(own > 0.5, ~mask[idx])
+        _, p_red = _track(anim, f"arms/left/colliding/visuals/{name}", "position")
+        _, p_own = _track(anim, f"arms/left/visuals/{name}", "position")
+        np.testing.assert_array_equal(p_red, p_own)  # drawn where the link is
+    red = (round(255 * COLLIDING_COLOR[0]) << 16) | (round(255 * COLLIDING_COLOR[1]) << 8) \
+        | round(255 * COLLIDING_COLOR[2])
+    sent = [c for c in window.commands if c["type"] == "set_object"
+            and "/colliding/" in c["path"]]
+    assert len(sent) == len(forearm)
+    for c in sent:  # one material, the colliding colour
+        assert [m["color"] for m in c["object"]["materials"]] == [red]
+    assert not any("/colliding/" in p for p in paths if "/right/" in p)

@@ -388,3 +388,31 @@ def test_compact_page_draws_what_the_plain_page_draws(ur5, tmp_path):
     drawn = np.any(np.abs(images["plain"] - images["empty"]) > 30, axis=2).mean()
     assert drawn > 0.05, f"the arms cover only {drawn:.1%} of the view"
     assert differ < 0.005, f"{differ:.2%} of the pixels differ ({drawn:.1%} drawn)"
+
+
+def test_a_runs_colliding_links_are_red_in_its_page(tmp_path):
+    """A run whose wrists reach the floor: its page holds a red copy of each link in
+    collision, shown over the time intervals that summary.json and trajectory.npz give."""
+    import json
+
+    import yaml
+
+    from multiarm_pin.app.replay_page import decode_block
+    from multiarm_pin.app.runner import run_scenario
+    from tests.feasibility.collision_cases import wrists_to_the_floor
+
+    data, _ = wrists_to_the_floor()
+    f = tmp_path / "down.yaml"
+    f.write_text(yaml.safe_dump(data), encoding="utf-8")
+    out = run_scenario(f, tmp_path / "r", plots=False)
+    summary = json.loads((out.out_dir / "summary.json").read_text())
+    hits = [v for v in summary["violations"] if v["kind"] == "collision"]
+    assert hits and all(v["intervals"][0][0] == v["t_first"] for v in hits)
+    traj = np.load(out.out_dir / "trajectory.npz")
+    assert sorted(traj["collision_link"].tolist()) == sorted(
+        f"{v['arm']}/{v['link']}" for v in hits for _ in v["intervals"])
+    manifest, _ = decode_block((out.out_dir / "replay.html").read_text(encoding="utf-8"))
+    red = {n[0].split("/colliding/visuals/")[0].split("/arms/")[1] for n in manifest["nodes"]
+           if "/colliding/" in n[0]}
+    assert red == {v["arm"] for v in hits}
+    assert manifest["overlay"]["colors"]["colliding"] == "#ff0000"  # in the legend

@@ -393,7 +393,7 @@ def _registry():
 
 def _mid_configuration(arm):
     """A configuration inside the limits, off the zero pose (no aligned-axes singularity)."""
-    from multiarm_pin.app.scenario_checks import one_dof_limits
+    from multiarm_pin.feasibility.limits import one_dof_limits
 
     lo, hi, _ = one_dof_limits(arm.model)
     q = pin.integrate(arm.model, arm.neutral(), 0.3 * np.ones(arm.nv))

@@ -72,6 +72,9 @@ FORCE_COLOR = 0x2DC653
 """Colour of force arrows: green."""
 SEPARATED_COLOR = 0x8D99AE
 """Colour of the sphere of a separated (not touching) contact: grey."""
+COLLIDING_COLOR = (1.0, 0.0, 0.0, 1.0)
+"""Colour (RGBA) of a link while it collides: red, opaque (the object is a lighter red,
+semi-transparent)."""
 SUPPORT_COLORS = (0x6C584C, 0x3D5A80, 0xA47148, 0x5E548E, 0x4A7C59, 0x9A8C98)
 """Colours of the support slabs, in turn (brown first); the page's legend names each."""
 SUPPORT_COLOR = SUPPORT_COLORS[0]
@@ -130,6 +133,12 @@ class CompactTrack(meshcat.animation.AnimationTrack):
         return {"name": "." + str(self.name), "type": str(self.jstype),
                 "times": umsgpack.Ext(0x17, times.tobytes()),
                 "values": umsgpack.Ext(0x17, np.ascontiguousarray(v).tobytes())}
+
+
+def _rgb_int(rgba) -> int:
+    """0xRRGGBB of an RGBA in [0, 1]."""
+    r, g, b = (round(255 * float(c)) for c in rgba[:3])
+    return (r << 16) | (g << 8) | b
 
 
 def _pose(R: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -206,6 +215,8 @@ class _ArmDrawer:
             viz = None  # Pinocchio's MeshcatVisualizer, imported only for a primitive (~1 s)
             self.nodes = []
             self.scales = []
+            self.links = [arm.model.frames[g.parentFrame].name
+                          for g in self.geom.geometryObjects]
             for g in self.geom.geometryObjects:
                 # the node MeshcatVisualizer.getViewerNodeName gives a VISUAL geometry
                 node = f"{self.root}/visuals/{g.name}"
@@ -222,10 +233,42 @@ class _ArmDrawer:
             self.geom = None
             self.nodes = [f"{self.root}/joints/{arm.model.names[j]}"
                           for j in range(1, arm.model.njoints)]
+            self.links = [None] * len(self.nodes)  # a sphere per joint: its body's link
+            for f in arm.model.frames:
+                if f.type == pin.FrameType.BODY and f.parentJoint > 0:
+                    self.links[f.parentJoint - 1] = self.links[f.parentJoint - 1] or f.name
             self.scales = [np.ones(3)] * len(self.nodes)
             rgba = arm.color if arm.color is not None else (0.55, 0.55, 0.55, 1.0)
             for node in self.nodes:
                 vis[node].set_object(mg.Sphere(0.04), lambert_material(rgba))
+
+    def load_colliding(self, vis: meshcat.Visualizer, mesh_cache: dict
+                       ) -> dict[int, tuple[str, np.ndarray]]:
+        """Red copies of the nodes of the arm's colliding links.
+
+        Returns:
+            node index -> (the red copy's path, (T,) bool: the samples it is shown).
+        """
+        out = {}
+        for g, (node, link) in enumerate(zip(self.nodes, self.links, strict=True)):
+            mask = self.arm.colliding.get(link)
+            if mask is None or not mask.any():
+                continue
+            red = node.replace(f"{self.root}/", f"{self.root}/colliding/", 1)
+            if self.geom is None:
+                vis[red].set_object(mg.Sphere(0.04), lambert_material(COLLIDING_COLOR))
+            else:
+                obj = self.geom.geometryObjects[g]
+                mesh = visual_mesh(obj, COLLIDING_COLOR, mesh_cache)
+                if mesh is not None:
+                    vis[red].set_object(mesh_object(mesh))
+                else:  # a primitive: Pinocchio's loader, into the copies' group
+                    viz = self._pinocchio_visualizer(vis)
+                    viz.viewerVisualGroupName = f"{self.root}/colliding/visuals"
+                    viz.loadViewerGeometryObject(obj, pin.GeometryType.VISUAL,
+                                                 np.array(COLLIDING_COLOR))
+            out[g] = (red, mask)
+        return out
 
     def _pinocchio_visualizer(self, vis: meshcat.Visualizer):
         from pinocchio.visualize import MeshcatVisualizer
@@ -447,11 +490,19 @@ def build_animation(
         track(node, "position", "vector3", p)
         track(node, "quaternion", "quaternion", _js_quaternions(R))
 
-    for d in drawers:
+    colliding = [d.load_colliding(vis, mesh_cache) for d in drawers]
+    for d, red in zip(drawers, colliding, strict=True):
         H = d.pose_stack(d.arm.q[indices])
         for g, (node, s) in enumerate(zip(d.nodes, d.scales, strict=True)):
             transform_tracks(node, H[:, g, :3, :3], H[:, g, :3, 3])
-            if not np.allclose(s, 1.0):
+            if g in red:  # the red copy shown instead while the link collides
+                copy, mask = red[g]
+                shown, hidden = s.tolist(), (s * _MIN_SCALE).tolist()
+                on = mask[indices].tolist()
+                transform_tracks(copy, H[:, g, :3, :3], H[:, g, :3, 3])
+                track(node, "scale", "vector3", [hidden if o else shown for o in on])
+                track(copy, "scale", "vector3", [shown if o else hidden for o in on])
+            elif not np.allclose(s, 1.0):
                 track(node, "scale", "vector3", [s.tolist() for _ in frames])
     if obj is not None:
         R = np.array([quaternion_to_rotation(q) for q in obj.quaternion[indices]])
@@ -478,8 +529,14 @@ def build_animation(
 
     # Static pose at the first frame, for viewers before (or without) the animation.
     i0 = int(indices[0])
-    for d in drawers:
-        for node, T, s in zip(d.nodes, d.poses(d.arm.q[i0]), d.scales, strict=True):
+    for d, red in zip(drawers, colliding, strict=True):
+        for g, (node, T, s) in enumerate(zip(d.nodes, d.poses(d.arm.q[i0]), d.scales,
+                                             strict=True)):
+            if g in red:
+                copy, mask = red[g]
+                on = bool(mask[i0])
+                vis[copy].set_transform(_scaled(T, s if on else s * _MIN_SCALE))
+                s = s * _MIN_SCALE if on else s
             vis[node].set_transform(_scaled(T, s))
     if obj is not None:
         vis["object"].set_transform(
@@ -566,7 +623,9 @@ def write_replay_html(
         force_scale=None if contacts is None else _force_scale(contacts, None),
         support_colors=[SUPPORT_COLORS[j % len(SUPPORT_COLORS)] for j in range(n_supports)],
         colors={"object": OBJECT_COLOR, "contact": CONTACT_COLOR,
-                "separated": SEPARATED_COLOR, "force": FORCE_COLOR})
+                "separated": SEPARATED_COLOR, "force": FORCE_COLOR,
+                **({"colliding": _rgb_int(COLLIDING_COLOR)}
+                   if any(m.any() for a in arms for m in a.colliding.values()) else {})})
     path.write_text(vis.static_html(), encoding="utf-8")
     return path
 

@@ -65,7 +65,8 @@ def overlay_data(t: np.ndarray, contacts: ReplayContacts | None, *, title: str =
         arm_names: the arms, in order.
         force_scale: the force arrows' length per newton [m/N] (None: no arrows).
         support_colors: 0xRRGGBB of each support's slab, in ``contacts.supports`` order.
-        colors: 0xRRGGBB of ``object``, ``contact``, ``separated``, ``force``.
+        colors: 0xRRGGBB of ``object``, ``contact``, ``separated``, ``force`` (and
+            ``colliding``: links drawn in it while they collide; in the legend if given).
 
     Returns:
         ``t0``, ``t_end`` [s]; ``title``; ``arms``; ``colors`` (CSS ``#rrggbb``); ``force``
@@ -173,6 +174,7 @@ OVERLAY_JS = r"""
     for (const s of o.supports) {
       sw(s.color, false, "support <b>" + esc(s.name) + "</b>: " + esc(s.plane));
     }
+    if (c.colliding) sw(c.colliding, false, "a link while it collides (feasibility check)");
     if (o.arms.length) {
       const names = o.arms.length <= 6 ? o.arms.join(", ") :
         o.arms.slice(0, 6).join(", ") + ", \u2026 (" + o.arms.length + " arms)";

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
@@ -35,6 +35,8 @@ class ReplayArm:
         color: optional RGBA in [0, 1] for all of the arm's geometry; ``None`` keeps each
             geometry's own colours: its URDF material, else its COLLADA file's materials,
             else ``GeometryObject.meshColor`` (see :mod:`multiarm_pin.app.replay_meshes`).
+        colliding: per link name, (T,) bool: the samples where it collides (drawn red
+            then; the collisions of a run's feasibility report). Empty: none.
     """
 
     name: str
@@ -43,6 +45,7 @@ class ReplayArm:
     base_placement: pin.SE3
     q: np.ndarray
     color: tuple[float, float, float, float] | None = None
+    colliding: dict = field(default_factory=dict)
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name or "/" in self.name:
@@ -64,6 +67,15 @@ class ReplayArm:
                 raise InputError(f"ReplayArm {self.name!r}.color: expected RGBA values in "
                                  f"[0, 1], got {rgba.tolist()}")
             self.color = tuple(float(c) for c in rgba)
+        T = len(self.q)
+        colliding = {}
+        for link, mask in dict(self.colliding or {}).items():
+            m = np.asarray(mask)
+            if m.shape != (T,) or m.dtype != bool:
+                raise InputError(f"ReplayArm {self.name!r}.colliding[{link!r}]: expected ({T},) "
+                                 f"bool, got {m.dtype} of shape {m.shape}")
+            colliding[str(link)] = m
+        self.colliding = colliding
 
 
 @dataclass

@@ -1,22 +1,16 @@
-"""A scenario run's feasibility: its initial collisions, its report, its ``limits:`` policies.
-
-The collision check of the initial state, the report of the recorded samples, and the
-``stop`` policies (a run ends at the first violation of a kind set to ``stop``).
+"""A scenario run's feasibility: its initial collisions, its ``stop`` monitors, its report.
 
 :func:`check_initial_state` refuses a scenario whose initial state has two bodies in
 collision (a :class:`~multiarm_pin.exceptions.ScenarioError`: bad input, exit 2).
-:func:`apply_policies` computes the run's
-:class:`~multiarm_pin.feasibility.FeasibilityReport` and, when a kind whose policy is
-``stop`` was violated, cuts the record just after the first such violation and makes the run
-failed (exit 1, the partial results kept). ``stop`` is decided on the recorded samples once
-the simulation has returned: the samples after the violation are simulated, then dropped.
+:func:`run_monitors` gives the simulation the monitors of the kinds whose ``limits:`` policy
+is ``stop`` (:mod:`multiarm_pin.feasibility.monitors`): the run ends while it runs, at the
+first violation (:class:`~multiarm_pin.exceptions.RunStoppedError`; exit 1, the samples up to
+and including it kept). :func:`apply_policies` computes the run's
+:class:`~multiarm_pin.feasibility.FeasibilityReport` and the error naming the violation that
+stopped it.
 """
 
 from __future__ import annotations
-
-import dataclasses
-
-import numpy as np
 
 from multiarm_pin.exceptions import ScenarioError
 
@@ -44,45 +38,48 @@ def check_initial_state(built):
     return scene
 
 
-def truncated(result, n: int):
-    """The first ``n`` samples of a :class:`~multiarm_pin.sim.result.SimulationResult`."""
-    T = len(result.t)
-    changes = {}
-    for f in dataclasses.fields(result):
-        value = getattr(result, f.name)
-        if isinstance(value, np.ndarray) and value.ndim and len(value) == T and \
-                f.name != "unilateral":
-            changes[f.name] = value[:n]
-    t_end = float(result.t[n - 1])
-    changes["events"] = [e for e in result.events if e.t <= t_end]
-    return dataclasses.replace(result, **changes)
+def run_monitors(built, scene) -> tuple:
+    """The monitors of the scenario's ``stop`` policies (empty: none is ``stop``)."""
+    from multiarm_pin.feasibility.monitors import stop_monitors
+
+    return stop_monitors(built.system, built.scenario.limits.stops(), scene)
 
 
-def apply_policies(built, result, scene, status: str, error: str | None):
-    """The run's feasibility report, with the ``stop`` policies applied.
+def apply_policies(built, result, scene, status: str, error: str | None,
+                   stopped: str | None = None, monitors=()):
+    """The run's feasibility report, and the error of a run its ``stop`` policies ended.
+
+    Args:
+        built: the built scenario.
+        result: the run's (possibly partial) result.
+        scene: its collision scene (None: no arms).
+        status: ``"complete"``, ``"failed"`` or ``"interrupted"``.
+        error: the run's error so far.
+        stopped: the message of the :class:`~multiarm_pin.exceptions.RunStoppedError` that
+            ended the run, if one did.
+        monitors: the run's monitors (:func:`run_monitors`): a collision monitor's scan of
+            a whole run is reused.
 
     Returns:
-        ``(result, status, error, report)``: when a ``stop`` kind was violated, the record up
-        to and including the sample of its first violation, status ``"failed"`` and the
-        error naming it (unless the run had already failed earlier). An interrupted run
-        is checked against the limits only (its results are written at once).
+        ``(status, error, report)``: a stopped run is failed, its error naming the first
+        violation of a ``stop`` kind (the sample it ended on). An interrupted run is checked
+        against the limits only (its results are written at once).
     """
     from multiarm_pin.feasibility import feasibility_report
 
     sc = built.scenario
     if status == "interrupted":  # write what was simulated at once: the limits only
-        return result, status, error, feasibility_report(built.system, result,
-                                                         ground=sc.ground, collisions=False)
-    report = feasibility_report(built.system, result, ground=sc.ground, scene=scene)
-    first = report.first(sc.limits.stops())
-    if first is not None and (status == "complete" or first.t_first < float(result.t[-1])):
-        n = int(np.searchsorted(result.t, first.t_first, side="right"))
-        if n < len(result.t) or status == "complete":
-            result = truncated(result, max(n, 1))
-            report = feasibility_report(built.system, result, ground=sc.ground, scene=scene)
-            status = "failed"
-            error = (f"{sc.file}: limits.{first.kind}: stop: {first.describe()}")
-    return result, status, error, report
+        return status, error, feasibility_report(built.system, result, ground=sc.ground,
+                                                 collisions=False)
+    scans = [m.scan for m in monitors if getattr(m, "scan", None) is not None]
+    report = feasibility_report(built.system, result, ground=sc.ground, scene=scene,
+                                scan=scans[0] if scans else None)
+    if stopped is not None:
+        first = report.first(sc.limits.stops())
+        what = (f"limits.{first.kind}: stop: {first.describe()}" if first is not None
+                else stopped)
+        status, error = "failed", f"{sc.file}: {what}"
+    return status, error, report
 
 
-__all__ = ["apply_policies", "check_initial_state", "truncated"]
+__all__ = ["apply_policies", "check_initial_state", "run_monitors"]

@@ -25,7 +25,10 @@ its results folder:
   ``tau_limit_A`` (nv,) its joints' URDF effort limits [N m] (``inf``: none),
   ``joint_names_A`` (nv,) their names, and, when the
   run saturates the actuators, ``tau_commanded_A`` (T, nv) (``tau_A`` is then the applied
-  torque); ``unilateral_arms``: the arms with unilateral (fingertip) rows.
+  torque); ``unilateral_arms``: the arms with unilateral (fingertip) rows; the collisions'
+  time intervals ``collision_link`` (C,) (``"<arm>/<link>"``), ``collision_t0``,
+  ``collision_t1`` (C,) [s] (first and last sample of each run of samples in collision;
+  the replay draws the link red over them).
 - ``summary.json``: scenario name, solver, steps, wall time, max constraint violation,
   min contact force, warnings (contact separations, solver switches), ``input_warnings``
   (legal but suspicious input values, also printed on stderr before the run), per-arm
@@ -59,9 +62,27 @@ from multiarm_pin.exceptions import InputError
 
 
 # ----------------------------------------------------------------------------- writing
-def trajectory_arrays(built: BuiltScenario, result) -> dict[str, np.ndarray]:
-    """The ``trajectory.npz`` arrays of a run (see the module docstring for keys/shapes)."""
-    return system_trajectory_arrays(built.system, result)
+def trajectory_arrays(built: BuiltScenario, result, violations=()) -> dict[str, np.ndarray]:
+    """The ``trajectory.npz`` arrays of a run (see the module docstring for keys/shapes).
+
+    ``violations``: the run's feasibility violations (``summary.json``'s dicts), whose
+    collisions give the ``collision_*`` arrays.
+    """
+    return {**system_trajectory_arrays(built.system, result), **collision_arrays(violations)}
+
+
+def collision_arrays(violations) -> dict[str, np.ndarray]:
+    """``collision_link``, ``collision_t0``, ``collision_t1`` of a run's violations.
+
+    Args:
+        violations: ``summary.json``'s ``violations`` (dicts; collisions carry
+            ``intervals``).
+    """
+    rows = [(f"{v['arm']}/{v['link']}", a, b) for v in violations
+            if v.get("kind") == "collision" for a, b in v.get("intervals", ())]
+    return {"collision_link": np.array([r[0] for r in rows], dtype=str),
+            "collision_t0": np.array([r[1] for r in rows], dtype=float),
+            "collision_t1": np.array([r[2] for r in rows], dtype=float)}
 
 
 def system_trajectory_arrays(system, result) -> dict[str, np.ndarray]:
@@ -256,7 +277,8 @@ def force_names(trajectory: dict, arm_names, support_names) -> list[str]:
 def replay_parts(arms, obj, trajectory: dict):
     """Replay inputs (:mod:`multiarm_pin.app.replay`) from arms, object and trajectory arrays.
 
-    The contacts carry their labels (``contact_labels``), states (``contact_active``),
+    The arms carry their links' collisions (``collision_*``: drawn red). The contacts carry
+    their labels (``contact_labels``), states (``contact_active``),
     supports (``support_names``, ``support_planes``) and events (``event_t``,
     ``event_kind``, ``event_contact``, ``event_impulse``: 0 when a file predates it).
 
@@ -275,8 +297,18 @@ def replay_parts(arms, obj, trajectory: dict):
         return np.clip(np.nan_to_num(np.asarray(a, float), nan=0.0, posinf=limit,
                                      neginf=-limit), -limit, limit)
 
+    t = np.asarray(trajectory["t"], float)
+    colliding: dict[str, dict[str, np.ndarray]] = {a.name: {} for a in arms}
+    for name, t0, t1 in zip(trajectory.get("collision_link", []),
+                            trajectory.get("collision_t0", []),
+                            trajectory.get("collision_t1", []), strict=True):
+        arm, link = str(name).split("/", 1)
+        if arm in colliding:
+            mask = colliding[arm].setdefault(link, np.zeros(len(t), dtype=bool))
+            mask |= (t >= t0) & (t <= t1)
     rarms = [ReplayArm(a.name, a.model, a.visual_model, pin.SE3.Identity(),
-                       finite(trajectory[f"q_{a.name}"], 1e3)) for a in arms]
+                       finite(trajectory[f"q_{a.name}"], 1e3), colliding=colliding[a.name])
+             for a in arms]
     quat = np.array(trajectory["object_quaternion"], float)
     bad = ~np.all(np.isfinite(quat), axis=1) | (np.linalg.norm(np.nan_to_num(quat), axis=1)
                                                  < 1e-9)

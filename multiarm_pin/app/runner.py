@@ -27,7 +27,7 @@ from multiarm_pin.app.diagnosis import describe_failure
 from multiarm_pin.app.precheck import precheck_warnings
 from multiarm_pin.app.progress import ProgressBar
 from multiarm_pin.app.results_io import ResultsWriter, safe_component, write_atomic
-from multiarm_pin.app.run_feasibility import apply_policies, check_initial_state
+from multiarm_pin.app.run_feasibility import apply_policies, check_initial_state, run_monitors
 from multiarm_pin.app.run_results import (
     REPLAY_FPS,
     load_run,
@@ -51,6 +51,7 @@ from multiarm_pin.exceptions import (
     OutputError,
     RunFailedError,
     RunInterrupted,
+    RunStoppedError,
     ScenarioError,
 )
 
@@ -255,9 +256,10 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
         bar = None if quiet else ProgressBar(f"{safe_component(sc.name)}", T)
         t0 = time.perf_counter()
         status, error, internal, signal_name = "complete", None, None, None
-        result = None
+        result, stopped = None, None
+        monitors = run_monitors(built, scene)
         try:
-            result = simulate_built(built, controller, T, dt, solver, bar)
+            result = simulate_built(built, controller, T, dt, solver, bar, monitors=monitors)
             signals.hold()
         except KeyboardInterrupt as exc:  # the signal handler holds the signals that follow
             if result is not None:  # just after the simulation ended: an interrupt of the write
@@ -270,6 +272,9 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
                 if result is None or len(result.t) == 0:
                     raise RunInterrupted(f"{sc.file}: {error} before the first sample; "
                                          "nothing written", None, None, signal_name) from None
+        except RunStoppedError as exc:  # a stop policy: its violation is named below
+            signals.hold()
+            result, status, stopped = partial_result(exc), "failed", str(exc)
         except MultiArmError as exc:
             signals.hold()
             result = partial_result(exc)
@@ -293,7 +298,8 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
             if bar is not None:
                 bar.close()
         wall = time.perf_counter() - t0
-        result, status, error, feasibility = apply_policies(built, result, scene, status, error)
+        status, error, feasibility = apply_policies(built, result, scene, status, error, stopped,
+                                                    monitors)
         t_end = float(result.t[-1])
         if status == "interrupted":
             _say(f"{error} at t = {t_end:.6g} s of {T:g} s: writing the partial results "
@@ -329,7 +335,7 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
 
 
 def simulate_built(built: BuiltScenario, controller, duration: float, dt: float, solver: str,
-                   progress=None):
+                   progress=None, monitors=()):
     """Simulate a built scenario with its simulation settings (integrator, Baumgarte).
 
     With ``limits: {torque: saturate}`` the actuators clip the applied torques to the arms'
@@ -342,6 +348,8 @@ def simulate_built(built: BuiltScenario, controller, duration: float, dt: float,
         dt: time step [s].
         solver: forward-dynamics solver name.
         progress: optional ``callable(fraction)``.
+        monitors: checks made while it runs (``simulate(monitors=...)``, e.g.
+            :func:`~multiarm_pin.app.run_feasibility.run_monitors`).
 
     Returns:
         The :class:`~multiarm_pin.sim.simulation.SimulationResult`.
@@ -359,7 +367,7 @@ def simulate_built(built: BuiltScenario, controller, duration: float, dt: float,
                         integrator=sim.integrator, solver=solver, baumgarte=sim.baumgarte,
                         progress=progress,
                         external_wrench=built.scenario.object.external_wrench or None,
-                        torque_limit=limit)
+                        torque_limit=limit, monitors=monitors)
 
 
 @dataclass
@@ -403,7 +411,7 @@ def _write_results(writer: ResultsWriter, signals: _RunSignals, built: BuiltScen
     folder, target = writer.path, writer.target
     start = time.perf_counter()
     _say(f"writing results to {target}", quiet)
-    traj = trajectory_arrays(built, result)
+    traj = trajectory_arrays(built, result, (feasibility or {}).get("violations", ()))
     files = {"trajectory": folder / "trajectory.npz", "scenario": folder / "scenario.yaml",
              "summary": folder / "summary.json"}
     summary = summarize(built, result, solver, wall)

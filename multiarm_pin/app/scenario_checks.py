@@ -19,42 +19,13 @@ from __future__ import annotations
 import numpy as np
 
 from multiarm_pin.exceptions import ScenarioError
-
-LIMIT_TOLERANCE = 1e-9
-"""Slack [rad or m] allowed beyond a joint position limit (rounding of written values)."""
+from multiarm_pin.feasibility.limits import LIMIT_TOLERANCE, one_dof_limits
 
 MASS_LIMIT = 1e6
 """Object mass [kg] above which a warning is given (a building, not a payload)."""
 
 INSIDE_TOLERANCE = 1e-3
 """Depth [m] below the object's surface from which a joint frame counts as inside it."""
-
-
-def one_dof_limits(model) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Position limits of a model's one-coordinate joints.
-
-    Args:
-        model: a Pinocchio model.
-
-    Returns:
-        ``(lower (nq,), upper (nq,), names (nq,))``: limits [rad or m] (``±inf`` where there is
-        none: multi-coordinate joints, unbounded joints) and the joint owning each coordinate.
-    """
-    lo = np.full(model.nq, -np.inf)
-    hi = np.full(model.nq, np.inf)
-    names = [""] * model.nq
-    for jid in range(1, model.njoints):
-        j = model.joints[jid]
-        for c in range(j.idx_q, j.idx_q + j.nq):
-            names[c] = model.names[jid]
-        if j.nq == 1 and j.nv == 1:
-            lo[j.idx_q] = model.lowerPositionLimit[j.idx_q]
-            hi[j.idx_q] = model.upperPositionLimit[j.idx_q]
-    lo[~np.isfinite(lo) | (lo < -1e10)] = -np.inf
-    hi[~np.isfinite(hi) | (hi > 1e10)] = np.inf
-    bad = lo > hi  # some URDFs leave limits unset (0, 0) on continuous joints
-    lo[bad], hi[bad] = -np.inf, np.inf
-    return lo, hi, names
 
 
 def check_within_limits(file: str, key: str, arm, q: np.ndarray) -> None:
@@ -121,9 +92,7 @@ def input_warnings(built, duration: float) -> list[str]:
 
 __all__ = [
     "INSIDE_TOLERANCE",
-    "LIMIT_TOLERANCE",
     "MASS_LIMIT",
     "check_within_limits",
     "input_warnings",
-    "one_dof_limits",
 ]

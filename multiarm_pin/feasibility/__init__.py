@@ -6,11 +6,15 @@
   the self-collision pairs its SRDF leaves.
 - :mod:`.batch_kinematics`: joint placements at every recorded sample at once.
 - :mod:`.collisions`: every body of a system (arms, object, supports' slabs, ground) in one
-  Pinocchio geometry model; collisions and clearances at a state and along a run.
+  Pinocchio geometry model; collisions and clearances at a state.
+- :mod:`.scan`: collisions and clearances along a run, stretch by stretch (:class:`RunScan`).
 - :mod:`.report`: :func:`feasibility_report` of a run, :func:`check_design` of a state.
+- :mod:`.monitors`: the checks of the ``stop`` policies while a run runs
+  (:func:`stop_monitors`, for ``simulate(monitors=...)``).
 """
 
 from multiarm_pin.feasibility.collisions import CATEGORIES, CollisionScene
+from multiarm_pin.feasibility.monitors import stop_monitors
 from multiarm_pin.feasibility.report import (
     LIMIT_KINDS,
     POLICIES,
@@ -29,4 +33,5 @@ __all__ = [
     "Violation",
     "check_design",
     "feasibility_report",
+    "stop_monitors",
 ]

@@ -35,14 +35,6 @@ def _axis(joint) -> tuple[str, np.ndarray]:
     raise UnsupportedJointError(joint.shortname(), joint.shortname())
 
 
-def _rotations(axis: np.ndarray, cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
-    """(T, 3, 3) rotations about a unit ``axis`` by angles of cosine ``cos``, sine ``sin``."""
-    K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]],
-                  [-axis[1], axis[0], 0.0]])
-    return (np.eye(3) + sin[:, None, None] * K
-            + (1.0 - cos)[:, None, None] * (K @ K))
-
-
 def joint_placements(model: pin.Model, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """World placements of every joint of ``model`` at T configurations.
 
@@ -59,29 +51,46 @@ def joint_placements(model: pin.Model, q: np.ndarray) -> tuple[np.ndarray, np.nd
     """
     q = np.asarray(q, float)
     T = len(q)
-    R = np.empty((T, model.njoints, 3, 3))
-    p = np.empty((T, model.njoints, 3))
-    R[:, 0], p[:, 0] = np.eye(3), 0.0
+    # joint-first while building (each joint's (T, 3, 3) block contiguous), returned as a
+    # (T, njoints, ...) view
+    R = np.empty((model.njoints, T, 3, 3))
+    p = np.empty((model.njoints, T, 3))
+    R[0], p[0] = np.eye(3), 0.0
+
+    def times(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+        """(T, 3, 3) @ a constant (3, 3), as one (3T, 3) @ (3, 3) matrix product."""
+        return (A.reshape(-1, 3) @ B).reshape(A.shape)
+
     for j in range(1, model.njoints):
         joint = model.joints[j]
         kind, axis = _axis(joint)
         parent = model.parents[j]
         M = model.jointPlacements[j]
-        Rp = R[:, parent] @ M.rotation
-        pp = p[:, parent] + R[:, parent] @ M.translation
+        Rpar = R[parent]
+        t = np.asarray(M.translation)
+        pp = p[parent] + Rpar[..., 0] * t[0] + Rpar[..., 1] * t[1] + Rpar[..., 2] * t[2]
         i = joint.idx_q
-        if kind == "R":
-            Rj, tj = _rotations(axis, np.cos(q[:, i]), np.sin(q[:, i])), None
-        elif kind == "RUB":
-            Rj, tj = _rotations(axis, q[:, i], q[:, i + 1]), None
+        if kind in ("R", "RUB"):
+            # Rp (I + sin K + (1 - cos) K²), K the axis' cross-product matrix
+            cos, sin = ((np.cos(q[:, i]), np.sin(q[:, i])) if kind == "R"
+                        else (q[:, i], q[:, i + 1]))
+            K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]],
+                          [-axis[1], axis[0], 0.0]])
+            Rm = np.asarray(M.rotation)
+            R[j] = (times(Rpar, Rm) + sin[:, None, None] * times(Rpar, Rm @ K)
+                    + (1.0 - cos)[:, None, None] * times(Rpar, Rm @ K @ K))
+            p[j] = pp
         elif kind == "P":
-            Rj, tj = None, q[:, i, None] * axis
+            Rp = times(Rpar, np.asarray(M.rotation))
+            R[j] = Rp
+            p[j] = pp + (Rp[..., 0] * axis[0] + Rp[..., 1] * axis[1]
+                         + Rp[..., 2] * axis[2]) * q[:, i, None]
         else:
+            Rp = times(Rpar, np.asarray(M.rotation))
             Rj = Rotation.from_quat(q[:, i + 3:i + 7]).as_matrix()
-            tj = q[:, i:i + 3]
-        R[:, j] = Rp if Rj is None else Rp @ Rj
-        p[:, j] = pp if tj is None else pp + np.einsum("tij,tj->ti", Rp, tj)
-    return R, p
+            R[j] = Rp @ Rj
+            p[j] = pp + np.einsum("tij,tj->ti", Rp, q[:, i:i + 3])
+    return np.moveaxis(R, 0, 1), np.moveaxis(p, 0, 1)
 
 
 __all__ = ["joint_placements"]

@@ -38,7 +38,7 @@ import numpy as np
 import pinocchio as pin
 
 from multiarm_pin.feasibility.arm_geometry import ArmGeometry, arm_collision_geometry
-from multiarm_pin.feasibility.batch_kinematics import joint_placements
+from multiarm_pin.feasibility.scan import CLEARANCE_TOLERANCE, RunScan, ScanResult
 
 CATEGORIES = ("arm_self", "arm_arm", "arm_object", "arm_support", "arm_ground")
 """Pair categories, in the order of :attr:`CollisionScene.category` codes."""
@@ -60,22 +60,6 @@ where the object's support points rest, as a stand under some points of a face).
 GJK_TOLERANCE = 1e-11
 """Tolerance of coal's GJK on the hulls' distances [m] (its default, 1e-6, leaves the
 distance of two hulls uncertain by about 1e-7 m)."""
-
-CLEARANCE_TOLERANCE = 1e-10
-"""How far [m] above the exact minimum over the samples a reported clearance may be (a pair
-whose bound is within it of the smallest distance found is not measured again)."""
-
-ADVANCE_FRACTION = 0.5
-"""A measured pair is measured again where its bound falls below this fraction of the distance
-measured (:meth:`CollisionScene.scan`)."""
-
-ADVANCE_WINDOW = 64
-"""Samples ahead over which a measured pair's distance is bounded before it is measured again
-(:meth:`CollisionScene.scan`)."""
-
-ADVANCE_STRIDE = 16
-"""A pair due at a later sample is measured at the last multiple of this many samples before
-it, so that pairs share their samples (one placement update for all of them)."""
 
 PENETRATION_TOLERANCE = 1e-6
 """Depth [m] beyond which a penetration counts (round-off of touching surfaces)."""
@@ -107,23 +91,6 @@ class Collision:
         """One line: both bodies and the depth."""
         return (f"{self.arm}/{self.link} and {self.other} interpenetrate by "
                 f"{-self.distance * 1e3:.3g} mm at {np.round(self.point, 4).tolist()} m")
-
-
-@dataclass(frozen=True)
-class ScanResult:
-    """What :meth:`CollisionScene.scan` found along a run.
-
-    Attributes:
-        clearance: per category of :data:`CATEGORIES`, the smallest hull distance over the run
-            [m] (grasp pairs left out), or None when the category has no pair.
-        hits: per pair index, its collisions ``(sample, distance [m] on the meshes, point
-            (3,) on the first body)`` in time order.
-        measured: number of (sample, pair) distances computed exactly.
-    """
-
-    clearance: dict
-    hits: dict
-    measured: int
 
 
 def _prefixed(model: pin.Model, geom: pin.GeometryModel, prefix: str):
@@ -387,7 +354,7 @@ class CollisionScene:
             hit = self.mesh_penetration(q_scene, k)
             if hit is None:
                 continue
-            if self.grasp_pair[k] and contact_points is not None and self._at_grasp(
+            if self.grasp_pair[k] and contact_points is not None and self.at_grasp(
                     k, hit[1], contact_points):
                 continue
             arm, link, other = self.pair_names(k)
@@ -396,35 +363,14 @@ class CollisionScene:
         return out
 
     # ------------------------------------------------------------------ along a run
-    def _spheres(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Bounding sphere of every geometry.
-
-        Returns:
-            centres (G, 3) in the frame of the geometry's joint [m], radii (G,) [m], and
-            whether each moves (G,) bool (on a joint, not the world).
-        """
-        G = self.hull.ngeoms
-        c, r, moving = np.zeros((G, 3)), np.zeros(G), np.zeros(G, dtype=bool)
-        for g in range(G):
-            o = self.hull.geometryObjects[g]
-            moving[g] = o.parentJoint != 0
-            if g == self.ground_index:
-                continue
-            shape = o.geometry
-            shape.computeLocalAABB()
-            c[g] = o.placement.act(np.array(shape.aabb_center))
-            r[g] = float(shape.aabb_radius)
-        return c, r, moving
-
     def scan(self, q: np.ndarray, object_position: np.ndarray, object_quaternion: np.ndarray,
              contact_points: list[np.ndarray] | None = None) -> ScanResult:
-        """Collisions and clearances at every sample of a run.
+        """Collisions and clearances at every sample of a run (:class:`~.scan.RunScan`).
 
         Each pair is measured on the hulls where it may come closer and bounded from below
-        elsewhere (:meth:`_advance`, conservative advancement); a pair whose hulls penetrate
-        is measured on the meshes. Each category's clearance is then the exact minimum over
-        the samples, on the hulls: the samples whose bound is below the smallest measured
-        distance are measured until none is (:meth:`_category_minimum`).
+        elsewhere (conservative advancement along the path); a pair whose hulls penetrate
+        is measured on the meshes. Each category's clearance is the exact minimum over the
+        samples, on the hulls.
 
         Args:
             q: (T, nq) arms' configurations.
@@ -436,224 +382,15 @@ class CollisionScene:
         Returns:
             :class:`ScanResult`.
         """
-        T = len(q)
-        P = len(self.pairs)
-        c_local, radius, _ = self._spheres()
-        G = len(radius)
-        configs = np.concatenate([q, object_position, object_quaternion], axis=1)
-        R, p = joint_placements(self.model, configs)
-        joint = np.array([o.parentJoint for o in self.hull.geometryObjects], dtype=int)
-        in_joint = c_local.reshape(G, 3)  # _spheres gives the centres in the joints' frames
-        reach = np.linalg.norm(in_joint, axis=1) + radius  # any point's distance to its joint
-        exact = np.full((T, P), np.nan)
-        skip, ground = self._ground_distances(R, p, joint, exact)
-        opens = self._grasp_openings(R, p, joint, in_joint, radius, contact_points, T)
-        lower = self._advance(configs, R, p, joint, reach, exact, skip, ground, opens)
-        clearance = {}
-        for ci, name in enumerate(CATEGORIES):
-            cols = np.flatnonzero((self.category == ci) & ~self.grasp_pair)
-            if not len(cols):
-                clearance[name] = None
-                continue
-            clearance[name] = self._category_minimum(configs, exact, lower, cols)
-        hits: dict[int, list] = {}
-        for s, k in zip(*np.nonzero(exact < -PENETRATION_TOLERANCE), strict=True):
-            hit = self.mesh_penetration(configs[s], k)
-            if hit is None:
-                continue
-            if self.grasp_pair[k] and contact_points is not None:
-                cps = [np.asarray(c)[s] for c in contact_points]
-                if self._at_grasp(k, hit[1], cps):
-                    continue
-            hits.setdefault(int(k), []).append((int(s), hit[0], hit[1]))
-        return ScanResult(clearance, hits, int(np.count_nonzero(~np.isnan(exact))))
+        run = RunScan(self, len(q))
+        run.extend(q, object_position, object_quaternion, contact_points)
+        return run.result()
 
-    def _ground_distances(self, R, p, joint, exact) -> tuple[np.ndarray, np.ndarray]:
-        """The ground pairs' distances from the hulls' vertices, where they matter.
+    def at_grasp(self, k: int, point_on_object: np.ndarray, contact_points) -> bool:
+        """True if a point of pair ``k`` on the object lies in its arm's grasp zone.
 
-        The distance of a convex hull (or a box) to the half-space ``z <= h`` is its lowest
-        vertex's height above ``h``; the lowest corner of the hull's bounding box (in its
-        joint frame) bounds it from below. The bound of every pair comes first; the exact
-        distance (into ``exact``) only where the bound is below the smallest exact distance
-        found (or below the penetration tolerance), the pair of the lowest bound first.
-
-        Returns:
-            ``(done (P,) bool, lower (T, P))``: the ground pairs handled here and their
-            lower bounds (the exact distance where computed).
+        ``contact_points``: per arm, (N_i, 3) its contact points in the world [m].
         """
-        T, P = exact.shape
-        done = np.zeros(P, dtype=bool)
-        lower = np.full((T, P), -np.inf)
-        if self.ground_index is None:
-            return done, lower
-        points = {}
-        for k in np.flatnonzero(self.pairs[:, 1] == self.ground_index):
-            g = int(self.pairs[k, 0])
-            o = self.hull.geometryObjects[g]
-            shape = o.geometry
-            if hasattr(shape, "points"):
-                pts = np.asarray(shape.points(), float)
-            elif hasattr(shape, "halfSide"):
-                h = np.array(shape.halfSide)
-                pts = np.array([[x, y, z] for x in (-h[0], h[0]) for y in (-h[1], h[1])
-                                for z in (-h[2], h[2])])
-            else:
-                continue
-            local = pts @ o.placement.rotation.T + o.placement.translation
-            lo, hi = local.min(axis=0), local.max(axis=0)
-            corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                                for z in (lo[2], hi[2])])
-            points[k] = local
-            lower[:, k] = self._lowest(corners, R[:, joint[g], 2, :], p[:, joint[g], 2])
-            done[k] = True
-        best = np.inf
-        for k in sorted(points, key=lambda k: float(lower[:, k].min())):
-            rows = np.flatnonzero(lower[:, k] < max(best, PENETRATION_TOLERANCE))
-            if not len(rows):
-                continue
-            g = int(self.pairs[k, 0])
-            d = self._lowest(points[k], R[rows, joint[g], 2, :], p[rows, joint[g], 2])
-            exact[rows, k] = lower[rows, k] = d
-            best = min(best, float(d.min()))
-        return done, lower
-
-    def _lowest(self, local: np.ndarray, Rz: np.ndarray, pz: np.ndarray) -> np.ndarray:
-        """(T,) height above the ground [m] of the lowest of ``local`` (V, 3) points.
-
-        ``Rz`` (T, 3): the joint's third rotation row; ``pz`` (T,): its origin's height.
-        Sums of products, not a BLAS call (small operands).
-        """
-        z = (local[:, 0, None] * Rz[None, :, 0] + local[:, 1, None] * Rz[None, :, 1]
-             + local[:, 2, None] * Rz[None, :, 2])
-        return z.min(axis=0) + pz - self.ground
-
-    def _grasp_openings(self, R, p, joint, in_joint, radius, contact_points, T):
-        """(T + 1, P) the first sample from each sample on where a pair can collide.
-
-        A carrying link whose bounding sphere lies, at a sample, within
-        :data:`JOINT_ZONE_RADIUS` of one of its arm's contact points touches the object
-        (if at all) at the grasp: no collision there, and it is left out of the
-        clearances; such samples are skipped (a fingertip on its face, every sample).
-        Every other pair may collide at every sample (its own index).
-        """
-        P = len(self.pairs)
-        opens = np.broadcast_to(np.arange(T + 1)[:, None], (T + 1, P)).copy()
-        if contact_points is None:
-            return opens
-        for k in np.flatnonzero(self.grasp_pair):
-            g = int(self.pairs[k, 0])
-            cps = np.asarray(contact_points[self.arm_of_pair[k]]).reshape(T, -1, 3)
-            if not cps.shape[1]:
-                continue
-            c = np.einsum("tij,j->ti", R[:, joint[g]], in_joint[g]) + p[:, joint[g]]
-            near = np.min(np.linalg.norm(cps - c[:, None], axis=2), axis=1) + radius[g]
-            inside = near <= JOINT_ZONE_RADIUS
-            nxt = np.where(inside, T, np.arange(T))
-            opens[:T, k] = np.minimum.accumulate(nxt[::-1])[::-1]
-        return opens
-
-    def _advance(self, configs, R, p, joint, reach, exact, skip, bounds,
-                 opens) -> np.ndarray:
-        """Measure every pair at the samples where it may come closer; bound it elsewhere.
-
-        Conservative advancement at sample resolution: after measuring pair ``(a, b)`` at
-        sample ``s`` (distance ``d``), its distance at a later sample ``s'`` is at least
-        ``d - (|Δp| + ‖ΔR‖_F ρ_a)``, where ``Δp``, ``ΔR`` are the change of ``a``'s joint
-        placement seen from ``b``'s joint between ``s`` and ``s'`` and ``ρ_a`` bounds the
-        distance of ``a``'s points to its joint (any point of ``a`` moves relative to ``b``
-        by at most that much). The pair is measured again at the first sample of the next
-        :data:`ADVANCE_WINDOW` where that bound falls to :data:`ADVANCE_FRACTION` of ``d``
-        (to ``-PENETRATION_TOLERANCE`` for a grasp pair or a touching one: they matter only
-        once they may penetrate; at the next sample while it penetrates).
-
-        Args:
-            configs: (T, nq + 7) the scene's configurations.
-            R: (T, njoints, 3, 3) joint axes -> world axes.
-            p: (T, njoints, 3) joint origins [m].
-            joint: (G,) each geometry's joint.
-            reach: (G,) ``ρ`` [m].
-            exact: (T, P) filled with the measured hull distances (NaN elsewhere).
-            skip: (P,) pairs already handled (bounded at every sample, measured where needed).
-            bounds: (T, P) their lower bounds.
-            opens: (T + 1, P) from :meth:`_grasp_openings` (samples a pair skips).
-
-        Returns:
-            (T, P) lower bounds of the distances [m] (the measured value where measured).
-        """
-        T, P = exact.shape
-        lower = np.full((T, P), -np.inf)
-        ja, jb = joint[self.pairs[:, 0]], joint[self.pairs[:, 1]]
-        rho = reach[self.pairs[:, 0]]
-        due = np.where(skip, T, opens[0])
-        lower[:, skip] = bounds[:, skip]
-        model, data, hull, hd = self.model, self.data, self.hull, self.hull_data
-        W = ADVANCE_WINDOW
-        self.visits = 0
-        while True:
-            s = int(due.min())
-            if s >= T:
-                break
-            ks = np.flatnonzero(due == s)
-            self.visits += 1
-            pin.updateGeometryPlacements(model, data, hull, hd, configs[s])
-            d = np.array([pin.computeDistance(hull, hd, int(k)).min_distance for k in ks])
-            exact[s, ks] = d
-            lower[s, ks] = d
-            near = d < -PENETRATION_TOLERANCE  # penetrating: every sample (its hits)
-            due[ks[near]] = opens[s + 1, ks[near]]
-            far, dfar = ks[~near], d[~near]
-            end = min(T, s + 1 + W)
-            if not len(far) or end <= s + 1:
-                due[far] = opens[s + 1, far]
-                continue
-            # a's joint seen from b's joint at s .. end - 1, once per pair of joints
-            key = ja[far] * R.shape[1] + jb[far]
-            uniq, inv = np.unique(key, return_inverse=True)
-            ua, ub = uniq // R.shape[1], uniq % R.shape[1]
-            Rw, pw = R[s:end], p[s:end]
-            Rbt = np.swapaxes(Rw[:, ub], -1, -2)
-            rel_R = Rbt @ Rw[:, ua]
-            rel_p = (Rbt @ (pw[:, ua] - pw[:, ub])[..., None])[..., 0]
-            dR, dp = rel_R[1:] - rel_R[0], rel_p[1:] - rel_p[0]
-            shift = np.sqrt(np.einsum("tki,tki->tk", dp, dp))[:, inv]
-            turn = np.sqrt(np.einsum("tkij,tkij->tk", dR, dR))[:, inv]
-            move = shift + turn * rho[far]
-            bound = dfar - move  # (window, k)
-            lower[s + 1:end, far] = np.maximum(lower[s + 1:end, far], bound)
-            # grasp pairs and touching pairs matter only once they may penetrate
-            target = np.where(self.grasp_pair[far] | (dfar <= PENETRATION_TOLERANCE),
-                              -PENETRATION_TOLERANCE, ADVANCE_FRACTION * dfar)
-            weak = bound <= target
-            first = np.where(weak.any(axis=0), weak.argmax(axis=0), end - s - 1)
-            # measured earlier than needed at a multiple of ADVANCE_STRIDE: pairs share samples
-            due[far] = opens[np.maximum(s + 1, (s + 1 + first) // ADVANCE_STRIDE
-                                        * ADVANCE_STRIDE), far]
-        return lower
-
-    def _category_minimum(self, configs, exact, lower, cols) -> float:
-        """The smallest hull distance over samples and the pairs ``cols`` (branch and bound).
-
-        Samples in increasing order of their smallest bound; at each, the pairs whose bound
-        is below the smallest distance measured so far (less :data:`CLEARANCE_TOLERANCE`)
-        are measured; it stops at the first sample whose smallest bound is not below it. The
-        result is within :data:`CLEARANCE_TOLERANCE` above the exact minimum.
-        """
-        model, data, hull, hd = self.model, self.data, self.hull, self.hull_data
-        sub = exact[:, cols]
-        best = float(np.nanmin(sub)) if np.any(~np.isnan(sub)) else np.inf
-        lb = np.where(np.isnan(sub), lower[:, cols], np.inf)
-        row = lb.min(axis=1)
-        for s in np.argsort(row, kind="stable"):
-            if row[s] >= best - CLEARANCE_TOLERANCE:
-                break
-            pin.updateGeometryPlacements(model, data, hull, hd, configs[s])
-            for j in np.flatnonzero(lb[s] < best - CLEARANCE_TOLERANCE):
-                k = int(cols[j])
-                exact[s, k] = pin.computeDistance(hull, hd, k).min_distance
-                best = min(best, float(exact[s, k]))
-        return best
-
-    def _at_grasp(self, k: int, point_on_object: np.ndarray, contact_points) -> bool:
         pts = np.asarray(contact_points[self.arm_of_pair[k]]).reshape(-1, 3)
         if not len(pts):
             return False

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from multiarm_pin.app.scenario_checks import LIMIT_TOLERANCE, one_dof_limits
+LIMIT_TOLERANCE = 1e-9
+"""Slack [rad or m] allowed beyond a joint position limit (rounding of written values)."""
 
 RATIO_TOLERANCE = 1e-9
 """Relative slack beyond a velocity or effort limit (round-off of a value at its limit)."""
@@ -40,6 +41,33 @@ class ArmLimits:
     q_index: np.ndarray
     velocity: np.ndarray
     effort: np.ndarray
+
+
+def one_dof_limits(model) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Position limits of a model's one-coordinate joints.
+
+    Args:
+        model: a Pinocchio model.
+
+    Returns:
+        ``(lower (nq,), upper (nq,), names (nq,))``: limits [rad or m] (``±inf`` where there is
+        none: multi-coordinate joints, unbounded joints) and the joint owning each coordinate.
+    """
+    lo = np.full(model.nq, -np.inf)
+    hi = np.full(model.nq, np.inf)
+    names = [""] * model.nq
+    for jid in range(1, model.njoints):
+        j = model.joints[jid]
+        for c in range(j.idx_q, j.idx_q + j.nq):
+            names[c] = model.names[jid]
+        if j.nq == 1 and j.nv == 1:
+            lo[j.idx_q] = model.lowerPositionLimit[j.idx_q]
+            hi[j.idx_q] = model.upperPositionLimit[j.idx_q]
+    lo[~np.isfinite(lo) | (lo < -1e10)] = -np.inf
+    hi[~np.isfinite(hi) | (hi > 1e10)] = np.inf
+    bad = lo > hi  # some URDFs leave limits unset (0, 0) on continuous joints
+    lo[bad], hi[bad] = -np.inf, np.inf
+    return lo, hi, names
 
 
 def _positive(x: np.ndarray) -> np.ndarray:
@@ -95,6 +123,50 @@ def _first(mask: np.ndarray, t: np.ndarray) -> float | None:
     return float(t[idx[0]]) if idx.size else None
 
 
+def system_limits(system) -> ArmLimits:
+    """The limits of every arm of a system, in its coordinates (``q_index`` into its nq)."""
+    parts = [arm_limits(a) for a in system.arms]
+    aset = system.arm_set
+    q_index = [np.where(lim.q_index >= 0, lim.q_index + aset.q_slices[i].start, -1)
+               for i, lim in enumerate(parts)]
+    if not parts:
+        empty = np.zeros(0)
+        return ArmLimits((), empty, empty, np.zeros(0, dtype=int), empty, empty)
+    return ArmLimits(sum((lim.joints for lim in parts), ()),
+                     *(np.concatenate([getattr(lim, f) for lim in parts])
+                       for f in ("lower", "upper")),
+                     np.concatenate(q_index),
+                     *(np.concatenate([getattr(lim, f) for lim in parts])
+                       for f in ("velocity", "effort")))
+
+
+def exceeded(limits: ArmLimits, q: np.ndarray, v: np.ndarray, tau: np.ndarray
+             ) -> dict[str, np.ndarray]:
+    """Where recorded samples exceed the limits, per kind.
+
+    Args:
+        limits: the :class:`ArmLimits` of the coordinates.
+        q: (T, nq) configurations [rad or m] (``limits.q_index`` indexes them).
+        v: (T, nv) velocities [rad/s or m/s].
+        tau: (T, nv) torques [N m or N].
+
+    Returns:
+        ``{"torque", "velocity", "position"}`` -> (T, nv) bool: ``|τ| > effort (1 +``
+        :data:`RATIO_TOLERANCE` ``)``, ``|v| > velocity (1 + RATIO_TOLERANCE)``, a position
+        more than :data:`LIMIT_TOLERANCE` outside its bounds (NaN: not exceeded).
+    """
+    with np.errstate(invalid="ignore"):
+        torque = np.abs(tau) > limits.effort * (1.0 + RATIO_TOLERANCE)
+        velocity = np.abs(v) > limits.velocity * (1.0 + RATIO_TOLERANCE)
+        position = np.zeros(np.shape(v), dtype=bool)
+        has = np.flatnonzero(limits.q_index >= 0)
+        if len(has) and len(q):
+            x = q[:, limits.q_index[has]]
+            position[:, has] = ((x < limits.lower[has] - LIMIT_TOLERANCE)
+                                | (x > limits.upper[has] + LIMIT_TOLERANCE))
+    return {"torque": torque, "velocity": velocity, "position": position}
+
+
 def limit_statistics(limits: ArmLimits, t: np.ndarray, q: np.ndarray, v: np.ndarray,
                      tau: np.ndarray) -> list[JointStatistics]:
     """Per joint, peaks, margins and the first violation time over recorded samples.
@@ -109,6 +181,7 @@ def limit_statistics(limits: ArmLimits, t: np.ndarray, q: np.ndarray, v: np.ndar
     Returns:
         One :class:`JointStatistics` per joint (nv), in the model's order.
     """
+    over = exceeded(limits, q, v, tau)
     out = []
     for c in range(len(limits.joints)):
         torque, speed = np.abs(tau[:, c]), np.abs(v[:, c])
@@ -117,21 +190,22 @@ def limit_statistics(limits: ArmLimits, t: np.ndarray, q: np.ndarray, v: np.ndar
         if np.isfinite(limits.effort[c]):
             ratio = torque / limits.effort[c]
             tr = float(ratio.max()) if len(ratio) else 0.0
-            t_tau = _first(ratio > 1.0 + RATIO_TOLERANCE, t)
+            t_tau = _first(over["torque"][:, c], t)
         if np.isfinite(limits.velocity[c]):
             ratio = speed / limits.velocity[c]
             vr = float(ratio.max()) if len(ratio) else 0.0
-            t_v = _first(ratio > 1.0 + RATIO_TOLERANCE, t)
+            t_v = _first(over["velocity"][:, c], t)
         i = limits.q_index[c]
         if i >= 0 and len(q) and (np.isfinite(limits.lower[c]) or np.isfinite(limits.upper[c])):
             m = np.minimum(q[:, i] - limits.lower[c], limits.upper[c] - q[:, i])
             k = int(np.argmin(m))
             margin, worst = float(m[k]), float(q[k, i])
-            t_q = _first(m < -LIMIT_TOLERANCE, t)
+            t_q = _first(over["position"][:, c], t)
         out.append(JointStatistics(tr, vr, margin, t_tau, t_v, t_q,
                                    float(torque.max(initial=0.0)),
                                    float(speed.max(initial=0.0)), worst))
     return out
 
 
-__all__ = ["RATIO_TOLERANCE", "ArmLimits", "JointStatistics", "arm_limits", "limit_statistics"]
+__all__ = ["LIMIT_TOLERANCE", "RATIO_TOLERANCE", "ArmLimits", "JointStatistics", "arm_limits",
+           "exceeded", "limit_statistics", "one_dof_limits", "system_limits"]

@@ -41,6 +41,8 @@ class Violation:
             distance [m] (negative: penetration depth).
         limit: the limit it exceeds (effort, velocity, the position bound it passes, 0 m).
         t_worst: time [s] of the worst value.
+        intervals: a collision's time intervals ``((t0, t1), ...)`` [s]: the first and last
+            sample of each run of consecutive samples in collision (empty for the limits).
     """
 
     kind: str
@@ -52,6 +54,7 @@ class Violation:
     value: float
     limit: float
     t_worst: float | None = None
+    intervals: tuple = ()
 
     def as_dict(self) -> dict:
         """The JSON form of ``summary.json``'s ``violations`` entries."""
@@ -62,6 +65,8 @@ class Violation:
             d["link"] = self.link
             d["other"] = self.other
         d.update(t_first=self.t_first, value=self.value, limit=self.limit)
+        if self.kind == "collision":
+            d["intervals"] = [[float(a), float(b)] for a, b in self.intervals]
         return d
 
     def describe(self) -> str:
@@ -123,6 +128,15 @@ def _none_if_inf(x):
     return None if x is None or not np.isfinite(x) else float(x)
 
 
+def _intervals(samples: np.ndarray, t: np.ndarray) -> tuple:
+    """``((t0, t1), ...)`` [s] of the runs of consecutive indices in sorted ``samples``."""
+    breaks = np.flatnonzero(np.diff(samples) > 1)
+    first = np.concatenate([[0], breaks + 1])
+    last = np.concatenate([breaks, [len(samples) - 1]])
+    return tuple((float(t[samples[a]]), float(t[samples[b]])) for a, b in zip(first, last,
+                                                                               strict=True))
+
+
 def _grasp_points(system, result) -> list[np.ndarray]:
     """Per arm, (T, N_i, 3) its grasp's recorded contact points [m]."""
     return [result.contact_points[:, i, :int(system.constraint_set.N[i])]
@@ -130,7 +144,7 @@ def _grasp_points(system, result) -> list[np.ndarray]:
 
 
 def feasibility_report(system, result, *, ground: float | None = 0.0, collisions: bool = True,
-                       scene: CollisionScene | None = None) -> FeasibilityReport:
+                       scene: CollisionScene | None = None, scan=None) -> FeasibilityReport:
     """Check every recorded sample of a run against the joint limits and for collisions.
 
     Args:
@@ -140,6 +154,9 @@ def feasibility_report(system, result, *, ground: float | None = 0.0, collisions
         ground: height [m] of the ground plane, or None for none.
         collisions: also check collisions (False: limits only; ``clearance`` is empty).
         scene: a :class:`CollisionScene` of the system to reuse (built otherwise).
+        scan: the :class:`~multiarm_pin.feasibility.scan.RunScan` of ``scene`` that a
+            collision monitor fed while the run ran; reused when it holds exactly the
+            samples checked here (a complete run), else the samples are scanned here.
 
     Returns:
         :class:`FeasibilityReport`.
@@ -182,16 +199,23 @@ def feasibility_report(system, result, *, ground: float | None = 0.0, collisions
     clearance = {}
     if collisions and system.n_arms and n:
         scene = scene or CollisionScene(system, result.state(0), ground)
-        scan = scene.scan(result.q[:n], result.object_position[:n],
-                          result.object_quaternion[:n],
-                          [c[:n] for c in _grasp_points(system, result)])
+        if scan is not None and scan.scene is scene and scan.n == n:
+            scan = scan.result()
+        else:
+            scan = scene.scan(result.q[:n], result.object_position[:n],
+                              result.object_quaternion[:n],
+                              [c[:n] for c in _grasp_points(system, result)])
         clearance = {k: _none_if_inf(v) for k, v in scan.clearance.items()}
+        # a link of several geometries: one violation per pair of names
+        by_names: dict[tuple, list] = {}
         for k, hits in scan.hits.items():
-            arm, link, other = scene.pair_names(k)
-            s0 = hits[0][0]
+            by_names.setdefault(scene.pair_names(k), []).extend(hits)
+        for (arm, link, other), hits in by_names.items():
+            samples = np.unique([h[0] for h in hits])
             worst = min(hits, key=lambda h: h[1])
-            violations.append(Violation("collision", arm, None, link, other, float(t[s0]),
-                                        float(worst[1]), 0.0, float(t[worst[0]])))
+            violations.append(Violation("collision", arm, None, link, other,
+                                        float(t[samples[0]]), float(worst[1]), 0.0,
+                                        float(t[worst[0]]), _intervals(samples, t)))
     violations.sort(key=lambda x: (x.t_first, LIMIT_KINDS.index(x.kind)))
     return FeasibilityReport(not violations, violations, limits, clearance,
                              bool(collisions and system.n_arms))
@@ -249,9 +273,13 @@ def check_design(system, state, *, ground: float | None = 0.0,
                                             state.obj.kinematics())
         cps = [ct.contact_points[i, :int(system.constraint_set.N[i])]
                for i in range(system.n_arms)]
+        deepest: dict[tuple, float] = {}  # a link of several geometries: once, its deepest
         for c in scene.collisions(qs, cps, d):
-            violations.append(Violation("collision", c.arm, None, c.link, c.other, 0.0,
-                                        c.distance, 0.0))
+            key = (c.arm, c.link, c.other)
+            deepest[key] = min(deepest.get(key, 0.0), c.distance)
+        for (arm, link, other), depth in deepest.items():
+            violations.append(Violation("collision", arm, None, link, other, 0.0, depth, 0.0,
+                                        0.0, ((0.0, 0.0),)))
     return FeasibilityReport(not violations, violations, limits, clearance, bool(system.n_arms))
 
 

@@ -46,8 +46,9 @@ re-exported here).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -56,7 +57,7 @@ from multiarm_pin._compiled.contact_loop import STAGE_EVENTS_FULL
 from multiarm_pin._registry import lookup
 from multiarm_pin.constraints.joint import INITIAL_GAP_TOLERANCE
 from multiarm_pin.dynamics import solver_entry
-from multiarm_pin.exceptions import DynamicsError, InputError
+from multiarm_pin.exceptions import DynamicsError, InputError, RunStoppedError
 from multiarm_pin.model.rigid_object import ObjectState
 from multiarm_pin.sim.compiled_loop import CompiledLoop
 from multiarm_pin.sim.contact_events import ContactEvent
@@ -103,6 +104,13 @@ INTEGRATORS: dict[str, IntegratorEntry] = {e.name: e for e in (
 )}
 """Every integrator, by name (the names :func:`simulate` and scenarios accept)."""
 
+MONITOR_STRETCH = 512
+"""Largest number of samples the compiled loops simulate in one call: a run's monitors
+(:func:`simulate`'s ``monitors``) see each such stretch as soon as it is done."""
+
+MONITOR_STRIDE = 32
+"""Samples the stepper records one by one before the monitors are shown them."""
+
 MAX_WARNINGS = 200
 """Contact-separation warnings kept in a result (the rest are counted)."""
 
@@ -130,6 +138,7 @@ def simulate(
     max_record_bytes: int | None = None,
     external_wrench: WrenchSchedule | None = None,
     torque_limit=None,
+    monitors: Sequence[Monitor] = (),
 ) -> SimulationResult:
     """Simulate the closed-loop system from ``initial_state`` for ``duration`` seconds.
 
@@ -159,6 +168,14 @@ def simulate(
             the dynamics, and both are recorded (``tau``, ``tau_commanded``). A saturating run
             is integrated by the numpy stepper (the compiled loops add the controller's
             torque as it is) and its result says so once in ``warnings``.
+        monitors: checks made while the run runs (e.g. the ``stop`` policies of
+            :mod:`multiarm_pin.feasibility.monitors`): each ``monitor.check(record, k0, k1)``
+            is called on every stretch of newly recorded samples ``k0 .. k1 - 1`` (in order,
+            each sample once; ``record`` the run's :class:`~multiarm_pin.sim.result.Recorder`,
+            its arrays ``(T, ...)`` valid up to ``k1``) and returns the first violating
+            sample or None. The run then ends: :class:`~multiarm_pin.exceptions.
+            RunStoppedError` is raised, its partial result ending at that sample (the samples
+            after it are dropped). Stretches hold at most :data:`MONITOR_STRETCH` samples.
 
     Returns:
         :class:`SimulationResult`.
@@ -172,6 +189,7 @@ def simulate(
             or a run whose record would not fit in memory (before allocating it).
         ConstraintError: an initial state that violates the joints.
         DynamicsError: NaN in the state, or no solution of the dynamics (with the time).
+        RunStoppedError: a monitor found a violation (``monitor``, ``sample``, ``t``).
     """
     t_start = time.perf_counter()
     if max_record_bytes is None:
@@ -230,22 +248,24 @@ def simulate(
                                     np.array(initial_state.obj.twist, float)))
     if stepper.unilateral:
         stepper.init_active(stepper.blocks_at(0.0, state)[1], initial_tol)
+    watch = _Watch(monitors)
     try:
-        _integrate(stepper, rec, state, times, integrator, rtol, atol, report)
+        _integrate(stepper, rec, state, times, integrator, rtol, atol, report, watch)
     except BaseException as exc:  # keep what was simulated, for the caller to save
+        n = exc.sample + 1 if isinstance(exc, RunStoppedError) else rec.count
         exc.partial_result = rec.result(integrator, dt, baumgarte,
-                                         time.perf_counter() - t_start, stepper, rec.count)
+                                         time.perf_counter() - t_start, stepper, n)
         raise
     report(1.0)
     return rec.result(integrator, dt, baumgarte, time.perf_counter() - t_start, stepper)
 
 
 def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.ndarray,
-               integrator: str, rtol: float, atol: float, report) -> None:
-    """Run the integrator over the time grid, recording every sample."""
+               integrator: str, rtol: float, atol: float, report, watch: _Watch) -> None:
+    """Run the integrator over the time grid, recording every sample (and watching them)."""
     n_steps = len(times) - 1
     if integrator == "rk45":
-        _run_rk45(stepper, rec, state, times, rtol, atol, report)
+        _run_rk45(stepper, rec, state, times, rtol, atol, report, watch)
     else:
         every = max(1, n_steps // 100)
         loop = CompiledLoop.for_run(stepper, integrator)
@@ -260,6 +280,7 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
                 # taken below by the contact loop or the stepper
                 with stretch:
                     k, state = loop.run(rec, state, times, k, stretch.end(k))
+                watch.recorded(rec, k)
                 report(k / n_steps)
                 if k > n_steps:
                     break
@@ -274,6 +295,7 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
             if events is not None and events.ready(state):
                 with stretch:
                     k, state = events.run(rec, state, times, k, stretch.end(k))
+                watch.recorded(rec, k)
                 report(k / n_steps)
                 if k > n_steps:
                     break
@@ -284,6 +306,7 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
             if stepper.separations(t, sol, rows):
                 sol, ev, tau, rows = stepper.evaluate(t, state)
             rec.record(k, t, state, sol, ev, tau, rows, stepper)
+            watch.recorded(rec, k + 1)
             if k == n_steps:
                 break
             state = stepper.advance_with_events(integrator, t, state, sol, times[k + 1] - t,
@@ -297,16 +320,17 @@ class _Stretch:
     """How many samples the next compiled call takes.
 
     1 % of the run, doubled while a call takes less than :attr:`WALL` seconds, up to 10 % of
-    the run: so that a call's Python around it (unboxing its arguments, the record's bookkeeping:
-    about 0.1 ms) stays small against the call, while the progress reports and a Ctrl-C (seen
-    between calls) still come every few hundredths of a second.
+    the run and :data:`MONITOR_STRETCH` samples: so that a call's Python around it (unboxing
+    its arguments, the record's bookkeeping: about 0.1 ms) stays small against the call,
+    while the progress reports and a Ctrl-C (seen between calls) still come every few
+    hundredths of a second, and the run's monitors see each stretch soon after it is done.
     """
 
     WALL = 0.01
 
     def __init__(self, every: int, n_steps: int):
-        self.size = every
-        self.top = max(every, n_steps // 10)
+        self.size = min(every, MONITOR_STRETCH)
+        self.top = min(max(every, n_steps // 10), MONITOR_STRETCH)
         self.n_samples = n_steps + 1
         self._t0 = 0.0
 
@@ -321,6 +345,58 @@ class _Stretch:
     def __exit__(self, *exc) -> None:
         if time.perf_counter() - self._t0 < self.WALL:
             self.size = min(2 * self.size, self.top)
+
+
+class Monitor(Protocol):
+    """A check made while a run runs (:func:`simulate`'s ``monitors``).
+
+    Attributes:
+        name: what it watches, for the :class:`~multiarm_pin.exceptions.RunStoppedError` message.
+    """
+
+    name: str
+
+    def check(self, record: Recorder, k0: int, k1: int) -> int | None:
+        """The first sample in ``[k0, k1)`` that violates what it watches, or None."""
+
+
+class _Watch:
+    """The run's monitors, called on each stretch of samples once it is recorded for good.
+
+    The seam between the simulation loops and the checks made while a run runs: the loops
+    call :meth:`recorded` whenever they hand back to Python (after each compiled stretch, each
+    step the stepper takes); the samples not yet shown to the monitors are shown once at
+    least :data:`MONITOR_STRIDE` of them wait (every compiled stretch, at most
+    :data:`MONITOR_STRETCH` samples, is one call) and at the end of the run. The last sample
+    recorded is held back until the next call: a step the compiled loop handed back is taken
+    again from it, which records it again.
+    """
+
+    def __init__(self, monitors: Sequence[Monitor]):
+        self.monitors = tuple(monitors)
+        self.checked = 0  # samples shown to the monitors
+
+    def recorded(self, rec: Recorder, count: int) -> None:
+        """Samples ``0 .. count - 1`` are recorded; show the monitors the settled ones.
+
+        Raises:
+            RunStoppedError: a monitor found a violation.
+        """
+        if not self.monitors:
+            return
+        end = count if count == len(rec.t) else count - 1
+        if end - self.checked < (1 if count == len(rec.t) else MONITOR_STRIDE):
+            return
+        k0, self.checked = self.checked, end
+        first, by = None, None
+        for m in self.monitors:
+            s = m.check(rec, k0, end)
+            if s is not None and (first is None or s < first):
+                first, by = int(s), m.name
+        if first is not None:
+            t = float(rec.t[first])
+            raise RunStoppedError(f"t = {t:.6g} s: {by}: stop at the first violation (sample "
+                             f"{first})", by, first, t)
 
 
 def _torque_limit(system: MultiArmSystem, torque_limit) -> np.ndarray | None:
@@ -340,7 +416,7 @@ def _normalised(q) -> np.ndarray:
 
 
 def _run_rk45(stepper: Stepper, rec: Recorder, state: SystemState, times: np.ndarray,
-              rtol: float, atol: float, report) -> None:
+              rtol: float, atol: float, report, watch: _Watch) -> None:
     from scipy.integrate import RK45
 
     system = stepper.system
@@ -372,6 +448,7 @@ def _run_rk45(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nda
             sol, ev, tau, rows = stepper.evaluate(times[k], s)
             rec.record(k, times[k], s, sol, ev, tau, rows, stepper)
             k += 1
+            watch.recorded(rec, k)
             continue
         message = ode.step()
         if ode.status == "failed":
@@ -382,7 +459,10 @@ def _run_rk45(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nda
 __all__ = [
     "INTEGRATORS",
     "IntegratorEntry",
+    "MONITOR_STRETCH",
+    "MONITOR_STRIDE",
     "ContactEvent",
+    "Monitor",
     "Controller",
     "SimulationResult",
     "default_record_limit",

@@ -1,0 +1,109 @@
+"""Checks made while a run runs: the ``stop`` policies of a scenario's ``limits:`` block.
+
+:func:`~multiarm_pin.sim.simulation.simulate` calls each monitor of its ``monitors`` on every
+stretch of samples it has recorded (``check(record, k0, k1)``, samples ``k0 .. k1 - 1`` of
+the run's :class:`~multiarm_pin.sim.result.Recorder`); a monitor returns the first sample
+that violates what it watches, or None, and the run then ends there
+(:class:`~multiarm_pin.exceptions.RunStoppedError`, the samples up to and including that one kept).
+The samples a monitor sees are those :func:`~multiarm_pin.feasibility.feasibility_report`
+checks after a run, with the same rules, so a stop falls on the report's first violation.
+
+- :class:`LimitMonitor`: the URDF's effort, velocity or position limits (any of them).
+- :class:`CollisionMonitor`: collisions (:class:`~.scan.RunScan`, fed stretch by stretch).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multiarm_pin.feasibility.limits import exceeded, system_limits
+from multiarm_pin.feasibility.scan import RunScan
+
+
+def _finite_rows(*arrays) -> int:
+    """How many leading rows of every array are finite."""
+    ok = np.ones(len(arrays[0]), dtype=bool)
+    for a in arrays:
+        ok &= np.isfinite(a.reshape(len(a), -1)).all(axis=1)
+    return len(ok) if ok.all() else int(np.argmin(ok))
+
+
+class LimitMonitor:
+    """Stops a run at the first sample beyond a joint limit of the given kinds.
+
+    Args:
+        system: the simulated :class:`~multiarm_pin.system.MultiArmSystem`.
+        kinds: any of ``"torque"`` (the applied torque ``|τ|`` against the effort),
+            ``"velocity"``, ``"position"``.
+    """
+
+    def __init__(self, system, kinds):
+        self.kinds = tuple(kinds)
+        self.limits = system_limits(system)
+        self.name = "limits." + "/".join(self.kinds)
+
+    def check(self, record, k0: int, k1: int) -> int | None:
+        """The first sample in ``[k0, k1)`` beyond a limit, or None."""
+        over = exceeded(self.limits, record.q[k0:k1], record.v[k0:k1], record.tau[k0:k1])
+        rows = np.zeros(k1 - k0, dtype=bool)
+        for kind in self.kinds:
+            rows |= over[kind].any(axis=1)
+        hit = np.flatnonzero(rows)
+        return k0 + int(hit[0]) if len(hit) else None
+
+
+class CollisionMonitor:
+    """Stops a run at the first sample where two bodies collide.
+
+    Args:
+        scene: the run's :class:`~multiarm_pin.feasibility.CollisionScene`.
+
+    Samples from the first non-finite one on are not checked (a failing run's last ones).
+    """
+
+    name = "limits.collision"
+
+    def __init__(self, scene):
+        self.scene = scene
+        self.scan: RunScan | None = None
+        self._stopped = False
+
+    def check(self, record, k0: int, k1: int) -> int | None:
+        """The first sample in ``[k0, k1)`` where two bodies collide, or None."""
+        if self._stopped:
+            return None
+        if self.scan is None:
+            self.scan = RunScan(self.scene, len(record.t))
+        q, p, quat = record.q[k0:k1], record.p[k0:k1], record.quat[k0:k1]
+        n = _finite_rows(q, p, quat)
+        if n < k1 - k0:
+            self._stopped = True
+        system = self.scene.system
+        N = system.constraint_set.N
+        cps = [record.points[k0:k0 + n, i, :int(N[i])] for i in range(system.n_arms)]
+        return self.scan.extend(q[:n], p[:n], quat[:n], cps)
+
+
+def stop_monitors(system, kinds, scene=None) -> tuple:
+    """The monitors of the ``stop`` policies ``kinds`` (of :data:`~.report.LIMIT_KINDS`).
+
+    Args:
+        system: the :class:`~multiarm_pin.system.MultiArmSystem`.
+        kinds: the kinds whose policy is ``stop``.
+        scene: its :class:`~multiarm_pin.feasibility.CollisionScene` (needed for
+            ``"collision"`` with arms; built otherwise).
+    """
+    monitors = []
+    joint_kinds = [k for k in kinds if k in ("torque", "velocity", "position")]
+    if joint_kinds and system.n_arms:
+        monitors.append(LimitMonitor(system, joint_kinds))
+    if "collision" in kinds and system.n_arms:
+        if scene is None:
+            from multiarm_pin.feasibility.collisions import CollisionScene
+
+            scene = CollisionScene(system)
+        monitors.append(CollisionMonitor(scene))
+    return tuple(monitors)
+
+
+__all__ = ["CollisionMonitor", "LimitMonitor", "stop_monitors"]

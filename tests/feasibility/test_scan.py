@@ -1,0 +1,106 @@
+"""Collisions along a run (feasibility/scan.py): hand-placed cases, and stretch by stretch."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from multiarm_pin.app.run_feasibility import check_initial_state
+from multiarm_pin.app.runner import make_controller, simulate_built
+from multiarm_pin.app.scenario import build_scenario
+from multiarm_pin.app.scenario.schema import parse_scenario
+from multiarm_pin.feasibility import feasibility_report
+from multiarm_pin.feasibility.collisions import PENETRATION_TOLERANCE
+from multiarm_pin.feasibility.scan import RunScan
+from tests.feasibility.collision_cases import ALONG_A_RUN, ALONG_A_RUN_LINK
+
+
+def _run(case):
+    data, file = case()
+    built = build_scenario(parse_scenario(data, file), load_visuals=False)
+    scene = check_initial_state(built)  # collision-free at the start (else ScenarioError)
+    sim = built.scenario.simulation
+    result = simulate_built(built, make_controller(built), sim.duration, sim.dt, sim.solver)
+    return built, scene, result
+
+
+def _first_mesh_collision(scene, result, k) -> int | None:
+    """The first sample where pair k's meshes interpenetrate, by coal at every sample."""
+    for s in range(len(result.t)):
+        qs = scene.configuration(result.q[s], result.object_position[s],
+                                 result.object_quaternion[s])
+        if scene.mesh_penetration(qs, k) is not None:
+            return s
+    return None
+
+
+@pytest.mark.parametrize("name", list(ALONG_A_RUN))
+def test_collisions_along_a_run_name_the_pair_and_the_time(name):
+    case, other, arms = ALONG_A_RUN[name]
+    built, scene, result = _run(case)
+    report = feasibility_report(built.system, result, ground=built.scenario.ground,
+                                scene=scene)
+    hits = [v for v in report.violations if v.kind == "collision" and v.other == other
+            and v.arm in arms]
+    assert hits, [v.describe() for v in report.violations]
+    link = ALONG_A_RUN_LINK[name]
+    if link is not None:
+        assert link in {v.link for v in hits}, [v.describe() for v in hits]
+    for v in hits:
+        assert v.t_first > 0.0 and v.value < -PENETRATION_TOLERANCE  # along the run
+        # the time: the first sample where coal finds the meshes of one of the link's
+        # geometries interpenetrating the other body, sample by sample
+        ks = [k for k in range(len(scene.pairs))
+              if scene.pair_names(k) == (v.arm, v.link, v.other)]
+        firsts = [s for s in (_first_mesh_collision(scene, result, k) for k in ks)
+                  if s is not None]
+        assert firsts and result.t[min(firsts)] == v.t_first, (v.describe(), firsts)
+
+
+def test_a_run_scanned_in_stretches_equals_one_scan():
+    built, scene, result = _run(ALONG_A_RUN["wrists_to_the_floor"][0])
+    N = built.system.constraint_set.N
+    cps = [result.contact_points[:, i, :int(N[i])] for i in range(built.system.n_arms)]
+    whole = scene.scan(result.q, result.object_position, result.object_quaternion, cps)
+    run = RunScan(scene, len(result.t))
+    firsts = []
+    edges = [0, 1, 17, 100, 101, 240, len(result.t)]
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        s = run.extend(result.q[a:b], result.object_position[a:b],
+                       result.object_quaternion[a:b], [c[a:b] for c in cps])
+        if s is not None:
+            firsts.append(s)
+    parts = run.result()
+    assert whole.hits and set(parts.hits) == set(whole.hits)
+    for k, hits in whole.hits.items():
+        assert [h[0] for h in parts.hits[k]] == [h[0] for h in hits]
+        np.testing.assert_allclose([h[1] for h in parts.hits[k]], [h[1] for h in hits],
+                                   rtol=0, atol=1e-12)
+    assert firsts[0] == min(h[0][0] for h in whole.hits.values())
+    for name, value in whole.clearance.items():
+        assert parts.clearance[name] == pytest.approx(value, abs=2e-10) if value is not None \
+            else parts.clearance[name] is None
+
+
+def test_clearances_equal_every_pair_at_every_sample_of_the_demo():
+    # the demo carrying its box: pairs at nearly constant distance (a wrist and the tool's
+    # box turning about each other), pairs bounded along the measured closest axis
+    from multiarm_pin.feasibility.collisions import CATEGORIES
+    from tests.feasibility.collision_cases import DEMO
+
+    data, _ = ALONG_A_RUN["wrists_to_the_floor"][0]()
+    data["controller"]["waypoints"] = [{"t": 0.5, "position": [0.45, 0.1, 0.5],
+                                        "rpy": [0.0, 0.0, 0.3]}]
+    data["simulation"]["duration"] = 0.5
+    built, scene, result = _run(lambda: (data, str(DEMO)))
+    scan = scene.scan(result.q, result.object_position, result.object_quaternion, None)
+    brute = np.array([scene.hull_distances(scene.configuration(
+        result.q[s], result.object_position[s], result.object_quaternion[s]))
+        for s in range(len(result.t))])
+    for ci, name in enumerate(CATEGORIES):
+        cols = (scene.category == ci) & ~scene.grasp_pair
+        if not cols.any():
+            assert scan.clearance[name] is None
+            continue
+        assert scan.clearance[name] == pytest.approx(brute[:, cols].min(), abs=2e-10), name
+    assert scan.measured < brute.size / 4
