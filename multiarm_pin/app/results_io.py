@@ -296,6 +296,26 @@ class RunLock:
         self.fd = None
 
 
+def folder_lock(target: Path, ident: str | os.PathLike, option: str = "--out") -> RunLock:
+    """The :class:`RunLock` that guards a results folder (not yet taken).
+
+    Its file is ``TARGET/.multiarm-pin.lock`` for a mount point (written in place), else
+    ``.NAME.lock`` beside the folder, so that it exists before the folder does and outlives a
+    rename of the folder. Every writer of results folders (a run, a sweep) takes this one lock,
+    so two of them never write one folder at once.
+
+    Args:
+        target: the results folder.
+        ident: what is written into the folder (a scenario or study file), named to a refused
+            run.
+        option: the option name for messages.
+    """
+    target = Path(target)
+    lock_file = (target / LOCK_NAME if publishes_in_place(target)
+                 else target.parent / f".{target.name}.lock")
+    return RunLock(lock_file, target, ident, option)
+
+
 class ResultsWriter:
     """Writes a results folder: lock, checks, staging, atomic publication (a context manager).
 
@@ -349,9 +369,7 @@ class ResultsWriter:
                 parent.is_dir() and os.access(parent, os.W_OK | os.X_OK)):
             # no lock file can go there: raises its message (or creates the parent)
             prepare_output(self.target, self.scenario_file, self.overwrite, self.option)
-        lock_file = (self.target / LOCK_NAME if self.in_place
-                     else self.target.parent / f".{self.target.name}.lock")
-        self.lock = RunLock(lock_file, self.target, self.scenario_file, self.option)
+        self.lock = folder_lock(self.target, self.scenario_file, self.option)
         self.lock.acquire()
         try:
             # under the lock: no other run can write the folder between this check and ours
@@ -508,6 +526,7 @@ __all__ = [
     "STAGING_PREFIX",
     "ResultsWriter",
     "RunLock",
+    "folder_lock",
     "deferred_signals",
     "is_mount_point",
     "mount_points",

@@ -21,7 +21,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from multiarm_pin.app.progress import LineProgress
-from multiarm_pin.app.results_io import deferred_signals
+from multiarm_pin.app.results_io import deferred_signals, folder_lock
 from multiarm_pin.exceptions import StudyError
 from multiarm_pin.study.case import CaseTask, run_case
 from multiarm_pin.study.spec import Case, StudySpec, load_study
@@ -218,8 +218,13 @@ class Study:
         Raises:
             StudyError: unreachable scheduler (nothing written), bad ``workers``, an output
                 folder holding another study.
+            OutputError: another run or study is writing into ``out`` (nothing written).
             KeyboardInterrupt: after writing every finished row and the table.
         """
+        with self._locked(out):
+            return self._run(client, out, workers, scheduler, resume, progress, on_case)
+
+    def _run(self, client, out, workers, scheduler, resume, progress, on_case):
         if out is not None:  # a folder that cannot take the study: before any cluster
             ResultsFolder(out).check(self.spec, resume)
         if client is None and out is not None and self._nothing_to_run(out):
@@ -253,7 +258,32 @@ class Study:
         Same arguments and result as :meth:`run` (the reference the Dask run is checked
         against, and the benchmark's plain loop).
         """
-        return self._drive(_LoopRunner(), out, resume, progress, on_case)
+        with self._locked(out):
+            return self._drive(_LoopRunner(), out, resume, progress, on_case)
+
+    @contextlib.contextmanager
+    def _locked(self, out):
+        """Hold the results folder's lock (the one runs take) while the study writes it.
+
+        Raises:
+            OutputError: another run or study is writing into ``out`` (names its pid and file).
+        """
+        if out is None:
+            yield
+            return
+        out = Path(out)
+        if not out.parent.is_dir():
+            try:
+                out.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise StudyError(str(out), "--out", f"cannot create the folder {out.parent}: "
+                                 f"{exc.strerror or exc}") from exc
+        lock = folder_lock(out, self.spec.file)
+        lock.acquire()
+        try:
+            yield
+        finally:
+            lock.release()
 
     def _drive(self, runner, out, resume: bool, progress: bool, on_case):
         folder = ResultsFolder(out) if out is not None else None

@@ -44,3 +44,25 @@ def test_out_folder_that_is_not_a_study_is_refused(tmp_path):
         ResultsFolder(busy).prepare(spec, spec.cases(), resume=False)
     with pytest.raises(StudyError, match="cannot read the results table"):
         read_table(tmp_path / "nothing")
+
+
+def test_a_study_refuses_a_folder_another_run_or_study_is_writing(tmp_path):
+    # the same lock as `multiarm-pin run`: held here as another process would hold it
+    from multiarm_pin.app.results_io import folder_lock
+    from multiarm_pin.exceptions import OutputError
+    from multiarm_pin.study import Study
+
+    study = Study(tiny_grasp_study(tmp_path, samples=2))
+    out = tmp_path / "out"
+    other = folder_lock(out, tmp_path / "other_study.yaml")
+    other.acquire()
+    try:
+        with pytest.raises(OutputError, match=r"another run is writing into this folder "
+                                              r"\(pid \d+, scenario .*other_study\.yaml"):
+            study.run_loop(out=out)
+        assert not out.exists()  # nothing written
+    finally:
+        other.release()
+    table = study.run_loop(out=out)  # free again: runs, and releases its lock
+    assert table.num_rows == len(study.cases)
+    assert not (tmp_path / ".out.lock").exists()
