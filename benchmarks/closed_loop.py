@@ -329,11 +329,13 @@ def targets(weld: Sequence[Row], scen: Sequence[Row], cold: dict | None,
         line(r.rtf >= 10.0, f"{r.case}: at least 10x faster than real time (RTF {r.rtf:.2f})"
              + (f"; {r.note}" if r.note else ""))
     for r in feasibility:
-        line(r["ratio"] <= FEASIBILITY_TARGET,
-             f"{r['scenario']}: the feasibility checks after the run add at most "
-             f"{100 * FEASIBILITY_TARGET:.0f} % to simulate's wall time "
-             f"({100 * r['ratio']:.0f} %; the run with every stop monitor and its report "
-             f"{100 * r['monitored_ratio']:+.0f} %; the scene {r['scene'] * 1e3:.0f} ms more)")
+        line(r["run_ratio"] <= FEASIBILITY_TARGET,
+             f"{r['scenario']}: the feasibility checks add at most "
+             f"{100 * FEASIBILITY_TARGET:.0f} % to the run's wall time "
+             f"({100 * r['run_ratio']:+.0f} % with the scan beside the simulation and the "
+             f"report; made after the run instead {100 * r['ratio']:.0f} %; with every stop "
+             f"monitor {100 * r['monitored_ratio']:+.0f} %; the scene {r['scene'] * 1e3:.0f} "
+             "ms more)")
     if cold is not None:
         line(cold["compile"] < 10.0, f"cold-start compile of the demo under 10 s, as installed "
              f"({cold['compile']:.1f} s; with the JIT alone {cold['jit']['compile']:.1f} s)")
@@ -387,13 +389,15 @@ def write_report(path: Path, weld: Sequence[Row], scen: Sequence[Row], cold: dic
                      f"{_x(r.t_closed_run_s / r.t_open_s)} | {r.sim_time_s:g} | "
                      f"{r.wall_s:.2f} | {_x(r.rtf)} | {r.note} |")
     lines += ["", "## Feasibility checks (issue 23)", "",
-              "Interleaved rounds per scenario: `simulate_built`; the run's "
-              "`feasibility_report` (limits and collisions at every recorded sample, the "
-              "`CollisionScene` built beforehand, as the runner does); `simulate_built` with "
-              "the monitors of `limits: {torque, velocity, position, collision: stop}` and its "
-              "report (which reuses the collision monitor's scan). Ratios are medians of the "
-              "per-round ratios to the first run; `scene` is the scene's construction "
-              "(once per run, the arms' hulls cached per process).", ""]
+              "Interleaved rounds per scenario: `simulate_built` alone; the run's "
+              "`feasibility_report` after it (limits and collisions at every recorded sample, "
+              "the `CollisionScene` built beforehand, as the runner does); `simulate_built` as "
+              "`multiarm-pin run` calls it, the collision scan checking each stretch on a "
+              "worker thread while the loop simulates the next, then the report reusing the "
+              "scan (the target's row); the same with the monitors of `limits: {torque, "
+              "velocity, position, collision: stop}`. Ratios are medians of the per-round "
+              "ratios to the first run; `scene` is the scene's construction (once per run, "
+              "the arms' hulls cached per process).", ""]
     lines += list(feasibility_table(list(feasibility))) if feasibility else [
         "Not measured in this run."]
     lines += ["", "## Cold start", ""]

@@ -1,13 +1,17 @@
 """What the feasibility checks at every recorded sample add to a run (issue 23: at most 20 %).
 
-For each scenario (default: the demo), interleaved rounds of (``simulate_built``, the run's
-``feasibility_report`` on the same result, limits and collisions, its ``CollisionScene``
-built once beforehand as the runner builds it before simulating; then ``simulate_built``
-with the monitors of ``limits: {torque, velocity, position, collision: stop}``, which check
-each stretch while the run runs, and its report, which reuses the collision monitor's scan):
-the medians of the per-round ratios, so that the machine's
+For each scenario (default: the demo), interleaved rounds of: ``simulate_built`` alone (no
+checks); the run's ``feasibility_report`` on the same result, limits and collisions, made
+after the run (its ``CollisionScene`` built once beforehand as the runner builds it before
+simulating); ``simulate_built`` as ``multiarm-pin run`` calls it, with the collision scan as
+a monitor that checks each stretch while the run runs (on a worker thread beside the
+compiled loop), then its report reusing that scan: its extra time over the bare run is what
+the target is judged on; and the same with the monitors of ``limits: {torque, velocity,
+position, collision: stop}``. The medians of the per-round ratios, so that the machine's
 load changes hit the parts of a round alike. Also the scene's construction (once per run).
-Prints a Markdown table; the target column says met / NOT met.
+Prints a Markdown table; the target column says met / NOT met. The checks beside the
+simulation need a free core: on a machine whose cores are all busy they cost what the
+checks after the run cost.
 
     .venv/bin/python benchmarks/feasibility_overhead.py [--scenarios two_ur5_box ...]
         [--repeat 7] [--duration S]
@@ -56,7 +60,16 @@ def measure(name: str, repeat: int, duration: float | None = None) -> dict:
     stops = dataclasses.replace(built, scenario=dataclasses.replace(
         built.scenario, limits=LimitsSpec("stop", "stop", "stop", "stop")))
     simulate_built(built, make_controller(built), T, sim.dt, sim.solver)  # kernels loaded
-    sims, checks, monitored = [], [], []
+    sims, checks, runs, monitored = [], [], [], []
+
+    def watched_run(spec):
+        monitors = run_monitors(spec, scene)
+        watched = simulate_built(built, make_controller(built), T, sim.dt, sim.solver,
+                                 monitors=monitors)
+        scans = [m.scan for m in monitors if getattr(m, "scan", None) is not None]
+        feasibility_report(built.system, watched, ground=built.scenario.ground, scene=scene,
+                           scan=scans[0] if scans else None)  # the monitor's scan reused
+
     for _ in range(repeat):
         controller = make_controller(built)
         t0 = time.perf_counter()
@@ -64,32 +77,34 @@ def measure(name: str, repeat: int, duration: float | None = None) -> dict:
         t1 = time.perf_counter()
         feasibility_report(built.system, result, ground=built.scenario.ground, scene=scene)
         t2 = time.perf_counter()
-        monitors = run_monitors(stops, scene)
-        watched = simulate_built(built, make_controller(built), T, sim.dt, sim.solver,
-                                 monitors=monitors)
-        scans = [m.scan for m in monitors if getattr(m, "scan", None) is not None]
-        feasibility_report(built.system, watched, ground=built.scenario.ground, scene=scene,
-                           scan=scans[0] if scans else None)  # the monitor's scan reused
+        watched_run(built)  # what `multiarm-pin run` does: the scan beside the simulation
         t3 = time.perf_counter()
+        watched_run(stops)
+        t4 = time.perf_counter()
         sims.append(t1 - t0)
         checks.append(t2 - t1)
-        monitored.append(t3 - t2)
-    sims, checks, monitored = np.array(sims), np.array(checks), np.array(monitored)
+        runs.append(t3 - t2)
+        monitored.append(t4 - t3)
+    sims, checks = np.array(sims), np.array(checks)
+    runs, monitored = np.array(runs), np.array(monitored)
     return {"scenario": name, "samples": len(result.t), "simulate": float(np.median(sims)),
             "check": float(np.median(checks)), "ratio": float(np.median(checks / sims)),
+            "run": float(np.median(runs)), "run_ratio": float(np.median(runs / sims - 1.0)),
             "monitored": float(np.median(monitored)),
             "monitored_ratio": float(np.median(monitored / sims - 1.0)), "scene": scene_s}
 
 
 def table(rows: list[dict]) -> list[str]:
-    """The Markdown table of :func:`measure`'s rows."""
+    """The Markdown table of :func:`measure`'s rows (the target is judged on the run's)."""
     out = ["| scenario | samples | simulate [s] | checks after [s] | checks / simulate | "
-           "target 20 % | stop monitors + report [s] | its extra time | scene [s] |",
-           "|---|---|---|---|---|---|---|---|---|"]
+           "run with its checks [s] | its extra time | target 20 % | every stop + report [s] | "
+           "its extra time | scene [s] |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        verdict = "met" if r["ratio"] <= TARGET else "NOT met"
+        verdict = "met" if r["run_ratio"] <= TARGET else "NOT met"
         out.append(f"| {r['scenario']} | {r['samples']} | {r['simulate']:.3f} | "
-                   f"{r['check']:.3f} | {100 * r['ratio']:.0f} % | {verdict} | "
+                   f"{r['check']:.3f} | {100 * r['ratio']:.0f} % | {r['run']:.3f} | "
+                   f"{100 * r['run_ratio']:+.0f} % | {verdict} | "
                    f"{r['monitored']:.3f} | {100 * r['monitored_ratio']:+.0f} % | "
                    f"{r['scene']:.3f} |")
     return out

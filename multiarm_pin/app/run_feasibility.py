@@ -39,7 +39,12 @@ def check_initial_state(built):
 
 
 def run_monitors(built, scene) -> tuple:
-    """The monitors of the scenario's ``stop`` policies (empty: none is ``stop``)."""
+    """The monitors of the scenario's ``stop`` policies, and its collision scan.
+
+    The collision scan runs while the run runs whatever the policy (on a worker thread,
+    beside the simulation: :func:`~multiarm_pin.sim.simulation.simulate`'s ``monitors``);
+    the report reuses it.
+    """
     from multiarm_pin.feasibility.monitors import stop_monitors
 
     return stop_monitors(built.system, built.scenario.limits.stops(), scene)

@@ -53,18 +53,22 @@ class LimitMonitor:
 
 
 class CollisionMonitor:
-    """Stops a run at the first sample where two bodies collide.
+    """Scans a run for collisions while it runs; stops it at the first one if ``stop``.
 
     Args:
         scene: the run's :class:`~multiarm_pin.feasibility.CollisionScene`.
+        stop: end the run at the first collision (the ``stop`` policy); False: only scan, so
+            that the run's report reuses the scan (:attr:`scan`) made while the run ran
+            instead of scanning every sample after it.
 
     Samples from the first non-finite one on are not checked (a failing run's last ones).
     """
 
     name = "limits.collision"
 
-    def __init__(self, scene):
+    def __init__(self, scene, stop: bool = True):
         self.scene = scene
+        self.stop = bool(stop)
         self.scan: RunScan | None = None
         self._stopped = False
 
@@ -81,7 +85,8 @@ class CollisionMonitor:
         system = self.scene.system
         N = system.constraint_set.N
         cps = [record.points[k0:k0 + n, i, :int(N[i])] for i in range(system.n_arms)]
-        return self.scan.extend(q[:n], p[:n], quat[:n], cps)
+        hit = self.scan.extend(q[:n], p[:n], quat[:n], cps)
+        return hit if self.stop else None
 
 
 def stop_monitors(system, kinds, scene=None) -> tuple:
@@ -90,8 +95,9 @@ def stop_monitors(system, kinds, scene=None) -> tuple:
     Args:
         system: the :class:`~multiarm_pin.system.MultiArmSystem`.
         kinds: the kinds whose policy is ``stop``.
-        scene: its :class:`~multiarm_pin.feasibility.CollisionScene` (needed for
-            ``"collision"`` with arms; built otherwise).
+        scene: its :class:`~multiarm_pin.feasibility.CollisionScene` (built for
+            ``"collision"`` with arms when None). Given without a ``"collision"`` stop, a
+            monitor that only scans is added (the report reuses its scan).
     """
     monitors = []
     joint_kinds = [k for k in kinds if k in ("torque", "velocity", "position")]
@@ -103,6 +109,8 @@ def stop_monitors(system, kinds, scene=None) -> tuple:
 
             scene = CollisionScene(system)
         monitors.append(CollisionMonitor(scene))
+    elif scene is not None and system.n_arms:  # scanned while the run runs, for its report
+        monitors.append(CollisionMonitor(scene, stop=False))
     return tuple(monitors)
 
 

@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -251,10 +252,16 @@ def simulate(
     watch = _Watch(monitors)
     try:
         _integrate(stepper, rec, state, times, integrator, rtol, atol, report, watch)
+        watch.finish()
     except BaseException as exc:  # keep what was simulated, for the caller to save
+        stop = watch.settle()  # a violation found before the failure ends the run there
+        if stop is not None and not isinstance(exc, RunStoppedError):
+            exc = stop
         n = exc.sample + 1 if isinstance(exc, RunStoppedError) else rec.count
         exc.partial_result = rec.result(integrator, dt, baumgarte,
                                          time.perf_counter() - t_start, stepper, n)
+        if exc is stop:
+            raise stop from None
         raise
     report(1.0)
     return rec.result(integrator, dt, baumgarte, time.perf_counter() - t_start, stepper)
@@ -370,33 +377,83 @@ class _Watch:
     :data:`MONITOR_STRETCH` samples, is one call) and at the end of the run. The last sample
     recorded is held back until the next call: a step the compiled loop handed back is taken
     again from it, which records it again.
+
+    The checks of a stretch run on a worker thread while the loop simulates the next one (the
+    compiled loops release the GIL), so on a machine with a free core they add little to a
+    run's wall time. They stay in order (a stretch's checks start once the previous stretch's
+    have ended) and read only samples that are settled (the loops write later ones). A
+    violation is raised at the next call (or at :meth:`finish`): the samples simulated since
+    are dropped, so the run ends exactly as if the checks had been made in line.
     """
 
     def __init__(self, monitors: Sequence[Monitor]):
         self.monitors = tuple(monitors)
         self.checked = 0  # samples shown to the monitors
+        self._pool: ThreadPoolExecutor | None = None
+        self._pending: Future | None = None
 
     def recorded(self, rec: Recorder, count: int) -> None:
         """Samples ``0 .. count - 1`` are recorded; show the monitors the settled ones.
 
         Raises:
-            RunStoppedError: a monitor found a violation.
+            RunStoppedError: a monitor found a violation (in this or an earlier stretch).
         """
         if not self.monitors:
             return
-        end = count if count == len(rec.t) else count - 1
-        if end - self.checked < (1 if count == len(rec.t) else MONITOR_STRIDE):
+        last = count == len(rec.t)
+        end = count if last else count - 1
+        if end - self.checked < (1 if last else MONITOR_STRIDE):
             return
         k0, self.checked = self.checked, end
+        self._raise(self._collect())
+        if last:
+            self._raise(self._check(rec, k0, end))
+            return
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(1, thread_name_prefix="multiarm-pin-monitors")
+        self._pending = self._pool.submit(self._check, rec, k0, end)
+
+    def finish(self) -> None:
+        """The run's end: wait for the last checks (raises their violation) and stop the thread."""
+        try:
+            self._raise(self._collect())
+        finally:
+            self._close()
+
+    def settle(self) -> RunStoppedError | None:
+        """After a failure: wait for the checks under way; the violation they found, if any."""
+        try:
+            return self._collect()
+        except BaseException:  # the run's own failure is what the caller raises
+            return None
+        finally:
+            self._close()
+
+    def _collect(self) -> RunStoppedError | None:
+        pending, self._pending = self._pending, None
+        return pending.result() if pending is not None else None
+
+    def _close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
+
+    def _check(self, rec: Recorder, k0: int, k1: int) -> RunStoppedError | None:
         first, by = None, None
         for m in self.monitors:
-            s = m.check(rec, k0, end)
+            s = m.check(rec, k0, k1)
             if s is not None and (first is None or s < first):
                 first, by = int(s), m.name
-        if first is not None:
-            t = float(rec.t[first])
-            raise RunStoppedError(f"t = {t:.6g} s: {by}: stop at the first violation (sample "
-                             f"{first})", by, first, t)
+        if first is None:
+            return None
+        t = float(rec.t[first])
+        return RunStoppedError(f"t = {t:.6g} s: {by}: stop at the first violation (sample "
+                               f"{first})", by, first, t)
+
+    @staticmethod
+    def _raise(stop: RunStoppedError | None) -> None:
+        if stop is not None:
+            raise stop
 
 
 def _torque_limit(system: MultiArmSystem, torque_limit) -> np.ndarray | None:
