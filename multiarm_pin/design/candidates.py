@@ -1,0 +1,324 @@
+"""Candidate designs: where each arm's base goes, where it holds the object, which IK branch.
+
+A :class:`Candidate` gives, per arm, an :class:`ArmChoice`: the base (position and yaw), the
+grasp and the IK seed (the branch). The grasp of a weld is a face, a point on it and the
+tool's roll about the face normal (the tool's z axis points into the face); the grasp of a
+fingertip gripper is the face each tip touches and the point each tip should touch (the
+gripper is rigid: inverse kinematics puts every tip on its face, as near its point as the
+gripper allows).
+
+:func:`sample_candidate` draws a candidate at random (its own generator seeded from the spec's
+seed and the candidate's index, so that a candidate does not depend on which worker or in which
+order it is drawn); :func:`perturb` draws a neighbour of an evaluated candidate for local
+refinement, on the same IK branch (seeded with the configuration found).
+
+Faces: a weld never goes on a face that rests on a support, nor on a face whose outward
+normal points down (below :data:`DOWNWARD_NORMAL_Z`): an arm standing on the floor cannot
+reach under the object. A fingertip may touch a supported face only outside the support's
+rectangle (its ``extent``, else the rectangle of its support points, as the collision
+scene's slab), so under an overhang.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+import pinocchio as pin
+
+DOWNWARD_NORMAL_Z = -0.7
+"""A face whose outward normal's world z is below this is not offered to welds."""
+
+MIN_BASE_DISTANCE = 0.1
+"""Smallest horizontal distance [m] between a base and the object's footprint (sampling)."""
+
+BASE_SPACING = 0.3
+"""Smallest distance [m] between two bases (sampling)."""
+
+SAMPLING_TRIES = 200
+"""Random draws of a base position before the nearest-to-reach one is kept."""
+
+
+@dataclass(frozen=True)
+class ArmChoice:
+    """One arm's part of a candidate.
+
+    Attributes:
+        base: (4,) ``[x, y, z, yaw]`` of the base [m, rad].
+        faces: the face index of each contact (a weld: one face).
+        points: (K, 3) the contact points in the object frame [m] (a weld: one point).
+        roll: the weld tool's roll about the face normal [rad] (0 for fingertips).
+        q_seed: (nq,) the IK seed [rad] (the branch).
+    """
+
+    base: np.ndarray
+    faces: tuple[int, ...]
+    points: np.ndarray
+    roll: float
+    q_seed: np.ndarray
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A candidate design.
+
+    Attributes:
+        index: its number in the search (the ranking's tie-break).
+        arms: one :class:`ArmChoice` per arm slot.
+        parent: index of the candidate it refines, or -1.
+    """
+
+    index: int
+    arms: tuple[ArmChoice, ...]
+    parent: int = -1
+
+
+def candidate_rng(seed: int, index: int) -> np.random.Generator:
+    """The candidate's own generator, from the search seed and its index only."""
+    return np.random.default_rng([int(seed), int(index)])
+
+
+def face_edge_margin(poly, face: int, point: np.ndarray) -> float:
+    """Distance [m] from a point on face ``face`` to the face's edges (negative: outside).
+
+    Each other non-parallel face's plane cuts the face along a line; the point's distance to
+    that line within the face's plane is ``-(n_j·p - d_j) / |n_j × n_k|``.
+    """
+    n_k = poly.normals[face]
+    out = np.inf
+    for j in range(poly.n_faces):
+        if j == face:
+            continue
+        s = float(np.linalg.norm(np.cross(poly.normals[j], n_k)))
+        if s < 1e-9:
+            continue
+        out = min(out, -(float(poly.normals[j] @ point) - float(poly.offsets[j])) / s)
+    return float(out)
+
+
+def supported_rectangles(spec, poly) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """Per support, the object face resting on it and its supported rectangle (object frame).
+
+    Returns:
+        ``(face, lo, hi)`` with ``lo, hi`` (2,) the rectangle in the face's
+        :meth:`~multiarm_pin.model.polyhedron.Polyhedron.face_frame` coordinates.
+    """
+    R_o = pin.Quaternion(spec.object.quaternion).toRotationMatrix()
+    p_o = spec.object.position
+    out = []
+    for sp in spec.supports:
+        n_w = np.asarray(sp.normal, float)
+        for f in range(poly.n_faces):
+            nf = R_o @ poly.normals[f]
+            if nf @ n_w > -0.99:
+                continue
+            origin, F = poly.face_frame(f)
+            plane = float(n_w @ (p_o + R_o @ origin) - n_w @ sp.point)
+            if abs(plane) > 1e-3:
+                continue
+            pts = poly.vertices if isinstance(sp.points, str) else np.asarray(sp.points)
+            uv = (pts - origin) @ F[:, :2]
+            lo, hi = uv.min(axis=0), uv.max(axis=0)
+            if sp.extent is not None:  # the table's rectangle around its point, in the face
+                c = R_o.T @ (np.asarray(sp.point, float) - p_o) - origin
+                c2 = c @ F[:, :2]
+                half = 0.5 * float(max(sp.extent))
+                lo, hi = np.minimum(lo, c2 - half), np.maximum(hi, c2 + half)
+            out.append((f, lo, hi))
+    return out
+
+
+def weld_faces(spec, poly) -> list[int]:
+    """The faces a weld may hold (module docstring)."""
+    R_o = pin.Quaternion(spec.object.quaternion).toRotationMatrix()
+    resting = {f for f, _, _ in supported_rectangles(spec, poly)}
+    return [f for f in range(poly.n_faces)
+            if f not in resting and (R_o @ poly.normals[f])[2] >= DOWNWARD_NORMAL_Z]
+
+
+def point_allowed(spec, poly, face: int, point: np.ndarray, margin: float,
+                  rects=None) -> bool:
+    """A contact point lies inside its face by ``margin`` and off every supported rectangle."""
+    if face_edge_margin(poly, face, point) < margin:
+        return False
+    for f, lo, hi in rects if rects is not None else supported_rectangles(spec, poly):
+        if f != face:
+            continue
+        origin, F = poly.face_frame(f)
+        uv = (point - origin) @ F[:, :2]
+        if np.all(uv > lo - margin) and np.all(uv < hi + margin):
+            return False
+    return True
+
+
+def sample_face_point(poly, face: int, margin: float, rng) -> np.ndarray:
+    """A point drawn uniformly on face ``face`` at least ``margin`` inside its edges."""
+    origin, F = poly.face_frame(face)
+    verts = (poly.vertices[list(poly.faces[face])] - origin) @ F[:, :2]
+    lo, hi = verts.min(axis=0), verts.max(axis=0)
+    for _ in range(SAMPLING_TRIES):
+        uv = rng.uniform(lo, hi)
+        p = origin + F[:, :2] @ uv
+        if face_edge_margin(poly, face, p) >= margin:
+            return p
+    return origin.copy()
+
+
+def project_to_face(poly, face: int, point: np.ndarray, margin: float) -> np.ndarray:
+    """The point moved onto the face's plane and back inside its edges by ``margin``."""
+    origin, F = poly.face_frame(face)
+    p = point - (F[:, 2] @ (point - origin)) * F[:, 2]
+    for _ in range(60):
+        if face_edge_margin(poly, face, p) >= margin:
+            return p
+        p = origin + 0.9 * (p - origin)
+    return origin.copy()
+
+
+def sample_base(problem, contact_world: np.ndarray, normal_world: np.ndarray, reach: float,
+                taken: list[np.ndarray], rng) -> np.ndarray:
+    """A base ``[x, y, z, yaw]`` in the region, on the contact's side and within reach.
+
+    Draws positions uniformly in the region until one is on the outer side of the contact's
+    face (horizontally), within ``reach`` of the contact (in 3-D, from the shoulder height
+    ignored), outside the object's footprint and :data:`BASE_SPACING` from the bases already
+    taken; after :data:`SAMPLING_TRIES` draws, the one nearest those conditions.
+    """
+    b = problem.spec.bases
+    best, best_bad = None, np.inf
+    n_h = np.array([normal_world[0], normal_world[1], 0.0])
+    for _ in range(SAMPLING_TRIES):
+        p = rng.uniform(b.lower, b.upper)
+        d = p - contact_world
+        dist = float(np.linalg.norm(d))
+        bad = max(dist - reach, 0.0) + max(0.15 - float(np.linalg.norm(d[:2])), 0.0)
+        if np.linalg.norm(n_h) > 0.3:
+            bad += max(-(n_h @ d), 0.0)
+        if problem.footprint_distance(p) < MIN_BASE_DISTANCE:
+            bad += MIN_BASE_DISTANCE - problem.footprint_distance(p)
+        for t in taken:
+            bad += max(BASE_SPACING - float(np.linalg.norm(t[:2] - p[:2])), 0.0)
+        if bad < best_bad:
+            best, best_bad = p, bad
+        if bad == 0.0:
+            break
+    yaw = float(rng.uniform(*b.yaw)) if b.yaw[1] > b.yaw[0] else float(b.yaw[0])
+    return np.array([*best, yaw])
+
+
+def random_seed_configuration(problem, slot: int, rng) -> np.ndarray:
+    """An IK seed drawn uniformly within the joint limits (each at most ±π)."""
+    lo, hi = problem.seed_bounds[slot]
+    return rng.uniform(lo, hi)
+
+
+def sample_candidate(problem, index: int) -> Candidate:
+    """A random candidate (its generator: :func:`candidate_rng` of the spec's seed, ``index``).
+
+    Welds take distinct faces while there are enough (a random order of the weld faces);
+    fingertip grippers take the faces around a random corner of a box (see
+    :func:`fingertip_faces`).
+    """
+    spec = problem.spec
+    rng = candidate_rng(spec.search.seed, index)
+    poly = problem.poly
+    margin = spec.search.face_margin
+    order = list(rng.permutation(problem.weld_faces)) if problem.weld_faces else []
+    corners_used: list[np.ndarray] = []
+    arms, bases = [], []
+    for i, slot in enumerate(spec.arms):
+        if slot.gripper == "weld":
+            if not order:
+                order = list(rng.permutation(problem.weld_faces))
+            f = int(order.pop(0))
+            faces = (f,)
+            points = sample_face_point(poly, f, margin, rng)[None]
+            roll = float(rng.uniform(-np.pi, np.pi))
+        else:
+            faces, points = fingertip_faces(problem, slot, corners_used, rng)
+            roll = 0.0
+        c_w = problem.object_placement.act(points.mean(axis=0))
+        n_w = problem.object_placement.rotation @ poly.normals[faces[0]]
+        if spec.bases.fixed is not None:
+            M = spec.bases.fixed[i]
+            base = np.array([*M.translation, float(pin.rpy.matrixToRpy(M.rotation)[2])])
+        else:
+            base = sample_base(problem, c_w, n_w, problem.reach[i], bases, rng)
+        bases.append(base)
+        arms.append(ArmChoice(base, faces, points, roll,
+                              random_seed_configuration(problem, i, rng)))
+    return Candidate(index, tuple(arms))
+
+
+def fingertip_faces(problem, slot, corners_used: list, rng) -> tuple[tuple[int, ...],
+                                                                      np.ndarray]:
+    """Faces and preferred points of a fingertip gripper's tips around a corner of a box.
+
+    A corner (the signs of its x, y, z, not one another gripper took) and an order of its
+    three faces are drawn; tip k touches the k-th of them (tips beyond the third touch the
+    third face again, further from the corner, as the shipped four-finger gripper's fourth
+    tip). Each preferred point lies on its face at a random distance from the corner's
+    edges (between the face margin and a third of the face).
+    """
+    poly = problem.poly
+    half = np.max(np.abs(poly.vertices), axis=0)
+    for _ in range(50):
+        signs = rng.choice([-1.0, 1.0], size=3)
+        if not any(np.array_equal(signs, c) for c in corners_used):
+            break
+    corners_used.append(signs)
+    axes = list(rng.permutation(3))
+    margin = problem.spec.search.face_margin + slot.tip_radius
+    faces, points = [], []
+    for k in range(len(slot.tips)):
+        a = int(axes[min(k, 2)])
+        f = next(j for j in range(poly.n_faces)
+                 if abs(poly.normals[j][a] - signs[a]) < 1e-9)
+        p = signs * half
+        depth = rng.uniform(margin, np.maximum(margin, half * 2 / 3))
+        p = p - signs * depth
+        p[a] = signs[a] * half[a]
+        if k >= 3:  # a further tip on the same face: further from the corner
+            b = int(axes[0])
+            p[b] -= signs[b] * min(0.15, half[b])
+        faces.append(f)
+        points.append(project_to_face(poly, f, p, margin))
+    return tuple(faces), np.array(points)
+
+
+def perturb(problem, parent: Candidate, q0s: list[np.ndarray], index: int,
+            scale: float) -> Candidate:
+    """A neighbour of an evaluated candidate, on the same IK branches.
+
+    Bases move by a normal step of ``0.1 scale`` m (clipped to the region) and yaw by
+    ``0.3 scale`` rad; weld points move by ``0.05 scale`` m on their face (kept inside by the
+    margin) and rolls by ``0.3 scale`` rad; fingertip points by ``0.03 scale`` m. The IK seed
+    is the configuration found for the parent.
+    """
+    spec = problem.spec
+    rng = candidate_rng(spec.search.seed, index)
+    b = spec.bases
+    margin = spec.search.face_margin
+    arms = []
+    for i, a in enumerate(parent.arms):
+        base = a.base.copy()
+        if b.fixed is None:
+            base[:3] = np.clip(base[:3] + rng.normal(0.0, 0.1 * scale, 3), b.lower, b.upper)
+            if b.yaw[1] > b.yaw[0]:
+                yaw = base[3] + rng.normal(0.0, 0.3 * scale)
+                base[3] = float(np.clip(yaw, *b.yaw)) if b.yaw != (-np.pi, np.pi) else \
+                    float(np.angle(np.exp(1j * yaw)))
+        slot = spec.arms[i]
+        step = 0.05 if slot.gripper == "weld" else 0.03
+        m = margin + slot.tip_radius
+        points = np.array([project_to_face(problem.poly, f, p + rng.normal(0.0, step * scale, 3),
+                                           m) for f, p in zip(a.faces, a.points, strict=True)])
+        roll = a.roll + (rng.normal(0.0, 0.3 * scale) if slot.gripper == "weld" else 0.0)
+        arms.append(replace(a, base=base, points=points, roll=float(roll),
+                            q_seed=np.asarray(q0s[i], float).copy()))
+    return Candidate(index, tuple(arms), parent.index)
+
+
+__all__ = ["ArmChoice", "Candidate", "candidate_rng", "face_edge_margin", "fingertip_faces",
+           "perturb", "point_allowed", "project_to_face", "sample_base", "sample_candidate",
+           "sample_face_point", "supported_rectangles", "weld_faces"]
