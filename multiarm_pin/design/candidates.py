@@ -35,6 +35,11 @@ MIN_BASE_DISTANCE = 0.1
 BASE_SPACING = 0.3
 """Smallest distance [m] between two bases (sampling)."""
 
+REACH_FRACTION = 0.7
+"""Bases are drawn within this fraction of the arm's reach bound
+(:func:`~multiarm_pin.app.precheck.arm_reach`, the sum of its links' lengths, which no pose
+with the tool turned to a face attains) from the contact."""
+
 SAMPLING_TRIES = 200
 """Random draws of a base position before the nearest-to-reach one is kept."""
 
@@ -73,9 +78,9 @@ class Candidate:
     parent: int = -1
 
 
-def candidate_rng(seed: int, index: int) -> np.random.Generator:
-    """The candidate's own generator, from the search seed and its index only."""
-    return np.random.default_rng([int(seed), int(index)])
+def candidate_rng(seed: int, index: int, stream: int = 0) -> np.random.Generator:
+    """The candidate's own generator, from the search seed, its index and a stream only."""
+    return np.random.default_rng([int(seed), int(index), int(stream)])
 
 
 def face_edge_margin(poly, face: int, point: np.ndarray) -> float:
@@ -180,9 +185,9 @@ def sample_base(problem, contact_world: np.ndarray, normal_world: np.ndarray, re
     """A base ``[x, y, z, yaw]`` in the region, on the contact's side and within reach.
 
     Draws positions uniformly in the region until one is on the outer side of the contact's
-    face (horizontally), within ``reach`` of the contact (in 3-D, from the shoulder height
-    ignored), outside the object's footprint and :data:`BASE_SPACING` from the bases already
-    taken; after :data:`SAMPLING_TRIES` draws, the one nearest those conditions.
+    face (horizontally), within :data:`REACH_FRACTION` of ``reach`` from the contact (3-D),
+    outside the object's footprint and :data:`BASE_SPACING` from the bases already taken; after
+    :data:`SAMPLING_TRIES` draws, the one nearest those conditions.
     """
     b = problem.spec.bases
     best, best_bad = None, np.inf
@@ -191,7 +196,8 @@ def sample_base(problem, contact_world: np.ndarray, normal_world: np.ndarray, re
         p = rng.uniform(b.lower, b.upper)
         d = p - contact_world
         dist = float(np.linalg.norm(d))
-        bad = max(dist - reach, 0.0) + max(0.15 - float(np.linalg.norm(d[:2])), 0.0)
+        bad = max(dist - REACH_FRACTION * reach, 0.0) + \
+            max(0.15 - float(np.linalg.norm(d[:2])), 0.0)
         if np.linalg.norm(n_h) > 0.3:
             bad += max(-(n_h @ d), 0.0)
         if problem.footprint_distance(p) < MIN_BASE_DISTANCE:
@@ -206,10 +212,41 @@ def sample_base(problem, contact_world: np.ndarray, normal_world: np.ndarray, re
     return np.array([*best, yaw])
 
 
-def random_seed_configuration(problem, slot: int, rng) -> np.ndarray:
-    """An IK seed drawn uniformly within the joint limits (each at most ±π)."""
+AIMED_SEED_FRACTION = 0.75
+"""Share of IK seeds whose first joint (a vertical base axis) turns the arm toward its grasp."""
+
+
+SEED_TRIES = 30
+"""Draws of an IK seed before one whose joints are all above the ground is kept (else the
+last)."""
+
+SEED_GROUND_CLEARANCE = 0.05
+"""Height [m] above the ground of every joint origin of an IK seed."""
+
+
+def random_seed_configuration(problem, slot: int, base: np.ndarray, target: np.ndarray,
+                              rng) -> np.ndarray:
+    """An IK seed: uniform within the joint limits (each at most ±π), mostly aimed.
+
+    With probability :data:`AIMED_SEED_FRACTION`, when the arm's first joint turns about its
+    base's vertical axis, that joint is set so that the arm's neutral reach direction
+    (:attr:`~.evaluation.DesignProblem.pan_offset`) points at ``target`` (world [m]), give or
+    take a normal 0.2 rad. Seeds are drawn again (up to :data:`SEED_TRIES` times) until every
+    joint origin is :data:`SEED_GROUND_CLEARANCE` above the ground.
+    """
     lo, hi = problem.seed_bounds[slot]
-    return rng.uniform(lo, hi)
+    aim = rng.random() < AIMED_SEED_FRACTION
+    offset = problem.pan_offset[slot]
+    for _ in range(SEED_TRIES):
+        q = rng.uniform(lo, hi)
+        if aim and offset is not None:
+            d = target - base[:3]
+            pan = np.arctan2(d[1], d[0]) - base[3] - offset + rng.normal(0.0, 0.2)
+            pan = float(np.angle(np.exp(1j * pan)))
+            q[0] = float(np.clip(pan, lo[0], hi[0]))
+        if problem.lowest_joint(slot, q) + base[2] > problem.ground + SEED_GROUND_CLEARANCE:
+            break
+    return q
 
 
 def sample_candidate(problem, index: int) -> Candidate:
@@ -246,7 +283,7 @@ def sample_candidate(problem, index: int) -> Candidate:
             base = sample_base(problem, c_w, n_w, problem.reach[i], bases, rng)
         bases.append(base)
         arms.append(ArmChoice(base, faces, points, roll,
-                              random_seed_configuration(problem, i, rng)))
+                              random_seed_configuration(problem, i, base, c_w, rng)))
     return Candidate(index, tuple(arms))
 
 
@@ -319,6 +356,58 @@ def perturb(problem, parent: Candidate, q0s: list[np.ndarray], index: int,
     return Candidate(index, tuple(arms), parent.index)
 
 
-__all__ = ["ArmChoice", "Candidate", "candidate_rng", "face_edge_margin", "fingertip_faces",
-           "perturb", "point_allowed", "project_to_face", "sample_base", "sample_candidate",
-           "sample_face_point", "supported_rectangles", "weld_faces"]
+def arm_pool(problem, evaluations) -> dict:
+    """Per kind of arm, the arm choices of evaluated candidates whose start pose was found.
+
+    A kind is ``(robot, urdf, tool frame, gripper)``; each entry is the arm's
+    :class:`ArmChoice` with its start configuration as IK seed. Arms of a candidate that failed
+    the task on that arm (its ``solved`` entry None) are left out. The entries are in the
+    order of the candidates' indices, then of the arms.
+    """
+    pool: dict = {}
+    for e in sorted(evaluations, key=lambda e: e.index):
+        if not e.solved:
+            continue
+        for slot, a, q in zip(problem.spec.arms, e.candidate.arms, e.solved, strict=True):
+            if q is not None:
+                pool.setdefault(_kind(slot), []).append(replace(a, q_seed=np.asarray(q)))
+    return pool
+
+
+def _kind(slot) -> tuple:
+    return (slot.robot, slot.urdf, slot.tool_frame, slot.gripper)
+
+
+def recombine(problem, pool: dict, index: int) -> Candidate | None:
+    """A candidate whose arms are drawn from :func:`arm_pool` (each arm reached its grasp).
+
+    Welds take distinct faces, fingertip grippers distinct first faces, bases
+    :data:`BASE_SPACING` apart; an arm's choice is drawn again (up to :data:`SAMPLING_TRIES`
+    times) until it fits. None when the pool cannot furnish every arm.
+    """
+    rng = candidate_rng(problem.spec.search.seed, index)
+    arms, faces = [], set()
+    for slot in problem.spec.arms:
+        entries = pool.get(_kind(slot), [])
+        if not entries:
+            return None
+        choice = None
+        for _ in range(SAMPLING_TRIES):
+            c = entries[int(rng.integers(len(entries)))]
+            if c.faces[0] in faces:
+                continue
+            if any(np.linalg.norm(c.base[:2] - a.base[:2]) < BASE_SPACING for a in arms):
+                continue
+            choice = c
+            break
+        if choice is None:
+            return None
+        faces.add(choice.faces[0])
+        arms.append(choice)
+    return Candidate(index, tuple(arms), -1)
+
+
+__all__ = ["ArmChoice", "Candidate", "arm_pool", "candidate_rng", "face_edge_margin",
+           "fingertip_faces", "perturb", "point_allowed", "project_to_face", "recombine",
+           "sample_base", "sample_candidate", "sample_face_point", "supported_rectangles",
+           "weld_faces"]

@@ -32,8 +32,10 @@ import pinocchio as pin
 
 from multiarm_pin.design.candidates import (
     Candidate,
+    candidate_rng,
     face_edge_margin,
     point_allowed,
+    random_seed_configuration,
     supported_rectangles,
     weld_faces,
 )
@@ -47,6 +49,10 @@ MAX_JOINT_STEP = 0.5
 
 IK_ITERATIONS = 100
 """Levenberg-Marquardt iterations per phase of each inverse kinematics solve."""
+
+SEED_RETRIES = 2
+"""IK seeds tried after the candidate's own when an arm's start pose is not found (drawn
+like the candidate's, from the candidate's generator stream of that arm)."""
 
 
 @dataclass
@@ -67,6 +73,8 @@ class Evaluation:
         path_q: (T, nq) the combined configuration at each pose of the task (when ``path``
             was met).
         scenario: the scenario mapping of the design (``q0`` given), when ``reach`` was met.
+        solved: per arm its start configuration, or None where it was not found (or the
+            arm failed the task): what :func:`~.candidates.recombine` may reuse.
     """
 
     index: int
@@ -79,6 +87,7 @@ class Evaluation:
     q0: list | None = None
     path_q: np.ndarray | None = None
     scenario: dict | None = None
+    solved: list | None = None
 
     @property
     def stage(self) -> int:
@@ -89,7 +98,10 @@ class Evaluation:
 class DesignProblem:
     """A spec made ready for evaluation: the object's shape, faces, task poses, arms' data.
 
-    Picklable (a Dask task carries it); the loaded arms are kept per process.
+    Picklable (a Dask task carries it). ``reach`` is each arm's reach bound [m]
+    (:func:`~multiarm_pin.app.precheck.arm_reach`), ``seed_bounds`` its IK seeds' joint
+    ranges, ``pan_offset`` the bearing [rad] of its tool at the neutral configuration in its
+    base frame when its first joint turns about the base's vertical axis (else None).
 
     Args:
         spec: the :class:`~.spec.DesignSpec`.
@@ -116,19 +128,39 @@ class DesignProblem:
         self.path_positions = np.array([s.position for s in samples])
         self.path_quaternions = np.array([s.quaternion for s in samples])
         self.path_placements = [pin.SE3(s.rotation, s.position) for s in samples]
-        self.reach, self.seed_bounds = [], []
+        from multiarm_pin.app.precheck import arm_reach
+
+        self.reach, self.seed_bounds, self.pan_offset = [], [], []
         for slot in spec.arms:
             arm = self.arm(slot.index, np.zeros(4))
-            from multiarm_pin.app.precheck import arm_reach
-
             self.reach.append(arm_reach(arm))
+            # bearing of the tool at the neutral configuration, for a vertical first joint
+            vertical = arm.nq and arm.model.joints[1].shortname() == "JointModelRZ" and \
+                arm.model.parents[1] == 0
+            p = arm.tool_placement(arm.neutral()).translation
+            self.pan_offset.append(float(np.arctan2(p[1], p[0])) if vertical else None)
             lo = np.maximum(arm.model.lowerPositionLimit, -np.pi)
             hi = np.minimum(arm.model.upperPositionLimit, np.pi)
             self.seed_bounds.append((lo, hi))
         self.footprint = self._footprint()
+        ground = spec.scenario_base.get("ground", {"height": 0.0})
+        self.ground = -np.inf if ground is None else float(ground.get("height", 0.0))
+        self._base_arms: dict = {}
 
     def __getstate__(self):
-        return {k: v for k, v in self.__dict__.items() if k != "_arms"}
+        return {k: v for k, v in self.__dict__.items() if k != "_base_arms"}
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self._base_arms = {}
+
+    def lowest_joint(self, slot: int, q: np.ndarray) -> float:
+        """Height [m] of the lowest joint origin of an arm at ``q`` above its base's origin."""
+        arm = self._base_arms.get(slot)
+        if arm is None:
+            arm = self._base_arms[slot] = self.arm(slot, np.zeros(4))
+        pin.forwardKinematics(arm.model, arm.data, q)
+        return float(min(arm.data.oMi[j].translation[2] for j in range(2, arm.model.njoints)))
 
     def _object(self):
         from multiarm_pin.model.rigid_object import RigidObject
@@ -228,6 +260,10 @@ def scenario_data(problem: DesignProblem, cand: Candidate, q0s=None, points=None
 
 
 # ----------------------------------------------------------------------------- checks
+def _without(q0s: list, i: int) -> list:
+    return [None if k == i else q for k, q in enumerate(q0s)]
+
+
 def _fail(cand: Candidate, condition: str, value: float, detail: str, **kw) -> Evaluation:
     return Evaluation(cand.index, cand, False, condition, float(value), detail, **kw)
 
@@ -251,11 +287,20 @@ def _start_ik(problem: DesignProblem, sc, cand: Candidate):
                                      oMo)[0]
         else:
             targets = _contact_targets(sc, spec_arm, problem.poly, oMo)
-        try:
-            ik = solve_ik(arm.model, targets, a.q_seed, max_iter=IK_ITERATIONS, restarts=0,
-                          what=f"arm {slot.name}")
-        except UnreachableError as exc:
-            return None, _fail(cand, "reach", exc.residual, slot.name)
+        ik, residual = None, np.inf
+        rng = candidate_rng(problem.spec.search.seed, cand.index, 1 + slot.index)
+        for t in range(1 + SEED_RETRIES):
+            seed = a.q_seed if t == 0 else random_seed_configuration(
+                problem, slot.index, a.base, oMo.act(a.points.mean(axis=0)), rng)
+            try:
+                ik = solve_ik(arm.model, targets, seed, max_iter=IK_ITERATIONS, restarts=0,
+                              what=f"arm {slot.name}")
+                break
+            except UnreachableError as exc:
+                residual = min(residual, exc.residual)
+        if ik is None:
+            solved = q0s + [None] * (len(cand.arms) - len(q0s))
+            return None, _fail(cand, "reach", residual, slot.name, solved=solved)
         if slot.gripper == "weld":
             pts = a.points
         else:  # where the tips touch: sphere centres moved by the radius into the faces
@@ -268,9 +313,11 @@ def _start_ik(problem: DesignProblem, sc, cand: Candidate):
                 m = face_edge_margin(problem.poly, f, p)
                 if not point_allowed(problem.spec, problem.poly, f, p,
                                      problem.spec.search.face_margin, problem.rects):
+                    solved = q0s + [None] * (len(cand.arms) - len(q0s))
                     return None, _fail(cand, "reach", max(problem.spec.search.face_margin - m,
                                                           1e-12),
-                                       f"{slot.name}:tip[{k}] outside its face's margin")
+                                       f"{slot.name}:tip[{k}] outside its face's margin",
+                                       solved=solved)
         q0s.append(ik.q)
         points.append(pts)
         arms.append(arm)
@@ -362,12 +409,12 @@ def evaluate(problem: DesignProblem, cand: Candidate) -> Evaluation:
             except UnreachableError as exc:
                 return _fail(cand, "path", exc.residual,
                              f"{spec.arms[i].name} at t = {problem.path_times[k]:.3g} s",
-                             q0=q0s, scenario=data)
+                             q0=q0s, scenario=data, solved=_without(q0s, i))
             step = float(np.max(np.abs(ik.q - prev[i])))
             if step > MAX_JOINT_STEP:
                 return _fail(cand, "path", step, f"{spec.arms[i].name} jumps {step:.3g} rad "
                              f"at t = {problem.path_times[k]:.3g} s (another IK branch)",
-                             q0=q0s, scenario=data)
+                             q0=q0s, scenario=data, solved=_without(q0s, i))
             prev[i] = ik.q
             row.append(ik.q)
         Q.append(np.concatenate(row))
@@ -396,7 +443,8 @@ def evaluate(problem: DesignProblem, cand: Candidate) -> Evaluation:
             min_clear = min(min_clear, min(h[1] for h in scan.hits[k]))
         else:
             detail = f"{worst.replace('_', '-')} clearance"
-        return _fail(cand, "collision", min_clear, detail, q0=q0s, scenario=data, path_q=Q)
+        return _fail(cand, "collision", min_clear, detail, q0=q0s, scenario=data, path_q=Q,
+                     solved=list(q0s))
     scores["clearance"] = float(min_clear)
     assert worst in CATEGORIES
     # static torques along the task
@@ -423,7 +471,8 @@ def evaluate(problem: DesignProblem, cand: Candidate) -> Evaluation:
     scores["torque_ratio"] = worst_ratio
     scores["manipulability"] = min(_manipulability(a, q) for a, q in zip(arms, q0s,
                                                                            strict=True))
-    return Evaluation(cand.index, cand, True, None, None, worst_at, scores, q0s, Q, data)
+    return Evaluation(cand.index, cand, True, None, None, worst_at, scores, q0s, Q, data,
+                      list(q0s))
 
 
 __all__ = ["CONDITIONS", "DesignProblem", "Evaluation", "candidate_from_scenario",
@@ -431,7 +480,7 @@ __all__ = ["CONDITIONS", "DesignProblem", "Evaluation", "candidate_from_scenario
            "grasp_of", "scenario_data", "weld_placement"]
 
 
-def candidate_from_scenario(problem: DesignProblem, scenario, index: int = -1) -> Candidate:
+def candidate_from_scenario(problem: DesignProblem, scenario, index: int = 0) -> Candidate:
     """A scenario's own design as a candidate (to score a hand-made design the same way).
 
     Its bases (position and yaw), its welds' faces, points and rolls, its fingertips' faces

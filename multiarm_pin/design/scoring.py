@@ -61,7 +61,7 @@ SCORES: dict[str, Score] = {s.name: s for s in (
           "task (arm-object apart from the grasping links, arm-arm, arm-support, "
           "arm-ground, self)", True, 0.1),
     Score("manipulability", "smallest Yoshikawa manipulability sqrt(det(J Jᵀ)) of the arms "
-          "at the start [m³ rad³]", True, 0.03),
+          "at the start [m³ rad³]", True, 0.1),
 )}
 """The scores, in the report's column order."""
 

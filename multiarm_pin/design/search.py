@@ -1,13 +1,16 @@
 """The design search: random candidates, then local refinement around the best, in parallel.
 
 Round 0 draws ``search.candidates`` random candidates (:func:`~.candidates.sample_candidate`).
-Each of the ``search.refine`` rounds after it draws half as many neighbours
-(:func:`~.candidates.perturb`, steps halved each round, on the parents' IK branches) of the
-:data:`PARENTS` best candidates so far: the best designs by the objective, or, while no
-candidate met every condition, those that got furthest (the latest condition, the best value
-there). Candidates are evaluated (:func:`~.evaluation.evaluate`) in parallel on Dask (a
-``LocalCluster`` of ``workers`` processes or the scheduler at ``scheduler``, as ``multiarm-pin
-sweep``), or in this process when ``workers`` is 1.
+Each of the ``search.refine`` rounds after it draws half as many candidates: half of them
+neighbours (:func:`~.candidates.perturb`, steps halved each round, on the parents' IK branches)
+of the :data:`PARENTS` best candidates so far whose bases differ (:data:`PARENT_DISTANCE`; the
+best designs by the objective, or, while no candidate met every condition, those that got
+furthest: the latest condition, the best value there); the other half recombinations
+(:func:`~.candidates.recombine`) of arms that reached their grasps in any candidate so far
+(with one arm, fresh random candidates). Candidates are evaluated
+(:func:`~.evaluation.evaluate`) in parallel on Dask (a ``LocalCluster`` of ``workers``
+processes or the scheduler at ``scheduler``, as ``multiarm-pin sweep``), or in this process
+when ``workers`` is 1.
 
 Determinism: a candidate depends only on the spec's seed, its index and its parent
 (:func:`~.candidates.candidate_rng`); an evaluation only on its candidate; parents and designs
@@ -26,13 +29,16 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from multiarm_pin.design.candidates import perturb, sample_candidate
+from multiarm_pin.design.candidates import arm_pool, perturb, recombine, sample_candidate
 from multiarm_pin.design.evaluation import CONDITIONS, DesignProblem, Evaluation, evaluate
 from multiarm_pin.design.scoring import SCORES, objective, pareto_front, rank_key
 from multiarm_pin.exceptions import DesignImpossibleError
 
 PARENTS = 4
 """Candidates refined in each refinement round."""
+
+PARENT_DISTANCE = 0.15
+"""The parents of a round differ pairwise by this much [m] in some arm's base position."""
 
 LOWER_IS_BETTER = {"reach": True, "path": True, "collision": False, "torque": True,
                    "closure": False}
@@ -174,13 +180,16 @@ def run_design(spec, workers: int = 1, scheduler: str | None = None, client=None
         for r in range(1, s.refine + 1):
             if progress is not None:
                 progress(_round_line(r - 1, evals))
-            parents = sorted(evals, key=key)[:PARENTS]
-            parents = [p for p in parents if p.q0 is not None] or parents[:1]
+            parents = _diverse(sorted(evals, key=key), PARENTS)
             cands = []
-            for j in range(per_round):
+            for j in range(per_round // 2):
                 p = parents[j % len(parents)]
                 q0 = p.q0 if p.q0 is not None else [a.q_seed for a in p.candidate.arms]
                 cands.append(perturb(problem, p.candidate, q0, nxt + j, 0.5 ** r))
+            pool = arm_pool(problem, evals)
+            for j in range(per_round // 2, per_round):
+                c = recombine(problem, pool, nxt + j) if len(spec.arms) > 1 else None
+                cands.append(c if c is not None else sample_candidate(problem, nxt + j))
             nxt += per_round
             new = runner.map(problem, cands)
             evals += new
@@ -200,6 +209,23 @@ def run_design(spec, workers: int = 1, scheduler: str | None = None, client=None
     return DesignResult(spec, designs[:spec.top], [d for d in designs if d.pareto],
                         len(evals), len(ok), failures, time.perf_counter() - t0,
                         1 if isinstance(runner, _Loop) else max(workers, 1))
+
+
+def _diverse(ranked: list, n: int) -> list:
+    """The first ``n`` evaluations of a ranking whose bases differ by :data:`PARENT_DISTANCE`.
+
+    Two candidates differ when some arm's base is at least that far from its place in the
+    other (positions [m]); the ranking's first is always kept.
+    """
+    out = []
+    for e in ranked:
+        if len(out) == n:
+            break
+        if all(max(float(np.linalg.norm(a.base[:3] - b.base[:3]))
+                   for a, b in zip(e.candidate.arms, o.candidate.arms, strict=True))
+               >= PARENT_DISTANCE for o in out):
+            out.append(e)
+    return out
 
 
 def _all_scores(e: Evaluation) -> dict:
