@@ -167,6 +167,9 @@ def run_design(spec, workers: int = 1, scheduler: str | None = None, client=None
         spec = replace(spec, search=replace(spec.search, seed=int(seed)))
     t0 = time.perf_counter()
     problem = DesignProblem(spec)
+    blocked = _unclosable(problem)
+    if blocked is not None:
+        raise blocked
     s = spec.search
     def key(e):
         return _progress_key(e, spec.weights)
@@ -265,13 +268,47 @@ def _impossible(problem, evals: list) -> DesignImpossibleError:
                                        f"{msg}")
 
 
-def _closure_hint(problem) -> str:
-    """Why fingertips may never close: a face they cannot touch because it rests on a table."""
+def _unclosable(problem) -> DesignImpossibleError | None:
+    """Fingertips only, and the faces they may touch cannot push the object every way.
+
+    Frictionless contacts push along the inward normals of the faces they touch; if those
+    normals do not positively span R³ (the LP of :func:`~multiarm_pin.grasp.form_closure.lp_margin`
+    on them has no positive margin), no placement of the tips is form closure.
+    """
+    from multiarm_pin.grasp.form_closure import lp_margin
+
+    if any(s.gripper == "weld" for s in problem.spec.arms):
+        return None
+    touchable = [f for f in range(problem.poly.n_faces) if not _covered(problem, f)]
+    N = -problem.poly.normals[touchable].T  # (3, F) inward normals
+    eps = lp_margin(N)[0] if touchable else float("nan")
+    if np.isfinite(eps) and eps > 1e-9 and np.linalg.matrix_rank(N) == 3:
+        return None
+    eps = eps if np.isfinite(eps) else 0.0
+    return DesignImpossibleError(
+        "closure", eps, f"{problem.spec.file}: no design possible: the fingertip contacts can "
+        f"never be form closure (LP margin of the touchable faces' normals {eps:.3g}, needs > 0)"
+        + _closure_hint(problem))
+
+
+def _covered(problem, f: int) -> bool:
+    """Face ``f`` rests on a support that covers it whole (no fingertip can touch it)."""
     poly = problem.poly
-    for f, lo, hi in problem.rects:
+    for g, lo, hi in problem.rects:
+        if g != f:
+            continue
         origin, F = poly.face_frame(f)
         verts = (poly.vertices[list(poly.faces[f])] - origin) @ F[:, :2]
         if np.all(verts.min(axis=0) >= lo - 1e-9) and np.all(verts.max(axis=0) <= hi + 1e-9):
+            return True
+    return False
+
+
+def _closure_hint(problem) -> str:
+    """Why fingertips may never close: a face they cannot touch because it rests on a table."""
+    poly = problem.poly
+    for f, _, _ in problem.rects:
+        if _covered(problem, f):
             name = poly.face_names[f] if poly.face_names else str(f)
             sp = next(s.name for s in problem.spec.supports)
             return (f"; the {name} face rests on {sp!r}, which covers it whole, and fingertips "
