@@ -41,6 +41,9 @@ REACH_FRACTION = 0.7
 with the tool turned to a face attains) from the contact."""
 
 SAMPLING_TRIES = 200
+
+GRIP_TRIES = 24
+"""Assignments of a fingertip gripper's tips to a corner's faces tried per candidate."""
 """Random draws of a base position before the nearest-to-reach one is kept."""
 
 
@@ -54,6 +57,8 @@ class ArmChoice:
         points: (K, 3) the contact points in the object frame [m] (a weld: one point).
         roll: the weld tool's roll about the face normal [rad] (0 for fingertips).
         q_seed: (nq,) the IK seed [rad] (the branch).
+        tool: (7,) a fingertip gripper's tool placement in the object frame ``[x, y, z, qx,
+            qy, qz, qw]`` that puts its tips on ``points`` (:func:`fit_gripper`), or None.
     """
 
     base: np.ndarray
@@ -61,6 +66,7 @@ class ArmChoice:
     points: np.ndarray
     roll: float
     q_seed: np.ndarray
+    tool: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -271,8 +277,9 @@ def sample_candidate(problem, index: int) -> Candidate:
             faces = (f,)
             points = sample_face_point(poly, f, margin, rng)[None]
             roll = float(rng.uniform(-np.pi, np.pi))
+            tool = None
         else:
-            faces, points = fingertip_faces(problem, slot, corners_used, rng)
+            faces, points, tool = fingertip_faces(problem, slot, corners_used, rng)
             roll = 0.0
         c_w = problem.object_placement.act(points.mean(axis=0))
         n_w = problem.object_placement.rotation @ poly.normals[faces[0]]
@@ -283,44 +290,106 @@ def sample_candidate(problem, index: int) -> Candidate:
             base = sample_base(problem, c_w, n_w, problem.reach[i], bases, rng)
         bases.append(base)
         arms.append(ArmChoice(base, faces, points, roll,
-                              random_seed_configuration(problem, i, base, c_w, rng)))
+                              random_seed_configuration(problem, i, base, c_w, rng), tool))
     return Candidate(index, tuple(arms))
 
 
-def fingertip_faces(problem, slot, corners_used: list, rng) -> tuple[tuple[int, ...],
-                                                                      np.ndarray]:
-    """Faces and preferred points of a fingertip gripper's tips around a corner of a box.
+def corner_assignments(n_tips: int) -> list[tuple[tuple[int, ...], int]]:
+    """Every way to put a gripper's tips on the three faces around a box corner.
 
-    A corner (the signs of its x, y, z, not one another gripper took) and an order of its
-    three faces are drawn; tip k touches the k-th of them (tips beyond the third touch the
-    third face again, further from the corner, as the shipped four-finger gripper's fourth
-    tip). Each preferred point lies on its face at a random distance from the corner's
-    edges (between the face margin and a third of the face).
+    Returns:
+        ``(axes, extra)``: ``axes[k]`` the axis (0, 1, 2) of tip k's face for the first three
+        tips (a permutation), and the axis of every further tip's face (``extra``).
+    """
+    from itertools import permutations
+
+    out = []
+    for perm in permutations(range(3)):
+        for extra in (range(3) if n_tips > 3 else (perm[2],)):
+            out.append((tuple(perm) + (extra,) * (n_tips - 3), extra))
+    return out
+
+
+def fit_gripper(problem, slot, signs: np.ndarray, axes: tuple[int, ...], rng):
+    """Place a free-floating rigid gripper with its tips on the faces around a corner.
+
+    Inverse kinematics (:func:`~multiarm_pin.model.ik.solve_ik`) of the tool frame alone on a
+    free-flyer: each tip's sphere touches its face's plane (primary), as near as it can to a
+    point drawn on that face near the corner (preference). The fit counts when every tip
+    touches inside its face by the face margin (off supported areas); the gripper's links
+    against the object are the collision check's (:mod:`.evaluation`).
+
+    Returns:
+        ``(faces, points, tool)``: the contact points on the faces (object frame [m]) and
+        the tool's placement ``[x, y, z, qx, qy, qz, qw]`` in the object frame; or None.
+    """
+    from multiarm_pin.exceptions import UnreachableError
+    from multiarm_pin.model.ik import PlaneTarget, PointTarget, solve_ik
+
+    poly = problem.poly
+    half = np.max(np.abs(poly.vertices), axis=0)
+    tips = problem.tips_in_tool[slot.index]
+    r = slot.tip_radius
+    margin = problem.spec.search.face_margin
+    model = problem.floating_gripper(slot.index)
+    faces, targets = [], []
+    for k, a in enumerate(axes):
+        f = next(j for j in range(poly.n_faces) if abs(poly.normals[j][a] - signs[a]) < 1e-9)
+        n, d = poly.normals[f], float(poly.offsets[f])
+        p = signs * half - signs * rng.uniform(margin + r, np.maximum(margin + r, half * 0.6))
+        p[a] = signs[a] * half[a]
+        faces.append(f)
+        targets.append(PlaneTarget("tool", n, d + r, point=tips[k]))
+        targets.append(PointTarget("tool", p + r * n, primary=False, offset=tips[k]))
+    q = np.zeros(7)
+    q[:3] = signs * (half + 0.1)
+    q[3:] = pin.Quaternion(pin.rpy.rpyToMatrix(*rng.uniform(-np.pi, np.pi, 3))).coeffs()
+    try:
+        ik = solve_ik(model, targets, q, max_iter=60, restarts=0)
+    except UnreachableError:
+        return None
+    M = pin.XYZQUATToSE3(ik.q)
+    pts = np.array([M.act(t) - r * poly.normals[f] for t, f in zip(tips, faces, strict=True)])
+    for f, p in zip(faces, pts, strict=True):
+        if not point_allowed(problem.spec, poly, f, p, margin, problem.rects):
+            return None
+    return tuple(faces), pts, ik.q.copy()
+
+
+def fingertip_faces(problem, slot, corners_used: list, rng):
+    """Faces and points of a fingertip gripper's tips around a corner of a box.
+
+    A corner is drawn (the opposite of the previous gripper's, else one no gripper took) and
+    an assignment of the tips to its faces (:func:`corner_assignments`); a free-floating fit
+    (:func:`fit_gripper`) must place the rigid gripper's tips inside those faces, else
+    another assignment is drawn (up to :data:`GRIP_TRIES` times; then the last draw's
+    assignment with points near the corner and no tool placement, which inverse kinematics
+    will likely refuse).
+
+    Returns:
+        ``(faces, points, tool or None)`` as :func:`fit_gripper`.
     """
     poly = problem.poly
     half = np.max(np.abs(poly.vertices), axis=0)
-    for _ in range(50):
-        signs = rng.choice([-1.0, 1.0], size=3)
-        if not any(np.array_equal(signs, c) for c in corners_used):
-            break
+    if corners_used and not any(np.array_equal(-corners_used[-1], c) for c in corners_used):
+        signs = -corners_used[-1]
+    else:
+        for _ in range(50):
+            signs = rng.choice([-1.0, 1.0], size=3)
+            if not any(np.array_equal(signs, c) for c in corners_used):
+                break
     corners_used.append(signs)
-    axes = list(rng.permutation(3))
-    margin = problem.spec.search.face_margin + slot.tip_radius
-    faces, points = [], []
-    for k in range(len(slot.tips)):
-        a = int(axes[min(k, 2)])
-        f = next(j for j in range(poly.n_faces)
-                 if abs(poly.normals[j][a] - signs[a]) < 1e-9)
-        p = signs * half
-        depth = rng.uniform(margin, np.maximum(margin, half * 2 / 3))
-        p = p - signs * depth
-        p[a] = signs[a] * half[a]
-        if k >= 3:  # a further tip on the same face: further from the corner
-            b = int(axes[0])
-            p[b] -= signs[b] * min(0.15, half[b])
-        faces.append(f)
-        points.append(project_to_face(poly, f, p, margin))
-    return tuple(faces), np.array(points)
+    options = corner_assignments(len(slot.tips))
+    for _ in range(GRIP_TRIES):
+        axes = options[int(rng.integers(len(options)))][0]
+        fit = fit_gripper(problem, slot, signs, axes, rng)
+        if fit is not None:
+            return fit
+    faces = tuple(next(j for j in range(poly.n_faces)
+                       if abs(poly.normals[j][a] - signs[a]) < 1e-9) for a in axes)
+    m = problem.spec.search.face_margin + slot.tip_radius
+    pts = [project_to_face(poly, f, signs * (half - m), m) for f in faces]
+    return faces, np.array(pts), None
 
 
 def perturb(problem, parent: Candidate, q0s: list[np.ndarray], index: int,
@@ -329,8 +398,8 @@ def perturb(problem, parent: Candidate, q0s: list[np.ndarray], index: int,
 
     Bases move by a normal step of ``0.1 scale`` m (clipped to the region) and yaw by
     ``0.3 scale`` rad; weld points move by ``0.05 scale`` m on their face (kept inside by the
-    margin) and rolls by ``0.3 scale`` rad; fingertip points by ``0.03 scale`` m. The IK seed
-    is the configuration found for the parent.
+    margin) and rolls by ``0.3 scale`` rad; a fingertip gripper keeps its grip (its rigid
+    tips' fit). The IK seed is the configuration found for the parent.
     """
     spec = problem.spec
     rng = candidate_rng(spec.search.seed, index)
@@ -346,10 +415,11 @@ def perturb(problem, parent: Candidate, q0s: list[np.ndarray], index: int,
                 base[3] = float(np.clip(yaw, *b.yaw)) if b.yaw != (-np.pi, np.pi) else \
                     float(np.angle(np.exp(1j * yaw)))
         slot = spec.arms[i]
-        step = 0.05 if slot.gripper == "weld" else 0.03
-        m = margin + slot.tip_radius
-        points = np.array([project_to_face(problem.poly, f, p + rng.normal(0.0, step * scale, 3),
-                                           m) for f, p in zip(a.faces, a.points, strict=True)])
+        points = a.points
+        if slot.gripper == "weld":
+            points = np.array([project_to_face(problem.poly, f,
+                                               p + rng.normal(0.0, 0.05 * scale, 3), margin)
+                               for f, p in zip(a.faces, a.points, strict=True)])
         roll = a.roll + (rng.normal(0.0, 0.3 * scale) if slot.gripper == "weld" else 0.0)
         arms.append(replace(a, base=base, points=points, roll=float(roll),
                             q_seed=np.asarray(q0s[i], float).copy()))

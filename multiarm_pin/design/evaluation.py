@@ -146,13 +146,36 @@ class DesignProblem:
         ground = spec.scenario_base.get("ground", {"height": 0.0})
         self.ground = -np.inf if ground is None else float(ground.get("height", 0.0))
         self._base_arms: dict = {}
+        self._floating: dict = {}
+        self.tips_in_tool = []
+        for slot in spec.arms:
+            tips = np.zeros((0, 3))
+            if slot.tips:
+                arm = self.arm(slot.index, np.zeros(4))
+                q = arm.neutral()
+                oMt = arm.tool_placement(q)
+                tips = np.array([oMt.actInv(arm.frame_placement(q, t).translation)
+                                 for t in slot.tips])
+            self.tips_in_tool.append(tips)
+
+    def floating_gripper(self, slot: int) -> pin.Model:
+        """A free-flyer model whose frame ``tool`` is the slot's tool (for grip fits)."""
+        model = self._floating.get(slot)
+        if model is None:
+            model = pin.Model()
+            j = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "gripper")
+            model.addFrame(pin.Frame("tool", j, 0, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
+            model.lowerPositionLimit = np.full(7, -1e3)
+            model.upperPositionLimit = np.full(7, 1e3)
+            self._floating[slot] = model
+        return model
 
     def __getstate__(self):
-        return {k: v for k, v in self.__dict__.items() if k != "_base_arms"}
+        return {k: v for k, v in self.__dict__.items() if k not in ("_base_arms", "_floating")}
 
     def __setstate__(self, state):
         self.__dict__.update(state)
-        self._base_arms = {}
+        self._base_arms, self._floating = {}, {}
 
     def lowest_joint(self, slot: int, q: np.ndarray) -> float:
         """Height [m] of the lowest joint origin of an arm at ``q`` above its base's origin."""
@@ -276,15 +299,17 @@ def _start_ik(problem: DesignProblem, sc, cand: Candidate):
         _tips_in_tool,
         build_arm,
     )
-    from multiarm_pin.model.ik import solve_ik
+    from multiarm_pin.model.ik import PoseTarget, solve_ik
 
     oMo = problem.object_placement
     q0s, points, arms = [], [], []
     for spec_arm, slot, a in zip(sc.arms, problem.spec.arms, cand.arms, strict=True):
         arm = build_arm(sc, spec_arm, load_visuals=False)
+        tool = arm.model.frames[arm.tool_frame_id].name
         if slot.gripper == "weld":
-            targets = _joint_targets(spec_arm, arm.model.frames[arm.tool_frame_id].name,
-                                     oMo)[0]
+            targets = _joint_targets(spec_arm, tool, oMo)[0]
+        elif a.tool is not None:  # the fitted grip: the tool where it puts the tips
+            targets = [PoseTarget(tool, oMo * pin.XYZQUATToSE3(a.tool))]
         else:
             targets = _contact_targets(sc, spec_arm, problem.poly, oMo)
         ik, residual = None, np.inf
