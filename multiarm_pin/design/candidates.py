@@ -310,12 +310,14 @@ def corner_assignments(n_tips: int) -> list[tuple[tuple[int, ...], int]]:
     return out
 
 
-def fit_gripper(problem, slot, signs: np.ndarray, axes: tuple[int, ...], rng):
+def fit_gripper(problem, slot, signs: np.ndarray, axes: tuple[int, ...], rng,
+                preferred: np.ndarray | None = None):
     """Place a free-floating rigid gripper with its tips on the faces around a corner.
 
     Inverse kinematics (:func:`~multiarm_pin.model.ik.solve_ik`) of the tool frame alone on a
     free-flyer: each tip's sphere touches its face's plane (primary), as near as it can to a
-    point drawn on that face near the corner (preference). The fit counts when every tip
+    point drawn on that face near the corner, or to ``preferred`` (K, 3) (preference). The
+    fit counts when every tip
     touches inside its face by the face margin (off supported areas); the gripper's links
     against the object are the collision check's (:mod:`.evaluation`).
 
@@ -336,8 +338,12 @@ def fit_gripper(problem, slot, signs: np.ndarray, axes: tuple[int, ...], rng):
     for k, a in enumerate(axes):
         f = next(j for j in range(poly.n_faces) if abs(poly.normals[j][a] - signs[a]) < 1e-9)
         n, d = poly.normals[f], float(poly.offsets[f])
-        p = signs * half - signs * rng.uniform(margin + r, np.maximum(margin + r, half * 0.6))
-        p[a] = signs[a] * half[a]
+        if preferred is None:
+            p = signs * half - signs * rng.uniform(margin + r, np.maximum(margin + r,
+                                                                          half * 0.6))
+            p[a] = signs[a] * half[a]
+        else:
+            p = preferred[k]
         faces.append(f)
         targets.append(PlaneTarget("tool", n, d + r, point=tips[k]))
         targets.append(PointTarget("tool", p + r * n, primary=False, offset=tips[k]))
@@ -398,8 +404,9 @@ def perturb(problem, parent: Candidate, q0s: list[np.ndarray], index: int,
 
     Bases move by a normal step of ``0.1 scale`` m (clipped to the region) and yaw by
     ``0.3 scale`` rad; weld points move by ``0.05 scale`` m on their face (kept inside by the
-    margin) and rolls by ``0.3 scale`` rad; a fingertip gripper keeps its grip (its rigid
-    tips' fit). The IK seed is the configuration found for the parent.
+    margin) and rolls by ``0.3 scale`` rad; half the time a fingertip gripper is fitted
+    again (:func:`fit_gripper`) at its corner with its points moved by ``0.03 scale`` m,
+    else it keeps its grip. The IK seed is the configuration found for the parent.
     """
     spec = problem.spec
     rng = candidate_rng(spec.search.seed, index)
@@ -421,8 +428,18 @@ def perturb(problem, parent: Candidate, q0s: list[np.ndarray], index: int,
                                                p + rng.normal(0.0, 0.05 * scale, 3), margin)
                                for f, p in zip(a.faces, a.points, strict=True)])
         roll = a.roll + (rng.normal(0.0, 0.3 * scale) if slot.gripper == "weld" else 0.0)
-        arms.append(replace(a, base=base, points=points, roll=float(roll),
-                            q_seed=np.asarray(q0s[i], float).copy()))
+        faces, tool = a.faces, a.tool
+        if slot.gripper != "weld" and a.tool is not None and rng.random() < 0.5:
+            signs = np.sign(a.points.mean(axis=0))
+            axes = tuple(int(np.argmax(np.abs(problem.poly.normals[f]))) for f in a.faces)
+            pref = np.array([project_to_face(problem.poly, f,
+                                             p + rng.normal(0.0, 0.03 * scale, 3), margin)
+                             for f, p in zip(a.faces, a.points, strict=True)])
+            fit = fit_gripper(problem, slot, signs, axes, rng, pref)
+            if fit is not None:
+                faces, points, tool = fit
+        arms.append(replace(a, base=base, faces=faces, points=points, roll=float(roll),
+                            q_seed=np.asarray(q0s[i], float).copy(), tool=tool))
     return Candidate(index, tuple(arms), parent.index)
 
 

@@ -51,9 +51,9 @@ SCORES: dict[str, Score] = {s.name: s for s in (
     Score("lp_margin", "form closure LP margin ε* of the unit contact wrenches (fingertips; "
           "dimensionless, at most 1/N)", True, 1.0 / 7.0),
     Score("ferrari_canny", "Ferrari-Canny ε: radius of the largest ball about the origin in "
-          "the hull of the unit contact wrenches (fingertips; qhull)", True, 0.2),
+          "the hull of the unit contact wrenches (fingertips; qhull)", True, 0.02),
     Score("stability", "configuration-stability bound [m]: how far every contact may move "
-          "along its face before closure can be lost (fingertips)", True, 0.05),
+          "along its face before closure can be lost (fingertips)", True, 0.01),
     Score("torque_ratio", "worst static joint torque over its URDF effort limit along the "
           "task (gravity on the arms plus the object's weight through the force "
           "distribution)", False, 1.0),
