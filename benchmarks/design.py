@@ -9,6 +9,11 @@ folder are not included (``--no-run`` territory: the run's own cost is
 ``benchmarks/run_phases.py``'s). Targets (issue 26): a two-arm design of the demo's box and
 task within 60 s, a three-arm one within 3 min, on a 2-core machine.
 
+Each spec's design is also compared with the shipped scenario of the same file name (its
+hand-made bases, contacts and seeds, scored by the same functions: :func:`evaluate` of its
+own design as a candidate): the scores of both, and whether the best design, or some design
+of the Pareto front, is at least as good on every score.
+
 The machine, its load average before and after each search, the date and the commit are
 written with the table: the targets are wall-clock times, and other processes add to them.
 
@@ -33,7 +38,13 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from multiarm_pin.data import data_path, shipped_files  # noqa: E402
-from multiarm_pin.design import load_design, run_design  # noqa: E402
+from multiarm_pin.design import SCORES, load_design, run_design  # noqa: E402
+from multiarm_pin.design.evaluation import (  # noqa: E402
+    DesignProblem,
+    candidate_from_scenario,
+    evaluate,
+)
+from multiarm_pin.design.scoring import at_least_as_good, objective  # noqa: E402
 
 TARGETS = {2: 60.0, 3: 180.0}
 """Issue 26's targets [s] by number of arms."""
@@ -67,7 +78,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     files = ([data_path("scenarios", "designs", s) for s in args.specs] if args.specs
              else shipped_files("scenarios/designs"))
-    rows = []
+    rows, compared = [], []
     for f in files:
         spec = load_design(f)
         modes = [("dask", args.workers)] + ([("loop", 1)] if args.loop else [])
@@ -82,6 +93,16 @@ def main(argv=None) -> int:
                          wall, target, load0, load1, res.designs[0].objective))
             print(f"{f.name}: {mode} ({workers} workers): {res.evaluated} candidates, "
                   f"{res.feasible} feasible, {wall:.1f} s", flush=True)
+        shipped = data_path("scenarios", f.name)
+        if shipped.is_file():
+            problem = DesignProblem(spec)
+            e = evaluate(problem, candidate_from_scenario(problem, shipped))
+            if e.ok:
+                best = res.designs[0]
+                compared.append((f.name, e.scores, objective(e.scores, spec.weights), best,
+                                 at_least_as_good(best.scores, e.scores),
+                                 [d.rank for d in res.pareto
+                                  if at_least_as_good(d.scores, e.scores)]))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     lines = [
@@ -99,6 +120,23 @@ def main(argv=None) -> int:
         lines.append(f"| {r[0]} | {r[1]} | {r[2]} | {r[3]} | {r[4]} | {r[5]} | {r[6]:.1f} | "
                      f"{'' if r[7] is None else f'{r[7]:.0f}'} | {r[8]:.1f} / {r[9]:.1f} | "
                      f"{r[10]:.4g} |")
+    lines += ["", "## Designs against the shipped, hand-made scenarios", "",
+              "Scores of the shipped scenario's own design and of the best design (by the "
+              "objective); `at least as good`: on every score; Pareto: the ranks of the "
+              "designs of the front (in `report.md`) at least as good on every score.", "",
+              "| spec | | objective | " + " | ".join(SCORES) + " |",
+              "|---" * (len(SCORES) + 3) + "|"]
+
+    def fmt(v):
+        return "—" if v is None else f"{v:.4g}"
+
+    for name, ship, ship_obj, best, better, front in compared:
+        lines.append(f"| {name} | shipped | {ship_obj:.4g} | " +
+                     " | ".join(fmt(ship.get(n)) for n in SCORES) + " |")
+        lines.append(f"| | best design | {best.objective:.4g} | " +
+                     " | ".join(fmt(best.scores.get(n)) for n in SCORES) + " |")
+        lines.append(f"| | at least as good: best {'yes' if better else 'no'}; Pareto "
+                     f"{', '.join(map(str, front[:8])) or 'none'} |" + " |" * (len(SCORES) + 1))
     (out / "design.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     print(f"report: {out / 'design.md'}")
     return 0

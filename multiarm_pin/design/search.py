@@ -102,9 +102,26 @@ def _progress_key(e: Evaluation, weights: dict) -> tuple:
     return (len(CONDITIONS) - e.stage, round(float(v), 12), e.index)
 
 
+def make_and_evaluate(problem: DesignProblem, recipe: tuple) -> Evaluation:
+    """Make a candidate from its recipe and evaluate it (one task of the search).
+
+    Recipes: ``("sample", index)`` (:func:`~.candidates.sample_candidate`), ``("perturb",
+    parent, q0s, index, scale)`` (:func:`~.candidates.perturb`), ``("ready", candidate)``.
+    Making the candidate in the task spreads the fingertip grips' fits over the workers too.
+    """
+    kind = recipe[0]
+    if kind == "sample":
+        cand = sample_candidate(problem, recipe[1])
+    elif kind == "perturb":
+        cand = perturb(problem, *recipe[1:])
+    else:
+        cand = recipe[1]
+    return evaluate(problem, cand)
+
+
 class _Loop:
-    def map(self, problem, cands):
-        return [evaluate(problem, c) for c in cands]
+    def map(self, problem, recipes):
+        return [make_and_evaluate(problem, r) for r in recipes]
 
     def close(self):
         pass
@@ -124,10 +141,15 @@ class _Dask:
                 self.cluster = local_cluster(workers)
                 client = self.own_client = Client(self.cluster)
         self.client = client
+        self.problem = None
 
-    def map(self, problem, cands):
-        fp = self.client.scatter(problem, broadcast=True)
-        futures = self.client.map(evaluate, [fp] * len(cands), cands, pure=False)
+    def map(self, problem, recipes):
+        # scattered once and held for the whole search: scattering it again gives the same
+        # key, which releasing the first future would take from the tasks using the second
+        if self.problem is None:
+            self.problem = self.client.scatter(problem, broadcast=True)
+        futures = self.client.map(make_and_evaluate, [self.problem] * len(recipes), recipes,
+                                  pure=False)
         return self.client.gather(futures)
 
     def close(self):
@@ -177,7 +199,7 @@ def run_design(spec, workers: int = 1, scheduler: str | None = None, client=None
     runner = _Dask(workers, scheduler, client) if (client is not None or scheduler is not None
                                                    or workers > 1) else _Loop()
     try:
-        evals = runner.map(problem, [sample_candidate(problem, i) for i in range(s.candidates)])
+        evals = runner.map(problem, [("sample", i) for i in range(s.candidates)])
         nxt = s.candidates
         per_round = max(s.candidates // 2, 1)
         for r in range(1, s.refine + 1):
@@ -188,11 +210,11 @@ def run_design(spec, workers: int = 1, scheduler: str | None = None, client=None
             for j in range(per_round // 2):
                 p = parents[j % len(parents)]
                 q0 = p.q0 if p.q0 is not None else [a.q_seed for a in p.candidate.arms]
-                cands.append(perturb(problem, p.candidate, q0, nxt + j, 0.5 ** r))
+                cands.append(("perturb", p.candidate, q0, nxt + j, 0.5 ** r))
             pool = arm_pool(problem, evals)
             for j in range(per_round // 2, per_round):
                 c = recombine(problem, pool, nxt + j) if len(spec.arms) > 1 else None
-                cands.append(c if c is not None else sample_candidate(problem, nxt + j))
+                cands.append(("ready", c) if c is not None else ("sample", nxt + j))
             nxt += per_round
             new = runner.map(problem, cands)
             evals += new
@@ -316,4 +338,4 @@ def _closure_hint(problem) -> str:
     return ""
 
 
-__all__ = ["PARENTS", "Design", "DesignResult", "run_design"]
+__all__ = ["PARENTS", "Design", "DesignResult", "make_and_evaluate", "run_design"]
