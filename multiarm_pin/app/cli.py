@@ -211,7 +211,8 @@ def _build_parser(command: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true",
                    help="replace a results folder of another scenario file")
     p.set_defaults(func=_demo)
-    p = sub.add_parser("scenarios", help="list the shipped scenario, grasp and study files")
+    p = sub.add_parser("scenarios", help="list the shipped scenario, grasp, study and design "
+                       "files")
     p.set_defaults(func=_scenarios)
 
     p = sub.add_parser("info", help="print the key quantities of a scenario's arms and object "
@@ -253,7 +254,7 @@ def _scenarios(args: argparse.Namespace) -> int:
     from multiarm_pin.yaml_reader import load_yaml_file
 
     for folder, command in (("scenarios", "run"), ("scenarios/grasps", "grasp"),
-                            ("scenarios/studies", "sweep")):
+                            ("scenarios/studies", "sweep"), ("scenarios/designs", "design")):
         print(f"{folder} (multiarm-pin {command} FILE): {data_path(*folder.split('/'))}")
         for f in shipped_files(folder):
             data = load_yaml_file(f)

@@ -59,3 +59,18 @@ def test_errors_name_the_key_path(edit, key, words):
     assert info.value.key == key
     assert words in str(info.value)
     assert str(info.value).startswith("spec.yaml: ")
+
+
+def test_the_command_refuses_a_bad_spec_with_exit_2(tmp_path, capsys):
+    import yaml
+
+    from multiarm_pin.app.cli import main
+
+    d = spec_data()
+    d["bases"]["region"]["y"] = [0.5]
+    spec = tmp_path / "bad.yaml"
+    spec.write_text(yaml.safe_dump(d), encoding="utf-8")
+    assert main(["design", str(spec), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert f"{spec}: bases.region.y: expected 2 numbers" in err
+    assert not (tmp_path / "out").exists()
