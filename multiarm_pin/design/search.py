@@ -205,7 +205,7 @@ def run_design(spec, workers: int = 1, scheduler: str | None = None, client=None
         for r in range(1, s.refine + 1):
             if progress is not None:
                 progress(_round_line(r - 1, evals))
-            parents = _diverse(sorted(evals, key=key), PARENTS)
+            parents = _parents(sorted(evals, key=key))
             cands = []
             for j in range(per_round // 2):
                 p = parents[j % len(parents)]
@@ -234,6 +234,25 @@ def run_design(spec, workers: int = 1, scheduler: str | None = None, client=None
     return DesignResult(spec, designs[:spec.top], [d for d in designs if d.pareto],
                         len(evals), len(ok), failures, time.perf_counter() - t0,
                         1 if isinstance(runner, _Loop) else max(workers, 1))
+
+
+def _parents(ranked: list) -> list:
+    """A round's parents: the best candidates, and the design best on each score.
+
+    The :data:`PARENTS` best of the ranking (:func:`_diverse`), then for each score the design
+    best on it, so that every trade-off of the Pareto front is refined too.
+    """
+    out = _diverse(ranked, PARENTS)
+    ok = [e for e in ranked if e.ok]
+    for name, score in SCORES.items():
+        have = [e for e in ok if e.scores.get(name) is not None]
+        if not have:
+            continue
+        sign = -1.0 if score.higher_is_better else 1.0
+        best = min(have, key=lambda e: (sign * e.scores[name], e.index))
+        if all(best.index != o.index for o in out):
+            out.append(best)
+    return out
 
 
 def _diverse(ranked: list, n: int) -> list:
