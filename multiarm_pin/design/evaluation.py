@@ -47,7 +47,7 @@ CONDITIONS = ("reach", "closure", "path", "collision", "torque")
 MAX_JOINT_STEP = 0.5
 """Largest change [rad or m] of any joint between two successive poses of the task."""
 
-IK_ITERATIONS = 100
+IK_ITERATIONS = 40
 """Levenberg-Marquardt iterations per phase of each inverse kinematics solve."""
 
 SEED_RETRIES = 2
