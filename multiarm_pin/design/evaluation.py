@@ -445,7 +445,7 @@ def evaluate(problem: DesignProblem, cand: Candidate) -> Evaluation:
         Q.append(np.concatenate(row))
     Q = np.array(Q)
     # collisions and clearances along the task
-    from multiarm_pin.feasibility import CATEGORIES, CollisionScene
+    from multiarm_pin.feasibility import CollisionScene
 
     ground = spec.scenario_base.get("ground", {"height": 0.0})
     ground = None if ground is None else float(ground.get("height", 0.0))
@@ -471,7 +471,6 @@ def evaluate(problem: DesignProblem, cand: Candidate) -> Evaluation:
         return _fail(cand, "collision", min_clear, detail, q0=q0s, scenario=data, path_q=Q,
                      solved=list(q0s))
     scores["clearance"] = float(min_clear)
-    assert worst in CATEGORIES
     # static torques along the task
     from multiarm_pin.app.precheck import effort_limits, joint_names, static_torques
 
