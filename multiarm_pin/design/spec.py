@@ -237,6 +237,11 @@ def _parse(data, file: str) -> DesignSpec:
     _parse_simulation(Reader(file, "simulation", sim))
     base["simulation"] = sim
     arms = _parse_arms(root.get("arms"), Path(file).resolve().parent)
+    for s in arms:
+        if s.gripper == "fingertips" and obj.shape_type != "box":
+            raise root.get("arms").error(
+                "a fingertip gripper's grip is fitted around a corner of a box; the object is "
+                f"a {obj.shape_type} (welds may hold any polyhedron)")
     bases = _parse_bases(root.get("bases"), len(arms))
     search = _parse_search(root.get("search")) if "search" in d else SearchSettings()
     weights = _parse_weights(root.get("weights")) if "weights" in d else {}

@@ -74,3 +74,13 @@ def test_the_command_refuses_a_bad_spec_with_exit_2(tmp_path, capsys):
     err = capsys.readouterr().err
     assert f"{spec}: bases.region.y: expected 2 numbers" in err
     assert not (tmp_path / "out").exists()
+
+
+def test_fingertip_grippers_need_a_box():
+    d = spec_data()
+    d["object"]["shape"] = {"type": "polyhedron", "vertices": [
+        [0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]}
+    d["arms"] = [{"name": "hand", "gripper": {"fingertips": "mp6_3f"}}]
+    with pytest.raises(DesignError) as info:
+        parse_design(d, "spec.yaml")
+    assert info.value.key == "arms" and "corner of a box" in str(info.value)
