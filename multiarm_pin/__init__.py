@@ -8,7 +8,9 @@ system (:class:`MultiArmSystem`), control (:class:`MinimumJerkTrajectory`,
 :func:`make_controller`), simulate (:func:`simulate`), analyse (:class:`SimulationResult`,
 :func:`form_closure`; is it physically possible: :func:`check_design` before,
 :func:`feasibility_report` after) and replay (:func:`write_replay`); or do it all from a
-scenario file (:func:`load_scenario`, :func:`build_scenario`). Every placement is a ``pin.SE3``.
+scenario file (:func:`load_scenario`, :func:`build_scenario`). Or let the package choose the
+arms' bases and contacts: :func:`design` (``multiarm_pin.design(spec)``, a callable package)
+returns ranked scenarios. Every placement is a ``pin.SE3``.
 
 Everything else stays importable from its layer: :mod:`multiarm_pin.model` (arms, kinematics,
 IK), :mod:`multiarm_pin.grasp` (thesis ch. 2), :mod:`multiarm_pin.constraints` (ch. 3),
@@ -47,6 +49,7 @@ _LAZY = {
     "check_design": "multiarm_pin.feasibility",
     "feasibility_report": "multiarm_pin.feasibility",
     "SystemState": "multiarm_pin.system",
+    "design": "multiarm_pin.design",
 }
 
 
@@ -57,7 +60,9 @@ def __getattr__(name: str):
         raise AttributeError(f"module 'multiarm_pin' has no attribute {name!r}")
     import importlib
 
-    value = getattr(importlib.import_module(module), name)
+    value = importlib.import_module(module)
+    if module != f"{__name__}.{name}":  # a subpackage that is its own name: design
+        value = getattr(value, name)
     globals()[name] = value
     return value
 
@@ -96,6 +101,8 @@ __all__ = [
     "FeasibilityReport",
     "Violation",
     "write_replay",
+    # design: where the arms and the contacts go
+    "design",
     # scenario files
     "build_scenario",
     "load_scenario",

@@ -283,3 +283,28 @@ class StudyError(ScenarioError):
         file: the study file (or the results folder).
         key: the key path, e.g. ``"parameters[1].normal.sigma"``, or the option.
     """
+
+
+class DesignError(ScenarioError):
+    """A design spec file (``multiarm-pin design``) is invalid.
+
+    Attributes:
+        file: the spec file.
+        key: the key path, e.g. ``"bases.region.x"``.
+    """
+
+
+class DesignImpossibleError(MultiArmError):
+    """No candidate of a design search met every condition (``multiarm-pin design``: exit 1).
+
+    Attributes:
+        condition: the condition that the candidates which got furthest failed (``reach``,
+            ``path``, ``collision``, ``torque``, ``closure``).
+        best: the best value of that condition any candidate reached (its unit in the
+            message).
+        message: the sentence for people, naming the condition and the best value.
+    """
+
+    def __init__(self, condition: str, best: float, message: str):
+        self.condition, self.best, self.message = condition, float(best), message
+        super().__init__(message)

@@ -17,6 +17,13 @@ PACKAGES = [
     "multiarm_pin.study.execution",
     "multiarm_pin.study.store",
     "multiarm_pin.study.report",
+    "multiarm_pin.design",
+    "multiarm_pin.design.spec",
+    "multiarm_pin.design.candidates",
+    "multiarm_pin.design.evaluation",
+    "multiarm_pin.design.scoring",
+    "multiarm_pin.design.search",
+    "multiarm_pin.design.report",
 ]
 
 
@@ -194,3 +201,14 @@ def test_every_arm_loader_loads_the_meshes_by_default():
 
     for f in (load_arm, Arm.from_robot_name, Arm.from_urdf, build_arm, build_scenario):
         assert inspect.signature(f).parameters["load_visuals"].default is True, f.__qualname__
+
+
+def test_design_is_the_callable_design_package():
+    """``multiarm_pin.design(spec)`` designs; ``multiarm_pin.design.load_design`` reads specs,
+    whichever of the two is reached first."""
+    import multiarm_pin
+    import multiarm_pin.design.cli  # noqa: F401 (the subpackage imported first)
+
+    assert callable(multiarm_pin.design)
+    assert multiarm_pin.design.design.__doc__
+    assert multiarm_pin.design.load_design is multiarm_pin.design.spec.load_design

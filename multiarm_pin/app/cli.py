@@ -5,13 +5,15 @@ Subcommands:
     ``replay DIR``          serve the replay of a finished run from a Meshcat server
     ``grasp FILE.yaml``     grasp analysis report (form closure, margin, seventh contact)
     ``sweep STUDY.yaml``    a study (sweep / Monte Carlo) of a scenario or grasp, on Dask
+    ``design SPEC.yaml``    find where the arms and the contacts go: ranked scenarios
     ``demo``                run the shipped default scenario (the README's main command)
     ``scenarios``           list the shipped scenario, grasp and study files
     ``info [SCENARIO]``     a scenario's (or two default arms') key quantities
 
 The argument parsing of ``run``, ``replay``, ``demo`` and ``scenarios`` lives here; the work is
-done by :mod:`multiarm_pin.app.runner` (``grasp`` and ``sweep`` bring their own parsers from
-:mod:`multiarm_pin.grasp.cli` and :mod:`multiarm_pin.study.cli`).
+done by :mod:`multiarm_pin.app.runner` (``grasp``, ``sweep`` and ``design`` bring their own
+parsers from :mod:`multiarm_pin.grasp.cli`, :mod:`multiarm_pin.study.cli` and
+:mod:`multiarm_pin.design.cli`).
 """
 
 from __future__ import annotations
@@ -195,6 +197,13 @@ def _build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
         study_cli.configure_parser(p)
         p.set_defaults(func=study_cli.run)
+    p = sub.add_parser("design", help="find where the arms and the contacts go (ranked "
+                       "scenarios, a report, the best design's run)")
+    if command in (None, "design"):
+        from multiarm_pin.design import cli as design_cli
+
+        design_cli.configure_parser(p)
+        p.set_defaults(func=design_cli.run)
     p = sub.add_parser("demo", help=f"run the shipped default scenario ({DEMO_SCENARIO})")
     p.add_argument("--out", default="results/demo", help="output folder (default results/demo)")
     p.add_argument("--duration", type=float, default=None, help="override the duration [s]")
@@ -202,7 +211,8 @@ def _build_parser(command: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true",
                    help="replace a results folder of another scenario file")
     p.set_defaults(func=_demo)
-    p = sub.add_parser("scenarios", help="list the shipped scenario, grasp and study files")
+    p = sub.add_parser("scenarios", help="list the shipped scenario, grasp, study and design "
+                       "files")
     p.set_defaults(func=_scenarios)
 
     p = sub.add_parser("info", help="print the key quantities of a scenario's arms and object "
@@ -244,7 +254,7 @@ def _scenarios(args: argparse.Namespace) -> int:
     from multiarm_pin.yaml_reader import load_yaml_file
 
     for folder, command in (("scenarios", "run"), ("scenarios/grasps", "grasp"),
-                            ("scenarios/studies", "sweep")):
+                            ("scenarios/studies", "sweep"), ("scenarios/designs", "design")):
         print(f"{folder} (multiarm-pin {command} FILE): {data_path(*folder.split('/'))}")
         for f in shipped_files(folder):
             data = load_yaml_file(f)

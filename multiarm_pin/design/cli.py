@@ -1,0 +1,59 @@
+"""``multiarm-pin design SPEC.yaml --out DIR [--workers N | --scheduler ADDRESS] [--seed S]``."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def configure_parser(p: argparse.ArgumentParser) -> None:
+    """Arguments of ``multiarm-pin design``."""
+    p.add_argument("spec", help="design spec YAML file (see scenarios/designs/)")
+    p.add_argument("--out", required=True, help="results folder (designs, report, best run)")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--workers", type=int, default=2,
+                   help="worker processes of the local Dask cluster (default 2; 1: no Dask)")
+    g.add_argument("--scheduler", default=None,
+                   help="address of an existing Dask scheduler (tcp://host:8786)")
+    p.add_argument("--seed", type=int, default=None, help="overrides the spec's search.seed")
+    p.add_argument("--no-run", dest="simulate", action="store_false",
+                   help="do not simulate the best design")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace a results folder of another spec file")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Search, write the results folder, print the ranking; exit 1 for an impossible spec."""
+    from multiarm_pin.design.report import write_design
+    from multiarm_pin.design.search import run_design
+    from multiarm_pin.design.spec import load_design
+    from multiarm_pin.exceptions import DesignError, DesignImpossibleError
+
+    spec = load_design(args.spec)
+    if args.scheduler is None and args.workers < 1:
+        raise DesignError("--workers", "", f"expected a positive number of workers, got "
+                          f"{args.workers}")
+
+    def say(line: str) -> None:
+        if not args.quiet:
+            print(f"design {spec.name}: {line}", file=sys.stderr, flush=True)
+
+    try:
+        result = run_design(spec, workers=args.workers, scheduler=args.scheduler,
+                            seed=args.seed, progress=say)
+    except DesignImpossibleError as exc:
+        print(f"impossible: {exc}", file=sys.stderr)
+        return 1
+    out = write_design(result, args.out, simulate=args.simulate,
+                       overwrite=bool(args.overwrite), quiet=True)
+    print(f"design {spec.name}: {result.evaluated} candidates in {result.wall_time:.1f} s, "
+          f"{result.feasible} met every condition")
+    for d in result.designs:
+        s = ", ".join(f"{k} {v:.4g}" for k, v in d.scores.items() if v is not None)
+        print(f"  {d.rank}. candidate {d.index}: objective {d.objective:.4g} ({s})")
+    print(f"designs: {out / 'designs'}")
+    print(f"report:  {out / 'report.md'}")
+    if args.simulate:
+        print(f"best run: {out / 'best_run'} (replay: {out / 'best_run' / 'replay.html'})")
+    return 0

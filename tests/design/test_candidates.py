@@ -1,0 +1,85 @@
+"""Candidates: faces and points offered, determinism of sampling, weld placements."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from multiarm_pin.design import load_design, parse_design
+from multiarm_pin.design.candidates import (
+    face_edge_margin,
+    perturb,
+    point_allowed,
+    sample_candidate,
+    sample_face_point,
+    weld_faces,
+)
+from multiarm_pin.design.evaluation import DesignProblem, weld_placement
+from multiarm_pin.model.polyhedron import box
+from tests.design.design_cases import TWO_UR5_SPEC, spec_data
+
+
+def test_edge_margin_of_a_box_face_is_the_distance_to_its_nearest_edge():
+    poly = box([0.8, 0.4, 0.3])
+    f = poly.face_index("+y")
+    p = np.array([0.3, 0.2, -0.1])
+    assert face_edge_margin(poly, f, p) == pytest.approx(min(0.4 - 0.3, 0.15 - 0.1), abs=1e-12)
+    assert face_edge_margin(poly, f, np.array([0.5, 0.2, 0.0])) == pytest.approx(-0.1)
+
+
+def test_sampled_points_keep_the_margin(rng):
+    poly = box([0.8, 0.4, 0.3])
+    for f in range(6):
+        for _ in range(20):
+            p = sample_face_point(poly, f, 0.05, rng)
+            assert abs(poly.signed_distance_to_face(p, f)) < 1e-12
+            assert face_edge_margin(poly, f, p) >= 0.05
+
+
+def test_welds_never_take_a_supported_or_downward_face():
+    d = spec_data()
+    d["object"]["pose"]["position"] = [0.5, 0.0, 0.15]
+    d["supports"] = [{"name": "table", "plane": {"point": [0, 0, 0], "normal": [0, 0, 1]},
+                      "points": "vertices"}]
+    spec = parse_design(d, "s.yaml")
+    poly = box(spec.object.size)
+    faces = [poly.face_names[f] for f in weld_faces(spec, poly)]
+    assert faces == ["+x", "-x", "+y", "-y", "+z"]
+    # a stand smaller than the bottom face leaves its overhang to fingertips
+    d["supports"][0]["points"] = [[0.2, 0.1, -0.15], [-0.2, 0.1, -0.15], [0.2, -0.1, -0.15],
+                                  [-0.2, -0.1, -0.15]]
+    spec = parse_design(d, "s.yaml")
+    bottom = poly.face_index("-z")
+    assert not point_allowed(spec, poly, bottom, np.array([0.0, 0.0, -0.15]), 0.01)
+    assert point_allowed(spec, poly, bottom, np.array([0.35, 0.15, -0.15]), 0.01)
+
+
+def test_a_candidate_depends_only_on_the_seed_and_its_index():
+    spec = load_design(TWO_UR5_SPEC)
+    problem = DesignProblem(spec)
+    a, b = sample_candidate(problem, 7), sample_candidate(problem, 7)
+    for x, y in zip(a.arms, b.arms, strict=True):
+        np.testing.assert_array_equal(x.base, y.base)
+        np.testing.assert_array_equal(x.q_seed, y.q_seed)
+    other = DesignProblem(dataclasses.replace(spec, search=dataclasses.replace(spec.search,
+                                                                              seed=1)))
+    assert not np.array_equal(sample_candidate(other, 7).arms[0].base, a.arms[0].base)
+    # bases in the region; neighbours stay in it, on their parents' faces
+    lo, hi = spec.bases.lower, spec.bases.upper
+    for i in range(10):
+        c = sample_candidate(problem, i)
+        n = perturb(problem, c, [x.q_seed for x in c.arms], 100 + i, 0.5)
+        for x, y in zip(c.arms, n.arms, strict=True):
+            assert np.all(y.base[:3] >= lo - 1e-12) and np.all(y.base[:3] <= hi + 1e-12)
+            assert x.faces == y.faces
+            assert face_edge_margin(problem.poly, y.faces[0], y.points[0]) >= \
+                spec.search.face_margin - 1e-12
+
+
+def test_weld_tool_points_into_its_face():
+    poly = box([0.8, 0.4, 0.3])
+    for f in range(6):
+        M = weld_placement(poly, f, poly.face_frame(f)[0], 0.7)
+        np.testing.assert_allclose(M.rotation[:, 2], -poly.normals[f], atol=1e-12)
+        np.testing.assert_allclose(M.rotation.T @ M.rotation, np.eye(3), atol=1e-12)
+        assert np.linalg.det(M.rotation) == pytest.approx(1.0)

@@ -1,0 +1,111 @@
+"""The design search on the demo's box and task (two UR5s, welds).
+
+One search of the shipped spec serves the module. Its designs are re-checked here by
+independent means (forward kinematics, ``coal.distance``, ``rnea + Jᵀ w``), and compared with
+the shipped scenario's own design scored by the same functions.
+"""
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from multiarm_pin.app.precheck import static_torques
+from multiarm_pin.app.scenario import build_scenario
+from multiarm_pin.app.scenario.schema import parse_scenario
+from multiarm_pin.design import load_design, run_design
+from multiarm_pin.design.evaluation import (
+    MAX_JOINT_STEP,
+    DesignProblem,
+    candidate_from_scenario,
+    evaluate,
+)
+from multiarm_pin.design.scoring import at_least_as_good, objective
+from multiarm_pin.feasibility import CollisionScene
+from tests.design.design_cases import (
+    TWO_UR5_SCENARIO,
+    TWO_UR5_SPEC,
+    coal_clearance,
+    rnea_static_torques,
+    small,
+    tool_pose_errors,
+)
+
+
+@pytest.fixture(scope="module")
+def searched():
+    spec = load_design(TWO_UR5_SPEC)
+    return spec, run_design(spec)
+
+
+@pytest.fixture(scope="module")
+def shipped(searched):
+    spec = searched[0]
+    problem = DesignProblem(spec)
+    return evaluate(problem, candidate_from_scenario(problem, TWO_UR5_SCENARIO))
+
+
+def test_the_shipped_design_meets_every_condition_and_is_scored(shipped):
+    assert shipped.ok, (shipped.condition, shipped.detail)
+    assert set(shipped.scores) == {"torque_ratio", "clearance", "manipulability"}
+
+
+def test_designs_are_at_least_as_good_as_the_shipped_one(searched, shipped):
+    """The best design's objective is at least the shipped one's, and the Pareto front (in
+    the report) holds a design at least as good on every score."""
+    spec, result = searched
+    assert result.designs and len(result.designs) == spec.top
+    best = result.designs[0]
+    assert best.objective >= objective(shipped.scores, spec.weights)
+    assert any(at_least_as_good(d.scores, shipped.scores) for d in result.pareto)
+    # ranked by the objective, best first
+    objs = [d.objective for d in result.designs]
+    assert objs == sorted(objs, reverse=True)
+
+
+def test_every_returned_design_passes_independent_rechecks(searched):
+    spec, result = searched
+    margin = spec.search.clearance
+    problem = DesignProblem(spec)
+    for d in result.designs:
+        built = build_scenario(parse_scenario(d.scenario, spec.file), load_visuals=False)
+        system = built.system
+        tools = [a.joint.placement_in_object for a in built.scenario.arms]
+        Q = d.evaluation.path_q
+        assert Q.shape == (len(problem.path_times), system.nq)
+        np.testing.assert_allclose(Q[0], built.initial_state.q, atol=1e-9)
+        scene = CollisionScene(system, built.initial_state, 0.0)
+        for k, (M, q) in enumerate(zip(problem.path_placements, Q, strict=True)):
+            # the welds hold their placements: IK residual below 1e-6 m (and rad)
+            err = tool_pose_errors(system, q, M, tools)
+            assert err.max() < 1e-6, (d.rank, k, err)
+            # joint limits
+            for i, arm in enumerate(system.arms):
+                qi = q[system.arm_set.q_slices[i]]
+                assert np.all(qi >= arm.model.lowerPositionLimit - 1e-12)
+                assert np.all(qi <= arm.model.upperPositionLimit + 1e-12)
+            # clearance by coal.distance on every pair but the grasps
+            q_scene = np.concatenate([q, M.translation, pin.Quaternion(M.rotation).coeffs()])
+            assert coal_clearance(scene, q_scene) >= margin - 1e-9
+            # static torques: rnea + Jᵀ w, equal to the designer's, within the efforts
+            st = system.state(q, None, M.translation, pin.Quaternion(M.rotation).coeffs())
+            tau, mu, b = rnea_static_torques(system, st)
+            np.testing.assert_allclose(tau, static_torques(system, st)[0], atol=1e-8)
+            resultant = b.h_o + sum(b.W_o[i] @ mu[i] for i in range(system.n_arms))
+            np.testing.assert_allclose(resultant, 0.0, atol=1e-8)  # the object is held
+            effort = np.concatenate([a.model.effortLimit for a in system.arms])
+            assert np.all(np.abs(tau) <= effort)
+        # one continuous branch
+        assert np.abs(np.diff(Q, axis=0)).max() <= MAX_JOINT_STEP
+        # the reported torque ratio is the worst along the task
+        assert 0.0 < d.scores["torque_ratio"] <= 1.0
+
+
+def test_same_seed_same_designs_on_one_and_two_workers():
+    spec = small(load_design(TWO_UR5_SPEC), candidates=16, refine=1)
+    one = run_design(spec, workers=1)
+    two = run_design(spec, workers=2)
+    assert [d.index for d in one.designs] == [d.index for d in two.designs]
+    for a, b in zip(one.designs, two.designs, strict=True):
+        assert a.scores == b.scores
+        assert a.scenario == b.scenario
+    assert one.failures == two.failures
