@@ -8,8 +8,8 @@ from contact points (Sec 2.4), and helps design and optimise grasps.
 """
 
 from multiarm_pin.grasp.contacts import (
-    Contact,
     Grasp,
+    GraspContact,
     contact_from_point_normal,
     contact_on_face,
     wrench_matrix,
@@ -54,7 +54,7 @@ from multiarm_pin.grasp.stability import (
 __all__ = [
     "BlockDecomposition",
     "ClosureBound",
-    "Contact",
+    "GraspContact",
     "ContactRegion",
     "FormClosureResult",
     "Grasp",

@@ -22,8 +22,12 @@ ON_FACE_TOLERANCE = 1e-6
 
 
 @dataclass(frozen=True)
-class Contact:
-    """One frictionless point contact.
+class GraspContact:
+    """One frictionless point contact of a grasp analysis (a point and a normal on the object).
+
+    Not the constraint layer's :class:`multiarm_pin.constraints.contact.Contact`, which joins
+    a tool and the object in the dynamics (with ``W``, ``T``, ``φ``); the grasp analysis needs
+    only the contact's wrench.
 
     Attributes:
         point: (3,) contact point in the object frame [m].
@@ -59,7 +63,7 @@ class Grasp:
         polyhedron: the object's shape in the object frame, or ``None`` for bare contacts.
     """
 
-    contacts: tuple[Contact, ...]
+    contacts: tuple[GraspContact, ...]
     polyhedron: Polyhedron | None = None
 
     def __len__(self) -> int:
@@ -79,7 +83,7 @@ class Grasp:
         """The wrench matrix (6, N): column k is ``[n_k; (p_k - o) × n_k / L]``."""
         return wrench_matrix(self.points, self.normals, origin, length_scale)
 
-    def with_contacts(self, contacts: Sequence[Contact]) -> Grasp:
+    def with_contacts(self, contacts: Sequence[GraspContact]) -> Grasp:
         """The same object with other contacts."""
         return Grasp(tuple(contacts), self.polyhedron)
 
@@ -113,7 +117,7 @@ def wrench_matrix(
 
 def contact_on_face(
     polyhedron: Polyhedron, face: int | str, point, tol: float = ON_FACE_TOLERANCE
-) -> Contact:
+) -> GraspContact:
     """A contact at ``point`` on face ``face`` of ``polyhedron``, pushing inwards.
 
     Args:
@@ -144,7 +148,7 @@ def contact_on_face(
             f"contact point {p.tolist()} is on the plane of face {name} but outside the face "
             f"by {worst:.6g} m (expected a point inside the face's edges)"
         )
-    return Contact(p, -polyhedron.normals[k].copy(), k, name)
+    return GraspContact(p, -polyhedron.normals[k].copy(), k, name)
 
 
 def contact_from_point_normal(
@@ -153,7 +157,7 @@ def contact_from_point_normal(
     polyhedron: Polyhedron | None = None,
     tol: float = ON_FACE_TOLERANCE,
     label: str = "",
-) -> Contact:
+) -> GraspContact:
     """A contact from a point and an inward normal, matched to a face when a shape is given.
 
     Args:
@@ -174,12 +178,13 @@ def contact_from_point_normal(
         raise GraspError(f"contact normal: expected a non-zero vector, got {n.tolist()}")
     n = n / norm
     if polyhedron is None:
-        return Contact(p, n, -1, label)
+        return GraspContact(p, n, -1, label)
     for k in range(polyhedron.n_faces):
         if np.allclose(-polyhedron.normals[k], n, atol=max(tol, 1e-9)) and polyhedron.point_on_face(
             p, k, tol
         ):
-            return Contact(p, -polyhedron.normals[k].copy(), k, label or _face_name(polyhedron, k))
+            return GraspContact(p, -polyhedron.normals[k].copy(), k,
+                                label or _face_name(polyhedron, k))
     raise GraspError(
         f"contact at {p.tolist()} with inward normal {np.round(n, 9).tolist()}: no face of the "
         "polyhedron contains this point with this inward normal (expected the point on a face "

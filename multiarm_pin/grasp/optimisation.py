@@ -18,7 +18,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from multiarm_pin.exceptions import GraspError
-from multiarm_pin.grasp.contacts import Contact, Grasp
+from multiarm_pin.grasp.contacts import Grasp, GraspContact
 from multiarm_pin.grasp.form_closure import ferrari_canny_epsilon
 from multiarm_pin.grasp.stability import closure_bound
 from multiarm_pin.model.polyhedron import Polyhedron
@@ -158,7 +158,7 @@ def optimise_grasp(
             best_x, best_loss = res.x, res.fun
     P = points(best_x)
     contacts = tuple(
-        Contact(p, -polyhedron.normals[k].copy(), k, _name(polyhedron, k))
+        GraspContact(p, -polyhedron.normals[k].copy(), k, _name(polyhedron, k))
         for p, k in zip(P, faces, strict=True)
     )
     grasp = Grasp(contacts, polyhedron)

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from multiarm_pin.exceptions import GraspError
-from multiarm_pin.grasp import Contact, form_closure
+from multiarm_pin.grasp import GraspContact, form_closure
 from multiarm_pin.grasp.design import two_corner_box_grasp
 from multiarm_pin.grasp.stability import (
     closure_bound,
@@ -20,7 +20,7 @@ def _slide(g, rng, delta, which=None):
         u = rng.normal(size=2)
         u *= rng.uniform(0, 1) * delta / np.linalg.norm(u)
         c = cs[k]
-        cs[k] = Contact(c.point + T @ u, c.normal, c.face, c.label)
+        cs[k] = GraspContact(c.point + T @ u, c.normal, c.face, c.label)
     return g.with_contacts(cs)
 
 
@@ -62,8 +62,8 @@ def test_linearised_gradients_match_finite_differences():
         for ax in range(2):
             cs_p, cs_m = list(g.contacts), list(g.contacts)
             c = g.contacts[k]
-            cs_p[k] = Contact(c.point + h * T[:, ax], c.normal, c.face, c.label)
-            cs_m[k] = Contact(c.point - h * T[:, ax], c.normal, c.face, c.label)
+            cs_p[k] = GraspContact(c.point + h * T[:, ax], c.normal, c.face, c.label)
+            cs_m[k] = GraspContact(c.point - h * T[:, ax], c.normal, c.face, c.label)
             fd = (linearised_margins(g.with_contacts(cs_p)).measures
                   - linearised_margins(g.with_contacts(cs_m)).measures) / (2 * h)  # fmt: skip
             np.testing.assert_allclose(lm.gradients[:, k, ax], fd, atol=1e-6)
