@@ -1,5 +1,9 @@
 """The output of a design: scenario files, pictures, ``report.md`` and the best design's run.
 
+One concept at several layers: each layer's ``report.py`` (``grasp``, ``study``, ``feasibility``,
+``design``) makes that layer's report of its results.
+
+
 :func:`write_design` writes a results folder (atomically, through
 :class:`~multiarm_pin.app.results_io.ResultsWriter`: locked, staged, published whole)::
 

@@ -1,5 +1,9 @@
 """Whether what a run simulated is physically possible: limits and collisions, with causes.
 
+One concept at several layers: each layer's ``report.py`` (``grasp``, ``study``, ``feasibility``,
+``design``) makes that layer's report of its results.
+
+
 :func:`feasibility_report` checks every recorded sample of a
 :class:`~multiarm_pin.sim.result.SimulationResult` against the arms' joint limits
 (:mod:`.limits`) and for collisions (:mod:`.collisions`) and returns a

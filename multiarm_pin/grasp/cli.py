@@ -1,5 +1,10 @@
 """Command line of the grasp analysis: ``multiarm-pin grasp FILE.yaml`` (or this module).
 
+One concept at several layers: each layer's ``cli.py`` (``grasp``, ``study``, ``design``)
+holds its own subcommand of ``multiarm-pin`` (``configure_parser`` and ``run``), which
+:mod:`multiarm_pin.app.cli` wires into the one command line.
+
+
 FILE is a grasp file or a scenario file (its fingertip contacts, read as a study in mode
 ``grasp`` reads them: :mod:`multiarm_pin.app.grasp_input`). ``configure_parser`` adds the
 arguments to a parser given by the main command line and ``run`` executes them;

@@ -1,5 +1,8 @@
 """Grasp files (YAML), the analysis report, and its picture.
 
+One concept at several layers: each layer's ``report.py`` (``grasp``, ``study``, ``feasibility``,
+``design``) makes that layer's report of its results.
+
 File format (lengths in metres, points in the object frame)::
 
     object: {shape: {type: box, size: [2.0, 1.5, 1.0]}}   # or {type: polyhedron, vertices: [...]}

@@ -1,4 +1,9 @@
-"""``multiarm-pin sweep STUDY.yaml --out DIR [--workers N | --scheduler ADDRESS] [--resume]``."""
+"""``multiarm-pin sweep STUDY.yaml --out DIR [--workers N | --scheduler ADDRESS] [--resume]``.
+
+One concept at several layers: each layer's ``cli.py`` (``grasp``, ``study``, ``design``)
+holds its own subcommand of ``multiarm-pin`` (``configure_parser`` and ``run``), which
+:mod:`multiarm_pin.app.cli` wires into the one command line.
+"""
 
 from __future__ import annotations
 

@@ -1,5 +1,9 @@
 """The report of a study: ``report.md`` and plots of each metric against each parameter.
 
+One concept at several layers: each layer's ``report.py`` (``grasp``, ``study``, ``feasibility``,
+``design``) makes that layer's report of its results.
+
+
 The plots are ``plots/<metric>__vs__<parameter>.png``.
 
 For a verdict metric (``form_closure``, ``within_limits``) the plot shows the fraction of
