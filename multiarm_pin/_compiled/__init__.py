@@ -14,6 +14,14 @@ The kernels' on-disk cache is stamped with the contents of all kernel sources
 (:mod:`.cache`), so that editing a kernel recompiles the kernels that call it.
 """
 
+import warnings as _warnings
+
+from numba.core.errors import NumbaExperimentalFeatureWarning as _Experimental
+
 from multiarm_pin._compiled import cache as _cache
 
 _cache.install()
+# the loops call their stages through function pointers (numba's first-class functions,
+# :mod:`.function_pointers`), which numba flags as experimental at each compile of a call
+_warnings.filterwarnings("ignore", message="First-class function type feature is experimental",
+                         category=_Experimental)

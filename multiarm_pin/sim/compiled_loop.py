@@ -63,6 +63,7 @@ class CompiledLoop:
                      np.zeros((n, m)), np.zeros((n, k)))
         self.separation = np.array([ce.SEPARATION_GAP, ce.SEPARATION_SPEED])
         self._stage_args = None  # evaluate()'s kernel arguments, made once per controller
+        self._stage_pointer = None  # (controller's trajectory table, run_rk4's stage)
         self._zero = np.zeros(s.nv)
         self._tangent_size = 2 * s.nv + layout.OBJECT_STATE_SIZE
         q0 = layout.OBJECT_STATE_SIZE
@@ -152,14 +153,19 @@ class CompiledLoop:
         (traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, active, unilateral,
          q_ref) = self.stepper.controller.kernel_inputs()
         J, dJ, M, nle, H, energy, buf, tau, mu, qdd = self.work
-        return (k0, k1, times, x, self.model.ints, self.model.floats, q_ref, path.arm_table,
-                path.v_starts, path.contact_tables.ints, path.contact_tables.floats,
-                self.params, path.dims, path.N, path.nv_arm, unilateral, traj, pd_gains,
-                null_gains, hold_tool, hold_obj, hold_n, gains, active, self.wrenches,
-                self.separation, J, dJ, M, nle, H, energy, buf, tau, mu, qdd,
-                a_pts, a_d, rec.q, rec.v, rec.p, rec.quat,
-                rec.twist, rec.tau, rec.mu, rec.phi, rec.phi_dot, rec.points, rec.normals,
-                rec.a_o, rec.qdd, rec.violation, rec.wrench, rec.ke, rec.pe, rec.momentum)
+        system = (self.model.ints, self.model.floats, q_ref, path.arm_table, path.v_starts,
+                  path.contact_tables.ints, path.contact_tables.floats, self.params, path.dims,
+                  path.N, path.nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
+                  hold_obj, hold_n, gains, active, self.wrenches)
+        work = (J, dJ, M, nle, H, energy, buf, tau, mu, qdd, a_pts, a_d)
+        if self._stage_pointer is None or self._stage_pointer[0] is not traj:
+            # the stage for these types (made once per controller input, whose arrays are the
+            # only ones that may change between runs)
+            self._stage_pointer = (traj, kernels.stage_function(x, *system, *work))
+        return (k0, k1, times, x, *system, self.separation, *work, rec.q, rec.v, rec.p,
+                rec.quat, rec.twist, rec.tau, rec.mu, rec.phi, rec.phi_dot, rec.points,
+                rec.normals, rec.a_o, rec.qdd, rec.violation, rec.wrench, rec.ke, rec.pe,
+                rec.momentum, self._stage_pointer[1])
 
     def example_arguments(self, state: SystemState, steps: int = 2) -> tuple:
         """The arguments :meth:`run` would pass for ``steps`` steps of 1 ms from ``state``.

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from multiarm_pin._compiled import contact_loop as kernels
-from multiarm_pin._compiled import layout, precompiled
+from multiarm_pin._compiled import layout
 from multiarm_pin.dynamics import mlcp
 from multiarm_pin.sim import contact_events as ce
 from multiarm_pin.sim import event_location as el
@@ -162,7 +162,7 @@ class ContactLoop:
         self.n_onsets = np.zeros(1, np.int64)
         self.q_hold = np.zeros(nq)
         self.last_status = kernels.STAGE_OK
-        self._kernel = None  # (record, the kernel checked for its arguments' types)
+        self._fn = None  # (controller tuple, the kernel's stage functions for its types)
         self._kept_controller = None  # (controller inputs, the kernel's controller tuple)
         self._zero_x = np.zeros(nv)
 
@@ -252,7 +252,6 @@ class ContactLoop:
              np.zeros((n, m), np.uint8), np.zeros((n, m), bool), np.zeros((n, m), bool),
              self._free_gains(gains))
         self._kept_controller = (inputs, C)
-        self._kernel = None  # checked again against the module's types
         return C
 
     @staticmethod
@@ -271,8 +270,11 @@ class ContactLoop:
         Rec = (rec.q, rec.v, rec.p, rec.quat, rec.twist, rec.tau, rec.mu, rec.phi,
                rec.phi_dot, rec.points, rec.normals, rec.a_o, rec.qdd, rec.violation,
                rec.wrench, rec.ke, rec.pe, rec.momentum, rec.active, codes)
+        if self._fn is None or self._fn[0] is not C:  # the stages, for these types
+            self._fn = (C, kernels.stage_functions(x, active, self.S, C, self.W, self._O,
+                                                   self.K[0]))
         return (k0, k1, times, x, active, self.S, C, self.W, self._O, self.K, self.Z, self.L,
-                self.I, self.events, self.n_events, self.reserve, Rec)
+                self.I, self.events, self.n_events, self.reserve, Rec, self._fn[1])
 
     def example_arguments(self, state: SystemState, steps: int = 2) -> tuple:
         """The arguments :meth:`run` would pass for ``steps`` steps of 1 ms from ``state``.
@@ -313,11 +315,7 @@ class ContactLoop:
         active = np.array(stepper.active, dtype=bool)
         codes = np.zeros(len(times), np.int64)
         args = self._arguments(rec, x, times, k0, k1, C, active, codes)
-        if self._kernel is None or self._kernel[0] is not rec:
-            # the arguments' types are fixed by construction for this loop, its controller
-            # tuple and its record: checked once against the precompiled module's
-            self._kernel = (rec, precompiled.kernel_for("run_contact_rk4", args))
-        status, k = self._kernel[1](*args)
+        status, k = kernels.run_contact_rk4(*args)
         self.last_status = int(status)
         k = int(k)
         # the samples recorded: up to k, and k itself when its step failed (it is recorded
