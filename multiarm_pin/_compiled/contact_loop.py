@@ -473,6 +473,17 @@ def stage_functions(x, active, sy, ctl, wk, out, d):
     return stage, rows, torques, lcp
 
 
+def advance_function(x, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev, fn):
+    """The ``advance`` argument of :func:`run_contact_rk4`.
+
+    :func:`_advance_with_events` compiled once for the types of these arguments (``fn`` from
+    :func:`stage_functions`), called through its address.
+    """
+    return pointer(_advance_with_events,
+                   (0.0, x, 0.0, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev, fn),
+                   numba.types.int64)
+
+
 # ------------------------------------------------------------------ steps and events
 @njit(cache=True, error_model="numpy")
 def _illinois(theta, value, lo, f_lo, hi, f_hi, side):  # pragma: no cover - compiled
@@ -924,7 +935,7 @@ def _record_sample(s, t, x, active, sy, wk, out, solver, Rec):  # pragma: no cov
 
 @njit(cache=True, error_model="numpy")
 def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev,
-                    reserve, Rec, fn):  # pragma: no cover - compiled
+                    reserve, Rec, fn, advance):  # pragma: no cover - compiled
     """RK4 with contact events from sample ``k0``, recording samples ``k0 .. k1 - 1``.
 
     As :func:`~multiarm_pin.sim.simulation.simulate` with the stepper: at each sample the
@@ -954,6 +965,7 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         Rec: the record arrays (``Recorder``'s, and the active set and solver codes).
         fn: ``(contact_stage, _rows_and_blocks, torques, lcp)`` as :func:`stage_functions`
             makes them (compiled once, called through their addresses).
+        advance: :func:`_advance_with_events`, likewise (:func:`advance_function`).
 
     Returns:
         ``(status, k)``: ``STAGE_OK`` and ``k1``, or the reason and the sample whose step the
@@ -985,8 +997,8 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         active0[:] = active
         q_hold0[:] = q_hold
         n0, holding0, onsets0 = n_ev[0], control[CTL_HOLDING], n_onsets[0]
-        st = _advance_with_events(t, x, times[s + 1], active, sy, ctl, wk, out, rk, st0, loc,
-                                  imp, ev, n_ev, fn)
+        st = advance(t, x, times[s + 1], active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev,
+                     fn)
         if st != STAGE_OK:
             x[:] = x0
             active[:] = active0

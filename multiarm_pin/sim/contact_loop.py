@@ -271,10 +271,12 @@ class ContactLoop:
                rec.phi_dot, rec.points, rec.normals, rec.a_o, rec.qdd, rec.violation,
                rec.wrench, rec.ke, rec.pe, rec.momentum, rec.active, codes)
         if self._fn is None or self._fn[0] is not C:  # the stages, for these types
-            self._fn = (C, kernels.stage_functions(x, active, self.S, C, self.W, self._O,
-                                                   self.K[0]))
+            fn = kernels.stage_functions(x, active, self.S, C, self.W, self._O, self.K[0])
+            self._fn = (C, fn, kernels.advance_function(
+                x, active, self.S, C, self.W, self._O, self.K, self.Z, self.L, self.I,
+                self.events, self.n_events, fn))
         return (k0, k1, times, x, active, self.S, C, self.W, self._O, self.K, self.Z, self.L,
-                self.I, self.events, self.n_events, self.reserve, Rec, self._fn[1])
+                self.I, self.events, self.n_events, self.reserve, Rec, *self._fn[1:])
 
     def example_arguments(self, state: SystemState, steps: int = 2) -> tuple:
         """The arguments :meth:`run` would pass for ``steps`` steps of 1 ms from ``state``.
