@@ -10,7 +10,9 @@ recorder listens to ``numba:compile`` events, then prints the wall and CPU time 
 figure), the per-function table of exclusive compile seconds
 (own compile, nested compiles of callees excluded), their sum, the number of compiled
 specialisations (each is a full compile), and how much of the compile held numba's LLVM lock
-(LLVM passes, linking and code generation; the rest is numba's typing and lowering). With a warm cache the table is (nearly) empty.
+(LLVM passes, linking and code generation; the rest is numba's typing and lowering). With a
+warm cache the table is (nearly) empty. The loops' stages, compiled as ``cfunc`` function
+pointers, are not dispatcher compiles: their own time is in the total only.
 """
 
 from __future__ import annotations

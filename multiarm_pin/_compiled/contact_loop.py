@@ -25,6 +25,11 @@ row is active, there are no supports and every arm has as many joints as rows, a
 every unilateral multiplier is ``>= 0``; otherwise the active-set kernel
 (:func:`~multiarm_pin.dynamics.delassus.contact_kernel`).
 
+The evaluation, the rows alone, the controller's torques, the active-set kernel and the step
+with its events are handed to :func:`run_contact_rk4` as function pointers
+(:func:`stage_functions`, :func:`advance_function`): each is compiled once, on its own, and
+only the controller a run uses.
+
 Whatever the kernel cannot decide as the Python path would (a doubtful controller or solver
 case, NaN, too many events in one step) it hands back: the status and the sample whose step
 the Python stepper must take, with the state, the active set, the events and the

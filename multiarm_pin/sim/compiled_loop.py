@@ -26,6 +26,8 @@ import numpy as np
 
 from multiarm_pin._compiled import closed_loop as kernels
 from multiarm_pin._compiled import layout, precompiled
+from multiarm_pin.dynamics.solve import SOLVERS
+from multiarm_pin.dynamics.unilateral import UNILATERAL_SOLVERS
 from multiarm_pin.model.rigid_object import ObjectState
 from multiarm_pin.sim import contact_events as ce
 from multiarm_pin.sim.closed_loop import FUSED_SOLVERS
@@ -33,10 +35,11 @@ from multiarm_pin.sim.disturbances import WrenchSchedule
 from multiarm_pin.sim.result import Recorder
 from multiarm_pin.system import SystemState
 
-SOLVER_NAMES = {False: "object_first", True: "bilateral"}
+RECORDED_SOLVER = {False: SOLVERS["object_first"].name, True: UNILATERAL_SOLVERS[0]}
 """The solver recorded at the kernel's samples (the result's ``solver``), as the Python path
-names it: ``object_first`` for bilateral rows; with unilateral rows, all pushing, the mixed
-LCP's fast path, ``bilateral`` (the same object-first solve)."""
+names it, by whether the run has unilateral rows: ``object_first`` (the registry's) for
+bilateral rows; with unilateral rows, all pushing, the mixed LCP's fast path ``bilateral``
+(the same object-first solve)."""
 
 
 class CompiledLoop:
@@ -231,7 +234,7 @@ class CompiledLoop:
         """What the kernel does not record at samples ``done``: times, active set, solver."""
         rec.t[done] = times[done]
         rec.active[done] = self.stepper.active
-        rec.solver[done] = SOLVER_NAMES[self.stepper.unilateral]
+        rec.solver[done] = RECORDED_SOLVER[self.stepper.unilateral]
         rec.mark_recorded(done.stop)
 
 
@@ -260,4 +263,4 @@ def _entry_point(kernel, args: tuple):
     return kernel.compile(tuple(numba.typeof(a) for a in args))
 
 
-__all__ = ["SOLVER_NAMES", "CompiledLoop", "state_from_vector"]
+__all__ = ["RECORDED_SOLVER", "CompiledLoop", "state_from_vector"]

@@ -23,6 +23,7 @@ import numpy as np
 from multiarm_pin._compiled import contact_loop as kernels
 from multiarm_pin._compiled import layout
 from multiarm_pin.dynamics import mlcp
+from multiarm_pin.dynamics.unilateral import UNILATERAL_SOLVERS
 from multiarm_pin.sim import contact_events as ce
 from multiarm_pin.sim import event_location as el
 from multiarm_pin.sim.compiled_loop import state_from_vector
@@ -30,9 +31,9 @@ from multiarm_pin.sim.disturbances import WrenchSchedule
 from multiarm_pin.sim.result import Recorder
 from multiarm_pin.system import SystemState
 
-SOLVER_NAMES = {kernels.SOLVER_BILATERAL: "bilateral",
-                kernels.SOLVER_ACTIVE_SET: "active_set"}
-"""The solver recorded at the kernel's samples, as ``solve_unilateral`` names it."""
+RECORDED_SOLVERS = UNILATERAL_SOLVERS
+"""The solver recorded at the kernel's samples, by the kernel's code (``SOLVER_BILATERAL``,
+``SOLVER_ACTIVE_SET``): the names ``solve_unilateral`` records."""
 
 EVENT_KINDS = {kernels.EVENT_SEPARATION: "separation", kernels.EVENT_TOUCHDOWN: "touchdown"}
 """Event kind codes of the kernel's table."""
@@ -325,7 +326,7 @@ class ContactLoop:
         done = slice(k0, k)
         rec.t[done] = times[done]
         for j in range(k0, k):
-            rec.solver[j] = SOLVER_NAMES[int(codes[j])]
+            rec.solver[j] = RECORDED_SOLVERS[int(codes[j])]
         if k > k0:
             rec.mark_recorded(k)
         for row in self.events[:int(self.n_events[0])]:
@@ -345,4 +346,4 @@ class ContactLoop:
         return k, state_from_vector(x, s.nq, s.nv)
 
 
-__all__ = ["EVENT_KINDS", "SOLVER_NAMES", "ContactLoop", "rules_vector"]
+__all__ = ["EVENT_KINDS", "RECORDED_SOLVERS", "ContactLoop", "rules_vector"]
