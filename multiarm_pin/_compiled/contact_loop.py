@@ -74,7 +74,7 @@ from multiarm_pin._compiled.evaluate import (
     evaluate_system,
     quaternion_rotation,
 )
-from multiarm_pin._compiled.function_pointers import pointer
+from multiarm_pin._compiled.function_pointers import pointer, type_key
 from multiarm_pin._compiled.layout import (
     DIMS_K,
     DIMS_M,
@@ -461,9 +461,13 @@ def stage_functions(x, active, sy, ctl, wk, out, d):
     called through its address (:mod:`~multiarm_pin._compiled.function_pointers`): the
     loop's module, and the stage's, do not compile them again.
     """
+    mode = int(ctl[0][CTL_MODE])
+    key = (mode, type_key((x, active, sy, ctl, wk, out, d)))
+    found = _stages.get(key)  # the same tuple for the same types: a stable argument type key
+    if found is not None:
+        return found
     int64 = numba.types.int64
     rules = sy[19]
-    mode = int(ctl[0][CTL_MODE])
     torques = pointer(_torques if mode == CONTROL_OBJECT_PD else _zero_torques,
                       (0.0, x, active, sy, ctl, wk, out), int64)
     a_o, qdd_c, mu, Av = out[0], out[1], out[2], out[4]
@@ -475,7 +479,11 @@ def stage_functions(x, active, sy, ctl, wk, out, d):
     stage = pointer(contact_stage, (0.0, x, active, sy, ctl, wk, out, d, torques, lcp),
                     numba.types.UniTuple(int64, 2))
     rows = pointer(_rows_and_blocks, (x, sy, wk), numba.types.boolean)
-    return stage, rows, torques, lcp
+    found = _stages[key] = (stage, rows, torques, lcp)
+    return found
+
+
+_stages: dict = {}  # (controller mode, type_key of the arguments) -> stage_functions' tuple
 
 
 def advance_function(x, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev, fn):

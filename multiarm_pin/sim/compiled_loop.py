@@ -21,11 +21,11 @@ results equal the Python path's to round-off (tests: ``tests/test_compiled_loop.
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from multiarm_pin._compiled import closed_loop as kernels
 from multiarm_pin._compiled import layout, precompiled
+from multiarm_pin._compiled.function_pointers import entry_point
 from multiarm_pin.dynamics.solve import SOLVERS
 from multiarm_pin.dynamics.unilateral import UNILATERAL_SOLVERS
 from multiarm_pin.model.rigid_object import ObjectState
@@ -67,6 +67,7 @@ class CompiledLoop:
         self.separation = np.array([ce.SEPARATION_GAP, ce.SEPARATION_SPEED])
         self._stage_args = None  # evaluate()'s kernel arguments, made once per controller
         self._stage_pointer = None  # (controller's trajectory table, run_rk4's stage)
+        self._kernel = None  # (self._stage_pointer, the kernel to call with these types)
         self._zero = np.zeros(s.nv)
         self._tangent_size = 2 * s.nv + layout.OBJECT_STATE_SIZE
         q0 = layout.OBJECT_STATE_SIZE
@@ -139,7 +140,15 @@ class CompiledLoop:
         a_pts = np.zeros(ctrl.hold_points_in_tool.shape)
         a_d = np.zeros(6)
         args = self._arguments(rec, x, times, k0, k1, a_pts, a_d)
-        status, k = precompiled.run_rk4_for(args)(*args)
+        if self._kernel is None or self._kernel[0] is not self._stage_pointer:
+            # the precompiled module's, or the JIT kernel's entry point for these types (fixed
+            # by construction for this loop: numba's dispatch would type the stage's function
+            # pointer again at every call)
+            kernel = precompiled.run_rk4_for(args)
+            if kernel is kernels.run_rk4:
+                kernel = entry_point(kernel, args)
+            self._kernel = (self._stage_pointer, kernel)
+        status, k = self._kernel[1](*args)
         tau, mu, qdd = self.work[7:]
         self.last_status = int(status)
         k = int(k)
@@ -216,7 +225,7 @@ class CompiledLoop:
                                  np.empty(layout.REFERENCE_SIZE), np.empty((3, 3)),
                                  np.empty((n, k))), ctrl)
             kept = self._stage_args
-            self._stage = _entry_point(
+            self._stage = entry_point(
                 kernels.closed_loop_stage,
                 (0.0, self._x, True, *kept[0], np.empty(self._tangent_size)))
         o = state.obj
@@ -250,17 +259,6 @@ def state_from_vector(x: np.ndarray, nq: int, nv: int) -> SystemState:
                                    x[layout.X_TWIST:layout.X_TWIST + 6].copy()))
 
 
-def _entry_point(kernel, args: tuple):
-    """The compiled specialisation of ``kernel`` for exactly the types of ``args``.
-
-    Called without numba's dispatch, whose type matching costs ~0.13 us per argument (5 us
-    for the stage's 41); ``kernel`` itself when it is not compiled (``NUMBA_DISABLE_JIT``).
-    Compiled or loaded from the cache here, not run. Only for arguments whose types are
-    fixed by construction (the loop's own arrays): the entry point does not check them.
-    """
-    if not hasattr(kernel, "overloads"):
-        return kernel
-    return kernel.compile(tuple(numba.typeof(a) for a in args))
 
 
 __all__ = ["RECORDED_SOLVER", "CompiledLoop", "state_from_vector"]

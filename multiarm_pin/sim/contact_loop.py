@@ -22,6 +22,7 @@ import numpy as np
 
 from multiarm_pin._compiled import contact_loop as kernels
 from multiarm_pin._compiled import layout
+from multiarm_pin._compiled.function_pointers import entry_point
 from multiarm_pin.dynamics import mlcp
 from multiarm_pin.dynamics.unilateral import UNILATERAL_SOLVERS
 from multiarm_pin.sim import contact_events as ce
@@ -164,6 +165,7 @@ class ContactLoop:
         self.q_hold = np.zeros(nq)
         self.last_status = kernels.STAGE_OK
         self._fn = None  # (controller tuple, the kernel's stage functions for its types)
+        self._kernel = None  # (self._fn, the kernel's entry point for these types)
         self._kept_controller = None  # (controller inputs, the kernel's controller tuple)
         self._zero_x = np.zeros(nv)
 
@@ -318,7 +320,12 @@ class ContactLoop:
         active = np.array(stepper.active, dtype=bool)
         codes = np.zeros(len(times), np.int64)
         args = self._arguments(rec, x, times, k0, k1, C, active, codes)
-        status, k = kernels.run_contact_rk4(*args)
+        if self._kernel is None or self._kernel[0] is not self._fn:
+            # the arguments' types are fixed by construction for this loop and its stages:
+            # the compiled entry point, without the dispatcher's type matching (which types
+            # the function pointers again at every call)
+            self._kernel = (self._fn, entry_point(kernels.run_contact_rk4, args))
+        status, k = self._kernel[1](*args)
         self.last_status = int(status)
         k = int(k)
         # the samples recorded: up to k, and k itself when its step failed (it is recorded
