@@ -4,7 +4,7 @@ PYTHON ?= python3.11
 VENV := .venv
 STAMP := $(VENV)/.installed-$(shell cksum pyproject.toml | cut -d' ' -f1)
 
-.PHONY: demo test portability lint browser venv clean
+.PHONY: demo test portability lint browser venv precompile clean
 
 $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "$(PYTHON) not found: install Python 3.11 or run make PYTHON=/path/to/python3.11"; exit 1; }
@@ -14,22 +14,17 @@ $(STAMP): pyproject.toml
 	rm -f $(VENV)/.installed-*
 	touch $(STAMP)
 
-# The simulation loops (closed loop, contact loop) compiled ahead of time for this machine (multiarm_pin/_compiled/precompiled.py),
-# so that a first run compiles nothing; rebuilt when a kernel source changes. Without a C
-# compiler it is skipped with a message, and the kernels are compiled at first use instead.
-AOT := $(VENV)/.precompiled
-KERNEL_SOURCES := $(wildcard multiarm_pin/_compiled/*.py) multiarm_pin/dynamics/force_qp.py \
-	multiarm_pin/dynamics/delassus.py multiarm_pin/dynamics/mlcp.py
+# Optional: the closed loop compiled ahead of time for this machine
+# (multiarm_pin/_compiled/precompiled.py), so that the first run of a scenario whose contacts
+# all touch compiles nothing. Not on the path of demo, test or pip install: without it the
+# kernels are compiled at first use and cached on disk. Needs a C compiler.
+precompile: $(STAMP)
+	$(VENV)/bin/multiarm-pin precompile --if-stale
 
-$(AOT): $(STAMP) $(KERNEL_SOURCES)
-	@echo "compiling the simulation loops ahead of time (a few minutes, once)"
-	-$(VENV)/bin/multiarm-pin precompile --if-stale
-	touch $(AOT)
-
-venv: $(STAMP) $(AOT)
+venv: $(STAMP)
 
 ## The main job: run the default scenario, write results and a replay page.
-demo: $(STAMP) $(AOT)
+demo: $(STAMP)
 	$(VENV)/bin/multiarm-pin demo --out results/demo
 
 # Tests of the compiled (numba) kernels, run a second time as plain Python with
@@ -43,7 +38,7 @@ KERNEL_TESTS := tests/test_kernels.py tests/test_arm_set_fast_path.py tests/test
 
 ## The whole test suite (installs headless Chromium for the browser test when it can),
 ## then the compiled kernels' tests again without compilation (bounds-checked).
-test: $(STAMP) $(AOT) browser
+test: $(STAMP) browser
 	$(VENV)/bin/python -m pytest -q
 	NUMBA_DISABLE_JIT=1 $(VENV)/bin/python -m pytest -q -p no:cacheprovider $(KERNEL_TESTS)
 

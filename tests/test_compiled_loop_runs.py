@@ -92,4 +92,4 @@ def test_an_interrupt_keeps_the_samples_so_far(monkeypatch):
     assert 0 < n < len(full.t)
     for field in RUN_FIELDS:
         np.testing.assert_array_equal(getattr(part, field), getattr(full, field)[:n])
-    assert (part.solver == compiled_loop.SOLVER_NAMES[False]).all()
+    assert (part.solver == compiled_loop.RECORDED_SOLVER[False]).all()

@@ -75,6 +75,13 @@ def test_rules_are_the_event_modules():
     assert len(rules) == len(k.EVENT_CONSTANTS)
 
 
+def test_recorded_solver_names_are_the_unilateral_solves():
+    """The kernel's solver codes name what ``solve_unilateral`` records on the same path."""
+    k = contact_loop.kernels
+    assert contact_loop.RECORDED_SOLVERS[k.SOLVER_BILATERAL] == "bilateral"
+    assert contact_loop.RECORDED_SOLVERS[k.SOLVER_ACTIVE_SET] == "active_set"
+
+
 def test_a_wrench_schedule_of_another_kind_stays_on_the_stepper():
     """The loops read a schedule's intervals as a table: a subclass with its own ``__call__``
     (here a ramp) would be read wrongly, so neither loop takes such a run."""

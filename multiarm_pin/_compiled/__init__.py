@@ -7,13 +7,23 @@ module per reference: :mod:`.linalg` (Cholesky, LAPACK), :mod:`.arm_terms`
 (all of them fused on one buffer), :mod:`.controller_kernels` (``ObjectPD.reference``),
 :mod:`.rigid_body` (Pinocchio's pass of ``ArmSet.pinocchio_pass``: ``J``, ``dJ``, ``M``,
 ``nle``, tool placements; ``integrate``, ``difference``), :mod:`.trajectory`
-(``MinimumJerkTrajectory.motion``) and :mod:`.closed_loop` (the closed-loop evaluation and
-RK4 steps of ``simulate``).
+(``MinimumJerkTrajectory.motion``), :mod:`.closed_loop` (the closed-loop evaluation and
+RK4 steps of ``simulate``) and :mod:`.contact_loop` (RK4 with contact events). The loops call
+their stages through function pointers (:mod:`.function_pointers`), so that each stage is
+compiled once.
 The layout of every array they exchange with Python is defined once in :mod:`.layout`.
 The kernels' on-disk cache is stamped with the contents of all kernel sources
 (:mod:`.cache`), so that editing a kernel recompiles the kernels that call it.
 """
 
+import warnings as _warnings
+
+from numba.core.errors import NumbaExperimentalFeatureWarning as _Experimental
+
 from multiarm_pin._compiled import cache as _cache
 
 _cache.install()
+# the loops call their stages through function pointers (numba's first-class functions,
+# :mod:`.function_pointers`), which numba flags as experimental at each compile of a call
+_warnings.filterwarnings("ignore", message="First-class function type feature is experimental",
+                         category=_Experimental)

@@ -30,11 +30,13 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 from numba import njit
 
 from multiarm_pin._compiled.controller_kernels import PD_OK, object_pd_step
 from multiarm_pin._compiled.evaluate import evaluate_system, quaternion_rotation
+from multiarm_pin._compiled.function_pointers import pointer
 from multiarm_pin._compiled.layout import (
     DIMS_K,
     DIMS_M,
@@ -262,6 +264,26 @@ def closed_loop_stage(t, x, arm_pass, model_ints, model_floats, q_ref, err, J, d
     return STAGE_OK
 
 
+def stage_function(x, model_ints, model_floats, q_ref, arm_ints, v_starts, ints, floats,
+                   params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
+                   hold_obj, hold_n, gains, active, wrenches, work_J, work_dJ, work_M, work_nle,
+                   work_H, work_energy, buf, tau, mu, qdd, a_pts, a_d):
+    """The ``evaluate`` argument of :func:`run_rk4` for its arguments (same names).
+
+    :func:`closed_loop_stage` compiled once for the types :func:`run_rk4` passes it and
+    called through its address (:mod:`~multiarm_pin._compiled.function_pointers`): the
+    loop's module does not compile the stage again.
+    """
+    n, k = tau.shape
+    nd = 2 * q_ref.shape[0] + OBJECT_STATE_SIZE  # any size: only the types count
+    example = (0.0, x, True, model_ints, model_floats, q_ref, np.empty(work_J.shape[1]), work_J,
+               work_dJ, work_M, work_nle, work_H, work_energy, arm_ints, v_starts, ints, floats,
+               params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
+               hold_obj, hold_n, gains, active, wrenches, buf, tau, mu, qdd, a_pts, a_d,
+               np.empty(REFERENCE_SIZE), np.empty((3, 3)), np.empty((n, k)), np.empty(nd))
+    return pointer(closed_loop_stage, example, numba.types.int64)
+
+
 @njit(cache=True, error_model="numpy")
 def _advance(model_ints, x, d, h, hd, out):  # pragma: no cover - compiled
     """The state ``h`` [s] along the tangent ``d`` into ``out`` (``Stepper.advance``)."""
@@ -296,7 +318,7 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
             hold_obj, hold_n, gains, active, wrenches, separation, work_J, work_dJ, work_M,
             work_nle, work_H, work_energy, buf, tau, mu, qdd, a_pts, a_d, r_q, r_v, r_p, r_quat,
             r_tw, r_tau, r_mu, r_phi, r_phi_dot, r_points, r_normals, r_a_o, r_qdd, r_violation,
-            r_wrench, r_kinetic, r_potential, r_momentum):  # pragma: no cover - compiled
+            r_wrench, r_kinetic, r_potential, r_momentum, evaluate):  # pragma: no cover - compiled
     """RK4 steps from sample ``k0``, recording samples ``k0 .. k1 - 1``.
 
     Sample ``k`` is evaluated (stage 1), recorded, and unless it is the grid's last, the state
@@ -363,6 +385,8 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
         r_potential: (T,) their potential energy ``-Σ m g·c`` [J] (zero at the origin).
         r_momentum: (T, 6) their total momentum ``[linear; angular about the world
             origin]`` [kg m/s, kg m²/s].
+        evaluate: :func:`closed_loop_stage`, as :func:`stage_function` makes it (compiled
+            once, called through its address) or the kernel itself.
 
     Returns:
         ``(status, k)``: ``STAGE_OK`` and ``k1`` when every sample was done, else the reason
@@ -394,7 +418,7 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
                 ts = t + h if stage == 3 else t + 0.5 * h
                 _advance(model_ints, x, ds[stage - 1], h if stage == 3 else 0.5 * h, hd, xs)
                 xe = xs
-            st = closed_loop_stage(
+            st = evaluate(
                 ts, xe, True, model_ints, model_floats, q_ref, err, work_J, work_dJ, work_M,
                 work_nle, work_H, work_energy, arm_ints, v_starts, ints, floats, params, dims,
                 N, nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n,
@@ -531,4 +555,5 @@ def record_energy(s, x, params, energy, arms, r_kinetic, r_potential, r_momentum
 
 __all__ = ["NULL_KD", "NULL_KP", "STAGE_CONTROLLER", "STAGE_NOT_FINITE", "STAGE_OK",
            "STAGE_RELEASE", "STAGE_RELEASE_IN_STEP", "STAGE_SEPARATION", "STAGE_SOLVE",
-           "closed_loop_stage", "joint_pd", "record_energy", "record_state", "run_rk4", "tangent"]
+           "closed_loop_stage", "joint_pd", "record_energy", "record_state", "run_rk4",
+           "stage_function", "tangent"]

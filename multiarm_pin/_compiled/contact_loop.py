@@ -25,6 +25,11 @@ row is active, there are no supports and every arm has as many joints as rows, a
 every unilateral multiplier is ``>= 0``; otherwise the active-set kernel
 (:func:`~multiarm_pin.dynamics.delassus.contact_kernel`).
 
+The evaluation, the rows alone, the controller's torques, the active-set kernel and the step
+with its events are handed to :func:`run_contact_rk4` as function pointers
+(:func:`stage_functions`, :func:`advance_function`): each is compiled once, on its own, and
+only the controller a run uses.
+
 Whatever the kernel cannot decide as the Python path would (a doubtful controller or solver
 case, NaN, too many events in one step) it hands back: the status and the sample whose step
 the Python stepper must take, with the state, the active set, the events and the
@@ -35,6 +40,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 from numba import njit
 
@@ -68,6 +74,7 @@ from multiarm_pin._compiled.evaluate import (
     evaluate_system,
     quaternion_rotation,
 )
+from multiarm_pin._compiled.function_pointers import pointer, type_key
 from multiarm_pin._compiled.layout import (
     DIMS_K,
     DIMS_M,
@@ -357,13 +364,25 @@ def _torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def contact_stage(t, x, active, sy, ctl, wk, out, d):  # pragma: no cover - compiled
+def _zero_torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compiled
+    """No controller: zero torques ``out.tau`` (the arguments as :func:`_torques`'s)."""
+    tau = out[5]
+    for i in range(tau.shape[0]):
+        for a in range(tau.shape[1]):
+            tau[i, a] = 0.0
+    return STAGE_OK
+
+
+@njit(cache=True, error_model="numpy")
+def contact_stage(t, x, active, sy, ctl, wk, out, d, torques, lcp
+                  ):  # pragma: no cover - compiled
     """One evaluation at ``(t, x)`` on the active set, and its tangent ``d``.
 
-    The rows and blocks (:func:`_rows_and_blocks`), the controller (:func:`_torques`), the
-    external wrench on ``h_o``, then the mixed LCP as ``solve_unilateral`` (see the module
-    docstring). Outputs in ``out``: ``a_o`` (6,), ``qdd_c`` (B, kc), ``mu`` and ``phi_dd``
-    (B, R), ``tau`` (n, k); the rows in ``wk``.
+    The rows and blocks (:func:`_rows_and_blocks`), the controller (``torques``:
+    :func:`_torques` or :func:`_zero_torques`), the external wrench on ``h_o``, then the
+    mixed LCP as ``solve_unilateral`` (see the module docstring; ``lcp``:
+    :func:`~multiarm_pin.dynamics.delassus.contact_kernel`). Outputs in ``out``: ``a_o``
+    (6,), ``qdd_c`` (B, kc), ``mu`` and ``phi_dd`` (B, R), ``tau`` (n, k); the rows in ``wk``.
 
     Returns:
         ``(status, solver code)``.
@@ -375,7 +394,7 @@ def contact_stage(t, x, active, sy, ctl, wk, out, d):  # pragma: no cover - comp
     (a_o, qdd_c, mu, phi_dd, Av, tau, err, z, ref, E, mu_p, qdd_p, a_pts, a_d) = out
     if not _rows_and_blocks(x, sy, wk):
         return STAGE_NOT_FINITE, 0
-    st = _torques(t, x, active, sy, ctl, wk, out)
+    st = torques(t, x, active, sy, ctl, wk, out)
     if st != STAGE_OK:
         return st, 0
     k, nv, n = dims[DIMS_K], dims[DIMS_NV], dims[DIMS_N]
@@ -418,8 +437,8 @@ def contact_stage(t, x, active, sy, ctl, wk, out, d):  # pragma: no cover - comp
                         acc += Wc[b, j, r] * qdd_c[b, j]
                     phi_dd[b, r] = acc - cc[b, r]
     if not done:
-        s = contact_kernel(Mc, hc, Wc, W_oc, cc, M_o, hw, nv_c, N_c, uni_c, active, active,
-                           False, rules[R_DEP], rules[R_VIOL], rules[R_CONS], a_o, qdd_c, mu, Av)[0]
+        s = lcp(Mc, hc, Wc, W_oc, cc, M_o, hw, nv_c, N_c, uni_c, active, active, False,
+                rules[R_DEP], rules[R_VIOL], rules[R_CONS], a_o, qdd_c, mu, Av)[0]
         if s != LCP_OK:
             return STAGE_SOLVE, 0
         for b in range(B):
@@ -430,6 +449,52 @@ def contact_stage(t, x, active, sy, ctl, wk, out, d):  # pragma: no cover - comp
             return STAGE_NOT_FINITE, 0
     tangent(x, nv, nv_arm, v_starts, qdd_c, a_o, d)
     return STAGE_OK, solver
+
+
+def stage_functions(x, active, sy, ctl, wk, out, d):
+    """The ``fn`` argument of :func:`run_contact_rk4`, for the types of these arguments.
+
+    ``(contact_stage, _rows_and_blocks, torques, lcp)``: the controller's torques
+    (:func:`_torques` for ``object_pd``, :func:`_zero_torques` without a controller: only the
+    one a run uses is compiled) and the active-set kernel
+    (:func:`~multiarm_pin.dynamics.delassus.contact_kernel`). Each is compiled once and
+    called through its address (:mod:`~multiarm_pin._compiled.function_pointers`): the
+    loop's module, and the stage's, do not compile them again.
+    """
+    mode = int(ctl[0][CTL_MODE])
+    key = (mode, type_key((x, active, sy, ctl, wk, out, d)))
+    found = _stages.get(key)  # the same tuple for the same types: a stable argument type key
+    if found is not None:
+        return found
+    int64 = numba.types.int64
+    rules = sy[19]
+    torques = pointer(_torques if mode == CONTROL_OBJECT_PD else _zero_torques,
+                      (0.0, x, active, sy, ctl, wk, out), int64)
+    a_o, qdd_c, mu, Av = out[0], out[1], out[2], out[4]
+    lcp = pointer(contact_kernel,
+                  (wk[7], wk[8], wk[9], wk[10], wk[11], wk[12], a_o, sy[15], sy[16], sy[13],
+                   active, active, False, rules[R_DEP], rules[R_VIOL], rules[R_CONS], a_o,
+                   qdd_c, mu, Av),
+                  numba.types.Tuple((int64, int64, int64, int64, numba.types.float64)))
+    stage = pointer(contact_stage, (0.0, x, active, sy, ctl, wk, out, d, torques, lcp),
+                    numba.types.UniTuple(int64, 2))
+    rows = pointer(_rows_and_blocks, (x, sy, wk), numba.types.boolean)
+    found = _stages[key] = (stage, rows, torques, lcp)
+    return found
+
+
+_stages: dict = {}  # (controller mode, type_key of the arguments) -> stage_functions' tuple
+
+
+def advance_function(x, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev, fn):
+    """The ``advance`` argument of :func:`run_contact_rk4`.
+
+    :func:`_advance_with_events` compiled once for the types of these arguments (``fn`` from
+    :func:`stage_functions`), called through its address.
+    """
+    return pointer(_advance_with_events,
+                   (0.0, x, 0.0, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev, fn),
+                   numba.types.int64)
 
 
 # ------------------------------------------------------------------ steps and events
@@ -448,15 +513,15 @@ def _illinois(theta, value, lo, f_lo, hi, f_hi, side):  # pragma: no cover - com
         f_lo *= 0.5
     return lo, f_lo, theta, value, -1
 @njit(cache=True, error_model="numpy")
-def _step(t, x, d1, h, active, sy, ctl, wk, out, rk, x_new):  # pragma: no cover - compiled
+def _step(t, x, d1, h, active, sy, ctl, wk, out, rk, x_new, fn):  # pragma: no cover - compiled
     """RK4 from ``x`` (tangent ``d1`` there) with step ``h`` into ``x_new`` (``Stepper.step``)."""
     model_ints = sy[0]
     d2, d3, d4, hd, xs, dsum = rk
     for stage in range(3):  # one call site of the stage: t + h/2, t + h/2, t + h
         hs = h if stage == 2 else 0.5 * h
         _advance(model_ints, x, d1 if stage == 0 else (d2 if stage == 1 else d3), hs, hd, xs)
-        st = contact_stage(t + hs, xs, active, sy, ctl, wk, out,
-                           d2 if stage == 0 else (d3 if stage == 1 else d4))[0]
+        st = fn[0](t + hs, xs, active, sy, ctl, wk, out,
+                   d2 if stage == 0 else (d3 if stage == 1 else d4), fn[2], fn[3])[0]
         if st != STAGE_OK:
             return st
     for a in range(d1.shape[0]):  # (d1 + 2 d2 + 2 d3 + d4) / 6, numpy's order of operations
@@ -465,10 +530,10 @@ def _step(t, x, d1, h, active, sy, ctl, wk, out, rk, x_new):  # pragma: no cover
     return STAGE_OK
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _min_gap(x, watch, sy, wk):  # pragma: no cover - compiled
+@njit(cache=True, error_model="numpy")
+def _min_gap(x, watch, sy, wk, fn):  # pragma: no cover - compiled
     """The smallest gap [m] of the ``watch`` rows at ``x`` (``Stepper.gaps``), NaN if not finite."""
-    if not _rows_and_blocks(x, sy, wk):
+    if not fn[1](x, sy, wk):
         return np.nan
     phi = wk[14]
     g = np.inf
@@ -531,10 +596,13 @@ def _separations(t, active, mu, phi_dd, phi, phi_dot, keep, use_keep, uni_c, rul
     return out
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _evaluate_start(t, x, active, sy, ctl, wk, out, st0, keep, use_keep, ev, n_ev, reuse
+@njit(cache=True, error_model="numpy")
+def _evaluate_start(t, x, active, sy, ctl, wk, out, st0, keep, use_keep, ev, n_ev, reuse, fn
                     ):  # pragma: no cover - compiled
     """Evaluate at ``(t, x)``, drop separating rows and re-evaluate (``Stepper`` after an event).
+
+    Its callers pass ``use_keep`` and ``reuse`` as ``np.bool_`` values, not literals: numba
+    compiles a function once per literal argument value.
 
     The start of the next step is kept in ``st0``: ``d1``, ``mu0``, ``phi_dd0``, ``phi0`` (its
     gaps). With ``reuse`` the evaluation at ``(t, x)`` is the one in ``wk``, ``out`` and
@@ -547,7 +615,7 @@ def _evaluate_start(t, x, active, sy, ctl, wk, out, st0, keep, use_keep, ev, n_e
     solver = memo[1]
     for attempt in range(2):  # one call site of the stage
         if attempt > 0 or not reuse:
-            st, solver = contact_stage(t, x, active, sy, ctl, wk, out, d1)
+            st, solver = fn[0](t, x, active, sy, ctl, wk, out, d1, fn[2], fn[3])
             if st != STAGE_OK:
                 return st, solver
         if attempt == 1 or not _separations(t, active, out[2], out[3], wk[14], wk[15], keep,
@@ -559,15 +627,15 @@ def _evaluate_start(t, x, active, sy, ctl, wk, out, st0, keep, use_keep, ev, n_e
     return STAGE_OK, solver
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _impact(t, x, watch, active, sy, wk, imp, ev, n_ev, joined):  # pragma: no cover - compiled
+@njit(cache=True, error_model="numpy")
+def _impact(t, x, watch, active, sy, wk, imp, ev, n_ev, joined, fn):  # pragma: no cover - compiled
     """``Stepper._impact``: the impact law at a touchdown, into ``x``; the active set updated."""
     (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
      sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
     (J, dJ, Mq, nle, H, energy, buf, Mc, hc, Wc, W_oc, cc, M_o, h_o, phi, phi_dot, pts,
      nrm) = wk
     touching, cand, uni, rhs, dv_o, dqd, P, Av, zero_h, zero6 = imp
-    if not _rows_and_blocks(x, sy, wk):
+    if not fn[1](x, sy, wk):
         return STAGE_NOT_FINITE
     B, R = phi.shape
     for b in range(B):
@@ -584,9 +652,8 @@ def _impact(t, x, watch, active, sy, wk, imp, ev, n_ev, joined):  # pragma: no c
                 vm = phi_dot[b, r]
                 e = 0.0 if abs(vm) < rules[R_RESTING] else rest_c[b, r]
                 rhs[b, r] = -((1.0 + e) * vm) if uni[b, r] else -vm
-        s = contact_kernel(Mc, zero_h, Wc, W_oc, rhs, M_o, zero6, nv_c, N_c, uni, cand, cand,
-                           False, rules[R_DEP], rules[R_VIOL], rules[R_CONS], dv_o, dqd, P,
-                           Av)[0]
+        s = fn[3](Mc, zero_h, Wc, W_oc, rhs, M_o, zero6, nv_c, N_c, uni, cand, cand, False,
+                  rules[R_DEP], rules[R_VIOL], rules[R_CONS], dv_o, dqd, P, Av)[0]
         if s != LCP_OK:
             return STAGE_SOLVE
         for b in range(B):
@@ -632,8 +699,8 @@ def _impact(t, x, watch, active, sy, wk, imp, ev, n_ev, joined):  # pragma: no c
     return STAGE_OK
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev
+@njit(cache=True, error_model="numpy")
+def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev, fn
                          ):  # pragma: no cover - compiled
     """``Stepper.advance_with_events`` (RK4): ``x`` to ``t_end`` with its events, in place.
 
@@ -651,7 +718,7 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
     max_events = int(rules[R_MAX_EVENTS])
     for _ in range(max_events):
         h = t_end - t
-        st = _step(t, x, d1, h, active, sy, ctl, wk, out, rk, new)
+        st = _step(t, x, d1, h, active, sy, ctl, wk, out, rk, new, fn)
         if st != STAGE_OK:
             return st
         # locate_separation
@@ -663,7 +730,7 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
                     any_push = True
         end_eval = False  # wk and out hold the evaluation at (t_end, new)
         if any_push:
-            st, memo[1] = contact_stage(t_end, new, active, sy, ctl, wk, out, dtmp)
+            st, memo[1] = fn[0](t_end, new, active, sy, ctl, wk, out, dtmp, fn[2], fn[3])
             if st != STAGE_OK:
                 return st
             end_eval = True
@@ -692,10 +759,12 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
                         theta = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
                         if it % 3 == 2 or not (lo < theta < hi):
                             theta = 0.5 * (lo + hi)
-                        st = _step(t, x, d1, theta * h, active, sy, ctl, wk, out, rk, s_e)
+                        st = _step(t, x, d1, theta * h, active, sy, ctl, wk, out, rk, s_e,
+                                   fn)
                         if st != STAGE_OK:
                             return st
-                        st = contact_stage(t + theta * h, s_e, active, sy, ctl, wk, out, dtmp)[0]
+                        st = fn[0](t + theta * h, s_e, active, sy, ctl, wk, out, dtmp, fn[2],
+                                   fn[3])[0]
                         if st != STAGE_OK:
                             return st
                         value = _release(out[2], out[3], rows_sep, rules)
@@ -731,7 +800,7 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
                             if watch[b, r]:
                                 g_hi = min(g_hi, wk[14][b, r])
                 else:
-                    g_hi = _min_gap(new, watch, sy, wk)
+                    g_hi = _min_gap(new, watch, sy, wk, fn)
                 if not math.isfinite(g_hi):
                     return STAGE_NOT_FINITE
         if g_hi >= -tol:
@@ -743,7 +812,7 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
             t = t + h
             x[:] = new
             # Stepper._separate: the leaving rows' events with their rates at (t, x)
-            if not _rows_and_blocks(x, sy, wk):
+            if not fn[1](x, sy, wk):
                 return STAGE_NOT_FINITE
             phi_dot = wk[15]
             for b in range(B):
@@ -752,23 +821,25 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
                         _event(ev, n_ev, t, EVENT_SEPARATION, b, r, phi_dot[b, r],
                                phi_dot[b, r], 0.0, False)
                         active[b, r] = False
-            st = _evaluate_start(t, x, active, sy, ctl, wk, out, st0, joined, False, ev, n_ev,
-                                 False)[0]
+            st = _evaluate_start(t, x, active, sy, ctl, wk, out, st0, joined, np.bool_(False),
+                                 ev, n_ev, np.bool_(False), fn)[0]
             if st != STAGE_OK:
                 return st
             if t_end - t <= rules[R_TIME]:
                 return STAGE_OK
             continue
-        st, theta = _locate_touchdown(t, x, d1, h, watch, g_hi, active, sy, ctl, wk, out, rk, loc)
+        st, theta = _locate_touchdown(t, x, d1, h, watch, g_hi, active, sy, ctl, wk, out, rk, loc,
+                                      fn)
         if st != STAGE_OK:
             return st
         t = t + theta * h
         if theta > 0.0:
             x[:] = s_e
-        st = _impact(t, x, watch, active, sy, wk, imp, ev, n_ev, joined)
+        st = _impact(t, x, watch, active, sy, wk, imp, ev, n_ev, joined, fn)
         if st != STAGE_OK:
             return st
-        st = _evaluate_start(t, x, active, sy, ctl, wk, out, st0, joined, True, ev, n_ev, False)[0]
+        st = _evaluate_start(t, x, active, sy, ctl, wk, out, st0, joined, np.bool_(True), ev,
+                             n_ev, np.bool_(False), fn)[0]
         if st != STAGE_OK:
             return st
         if t_end - t <= rules[R_TIME]:
@@ -776,8 +847,8 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
     return STAGE_TOO_MANY_EVENTS
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _locate_touchdown(t, x, d1, h, watch, g_hi, active, sy, ctl, wk, out, rk, loc
+@njit(cache=True, error_model="numpy")
+def _locate_touchdown(t, x, d1, h, watch, g_hi, active, sy, ctl, wk, out, rk, loc, fn
                       ):  # pragma: no cover - compiled
     """``event_location.locate_touchdown``: ``(status, θ)``, the state at ``θ`` in ``loc[1]``.
 
@@ -788,7 +859,7 @@ def _locate_touchdown(t, x, d1, h, watch, g_hi, active, sy, ctl, wk, out, rk, lo
     tol = rules[R_GAP]
     target = -0.5 * tol
     lo, hi = 0.0, 1.0
-    if not _rows_and_blocks(x, sy, wk):
+    if not fn[1](x, sy, wk):
         return STAGE_NOT_FINITE, 0.0
     phi, phi_dot = wk[14], wk[15]
     g0 = np.inf
@@ -808,10 +879,10 @@ def _locate_touchdown(t, x, d1, h, watch, g_hi, active, sy, ctl, wk, out, rk, lo
             theta *= 0.5
             if theta * h < rules[R_TIME]:
                 return STAGE_OK, 0.0
-            st = _step(t, x, d1, theta * h, active, sy, ctl, wk, out, rk, s_e)
+            st = _step(t, x, d1, theta * h, active, sy, ctl, wk, out, rk, s_e, fn)
             if st != STAGE_OK:
                 return st, 0.0
-            f = _min_gap(s_e, watch, sy, wk) - target
+            f = _min_gap(s_e, watch, sy, wk, fn) - target
             if not math.isfinite(f):
                 return STAGE_NOT_FINITE, 0.0
             if f > 0.5 * tol:
@@ -827,10 +898,10 @@ def _locate_touchdown(t, x, d1, h, watch, g_hi, active, sy, ctl, wk, out, rk, lo
         theta = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
         if not (lo < theta < hi):
             theta = 0.5 * (lo + hi)
-        st = _step(t, x, d1, theta * h, active, sy, ctl, wk, out, rk, s_e)
+        st = _step(t, x, d1, theta * h, active, sy, ctl, wk, out, rk, s_e, fn)
         if st != STAGE_OK:
             return st, 0.0
-        value = _min_gap(s_e, watch, sy, wk) - target
+        value = _min_gap(s_e, watch, sy, wk, fn) - target
         if not math.isfinite(value):
             return STAGE_NOT_FINITE, 0.0
         if abs(value) <= 0.5 * tol or short:
@@ -877,7 +948,7 @@ def _record_sample(s, t, x, active, sy, wk, out, solver, Rec):  # pragma: no cov
 
 @njit(cache=True, error_model="numpy")
 def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev,
-                    reserve, Rec):  # pragma: no cover - compiled
+                    reserve, Rec, fn, advance):  # pragma: no cover - compiled
     """RK4 with contact events from sample ``k0``, recording samples ``k0 .. k1 - 1``.
 
     As :func:`~multiarm_pin.sim.simulation.simulate` with the stepper: at each sample the
@@ -905,6 +976,9 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         n_ev: (1,) int the events in it.
         reserve: rows of ``ev`` to keep free before a step (more than one step can add).
         Rec: the record arrays (``Recorder``'s, and the active set and solver codes).
+        fn: ``(contact_stage, _rows_and_blocks, torques, lcp)`` as :func:`stage_functions`
+            makes them (compiled once, called through their addresses).
+        advance: :func:`_advance_with_events`, likewise (:func:`advance_function`).
 
     Returns:
         ``(status, k)``: ``STAGE_OK`` and ``k1``, or the reason and the sample whose step the
@@ -925,8 +999,8 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         reuse = st0[4][0] == 1 and s > k0
         if reuse:
             st0[0][:] = loc[10]  # the end's tangent
-        st, solver = _evaluate_start(t, x, active, sy, ctl, wk, out, st0, loc[9], False, ev, n_ev,
-                                     reuse)
+        st, solver = _evaluate_start(t, x, active, sy, ctl, wk, out, st0, loc[9],
+                                     np.bool_(False), ev, n_ev, reuse, fn)
         if st != STAGE_OK:
             return st, s
         _record_sample(s, t, x, active, sy, wk, out, solver, Rec)
@@ -936,8 +1010,8 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         active0[:] = active
         q_hold0[:] = q_hold
         n0, holding0, onsets0 = n_ev[0], control[CTL_HOLDING], n_onsets[0]
-        st = _advance_with_events(t, x, times[s + 1], active, sy, ctl, wk, out, rk, st0, loc,
-                                  imp, ev, n_ev)
+        st = advance(t, x, times[s + 1], active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev,
+                     fn)
         if st != STAGE_OK:
             x[:] = x0
             active[:] = active0

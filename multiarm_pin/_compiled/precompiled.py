@@ -1,16 +1,15 @@
-"""The compiled loops built ahead of time, at install: a first run compiles nothing.
+"""The closed loop built ahead of time (optional): a first run compiles nothing.
 
-numba compiles a kernel at its first call. The loops of ``simulate`` (:data:`KERNELS`: the
-closed loop :func:`multiarm_pin._compiled.closed_loop.run_rk4`, with every kernel of an
-``object_pd`` run inside it, about 50 s of compile on a 2-core machine, and the contact loop
-:func:`multiarm_pin._compiled.contact_loop.run_contact_rk4`, with events, about 200 s) are
-most of the wait of a first run. The install (``make venv``, or
-``python -m multiarm_pin._compiled.precompiled``) compiles them once with numba's
-ahead-of-time compiler (``numba.pycc``) into one extension module next to this file, for this
-machine's CPU; :class:`~multiarm_pin.sim.compiled_loop.CompiledLoop` and
-:class:`~multiarm_pin.sim.contact_loop.ContactLoop` call it when it is there and fits the call
-(:func:`kernel_for`), and numba's JIT (cached on disk as before) otherwise. Same code, same
-results (tested: equal to the JIT kernel's to the bit).
+numba compiles a kernel at its first call and caches it on disk. ``make precompile`` (or
+``multiarm-pin precompile``, or ``python -m multiarm_pin._compiled.precompiled``; not part
+of the install, and never needed) compiles the closed loop
+(:func:`multiarm_pin._compiled.closed_loop.run_rk4`, :data:`KERNELS`) once with numba's
+ahead-of-time compiler (``numba.pycc``) into one extension module next to this file, for
+this machine's CPU; :class:`~multiarm_pin.sim.compiled_loop.CompiledLoop` calls it when it is
+there and fits the call (:func:`kernel_for`), and numba's JIT (cached on disk) otherwise.
+Same code, same results (tested: equal to the JIT kernel's to the bit). The contact loop is
+not in the module: the JIT compiles it, its stages once each
+(:mod:`~multiarm_pin._compiled.function_pointers`).
 
 Safety, since ``numba.pycc``'s entry points trust their arguments:
 
@@ -42,7 +41,7 @@ import tempfile
 import time
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numba
@@ -51,7 +50,6 @@ from numba.core import config
 from numba.core.errors import NumbaPendingDeprecationWarning
 
 from multiarm_pin._compiled import closed_loop as kernels
-from multiarm_pin._compiled import contact_loop
 from multiarm_pin._compiled.cache import kernel_sources_digest
 
 FOLDER = Path(__file__).resolve().parent
@@ -76,34 +74,24 @@ class Kernel:
         dispatcher: the JIT kernel (the same code, compiled at first use).
         example: ``() -> arguments`` of a short run of a shipped scenario, whose types fix the
             module's signature (every shipped scenario passes the same types: tested).
+        bound: its last parameters that are kernels (the stages the JIT path passes as
+            function pointers), by name: the module calls these kernels directly and does not
+            take them.
     """
 
     name: str
     dispatcher: Callable
     example: Callable[[], tuple]
+    bound: dict = field(default_factory=dict)
 
 
 def _closed_loop_example() -> tuple:
     return example_arguments()
 
 
-def _contact_loop_example() -> tuple:
-    from multiarm_pin.app.scenario import build_scenario, load_scenario
-    from multiarm_pin.data import data_path
-    from multiarm_pin.sim.contact_loop import ContactLoop
-    from multiarm_pin.sim.stepper import Stepper
-
-    built = build_scenario(load_scenario(data_path("scenarios", "box_on_table.yaml")),
-                           load_visuals=False)
-    sim = built.scenario.simulation
-    stepper = Stepper(built.system, None, sim.solver, sim.baumgarte)
-    stepper.init_active(stepper.blocks_at(0.0, built.initial_state)[1], 1e-9)
-    return ContactLoop(stepper).example_arguments(built.initial_state)
-
-
 KERNELS: dict[str, Kernel] = {k.name: k for k in (
-    Kernel("run_rk4", kernels.run_rk4, _closed_loop_example),
-    Kernel("run_contact_rk4", contact_loop.run_contact_rk4, _contact_loop_example),
+    Kernel("run_rk4", kernels.run_rk4, _closed_loop_example,
+           {"evaluate": kernels.closed_loop_stage}),
 )}
 """The kernels the module holds, by name."""
 
@@ -171,15 +159,17 @@ def kernel_for(name: str, args: Sequence, folder: Path | None = None):
     The precompiled one if it is there and ``args`` are exactly of its types, else the JIT
     kernel.
     """
+    kernel = KERNELS[name]
+    free = len(args) - len(kernel.bound)
     found = load(folder)
     if found is not None and name in found:
         fn, prints = found[name]
         try:
-            if fingerprints(args) == prints:
-                return fn
+            if fingerprints(args[:free]) == prints:
+                return fn if free == len(args) else (lambda *a: fn(*a[:free]))
         except (TypeError, ValueError):  # an argument numba cannot fingerprint
             pass
-    return KERNELS[name].dispatcher
+    return kernel.dispatcher
 
 
 def run_rk4_for(args: Sequence, folder: Path | None = None):
@@ -192,11 +182,15 @@ def _entry(kernel: Kernel):
 
     The AOT compiler compiles the function it exports with its default flags; exporting this
     call keeps the kernel compiled exactly as the JIT compiles it (``error_model="numpy"``).
+    Its :attr:`Kernel.bound` parameters are not the entry's: the kernels they name are passed
+    (and compiled in) here.
     """
     code = kernel.dispatcher.py_func.__code__
     names = list(code.co_varnames[:code.co_argcount])
-    src = f"def entry({', '.join(names)}):\n    return kernel({', '.join(names)})\n"
-    scope = {"kernel": kernel.dispatcher}
+    free = names[:len(names) - len(kernel.bound)]
+    assert names[len(free):] == list(kernel.bound), "bound parameters come last, in order"
+    src = f"def entry({', '.join(free)}):\n    return kernel({', '.join(names)})\n"
+    scope = {"kernel": kernel.dispatcher, **kernel.bound}
     exec(compile(src, "<precompiled entry>", "exec"), scope)  # noqa: S102 - our own names
     return scope["entry"]
 
@@ -253,6 +247,7 @@ def build(folder: Path | None = None, verbose: bool = False,
         arguments, prints = {}, {}
         for kernel in chosen:
             args = kernel.example()
+            args = args[:len(args) - len(kernel.bound)]
             types = [numba.typeof(a) for a in args]
             cc.export(kernel.name, RETURN_TYPE(*types))(_entry(kernel))
             arguments[kernel.name] = [str(t) for t in types]

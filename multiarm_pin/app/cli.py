@@ -220,9 +220,9 @@ def _build_parser(command: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("scenario", nargs="?", default=None, metavar="SCENARIO",
                    help="scenario YAML file: its arms, tool frames, joints, object and supports")
     p.set_defaults(func=_info)
-    p = sub.add_parser("precompile", help="compile the simulation loops (closed loop, "
-                       "contact events) ahead of time for this machine (a few minutes; `make "
-                       "venv` does it): first runs then compile nothing")
+    p = sub.add_parser("precompile", help="optional: compile the closed loop ahead of time for "
+                       "this machine (`make precompile`; needs a C compiler): the first run of a "
+                       "scenario whose contacts all touch then compiles nothing")
     p.add_argument("--if-stale", action="store_true",
                    help="do nothing if it is built for the installed sources")
     p.set_defaults(func=_precompile)

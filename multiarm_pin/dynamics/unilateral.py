@@ -85,6 +85,10 @@ from multiarm_pin.dynamics.mlcp import (
 from multiarm_pin.dynamics.object_first import solve_object_first
 from multiarm_pin.exceptions import DynamicsError, InputError, SingularityError
 
+UNILATERAL_SOLVERS = ("bilateral", "active_set")
+"""The solver names a unilateral solve records (``ContactSolution.solver``): its bilateral
+fast path (the object-first solve, every unilateral multiplier ``>= 0``), the active-set
+method; in the order of the compiled contact loop's solver codes."""
 
 # ------------------------------------------------------------------ inputs
 def _mask(value, name: str, blocks: SystemBlocks, padding: bool = True) -> np.ndarray:
@@ -256,7 +260,7 @@ def solve_unilateral(
         guess = _mask(guess, "guess", b)
     a_o, qdd, mu, Av, pivots = _solve(b, b.h, b.h_o, b.c, uni, act, "solve_unilateral",
                                       reference, guess)
-    return ContactSolution(a_o, qdd, mu, Av - b.c, "active_set", pivots, uni.copy(),
+    return ContactSolution(a_o, qdd, mu, Av - b.c, UNILATERAL_SOLVERS[1], pivots, uni.copy(),
                            act.copy(), b)
 
 
@@ -269,7 +273,7 @@ def _bilateral_fast_path(b: SystemBlocks, uni: np.ndarray) -> ContactSolution | 
     if not (sol.mu[uni] >= 0.0).all():
         return None
     phi_dd = _rates(b, sol.a_o, sol.qdd, b.c)
-    return ContactSolution(sol.a_o, sol.qdd, sol.mu, phi_dd, "bilateral", 0, uni.copy(),
+    return ContactSolution(sol.a_o, sol.qdd, sol.mu, phi_dd, UNILATERAL_SOLVERS[0], 0, uni.copy(),
                            b.constraint_mask.copy(), b)
 
 
@@ -338,12 +342,14 @@ def solve_impact(
     rhs = np.where(uni, (1.0 + e) * vm, vm)
     dv_o, dqd, P, Av, pivots = _solve(b, np.zeros_like(b.h), np.zeros(6), -rhs, uni, act,
                                       "solve_impact", reference)
-    return ImpactSolution(dv_o, dqd, P, Av + vm, "active_set", pivots, vm, e, uni, act, b)
+    return ImpactSolution(dv_o, dqd, P, Av + vm, UNILATERAL_SOLVERS[1], pivots, vm, e, uni, act,
+                          b)
 
 __all__ = [
     "CONSISTENCY_RTOL",
     "DEPENDENCY_RTOL",
     "SEPARATION_RTOL",
+    "UNILATERAL_SOLVERS",
     "VIOLATION_RTOL",
     "ContactResiduals",
     "ContactSolution",

@@ -21,11 +21,13 @@ results equal the Python path's to round-off (tests: ``tests/test_compiled_loop.
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from multiarm_pin._compiled import closed_loop as kernels
 from multiarm_pin._compiled import layout, precompiled
+from multiarm_pin._compiled.function_pointers import entry_point
+from multiarm_pin.dynamics.solve import SOLVERS
+from multiarm_pin.dynamics.unilateral import UNILATERAL_SOLVERS
 from multiarm_pin.model.rigid_object import ObjectState
 from multiarm_pin.sim import contact_events as ce
 from multiarm_pin.sim.closed_loop import FUSED_SOLVERS
@@ -33,10 +35,11 @@ from multiarm_pin.sim.disturbances import WrenchSchedule
 from multiarm_pin.sim.result import Recorder
 from multiarm_pin.system import SystemState
 
-SOLVER_NAMES = {False: "object_first", True: "bilateral"}
+RECORDED_SOLVER = {False: SOLVERS["object_first"].name, True: UNILATERAL_SOLVERS[0]}
 """The solver recorded at the kernel's samples (the result's ``solver``), as the Python path
-names it: ``object_first`` for bilateral rows; with unilateral rows, all pushing, the mixed
-LCP's fast path, ``bilateral`` (the same object-first solve)."""
+names it, by whether the run has unilateral rows: ``object_first`` (the registry's) for
+bilateral rows; with unilateral rows, all pushing, the mixed LCP's fast path ``bilateral``
+(the same object-first solve)."""
 
 
 class CompiledLoop:
@@ -63,6 +66,8 @@ class CompiledLoop:
                      np.zeros((n, m)), np.zeros((n, k)))
         self.separation = np.array([ce.SEPARATION_GAP, ce.SEPARATION_SPEED])
         self._stage_args = None  # evaluate()'s kernel arguments, made once per controller
+        self._stage_pointer = None  # (controller's trajectory table, run_rk4's stage)
+        self._kernel = None  # (self._stage_pointer, the kernel to call with these types)
         self._zero = np.zeros(s.nv)
         self._tangent_size = 2 * s.nv + layout.OBJECT_STATE_SIZE
         q0 = layout.OBJECT_STATE_SIZE
@@ -135,7 +140,15 @@ class CompiledLoop:
         a_pts = np.zeros(ctrl.hold_points_in_tool.shape)
         a_d = np.zeros(6)
         args = self._arguments(rec, x, times, k0, k1, a_pts, a_d)
-        status, k = precompiled.run_rk4_for(args)(*args)
+        if self._kernel is None or self._kernel[0] is not self._stage_pointer:
+            # the precompiled module's, or the JIT kernel's entry point for these types (fixed
+            # by construction for this loop: numba's dispatch would type the stage's function
+            # pointer again at every call)
+            kernel = precompiled.run_rk4_for(args)
+            if kernel is kernels.run_rk4:
+                kernel = entry_point(kernel, args)
+            self._kernel = (self._stage_pointer, kernel)
+        status, k = self._kernel[1](*args)
         tau, mu, qdd = self.work[7:]
         self.last_status = int(status)
         k = int(k)
@@ -152,14 +165,19 @@ class CompiledLoop:
         (traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, active, unilateral,
          q_ref) = self.stepper.controller.kernel_inputs()
         J, dJ, M, nle, H, energy, buf, tau, mu, qdd = self.work
-        return (k0, k1, times, x, self.model.ints, self.model.floats, q_ref, path.arm_table,
-                path.v_starts, path.contact_tables.ints, path.contact_tables.floats,
-                self.params, path.dims, path.N, path.nv_arm, unilateral, traj, pd_gains,
-                null_gains, hold_tool, hold_obj, hold_n, gains, active, self.wrenches,
-                self.separation, J, dJ, M, nle, H, energy, buf, tau, mu, qdd,
-                a_pts, a_d, rec.q, rec.v, rec.p, rec.quat,
-                rec.twist, rec.tau, rec.mu, rec.phi, rec.phi_dot, rec.points, rec.normals,
-                rec.a_o, rec.qdd, rec.violation, rec.wrench, rec.ke, rec.pe, rec.momentum)
+        system = (self.model.ints, self.model.floats, q_ref, path.arm_table, path.v_starts,
+                  path.contact_tables.ints, path.contact_tables.floats, self.params, path.dims,
+                  path.N, path.nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
+                  hold_obj, hold_n, gains, active, self.wrenches)
+        work = (J, dJ, M, nle, H, energy, buf, tau, mu, qdd, a_pts, a_d)
+        if self._stage_pointer is None or self._stage_pointer[0] is not traj:
+            # the stage for these types (made once per controller input, whose arrays are the
+            # only ones that may change between runs)
+            self._stage_pointer = (traj, kernels.stage_function(x, *system, *work))
+        return (k0, k1, times, x, *system, self.separation, *work, rec.q, rec.v, rec.p,
+                rec.quat, rec.twist, rec.tau, rec.mu, rec.phi, rec.phi_dot, rec.points,
+                rec.normals, rec.a_o, rec.qdd, rec.violation, rec.wrench, rec.ke, rec.pe,
+                rec.momentum, self._stage_pointer[1])
 
     def example_arguments(self, state: SystemState, steps: int = 2) -> tuple:
         """The arguments :meth:`run` would pass for ``steps`` steps of 1 ms from ``state``.
@@ -207,7 +225,7 @@ class CompiledLoop:
                                  np.empty(layout.REFERENCE_SIZE), np.empty((3, 3)),
                                  np.empty((n, k))), ctrl)
             kept = self._stage_args
-            self._stage = _entry_point(
+            self._stage = entry_point(
                 kernels.closed_loop_stage,
                 (0.0, self._x, True, *kept[0], np.empty(self._tangent_size)))
         o = state.obj
@@ -225,7 +243,7 @@ class CompiledLoop:
         """What the kernel does not record at samples ``done``: times, active set, solver."""
         rec.t[done] = times[done]
         rec.active[done] = self.stepper.active
-        rec.solver[done] = SOLVER_NAMES[self.stepper.unilateral]
+        rec.solver[done] = RECORDED_SOLVER[self.stepper.unilateral]
         rec.mark_recorded(done.stop)
 
 
@@ -241,17 +259,6 @@ def state_from_vector(x: np.ndarray, nq: int, nv: int) -> SystemState:
                                    x[layout.X_TWIST:layout.X_TWIST + 6].copy()))
 
 
-def _entry_point(kernel, args: tuple):
-    """The compiled specialisation of ``kernel`` for exactly the types of ``args``.
-
-    Called without numba's dispatch, whose type matching costs ~0.13 us per argument (5 us
-    for the stage's 41); ``kernel`` itself when it is not compiled (``NUMBA_DISABLE_JIT``).
-    Compiled or loaded from the cache here, not run. Only for arguments whose types are
-    fixed by construction (the loop's own arrays): the entry point does not check them.
-    """
-    if not hasattr(kernel, "overloads"):
-        return kernel
-    return kernel.compile(tuple(numba.typeof(a) for a in args))
 
 
-__all__ = ["SOLVER_NAMES", "CompiledLoop", "state_from_vector"]
+__all__ = ["RECORDED_SOLVER", "CompiledLoop", "state_from_vector"]

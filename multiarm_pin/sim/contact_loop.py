@@ -21,8 +21,10 @@ from __future__ import annotations
 import numpy as np
 
 from multiarm_pin._compiled import contact_loop as kernels
-from multiarm_pin._compiled import layout, precompiled
+from multiarm_pin._compiled import layout
+from multiarm_pin._compiled.function_pointers import entry_point
 from multiarm_pin.dynamics import mlcp
+from multiarm_pin.dynamics.unilateral import UNILATERAL_SOLVERS
 from multiarm_pin.sim import contact_events as ce
 from multiarm_pin.sim import event_location as el
 from multiarm_pin.sim.compiled_loop import state_from_vector
@@ -30,9 +32,9 @@ from multiarm_pin.sim.disturbances import WrenchSchedule
 from multiarm_pin.sim.result import Recorder
 from multiarm_pin.system import SystemState
 
-SOLVER_NAMES = {kernels.SOLVER_BILATERAL: "bilateral",
-                kernels.SOLVER_ACTIVE_SET: "active_set"}
-"""The solver recorded at the kernel's samples, as ``solve_unilateral`` names it."""
+RECORDED_SOLVERS = UNILATERAL_SOLVERS
+"""The solver recorded at the kernel's samples, by the kernel's code (``SOLVER_BILATERAL``,
+``SOLVER_ACTIVE_SET``): the names ``solve_unilateral`` records."""
 
 EVENT_KINDS = {kernels.EVENT_SEPARATION: "separation", kernels.EVENT_TOUCHDOWN: "touchdown"}
 """Event kind codes of the kernel's table."""
@@ -162,7 +164,8 @@ class ContactLoop:
         self.n_onsets = np.zeros(1, np.int64)
         self.q_hold = np.zeros(nq)
         self.last_status = kernels.STAGE_OK
-        self._kernel = None  # (record, the kernel checked for its arguments' types)
+        self._fn = None  # (controller tuple, the kernel's stage functions for its types)
+        self._kernel = None  # (self._fn, the kernel's entry point for these types)
         self._kept_controller = None  # (controller inputs, the kernel's controller tuple)
         self._zero_x = np.zeros(nv)
 
@@ -252,7 +255,6 @@ class ContactLoop:
              np.zeros((n, m), np.uint8), np.zeros((n, m), bool), np.zeros((n, m), bool),
              self._free_gains(gains))
         self._kept_controller = (inputs, C)
-        self._kernel = None  # checked again against the module's types
         return C
 
     @staticmethod
@@ -271,8 +273,13 @@ class ContactLoop:
         Rec = (rec.q, rec.v, rec.p, rec.quat, rec.twist, rec.tau, rec.mu, rec.phi,
                rec.phi_dot, rec.points, rec.normals, rec.a_o, rec.qdd, rec.violation,
                rec.wrench, rec.ke, rec.pe, rec.momentum, rec.active, codes)
+        if self._fn is None or self._fn[0] is not C:  # the stages, for these types
+            fn = kernels.stage_functions(x, active, self.S, C, self.W, self._O, self.K[0])
+            self._fn = (C, fn, kernels.advance_function(
+                x, active, self.S, C, self.W, self._O, self.K, self.Z, self.L, self.I,
+                self.events, self.n_events, fn))
         return (k0, k1, times, x, active, self.S, C, self.W, self._O, self.K, self.Z, self.L,
-                self.I, self.events, self.n_events, self.reserve, Rec)
+                self.I, self.events, self.n_events, self.reserve, Rec, *self._fn[1:])
 
     def example_arguments(self, state: SystemState, steps: int = 2) -> tuple:
         """The arguments :meth:`run` would pass for ``steps`` steps of 1 ms from ``state``.
@@ -313,10 +320,11 @@ class ContactLoop:
         active = np.array(stepper.active, dtype=bool)
         codes = np.zeros(len(times), np.int64)
         args = self._arguments(rec, x, times, k0, k1, C, active, codes)
-        if self._kernel is None or self._kernel[0] is not rec:
-            # the arguments' types are fixed by construction for this loop, its controller
-            # tuple and its record: checked once against the precompiled module's
-            self._kernel = (rec, precompiled.kernel_for("run_contact_rk4", args))
+        if self._kernel is None or self._kernel[0] is not self._fn:
+            # the arguments' types are fixed by construction for this loop and its stages:
+            # the compiled entry point, without the dispatcher's type matching (which types
+            # the function pointers again at every call)
+            self._kernel = (self._fn, entry_point(kernels.run_contact_rk4, args))
         status, k = self._kernel[1](*args)
         self.last_status = int(status)
         k = int(k)
@@ -325,7 +333,7 @@ class ContactLoop:
         done = slice(k0, k)
         rec.t[done] = times[done]
         for j in range(k0, k):
-            rec.solver[j] = SOLVER_NAMES[int(codes[j])]
+            rec.solver[j] = RECORDED_SOLVERS[int(codes[j])]
         if k > k0:
             rec.mark_recorded(k)
         for row in self.events[:int(self.n_events[0])]:
@@ -345,4 +353,4 @@ class ContactLoop:
         return k, state_from_vector(x, s.nq, s.nv)
 
 
-__all__ = ["EVENT_KINDS", "SOLVER_NAMES", "ContactLoop", "rules_vector"]
+__all__ = ["EVENT_KINDS", "RECORDED_SOLVERS", "ContactLoop", "rules_vector"]
