@@ -65,7 +65,7 @@ from feasibility_overhead import table as feasibility_table  # noqa: E402
 from report_tables import general, int_list, write_rows_csv  # noqa: E402
 from solver_vs_kkt import Timer, build_bench, build_peer, environment  # noqa: E402
 
-from multiarm_pin.app.runner import make_controller  # noqa: E402
+from multiarm_pin.app.runner import scenario_controller  # noqa: E402
 from multiarm_pin.app.scenario import build_scenario, load_scenario  # noqa: E402
 from multiarm_pin.exceptions import MultiArmError  # noqa: E402
 from multiarm_pin.sim.closed_loop import closed_loop_evaluation  # noqa: E402
@@ -203,14 +203,14 @@ def scenario_rows(names: Sequence[str], timer: Timer, duration: float | None) ->
         kw = dict(integrator=sim.integrator, solver=sim.solver, baumgarte=sim.baumgarte,
                   external_wrench=sc.object.external_wrench or None)  # as simulate_built
         try:  # a whole run first: every kernel it needs is loaded before the timed run
-            simulate(s, built.initial_state, make_controller(built), T, sim.dt, **kw)
+            simulate(s, built.initial_state, scenario_controller(built), T, sim.dt, **kw)
         except MultiArmError:
             pass
         note = ""
         t0 = time.perf_counter()
         events = 0
         try:
-            simt, wall, events = run_rtf(s, built.initial_state, make_controller(built), T,
+            simt, wall, events = run_rtf(s, built.initial_state, scenario_controller(built), T,
                                          sim.dt, **kw)
         except MultiArmError as exc:  # the scenario itself fails: RTF of the part before
             wall = time.perf_counter() - t0
@@ -232,12 +232,12 @@ def scenario_rows(names: Sequence[str], timer: Timer, duration: float | None) ->
             note = (f"{events} contact events: the steps with separated contacts and the "
                     "events run on the compiled contact loop")
         # states and torques of a short run, for the per-call times
-        res = simulate(s, built.initial_state, make_controller(built), 40 * sim.dt, sim.dt,
+        res = simulate(s, built.initial_state, scenario_controller(built), 40 * sim.dt, sim.dt,
                        **kw)
         states = [res.state(k) for k in range(0, len(res.t), 4)]
         taus = [res.tau[k] for k in range(0, len(res.t), 4)]
         (tc, to, _, tr, ta), rounds = measure(s, states, taus,
-                                              lambda b=built: make_controller(b), timer, None,
+                                              lambda b=built: scenario_controller(b), timer, None,
                                               sim.baumgarte)
         rows.append(Row(name, s.n_arms, s.nv, tc, to, math.nan, tr, ta,
                         wall / (4 * simt / sim.dt), tc / to, math.nan, tc / s.n_arms, simt,

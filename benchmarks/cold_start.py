@@ -43,14 +43,14 @@ SCENARIOS = ROOT / "multiarm_pin" / "data" / "scenarios"
 
 CHILD = """
 import json, sys, time
-from multiarm_pin.app.runner import make_controller, simulate_built
+from multiarm_pin.app.runner import scenario_controller, simulate_built
 from multiarm_pin.app.scenario import build_scenario, load_scenario
 built = build_scenario(load_scenario(sys.argv[1]), load_visuals=False)
 sim = built.scenario.simulation
 out = {}
 for key in ("first", "warm"):
     c0, w0 = time.process_time(), time.perf_counter()
-    result = simulate_built(built, make_controller(built), sim.duration, sim.dt, sim.solver)
+    result = simulate_built(built, scenario_controller(built), sim.duration, sim.dt, sim.solver)
     out[key + "_cpu"] = time.process_time() - c0
     out[key + "_wall"] = time.perf_counter() - w0
 out["duration"] = sim.duration

@@ -23,7 +23,7 @@ from pathlib import Path
 
 from numba.core import event
 
-from multiarm_pin.app.runner import make_controller, simulate_built
+from multiarm_pin.app.runner import scenario_controller, simulate_built
 from multiarm_pin.app.scenario import build_scenario, load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,7 +37,7 @@ def main() -> None:
     args = parser.parse_args()
     built = build_scenario(load_scenario(args.scenario))
     sim = built.scenario.simulation
-    controller = make_controller(built)
+    controller = scenario_controller(built)
     t0, c0 = time.perf_counter(), time.process_time()
     with event.install_recorder("numba:compile") as rec, \
             event.install_recorder("numba:llvm_lock") as llvm:

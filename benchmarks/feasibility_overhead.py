@@ -27,7 +27,7 @@ import time
 import numpy as np
 
 from multiarm_pin.app.run_feasibility import run_monitors
-from multiarm_pin.app.runner import make_controller, simulate_built
+from multiarm_pin.app.runner import scenario_controller, simulate_built
 from multiarm_pin.app.scenario import build_scenario, load_scenario
 from multiarm_pin.data import data_path
 from multiarm_pin.feasibility import CollisionScene, feasibility_report
@@ -59,19 +59,19 @@ def measure(name: str, repeat: int, duration: float | None = None) -> dict:
     scene_s = time.perf_counter() - t0
     stops = dataclasses.replace(built, scenario=dataclasses.replace(
         built.scenario, limits=LimitsSpec("stop", "stop", "stop", "stop")))
-    simulate_built(built, make_controller(built), T, sim.dt, sim.solver)  # kernels loaded
+    simulate_built(built, scenario_controller(built), T, sim.dt, sim.solver)  # kernels loaded
     sims, checks, runs, monitored = [], [], [], []
 
     def watched_run(spec):
         monitors = run_monitors(spec, scene)
-        watched = simulate_built(built, make_controller(built), T, sim.dt, sim.solver,
+        watched = simulate_built(built, scenario_controller(built), T, sim.dt, sim.solver,
                                  monitors=monitors)
         scans = [m.scan for m in monitors if getattr(m, "scan", None) is not None]
         feasibility_report(built.system, watched, ground=built.scenario.ground, scene=scene,
                            scan=scans[0] if scans else None)  # the monitor's scan reused
 
     for _ in range(repeat):
-        controller = make_controller(built)
+        controller = scenario_controller(built)
         t0 = time.perf_counter()
         result = simulate_built(built, controller, T, sim.dt, sim.solver)
         t1 = time.perf_counter()

@@ -71,7 +71,7 @@ def child(scenario: str, out: str, duration: float | None, as_run: bool = False)
     built = build_scenario(sc, load_visuals=True)
     times["build"] = time.perf_counter() - t
     t = time.perf_counter()
-    controller = runner.make_controller(built)
+    controller = runner.scenario_controller(built)
     times["controller"] = time.perf_counter() - t
     T = duration if duration is not None else sc.simulation.duration
     t = time.perf_counter()

@@ -13,7 +13,7 @@ import numpy as np
 import pinocchio as pin
 from system_builders import BOX_SIZE, JOINT_KINDS, Q_NOMINAL, joint_spec
 
-from multiarm_pin.app.runner import make_controller, simulate_built
+from multiarm_pin.app.runner import scenario_controller, simulate_built
 from multiarm_pin.app.scenario import build_scenario, load_scenario
 from multiarm_pin.model.arm import Arm
 from multiarm_pin.model.rigid_object import ObjectState, RigidObject
@@ -138,7 +138,7 @@ def run_scenario(name, duration, compiled, monkeypatch, **kw):
                                                     ContactLoop: "contact"}[loop]
             if not keep:
                 mp.setattr(loop, "for_run", classmethod(lambda cls, *a: None))
-        result = simulate_built(built, make_controller(built), duration, sim.dt, sim.solver,
+        result = simulate_built(built, scenario_controller(built), duration, sim.dt, sim.solver,
                                 **kw)
     return result, calls
 

@@ -21,7 +21,7 @@ from closed_loop_cases import (
 )
 
 from multiarm_pin._compiled import controller_kernels
-from multiarm_pin.app.runner import make_controller
+from multiarm_pin.app.runner import scenario_controller
 from multiarm_pin.app.scenario import build_scenario, load_scenario
 from multiarm_pin.dynamics import InverseDynamicsResult
 from multiarm_pin.exceptions import DynamicsError
@@ -188,7 +188,7 @@ def test_object_pd_runs_are_unchanged_by_the_compiled_path(name):
     sim = sc.simulation
     runs = []
     for compiled in (True, False):
-        ctrl = make_controller(built)
+        ctrl = scenario_controller(built)
         ctrl.compiled = compiled
         runs.append(simulate(built.system, built.initial_state, ctrl, 0.06, sim.dt,
                              integrator=sim.integrator, solver=sim.solver,

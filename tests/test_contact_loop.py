@@ -13,7 +13,7 @@ from closed_loop_cases import (
     run_scenario,
 )
 
-from multiarm_pin.app.runner import make_controller
+from multiarm_pin.app.runner import scenario_controller
 from multiarm_pin.app.scenario import build_scenario, load_scenario
 from multiarm_pin.sim import contact_events as ce
 from multiarm_pin.sim import contact_loop
@@ -94,6 +94,6 @@ def test_a_wrench_schedule_of_another_kind_stays_on_the_stepper():
         plain = WrenchSchedule([(0.0, 1.0, np.ones(6))])
         ramp = Ramp([(0.0, 1.0, np.ones(6))])
         for wrench, takes in ((plain, True), (ramp, False)):
-            stepper = Stepper(built.system, make_controller(built), "object_first", None,
+            stepper = Stepper(built.system, scenario_controller(built), "object_first", None,
                               wrench)
             assert (loop.for_run(stepper, "rk4") is not None) == takes, (name, takes)

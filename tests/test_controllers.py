@@ -287,7 +287,7 @@ def test_fingertips_stay_put_on_the_moving_box(scenario, slid_before):
     drag it into a singularity, holding the tip leaves its other motions free."""
     from pathlib import Path
 
-    from multiarm_pin.app.runner import make_controller as scenario_controller
+    from multiarm_pin.app.runner import scenario_controller
     from multiarm_pin.app.scenario import build_scenario, load_scenario
     from multiarm_pin.grasp import form_closure, wrench_matrix
     from multiarm_pin.spatial import quaternion_to_rotation

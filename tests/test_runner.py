@@ -283,10 +283,10 @@ def test_complete_run_status_and_tool_frames(tmp_path):
 
 
 def _nan_after(t_fail: float):
-    """A make_controller replacement: gravity compensation, then NaN torques from t_fail."""
+    """A scenario_controller replacement: gravity compensation, then NaN torques from t_fail."""
     import multiarm_pin.app.runner as runner
 
-    real = runner.make_controller
+    real = runner.scenario_controller
 
     def make(built):
         inner = real(built)
@@ -303,7 +303,7 @@ def _nan_after(t_fail: float):
 def test_mid_run_failure_keeps_the_partial_trajectory(tmp_path, monkeypatch, capsys):
     import multiarm_pin.app.runner as runner
 
-    monkeypatch.setattr(runner, "make_controller", _nan_after(0.0105))
+    monkeypatch.setattr(runner, "scenario_controller", _nan_after(0.0105))
     sc = write(tmp_path / "s.yaml", one_arm_scenario(duration=0.04))
     out = tmp_path / "out"
     assert cli.main(["run", str(sc), "--out", str(out), "--quiet"]) == 1
@@ -504,7 +504,7 @@ def test_plot_names_are_the_plots_written(run_dir, tmp_path):
 def test_a_bug_mid_run_keeps_the_partial_results_and_surfaces(tmp_path, monkeypatch):
     import multiarm_pin.app.runner as runner
 
-    real = runner.make_controller
+    real = runner.scenario_controller
 
     def make(built):
         inner = real(built)
@@ -516,7 +516,7 @@ def test_a_bug_mid_run_keeps_the_partial_results_and_surfaces(tmp_path, monkeypa
 
         return controller
 
-    monkeypatch.setattr(runner, "make_controller", make)
+    monkeypatch.setattr(runner, "scenario_controller", make)
     sc = write(tmp_path / "s.yaml", one_arm_scenario(duration=0.02))
     with pytest.raises(ZeroDivisionError, match="a bug"):
         run_scenario(sc, tmp_path / "out", html=False, plots=False)

@@ -98,14 +98,14 @@ def test_every_shipped_scenario_is_feasible_over_its_whole_run(path):
     # no false alarms: within the URDF's limits and collision-free at every recorded sample
     # of the whole run (the test above runs 0.1 s of each)
     from multiarm_pin.app.run_feasibility import check_initial_state
-    from multiarm_pin.app.runner import make_controller, simulate_built
+    from multiarm_pin.app.runner import scenario_controller, simulate_built
     from multiarm_pin.app.scenario import build_scenario
     from multiarm_pin.feasibility import feasibility_report
 
     built = build_scenario(load_scenario(path), load_visuals=False)
     scene = check_initial_state(built)
     sim = built.scenario.simulation
-    result = simulate_built(built, make_controller(built), sim.duration, sim.dt, sim.solver)
+    result = simulate_built(built, scenario_controller(built), sim.duration, sim.dt, sim.solver)
     assert result.t[-1] == pytest.approx(sim.duration)
     report = feasibility_report(built.system, result, ground=built.scenario.ground,
                                 scene=scene)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from multiarm_pin.app.runner import make_controller
+from multiarm_pin.app.runner import scenario_controller
 from multiarm_pin.app.scenario import build_scenario, load_scenario
 from multiarm_pin.sim.stepper import ROWS_KEPT, Stepper
 from multiarm_pin.system import SystemState
@@ -33,7 +33,7 @@ def test_gaps_reuse_the_rows_of_evaluated_states_only():
                            load_visuals=False)
     system, state = built.system, built.initial_state
     sim = built.scenario.simulation
-    st = Stepper(system, make_controller(built), "auto", sim.baumgarte)
+    st = Stepper(system, scenario_controller(built), "auto", sim.baumgarte)
     st.init_active(st.blocks_at(0.0, state)[1], 1e-6)
     sol, _, _, rows = st.evaluate(0.0, state)
     assert st._known_rows(state) is rows

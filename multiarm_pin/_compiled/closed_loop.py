@@ -312,7 +312,7 @@ def _advance(model_ints, x, d, h, hd, out):  # pragma: no cover - compiled
         out[X_TWIST + a] = x[X_TWIST + a] + hd[b + 7 + a]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)  # monitors check beside it
 def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_starts, ints,
             floats, params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
             hold_obj, hold_n, gains, active, wrenches, separation, work_J, work_dJ, work_M,

@@ -946,7 +946,7 @@ def _record_sample(s, t, x, active, sy, wk, out, solver, Rec):  # pragma: no cov
     record_energy(s, x, params, energy, n > 0, r_kinetic, r_potential, r_momentum)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)  # monitors check beside it
 def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev,
                     reserve, Rec, fn, advance):  # pragma: no cover - compiled
     """RK4 with contact events from sample ``k0``, recording samples ``k0 .. k1 - 1``.

@@ -201,7 +201,7 @@ def example_arguments() -> tuple:
     Every shipped scenario passes arguments of the same types (tested), so these fix the
     module's signature.
     """
-    from multiarm_pin.app.runner import make_controller
+    from multiarm_pin.app.runner import scenario_controller
     from multiarm_pin.app.scenario import build_scenario, load_scenario
     from multiarm_pin.data import DEMO_SCENARIO, data_path
     from multiarm_pin.sim.compiled_loop import CompiledLoop
@@ -210,7 +210,7 @@ def example_arguments() -> tuple:
     built = build_scenario(load_scenario(data_path("scenarios", DEMO_SCENARIO)),
                            load_visuals=False)
     sim = built.scenario.simulation
-    stepper = Stepper(built.system, make_controller(built), sim.solver, sim.baumgarte)
+    stepper = Stepper(built.system, scenario_controller(built), sim.solver, sim.baumgarte)
     loop = CompiledLoop.for_run(stepper, "rk4")
     if loop is None or not loop.ready(built.initial_state):
         raise RuntimeError("the demo scenario does not run on the compiled closed loop")

@@ -78,7 +78,7 @@ class RunOutput:
     files: dict = field(default_factory=dict)
 
 
-def make_controller(built: BuiltScenario):
+def scenario_controller(built: BuiltScenario):
     """The scenario's controller, built by ``multiarm_pin.sim.controllers.make_controller``.
 
     Returns:
@@ -94,10 +94,10 @@ def make_controller(built: BuiltScenario):
                                 f"the scenario has no arms, so no controller {spec.type!r}; "
                                 "expected 'none' (or no controller key)")
         return None
-    from multiarm_pin.sim.controllers import make_controller as factory
+    from multiarm_pin.sim.controllers import make_controller
 
     try:
-        return factory(spec.type, built.system, **spec.params)
+        return make_controller(spec.type, built.system, **spec.params)
     except MultiArmError as exc:  # bad parameters (the message lists the accepted ones)
         raise ScenarioError(built.scenario.file, "controller", str(exc)) from exc
 
@@ -240,7 +240,7 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
                  "results are moved into it one file at a time (each file atomically), not "
                  "as a whole folder", quiet)
         built = build_scenario(sc, load_visuals=html)
-        controller = make_controller(built)
+        controller = scenario_controller(built)
         n_samples = int(np.floor(T / dt + 1e-9)) + 1
         need, limit = record_bytes(built.system, n_samples), default_record_limit()
         if need > limit:
@@ -343,7 +343,7 @@ def simulate_built(built: BuiltScenario, controller, duration: float, dt: float,
 
     Args:
         built: the built scenario.
-        controller: its controller (:func:`make_controller`) or None.
+        controller: its controller (:func:`scenario_controller`) or None.
         duration: simulated time [s].
         dt: time step [s].
         solver: forward-dynamics solver name.
@@ -562,7 +562,7 @@ __all__ = [
     "http_status",
     "input_warnings",
     "load_run",
-    "make_controller",
+    "scenario_controller",
     "run_scenario",
     "serve_run",
     "simulate_built",

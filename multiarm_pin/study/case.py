@@ -87,7 +87,12 @@ def run_case(task: CaseTask) -> dict:
 def _simulation_case(task: CaseTask) -> tuple[dict, dict]:
     """Build and simulate the overridden scenario as ``multiarm-pin run`` does, no files."""
     from multiarm_pin.app.precheck import precheck_warnings
-    from multiarm_pin.app.runner import input_warnings, make_controller, simulate_built, summarize
+    from multiarm_pin.app.runner import (
+        input_warnings,
+        scenario_controller,
+        simulate_built,
+        summarize,
+    )
     from multiarm_pin.app.scenario import build_scenario, parse_scenario
     from multiarm_pin.exceptions import ScenarioError
     from multiarm_pin.feasibility import feasibility_report
@@ -101,7 +106,7 @@ def _simulation_case(task: CaseTask) -> tuple[dict, dict]:
         raise ScenarioError(sc.file, "simulation.duration", f"{sim.duration:g} s is shorter "
                             f"than the time step simulation.dt = {sim.dt:g} s")
     built = build_scenario(sc, load_visuals=False)
-    controller = make_controller(built)
+    controller = scenario_controller(built)
     warnings = input_warnings(built, sim.duration) + precheck_warnings(built, sim.dt)
     t0 = time.perf_counter()
     result = simulate_built(built, controller, sim.duration, sim.dt, sim.solver)

@@ -13,8 +13,7 @@ import pinocchio as pin
 import pytest
 import yaml
 
-from multiarm_pin.app.runner import make_controller as make_controller_of
-from multiarm_pin.app.runner import simulate_built
+from multiarm_pin.app.runner import scenario_controller, simulate_built
 from multiarm_pin.app.scenario import build_scenario
 from multiarm_pin.app.scenario import load_scenario as load_scenario_file
 from multiarm_pin.app.scenario.schema import parse_scenario
@@ -286,7 +285,7 @@ def test_scan_equals_every_pair_at_every_sample():
     # samples against the brute force of every pair at every sample
     built = build_scenario(load_scenario_file("scenarios/pick_from_table.yaml"),
                            load_visuals=False)
-    ctrl = make_controller_of(built)
+    ctrl = scenario_controller(built)
     result = simulate_built(built, ctrl, 0.1, built.scenario.simulation.dt, "auto")
     scene = CollisionScene(built.system, built.initial_state)
     cps = [result.contact_points[:, i, :int(built.system.constraint_set.N[i])]

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from multiarm_pin.app.run_feasibility import check_initial_state
-from multiarm_pin.app.runner import make_controller, simulate_built
+from multiarm_pin.app.runner import scenario_controller, simulate_built
 from multiarm_pin.app.scenario import build_scenario
 from multiarm_pin.app.scenario.schema import parse_scenario
 from multiarm_pin.exceptions import RunStoppedError
@@ -37,7 +37,7 @@ def _built(data, file):
 
 def _simulate(built, monitors=()):
     sim = built.scenario.simulation
-    return simulate_built(built, make_controller(built), sim.duration, sim.dt, sim.solver,
+    return simulate_built(built, scenario_controller(built), sim.duration, sim.dt, sim.solver,
                           monitors=monitors)
 
 
@@ -93,7 +93,7 @@ def test_a_limit_stop_ends_at_the_first_sample_beyond_the_limit():
 def test_monitors_see_every_sample_once_in_order(integrator):
     built = _built(demo_data(duration=0.3), "scenarios/two_ur5_box.yaml")
     spy = Spy()
-    result = simulate(built.system, built.initial_state, make_controller(built), 0.3, 0.002,
+    result = simulate(built.system, built.initial_state, scenario_controller(built), 0.3, 0.002,
                       integrator=integrator, monitors=(spy,))
     starts = [a for a, _ in spy.stretches]
     ends = [b for _, b in spy.stretches]

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from multiarm_pin.app.run_feasibility import check_initial_state
-from multiarm_pin.app.runner import make_controller, simulate_built
+from multiarm_pin.app.runner import scenario_controller, simulate_built
 from multiarm_pin.app.scenario import build_scenario
 from multiarm_pin.app.scenario.schema import parse_scenario
 from multiarm_pin.feasibility import feasibility_report
@@ -20,7 +20,7 @@ def _run(case):
     built = build_scenario(parse_scenario(data, file), load_visuals=False)
     scene = check_initial_state(built)  # collision-free at the start (else ScenarioError)
     sim = built.scenario.simulation
-    result = simulate_built(built, make_controller(built), sim.duration, sim.dt, sim.solver)
+    result = simulate_built(built, scenario_controller(built), sim.duration, sim.dt, sim.solver)
     return built, scene, result
 
 
