@@ -470,12 +470,12 @@ def approach(problem, parent: Candidate, q0s: list[np.ndarray], index: int, arm:
              step: float) -> Candidate:
     """The same design with arm ``arm``'s base moved horizontally toward its grasp.
 
-    By a uniform ``[0, step]`` m (away from it for a negative ``step``; kept in the region
-    and :data:`MIN_BASE_DISTANCE` off the object's footprint, else unmoved); every arm
-    seeded with its configuration found for the parent. The object's weight and the arm's
-    own act on its shoulder over the horizontal distance to the grasp: a nearer base lowers
-    the static torques, until the links meet the object; the distance also sets how far the
-    arm is stretched (its manipulability).
+    By a uniform ``[0, step]`` m (away from it for a negative ``step``; unmoved where that
+    leaves the region or comes within :data:`MIN_BASE_DISTANCE` of the object's footprint);
+    every arm seeded with its configuration found for the parent. The object's weight and
+    the arm's own act on its shoulder over the horizontal distance to the grasp: a nearer
+    base lowers the static torques, until the links meet the object; the distance also sets
+    how far the arm is stretched (its manipulability).
     """
     rng = candidate_rng(problem.spec.search.seed, index)
     b = problem.spec.bases
@@ -488,8 +488,8 @@ def approach(problem, parent: Candidate, q0s: list[np.ndarray], index: int, arm:
             if n > 1e-9:
                 moved = base.copy()
                 moved[:2] += step * rng.uniform(0.0, 1.0) * d / n
-                moved[:3] = np.clip(moved[:3], b.lower, b.upper)
-                if problem.footprint_distance(moved[:3]) >= MIN_BASE_DISTANCE:
+                inside = np.all(moved[:3] >= b.lower) and np.all(moved[:3] <= b.upper)
+                if inside and problem.footprint_distance(moved[:3]) >= MIN_BASE_DISTANCE:
                     base = moved
         arms.append(replace(a, base=base, q_seed=np.asarray(q0s[i], float).copy()))
     return Candidate(index, tuple(arms), parent.index)

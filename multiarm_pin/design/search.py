@@ -7,9 +7,10 @@ of the :data:`PARENTS` best candidates so far whose bases differ (:data:`PARENT_
 best designs by the objective, or, while no candidate met every condition, those that got
 furthest: the latest condition, the best value there); the other half recombinations
 (:func:`~.candidates.recombine`) of arms that reached their grasps in any candidate so far
-(with one arm, fresh random candidates). After them, :data:`POLISH_ROUNDS` rounds of half as many
-candidates refine the Pareto front (:func:`_polish`: other IK branches of the arm with the
-worst torque, small steps). Candidates are evaluated (:func:`~.evaluation.evaluate`) in
+(with one arm, fresh random candidates). After them, :data:`POLISH_ROUNDS` rounds of a
+quarter as many candidates refine the Pareto front (:func:`_polish`: other IK branches of
+the arm with the worst torque, bases toward or away from their grasps, small steps).
+Candidates are evaluated (:func:`~.evaluation.evaluate`) in
 parallel on Dask (a ``LocalCluster`` of ``workers`` processes or the scheduler at
 ``scheduler``, as ``multiarm-pin sweep``), or in this process when ``workers`` is 1.
 
@@ -286,13 +287,14 @@ def _parents(ranked: list) -> list:
 
 
 def _polish(ranked: list, n: int, first: int, scale: float) -> list:
-    """A polishing round's ``n`` recipes: neighbours of designs spread along the Pareto front.
+    """A polishing round's ``n`` recipes: neighbours of designs of the Pareto front.
 
-    Up to ``n // 4`` designs of the front (evenly along its ranking by the objective) each
-    get, in turn, a re-seed of the arm with the worst torque ratio (another IK branch of the
-    same bases and grasps: :func:`~.candidates.reseed`), that arm's base moved toward its
-    grasp (:func:`~.candidates.approach`, up to :data:`APPROACH_STEP`), the base of the arm
-    with the smallest manipulability moved toward or (every other parent) away from its grasp,
+    Up to ``n // 4`` designs of the front (half of them its best by the objective, the other
+    half evenly along the rest of its ranking) each get, in turn, a re-seed of the arm with
+    the worst torque ratio (another IK branch of the same bases and grasps:
+    :func:`~.candidates.reseed`), that arm's base moved toward its grasp
+    (:func:`~.candidates.approach`, up to :data:`APPROACH_STEP`), the base of the arm with
+    the smallest manipulability moved toward or (every other parent) away from its grasp,
     and a small step of its bases and grasps (:func:`~.candidates.perturb` at ``scale``). A
     neighbour better on one score and no worse on the others displaces its parent from the
     front, so that the front moves outward where the random rounds left it; candidates
@@ -303,7 +305,10 @@ def _polish(ranked: list, n: int, first: int, scale: float) -> list:
         return []
     front = [ok[i] for i in pareto_front([_all_scores(e) for e in ok])]
     m = max(min(len(front), n // 4), 1)
-    parents = [front[int(i)] for i in np.unique(np.round(np.linspace(0, len(front) - 1, m)))]
+    top = (m + 1) // 2
+    rest = front[top:]
+    spread = np.unique(np.round(np.linspace(0, len(rest) - 1, m - top))) if rest else []
+    parents = front[:top] + [rest[int(i)] for i in spread]
     out = []
     for j in range(n):
         p = parents[(j // 4) % len(parents)]
