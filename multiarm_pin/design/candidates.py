@@ -443,6 +443,58 @@ def perturb(problem, parent: Candidate, q0s: list[np.ndarray], index: int,
     return Candidate(index, tuple(arms), parent.index)
 
 
+def reseed(problem, parent: Candidate, q0s: list[np.ndarray], index: int,
+           arm: int) -> Candidate:
+    """The same design with arm ``arm`` on another IK branch: a fresh seed for its posture.
+
+    Bases and grasps stay; every other arm is seeded with its configuration found for the
+    parent; arm ``arm`` with a new :func:`random_seed_configuration` (aimed at its grasp).
+    With the tool held fully (a weld, a fitted gripper) a 6-joint arm's posture is one of
+    its IK branches, which decides how far its links' weight and the object's act from its
+    shoulder: the static torques.
+    """
+    rng = candidate_rng(problem.spec.search.seed, index)
+    arms = []
+    for i, a in enumerate(parent.arms):
+        if i == arm:
+            q = random_seed_configuration(problem, i, a.base,
+                                          problem.object_placement.act(a.points.mean(axis=0)),
+                                          rng)
+        else:
+            q = np.asarray(q0s[i], float).copy()
+        arms.append(replace(a, q_seed=q))
+    return Candidate(index, tuple(arms), parent.index)
+
+
+def approach(problem, parent: Candidate, q0s: list[np.ndarray], index: int, arm: int,
+             step: float) -> Candidate:
+    """The same design with arm ``arm``'s base moved horizontally toward its grasp.
+
+    By a uniform ``[0, step]`` m (away from it for a negative ``step``; unmoved where that
+    leaves the region or comes within :data:`MIN_BASE_DISTANCE` of the object's footprint);
+    every arm seeded with its configuration found for the parent. The object's weight and
+    the arm's own act on its shoulder over the horizontal distance to the grasp: a nearer
+    base lowers the static torques, until the links meet the object; the distance also sets
+    how far the arm is stretched (its manipulability).
+    """
+    rng = candidate_rng(problem.spec.search.seed, index)
+    b = problem.spec.bases
+    arms = []
+    for i, a in enumerate(parent.arms):
+        base = a.base.copy()
+        if i == arm and b.fixed is None:
+            d = problem.object_placement.act(a.points.mean(axis=0))[:2] - base[:2]
+            n = float(np.linalg.norm(d))
+            if n > 1e-9:
+                moved = base.copy()
+                moved[:2] += step * rng.uniform(0.0, 1.0) * d / n
+                inside = np.all(moved[:3] >= b.lower) and np.all(moved[:3] <= b.upper)
+                if inside and problem.footprint_distance(moved[:3]) >= MIN_BASE_DISTANCE:
+                    base = moved
+        arms.append(replace(a, base=base, q_seed=np.asarray(q0s[i], float).copy()))
+    return Candidate(index, tuple(arms), parent.index)
+
+
 def arm_pool(problem, evaluations) -> dict:
     """Per kind of arm, the arm choices of evaluated candidates whose start pose was found.
 
@@ -494,7 +546,7 @@ def recombine(problem, pool: dict, index: int) -> Candidate | None:
     return Candidate(index, tuple(arms), -1)
 
 
-__all__ = ["ArmChoice", "Candidate", "arm_pool", "candidate_rng", "face_edge_margin",
-           "fingertip_faces", "perturb", "point_allowed", "project_to_face", "recombine",
+__all__ = ["ArmChoice", "Candidate", "approach", "arm_pool", "candidate_rng", "face_edge_margin",
+           "fingertip_faces", "perturb", "point_allowed", "project_to_face", "recombine", "reseed",
            "sample_base", "sample_candidate", "sample_face_point", "supported_rectangles",
            "weld_faces"]

@@ -75,6 +75,9 @@ class Evaluation:
         scenario: the scenario mapping of the design (``q0`` given), when ``reach`` was met.
         solved: per arm its start configuration, or None where it was not found (or the
             arm failed the task): what :func:`~.candidates.recombine` may reuse.
+        torque_arm: the arm slot of the joint with the worst torque ratio (a design), or
+            None: the arm whose posture a refinement re-seeds (:func:`~.candidates.reseed`).
+        manipulability_arm: the arm slot of the smallest manipulability (a design), or None.
     """
 
     index: int
@@ -88,6 +91,8 @@ class Evaluation:
     path_q: np.ndarray | None = None
     scenario: dict | None = None
     solved: list | None = None
+    torque_arm: int | None = None
+    manipulability_arm: int | None = None
 
     @property
     def stage(self) -> int:
@@ -476,7 +481,7 @@ def evaluate(problem: DesignProblem, cand: Candidate) -> Evaluation:
 
     limits = np.concatenate([effort_limits(a) for a in arms])
     names = [f"{a.name} {j}" for a in arms for j in joint_names(a)]
-    worst_ratio, worst_at = 0.0, ""
+    worst_ratio, worst_at, worst_j = 0.0, "", 0
     for k, q in enumerate(Q):
         st = system.state(q, None, problem.path_positions[k], problem.path_quaternions[k])
         try:
@@ -488,15 +493,17 @@ def evaluate(problem: DesignProblem, cand: Candidate) -> Evaluation:
         ratio = np.abs(tau) / limits
         j = int(np.argmax(ratio))
         if ratio[j] > worst_ratio:
-            worst_ratio, worst_at = float(ratio[j]), f"{names[j]} at t = " \
+            worst_ratio, worst_j, worst_at = float(ratio[j]), j, f"{names[j]} at t = " \
                 f"{problem.path_times[k]:.3g} s"
     if worst_ratio > 1.0:
         return _fail(cand, "torque", worst_ratio, worst_at, q0=q0s, scenario=data, path_q=Q)
     scores["torque_ratio"] = worst_ratio
-    scores["manipulability"] = min(_manipulability(a, q) for a, q in zip(arms, q0s,
-                                                                           strict=True))
+    manip = [_manipulability(a, q) for a, q in zip(arms, q0s, strict=True)]
+    scores["manipulability"] = min(manip)
+    ends = np.cumsum([len(effort_limits(a)) for a in arms])
     return Evaluation(cand.index, cand, True, None, None, worst_at, scores, q0s, Q, data,
-                      list(q0s))
+                      list(q0s), int(np.searchsorted(ends, worst_j, side="right")),
+                      int(np.argmin(manip)))
 
 
 __all__ = ["CONDITIONS", "DesignProblem", "Evaluation", "candidate_from_scenario",

@@ -7,10 +7,12 @@ of the :data:`PARENTS` best candidates so far whose bases differ (:data:`PARENT_
 best designs by the objective, or, while no candidate met every condition, those that got
 furthest: the latest condition, the best value there); the other half recombinations
 (:func:`~.candidates.recombine`) of arms that reached their grasps in any candidate so far
-(with one arm, fresh random candidates). Candidates are evaluated
-(:func:`~.evaluation.evaluate`) in parallel on Dask (a ``LocalCluster`` of ``workers``
-processes or the scheduler at ``scheduler``, as ``multiarm-pin sweep``), or in this process
-when ``workers`` is 1.
+(with one arm, fresh random candidates). After them, :data:`POLISH_ROUNDS` rounds of a
+quarter as many candidates refine the Pareto front (:func:`_polish`: other IK branches of
+the arm with the worst torque, bases toward or away from their grasps, small steps).
+Candidates are evaluated (:func:`~.evaluation.evaluate`) in
+parallel on Dask (a ``LocalCluster`` of ``workers`` processes or the scheduler at
+``scheduler``, as ``multiarm-pin sweep``), or in this process when ``workers`` is 1.
 
 Determinism: a candidate depends only on the spec's seed, its index and its parent
 (:func:`~.candidates.candidate_rng`); an evaluation only on its candidate; parents and designs
@@ -29,13 +31,29 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from multiarm_pin.design.candidates import arm_pool, perturb, recombine, sample_candidate
+from multiarm_pin.design.candidates import (
+    approach,
+    arm_pool,
+    perturb,
+    recombine,
+    reseed,
+    sample_candidate,
+)
 from multiarm_pin.design.evaluation import CONDITIONS, DesignProblem, Evaluation, evaluate
 from multiarm_pin.design.scoring import SCORES, objective, pareto_front, rank_key
 from multiarm_pin.exceptions import DesignImpossibleError
 
 PARENTS = 4
 """Candidates refined in each refinement round."""
+
+POLISH_ROUNDS = 6
+"""Rounds of local refinement of the Pareto front after the refinement rounds, each of a
+quarter of ``search.candidates`` candidates (at least :data:`POLISH_MIN`)."""
+
+POLISH_MIN = 8
+
+APPROACH_STEP = 0.05
+"""Largest horizontal step [m] of a polishing round's base toward its grasp."""
 
 PARENT_DISTANCE = 0.15
 """The parents of a round differ pairwise by this much [m] in some arm's base position."""
@@ -106,7 +124,9 @@ def make_and_evaluate(problem: DesignProblem, recipe: tuple) -> Evaluation:
     """Make a candidate from its recipe and evaluate it (one task of the search).
 
     Recipes: ``("sample", index)`` (:func:`~.candidates.sample_candidate`), ``("perturb",
-    parent, q0s, index, scale)`` (:func:`~.candidates.perturb`), ``("ready", candidate)``.
+    parent, q0s, index, scale)`` (:func:`~.candidates.perturb`), ``("reseed", parent, q0s,
+    index, arm)`` (:func:`~.candidates.reseed`), ``("approach", parent, q0s, index, arm,
+    step)`` (:func:`~.candidates.approach`), ``("ready", candidate)``.
     Making the candidate in the task spreads the fingertip grips' fits over the workers too.
     """
     kind = recipe[0]
@@ -114,6 +134,10 @@ def make_and_evaluate(problem: DesignProblem, recipe: tuple) -> Evaluation:
         cand = sample_candidate(problem, recipe[1])
     elif kind == "perturb":
         cand = perturb(problem, *recipe[1:])
+    elif kind == "reseed":
+        cand = reseed(problem, *recipe[1:])
+    elif kind == "approach":
+        cand = approach(problem, *recipe[1:])
     else:
         cand = recipe[1]
     return evaluate(problem, cand)
@@ -218,10 +242,17 @@ def run_design(spec, workers: int = 1, scheduler: str | None = None, client=None
             nxt += per_round
             new = runner.map(problem, cands)
             evals += new
+        for r in range(1, POLISH_ROUNDS + 1):
+            if progress is not None:
+                progress(_round_line(s.refine + r - 1, evals))
+            cands = _polish(sorted(evals, key=key), max(s.candidates // 4, POLISH_MIN), nxt,
+                            0.5 ** (s.refine + r))
+            nxt += len(cands)
+            evals += runner.map(problem, cands)
     finally:
         runner.close()
     if progress is not None:
-        progress(_round_line(s.refine, evals))
+        progress(_round_line(s.refine + POLISH_ROUNDS, evals))
     ok = sorted((e for e in evals if e.ok), key=key)
     failures = {c: sum(1 for e in evals if e.condition == c) for c in CONDITIONS}
     if not ok:
@@ -252,6 +283,45 @@ def _parents(ranked: list) -> list:
         best = min(have, key=lambda e: (sign * e.scores[name], e.index))
         if all(best.index != o.index for o in out):
             out.append(best)
+    return out
+
+
+def _polish(ranked: list, n: int, first: int, scale: float) -> list:
+    """A polishing round's ``n`` recipes: neighbours of designs of the Pareto front.
+
+    Up to ``n // 4`` designs of the front (half of them its best by the objective, the other
+    half evenly along the rest of its ranking) each get, in turn, a re-seed of the arm with
+    the worst torque ratio (another IK branch of the same bases and grasps:
+    :func:`~.candidates.reseed`), that arm's base moved toward its grasp
+    (:func:`~.candidates.approach`, up to :data:`APPROACH_STEP`), the base of the arm with
+    the smallest manipulability moved toward or (every other parent) away from its grasp,
+    and a small step of its bases and grasps (:func:`~.candidates.perturb` at ``scale``). A
+    neighbour better on one score and no worse on the others displaces its parent from the
+    front, so that the front moves outward where the random rounds left it; candidates
+    indexed from ``first``.
+    """
+    ok = [e for e in ranked if e.ok]
+    if not ok:
+        return []
+    front = [ok[i] for i in pareto_front([_all_scores(e) for e in ok])]
+    m = max(min(len(front), n // 4), 1)
+    top = (m + 1) // 2
+    rest = front[top:]
+    spread = np.unique(np.round(np.linspace(0, len(rest) - 1, m - top))) if rest else []
+    parents = front[:top] + [rest[int(i)] for i in spread]
+    out = []
+    for j in range(n):
+        p = parents[(j // 4) % len(parents)]
+        if j % 4 == 0:
+            out.append(("reseed", p.candidate, p.q0, first + j, p.torque_arm))
+        elif j % 4 == 1:
+            out.append(("approach", p.candidate, p.q0, first + j, p.torque_arm, APPROACH_STEP))
+        elif j % 4 == 2:
+            sign = 1.0 if (j // 4) % 2 == 0 else -1.0
+            out.append(("approach", p.candidate, p.q0, first + j, p.manipulability_arm,
+                        sign * APPROACH_STEP))
+        else:
+            out.append(("perturb", p.candidate, p.q0, first + j, scale))
     return out
 
 

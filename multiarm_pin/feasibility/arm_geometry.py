@@ -138,26 +138,37 @@ def arm_collision_geometry(arm) -> ArmGeometry:
     return _arm_geometry(arm.source, tuple(arm.model.names), key, tool_joint)
 
 
-@functools.lru_cache(maxsize=64)
-def _arm_geometry(source: str, names: tuple, base_key: tuple, tool_joint: int) -> ArmGeometry:
-    """:func:`arm_collision_geometry` for hashable arguments (the base as two tuples)."""
-    import numpy as np
+@functools.lru_cache(maxsize=16)
+def _unplaced(source: str, names: tuple) -> tuple:
+    """The arm's model, geometry, its hulls and SRDF, before placing its base (per kind).
 
-    base = pin.SE3(np.array(base_key[0]).reshape(3, 3), np.array(base_key[1]))
+    The hulls are in the links' own frames, so placing the base does not change them: they
+    are built once per arm kind, not once per base placement.
+    """
     model, geom, srdf = _source_geometry(source)
     have = set(names)
     locked = tuple(n for n in list(model.names)[1:] if n not in have)
     if locked:
         model, geom = lock_joints(model, geom.copy(), locked, source)
     model = unique_frame_names(model)
+    return model, geom, _hulls(geom), srdf
+
+
+@functools.lru_cache(maxsize=64)
+def _arm_geometry(source: str, names: tuple, base_key: tuple, tool_joint: int) -> ArmGeometry:
+    """:func:`arm_collision_geometry` for hashable arguments (the base as two tuples)."""
+    import numpy as np
+
+    base = pin.SE3(np.array(base_key[0]).reshape(3, 3), np.array(base_key[1]))
+    model, geom, hull_geom, srdf = _unplaced(source, names)
     world = pin.Model()
     world.gravity = model.gravity
     placed, placed_geom = pin.appendModel(world, model, pin.GeometryModel(), geom, 0, base)
     if tuple(placed.names) != names:
         raise InputError(f"{source}: the collision model's joints {list(placed.names)} differ "
                          f"from the arm's {list(names)}")
+    _, hull = pin.appendModel(world, model, pin.GeometryModel(), hull_geom, 0, base)
     link_names = tuple(placed.frames[g.parentFrame].name for g in placed_geom.geometryObjects)
-    hull = _hulls(placed_geom)
     pairs_model = hull.copy()
     pairs_model.addAllCollisionPairs()
     if srdf:

@@ -7,9 +7,12 @@ import pytest
 
 from multiarm_pin.design import load_design, parse_design
 from multiarm_pin.design.candidates import (
+    MIN_BASE_DISTANCE,
+    approach,
     face_edge_margin,
     perturb,
     point_allowed,
+    reseed,
     sample_candidate,
     sample_face_point,
     weld_faces,
@@ -74,6 +77,50 @@ def test_a_candidate_depends_only_on_the_seed_and_its_index():
             assert x.faces == y.faces
             assert face_edge_margin(problem.poly, y.faces[0], y.points[0]) >= \
                 spec.search.face_margin - 1e-12
+
+
+def test_polishing_moves_change_one_arm_only():
+    """``approach`` moves one base horizontally along the line to its grasp, by at most the
+    step (toward it for a positive step, away for a negative one); ``reseed`` changes one arm's
+    IK seed only. Every other arm keeps its base, grasp and (given) configuration."""
+    spec = load_design(TWO_UR5_SPEC)
+    problem = DesignProblem(spec)
+    oMo = problem.object_placement
+    moved = 0
+    for i in range(10):
+        c = sample_candidate(problem, i)
+        q0s = [x.q_seed + 0.01 for x in c.arms]
+        for arm in range(len(c.arms)):
+            for step in (0.05, -0.05):
+                n = approach(problem, c, q0s, 200 + i, arm, step)
+                a, b = c.arms[arm], n.arms[arm]
+                g = oMo.act(a.points.mean(axis=0))
+                d_before = np.linalg.norm(g[:2] - a.base[:2])
+                d_after = np.linalg.norm(g[:2] - b.base[:2])
+                delta = b.base - a.base
+                assert delta[2] == 0.0 and delta[3] == 0.0
+                # along the horizontal line to the grasp
+                u = g[:2] - a.base[:2]
+                assert abs(delta[0] * u[1] - delta[1] * u[0]) < 1e-9
+                assert np.all(b.base[:3] >= spec.bases.lower) and \
+                    np.all(b.base[:3] <= spec.bases.upper)
+                assert np.linalg.norm(delta[:2]) <= abs(step) + 1e-12
+                assert (d_after <= d_before + 1e-12) if step > 0 else \
+                    (d_after >= d_before - 1e-12)
+                assert problem.footprint_distance(b.base[:3]) >= MIN_BASE_DISTANCE or \
+                    np.array_equal(a.base, b.base)
+                moved += int(not np.array_equal(a.base, b.base))
+                for k, (x, y) in enumerate(zip(c.arms, n.arms, strict=True)):
+                    np.testing.assert_array_equal(y.q_seed, q0s[k])
+                    np.testing.assert_array_equal(y.points, x.points)
+                    if k != arm:
+                        np.testing.assert_array_equal(y.base, x.base)
+            r = reseed(problem, c, q0s, 300 + i, arm)
+            for k, (x, y) in enumerate(zip(c.arms, r.arms, strict=True)):
+                np.testing.assert_array_equal(y.base, x.base)
+                np.testing.assert_array_equal(y.points, x.points)
+                assert np.array_equal(y.q_seed, q0s[k]) == (k != arm)
+    assert moved > 0
 
 
 def test_weld_tool_points_into_its_face():

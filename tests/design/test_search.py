@@ -100,6 +100,33 @@ def test_every_returned_design_passes_independent_rechecks(searched):
         assert 0.0 < d.scores["torque_ratio"] <= 1.0
 
 
+def test_the_arms_a_polishing_round_moves_are_those_that_set_the_scores(searched):
+    """``torque_arm``: the arm of the joint with the worst torque ratio along the task
+    (``rnea + Jᵀ w``), ``manipulability_arm``: the arm of the smallest sqrt(det(J Jᵀ))."""
+    spec, result = searched
+    problem = DesignProblem(spec)
+    for d in result.designs:
+        built = build_scenario(parse_scenario(d.scenario, spec.file), load_visuals=False)
+        system = built.system
+        effort = np.concatenate([a.model.effortLimit for a in system.arms])
+        arm_of = np.concatenate([[i] * a.nv for i, a in enumerate(system.arms)])
+        worst = (0.0, -1)
+        for M, q in zip(problem.path_placements, d.evaluation.path_q, strict=True):
+            st = system.state(q, None, M.translation, pin.Quaternion(M.rotation).coeffs())
+            r = np.abs(rnea_static_torques(system, st)[0]) / effort
+            worst = max(worst, (float(r.max()), int(arm_of[int(np.argmax(r))])))
+        assert d.scores["torque_ratio"] == pytest.approx(worst[0], rel=1e-9)
+        assert d.evaluation.torque_arm == worst[1]
+        manip = []
+        for i, arm in enumerate(system.arms):
+            qi = d.evaluation.path_q[0][system.arm_set.q_slices[i]]
+            J = pin.computeFrameJacobian(arm.model, arm.data, qi, arm.tool_frame_id,
+                                         pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+            manip.append(np.sqrt(np.linalg.det(J @ J.T)))
+        assert d.evaluation.manipulability_arm == int(np.argmin(manip))
+        assert d.scores["manipulability"] == pytest.approx(min(manip), rel=1e-9)
+
+
 def test_same_seed_same_designs_on_one_and_two_workers():
     spec = small(load_design(TWO_UR5_SPEC), candidates=16, refine=1)
     one = run_design(spec, workers=1)
