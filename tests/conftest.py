@@ -22,3 +22,28 @@ def panda() -> Arm:
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
 
+
+
+@pytest.fixture(autouse=True)
+def _sigint_left_as_found(request):
+    """Every test starts with the SIGINT handler and signal mask the session started with.
+
+    A process whose SIGINT is ignored or blocked ignores Ctrl-C and passes that on to every
+    process it starts (a sweep started by a later test then runs on through its Ctrl-C). A
+    test after which they differ is named in a warning, and they are put back, so that the
+    tests of Ctrl-C do not depend on the order the suite runs in.
+    """
+    import signal
+    import warnings
+
+    before = signal.getsignal(signal.SIGINT)
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, [])
+    yield
+    after = signal.getsignal(signal.SIGINT)
+    mask_after = signal.pthread_sigmask(signal.SIG_BLOCK, [])
+    if after is not before or mask_after != mask:
+        signal.signal(signal.SIGINT, before)
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        warnings.warn(f"{request.node.nodeid} left SIGINT changed: handler {before!r} -> "
+                      f"{after!r}, blocked signals {sorted(mask)} -> {sorted(mask_after)} "
+                      "(put back)", stacklevel=1)
