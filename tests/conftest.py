@@ -29,9 +29,8 @@ def _sigint_left_as_found(request):
     """Every test starts with the SIGINT handler and signal mask the session started with.
 
     A process whose SIGINT is ignored or blocked ignores Ctrl-C and passes that on to every
-    process it starts (a sweep started by a later test then runs on through its Ctrl-C). A
-    test after which they differ is named in a warning, and they are put back, so that the
-    tests of Ctrl-C do not depend on the order the suite runs in.
+    process it starts. A test after which they differ is named in a warning, and they are put
+    back, so that the tests of Ctrl-C do not depend on the order the suite runs in.
     """
     import signal
     import warnings

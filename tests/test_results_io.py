@@ -127,12 +127,18 @@ def test_write_atomic(tmp_path):
 
 def test_deferred_signals_deliver_after_the_block():
     done = []
-    with pytest.raises(KeyboardInterrupt):
-        with deferred_signals():
-            os.kill(os.getpid(), signal.SIGINT)
-            done.append("block finished")  # not interrupted inside
-    assert done == ["block finished"]
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    # Python's own handler, even if this process was started with SIGINT ignored (a
+    # background job of a shell without job control)
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with deferred_signals():
+                os.kill(os.getpid(), signal.SIGINT)
+                done.append("block finished")  # not interrupted inside
+        assert done == ["block finished"]
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, inherited)
 
 
 def test_run_lock_refuses_a_second_holder_names_it_and_is_removed(tmp_path):

@@ -58,6 +58,13 @@ def _rows_written(out) -> int:
     return len(list((out / "cases").glob("*/row.json"))) if (out / "cases").is_dir() else 0
 
 
+def _sigint_default():
+    """In the child before exec: SIGINT to its default, as a terminal's foreground job has it
+    (a test process started with SIGINT ignored, e.g. a background job of a shell without job
+    control, would hand the ignored disposition on, and Python keeps an ignored SIGINT)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_ctrl_c_to_the_process_group_then_resume(tmp_path, warm_kernels):
     # a terminal's Ctrl-C: SIGINT to the whole foreground process group, the local cluster's
     # worker processes too. Cases of 3 s simulated (~0.15-0.25 s each on the compiled loop,
@@ -69,7 +76,8 @@ def test_ctrl_c_to_the_process_group_then_resume(tmp_path, warm_kernels):
     cmd = [sys.executable, "-m", "multiarm_pin.app.cli", "sweep", str(study), "--out", str(out),
            "--workers", "2"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            cwd=REPO, start_new_session=True)  # its own group, as in a shell
+                            cwd=REPO, start_new_session=True,  # its own group, as in a shell
+                            preexec_fn=_sigint_default)
     try:
         deadline = time.monotonic() + 600
         while _rows_written(out) < 1 and proc.poll() is None and time.monotonic() < deadline:
