@@ -102,3 +102,28 @@ ALONG_A_RUN_LINK = {
     "fingertip_into_the_table": "fingertip_3",
 }
 """Case name -> the link that must be among those hitting the other body (None: any)."""
+
+
+def assert_clearances_are_brute_force(scene, result, scan) -> int:
+    """Each category's clearance of ``scan`` equals the smallest hull distance over every
+    pair of that category (grasp pairs aside) at every sample of ``result``, measured here
+    with coal pair by pair (``CollisionScene.hull_distances``), to 2e-10 m; None where the
+    category has no pair.
+
+    Returns the brute-force distances' array size, (T, pairs).
+    """
+    import numpy as np
+    import pytest
+
+    from multiarm_pin.feasibility import CATEGORIES
+
+    brute = np.array([scene.hull_distances(scene.configuration(
+        result.q[s], result.object_position[s], result.object_quaternion[s]))
+        for s in range(len(result.t))])
+    for ci, name in enumerate(CATEGORIES):
+        cols = (scene.category == ci) & ~scene.grasp_pair
+        if not cols.any():
+            assert scan.clearance[name] is None, name
+            continue
+        assert scan.clearance[name] == pytest.approx(brute[:, cols].min(), abs=2e-10), name
+    return brute.size

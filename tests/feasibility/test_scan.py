@@ -12,7 +12,11 @@ from multiarm_pin.app.scenario.schema import parse_scenario
 from multiarm_pin.feasibility import feasibility_report
 from multiarm_pin.feasibility.collisions import PENETRATION_TOLERANCE
 from multiarm_pin.feasibility.scan import RunScan
-from tests.feasibility.collision_cases import ALONG_A_RUN, ALONG_A_RUN_LINK
+from tests.feasibility.collision_cases import (
+    ALONG_A_RUN,
+    ALONG_A_RUN_LINK,
+    assert_clearances_are_brute_force,
+)
 
 
 def _run(case):
@@ -85,7 +89,6 @@ def test_a_run_scanned_in_stretches_equals_one_scan():
 def test_clearances_equal_every_pair_at_every_sample_of_the_demo():
     # the demo carrying its box: pairs at nearly constant distance (a wrist and the tool's
     # box turning about each other), pairs bounded along the measured closest axis
-    from multiarm_pin.feasibility.collisions import CATEGORIES
     from tests.feasibility.collision_cases import DEMO
 
     data, _ = ALONG_A_RUN["wrists_to_the_floor"][0]()
@@ -94,13 +97,5 @@ def test_clearances_equal_every_pair_at_every_sample_of_the_demo():
     data["simulation"]["duration"] = 0.5
     built, scene, result = _run(lambda: (data, str(DEMO)))
     scan = scene.scan(result.q, result.object_position, result.object_quaternion, None)
-    brute = np.array([scene.hull_distances(scene.configuration(
-        result.q[s], result.object_position[s], result.object_quaternion[s]))
-        for s in range(len(result.t))])
-    for ci, name in enumerate(CATEGORIES):
-        cols = (scene.category == ci) & ~scene.grasp_pair
-        if not cols.any():
-            assert scan.clearance[name] is None
-            continue
-        assert scan.clearance[name] == pytest.approx(brute[:, cols].min(), abs=2e-10), name
-    assert scan.measured < brute.size / 4
+    n_brute = assert_clearances_are_brute_force(scene, result, scan)
+    assert scan.measured < n_brute / 4
