@@ -227,6 +227,51 @@ def test_fingertips_on_faces_by_ik(tmp_path):
     assert err.key == "arms[0].joint.contacts[0].point" and "not on face" in str(err)
 
 
+def test_fingertips_given_as_points_in_the_tool_frame(tmp_path):
+    """A tip given as its centre in the tool frame is the same tip as the frame there: the
+    mp6's fingertip frames, measured by Pinocchio, written as points, put the frames on the
+    face (a rigid gripper: the points move with the tool)."""
+    from multiarm_pin.model.arm import Arm
+
+    urdf = str(REPO / "robots/mp6/mp6.urdf")
+    arm = Arm.from_urdf(urdf, "tool0", load_visuals=False)
+    model, data = arm.model, arm.model.createData()
+    q = pin.neutral(model)
+    pin.framesForwardKinematics(model, data, q)
+    oMt = data.oMf[model.getFrameId("tool0")]
+    names = ("fingertip_1", "fingertip_2", "fingertip_3")
+    tips = [oMt.actInv(data.oMf[model.getFrameId(n)].translation).tolist() for n in names]
+    points = ([0.05, 0.0, 0.15], [0.0, -0.05, 0.15], [0.0, 0.05, 0.15])
+    d = {
+        "object": {"shape": {"type": "box", "size": [0.6, 0.6, 0.3]}, "mass": 2.0,
+                   "pose": {"position": [0.6, 0.0, 0.2]}},
+        "arms": [{
+            "name": "g", "urdf": urdf, "tool_frame": "tool0",
+            "q_seed": [0.0, 0.6, 1.0, 0.0, 1.4, 0.0],
+            "joint": {"type": "fingertips", "tip_radius": 0.015, "contacts": [
+                {"tip": t, "face": "+z", "point": p} for t, p in zip(tips, points,
+                                                                     strict=True)]}}],
+    }
+    built = build_scenario(load_scenario(write(tmp_path, d)))
+    assert [c.tip for c in built.scenario.arms[0].joint.contacts] == ["tip0", "tip1", "tip2"]
+    qk = built.q0[0]
+    pin.framesForwardKinematics(model, data, qk)
+    for n in names:  # every fingertip frame's centre 15 mm above the top face
+        assert data.oMf[model.getFrameId(n)].translation[2] == pytest.approx(
+            0.2 + 0.15 + 0.015, abs=1e-9)
+    assert built.joints[0].kind == "fingertips"
+    assert built.system.unilateral.sum() == 3
+    built.system.check_initial_state(built.initial_state)
+    # bad tips: a wrong length, neither a name nor a point
+    d["arms"][0]["joint"]["contacts"][1]["tip"] = [0.0, 0.1]
+    err = error_of(tmp_path, d)
+    assert err.key == "arms[0].joint.contacts[1].tip" and "expected 3 numbers" in str(err)
+    d["arms"][0]["joint"]["contacts"][1]["tip"] = 7
+    err = error_of(tmp_path, d)
+    assert err.key == "arms[0].joint.contacts[1].tip"
+    assert "a frame name or the tip's centre [x, y, z] in the tool frame" in str(err)
+
+
 # ----------------------------------------------------------------------------- issue 13
 def _three_joint_ur5(joint_type, position):
     d = copy.deepcopy(BASE)

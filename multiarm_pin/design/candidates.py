@@ -41,10 +41,12 @@ REACH_FRACTION = 0.7
 with the tool turned to a face attains) from the contact."""
 
 SAMPLING_TRIES = 200
+"""Random draws before giving up: of a base position (then the draw nearest the conditions is
+kept), of a point inside a face by the margin (then the face's centre), of an arm's choice
+in a recombination (then none)."""
 
 GRIP_TRIES = 24
 """Assignments of a fingertip gripper's tips to a corner's faces tried per candidate."""
-"""Random draws of a base position before the nearest-to-reach one is kept."""
 
 
 @dataclass(frozen=True)

@@ -159,7 +159,8 @@ class DesignProblem:
                 arm = self.arm(slot.index, np.zeros(4))
                 q = arm.neutral()
                 oMt = arm.tool_placement(q)
-                tips = np.array([oMt.actInv(arm.frame_placement(q, t).translation)
+                tips = np.array([np.asarray(t, float) if not isinstance(t, str) else
+                                 oMt.actInv(arm.frame_placement(q, t).translation)
                                  for t in slot.tips])
             self.tips_in_tool.append(tips)
 
@@ -277,7 +278,8 @@ def scenario_data(problem: DesignProblem, cand: Candidate, q0s=None, points=None
         else:
             names = problem.poly.face_names
             e["joint"] = {"type": "fingertips", "tip_radius": slot.tip_radius, "contacts": [
-                {"tip": t, "face": names[f] if names else f, "point": _r(p)}
+                {"tip": t if isinstance(t, str) else _r(t), "face": names[f] if names else f,
+                 "point": _r(p)}
                 for t, f, p in zip(slot.tips, a.faces, pts, strict=True)]}
         arms.append(e)
     d["arms"] = arms
@@ -299,10 +301,10 @@ def _fail(cand: Candidate, condition: str, value: float, detail: str, **kw) -> E
 def _start_ik(problem: DesignProblem, sc, cand: Candidate):
     """Per arm the start configuration and (K, 3) contact points, or a ``reach`` failure."""
     from multiarm_pin.app.scenario.build import (
-        _contact_targets,
-        _joint_targets,
-        _tips_in_tool,
         build_arm,
+        contact_targets,
+        joint_targets,
+        tips_in_tool,
     )
     from multiarm_pin.model.ik import PoseTarget, solve_ik
 
@@ -312,11 +314,11 @@ def _start_ik(problem: DesignProblem, sc, cand: Candidate):
         arm = build_arm(sc, spec_arm, load_visuals=False)
         tool = arm.model.frames[arm.tool_frame_id].name
         if slot.gripper == "weld":
-            targets = _joint_targets(spec_arm, tool, oMo)[0]
+            targets = joint_targets(spec_arm, tool, oMo)[0]
         elif a.tool is not None:  # the fitted grip: the tool where it puts the tips
             targets = [PoseTarget(tool, oMo * pin.XYZQUATToSE3(a.tool))]
         else:
-            targets = _contact_targets(sc, spec_arm, problem.poly, oMo)
+            targets = contact_targets(sc, spec_arm, problem.poly, oMo, tool)
         ik, residual = None, np.inf
         rng = candidate_rng(problem.spec.search.seed, cand.index, 1 + slot.index)
         for t in range(1 + SEED_RETRIES):
@@ -335,7 +337,7 @@ def _start_ik(problem: DesignProblem, sc, cand: Candidate):
             pts = a.points
         else:  # where the tips touch: sphere centres moved by the radius into the faces
             oMt = arm.tool_placement(ik.q)
-            tips = _tips_in_tool(sc, spec_arm, arm)
+            tips = tips_in_tool(sc, spec_arm, arm)
             M = oMo.actInv(oMt)
             pts = np.array([M.act(t) - slot.tip_radius * problem.poly.normals[f]
                             for t, f in zip(tips, a.faces, strict=True)])

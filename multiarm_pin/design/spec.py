@@ -12,6 +12,8 @@ A design spec is a YAML file (format in the README's "Designing a system")::
     arms:
       - {robot: ur5, count: 2, gripper: weld}
       - {gripper: {fingertips: mp6_4f}}      # a named gripper of GRIPPERS (arm and hand)
+      - {robot: ur5, gripper: {fingertips: [[0.05, 0, 0.1], ...], tip_radius: 0.015}}
+                                             # tip centres in the tool frame [m] (or frames)
     bases:
       region: {x: [-0.2, 1.2], y: [-0.9, 0.9], z: 0.0}
       yaw: free                              # or a number [rad], or [lo, hi]
@@ -35,7 +37,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 
 from multiarm_pin.exceptions import DesignError, ScenarioError
 from multiarm_pin.yaml_reader import Reader, describe, load_yaml_file
@@ -82,7 +83,8 @@ class ArmSlot:
         urdf: absolute URDF path, or None.
         tool_frame: the tool frame (None: the robot registry's).
         gripper: ``"weld"`` or ``"fingertips"``.
-        tips: fingertip frame names (fingertips only).
+        tips: the fingertips (fingertips only): each a frame name of the arm, or its
+            sphere's centre ``(x, y, z)`` in the tool frame [m].
         tip_radius: fingertip radius [m] (fingertips only).
         index: position in the design's arms.
     """
@@ -92,7 +94,7 @@ class ArmSlot:
     urdf: str | None
     tool_frame: str | None
     gripper: str
-    tips: tuple[str, ...] = ()
+    tips: tuple[str | tuple[float, float, float], ...] = ()
     tip_radius: float = 0.0
     index: int = 0
 
@@ -200,11 +202,10 @@ def parse_design(data, file: str = "<design>") -> DesignSpec:
 
 def _parse(data, file: str) -> DesignSpec:
     from multiarm_pin.app.scenario.schema import (
-        _parse_controller,
-        _parse_ground,
-        _parse_object,
-        _parse_simulation,
-        _parse_supports,
+        parse_ground,
+        parse_object,
+        parse_simulation,
+        parse_supports,
     )
 
     root = Reader(file, "", data)
@@ -213,20 +214,17 @@ def _parse(data, file: str) -> DesignSpec:
     description = root.get("description").string() if "description" in d else ""
     if "gravity" in d:
         root.get("gravity").array((3,), "m/s^2")
-    obj = _parse_object(root.get("object"))
-    supports = _parse_supports(root.get("supports")) if "supports" in d else ()
+    obj = parse_object(root.get("object"))
+    supports = parse_supports(root.get("supports")) if "supports" in d else ()
     if "ground" in d:
-        _parse_ground(root.get("ground"))
-    waypoints = _parse_task(root.get("task"), obj)
-    ctrl = {"type": "object_pd", "waypoints": list(waypoints)}
+        parse_ground(root.get("ground"))
+    waypoints, trajectory = _parse_task(root.get("task"), obj)
     controller = {}
     if "controller" in d:
         cr = root.get("controller")
         controller = cr.mapping(("kp", "kd", "margin"))
         for k in controller:
             cr.get(k).number(nonnegative=True)
-        ctrl.update(controller)
-    trajectory = _parse_controller(Reader(file, "task", ctrl), obj).params["trajectory"]
     base = {k: d[k] for k in ("gravity", "object", "supports", "ground") if k in d}
     sim = dict(d.get("simulation") or {})
     sim.setdefault("duration", float(trajectory["times"][-1]) + 0.2)
@@ -234,7 +232,7 @@ def _parse(data, file: str) -> DesignSpec:
     sim.setdefault("dt", 0.002)
     sim.setdefault("solver", "object_first")
     sim.setdefault("baumgarte", {"alpha": 5.0, "beta": 5.0})
-    _parse_simulation(Reader(file, "simulation", sim))
+    parse_simulation(Reader(file, "simulation", sim))
     base["simulation"] = sim
     arms = _parse_arms(root.get("arms"), Path(file).resolve().parent)
     for s in arms:
@@ -252,8 +250,18 @@ def _parse(data, file: str) -> DesignSpec:
                       trajectory, arms, bases, search, weights, top, controller)
 
 
-def _parse_task(r: Reader, obj) -> list[dict]:
-    """The task as object_pd waypoints ``{t, position, quaternion}`` (world, COM frame)."""
+def _parse_task(r: Reader, obj) -> tuple[list[dict], dict]:
+    """The task's waypoints and their trajectory (the start pose at t = 0).
+
+    Returns ``(waypoints, trajectory)``: object_pd waypoints ``{t, position, quaternion}``
+    (world, COM frame) and ``{times, positions, quaternions}``.
+
+    ``waypoints`` are read by the scenario reader
+    (:func:`~multiarm_pin.app.scenario.schema.parse_waypoints`); ``lift: h`` is one waypoint
+    ``h`` above the start at ``duration``.
+    """
+    from multiarm_pin.app.scenario.schema import parse_waypoints
+
     d = r.mapping(("waypoints", "lift", "duration"))
     if ("waypoints" in d) == ("lift" in d):
         raise r.error("give exactly one of 'lift' (a height [m]) or 'waypoints' (object_pd's "
@@ -262,22 +270,20 @@ def _parse_task(r: Reader, obj) -> list[dict]:
         h = r.get("lift").number(positive=True)
         T = r.get("duration").number(positive=True) if "duration" in d else 1.0
         p = obj.position + np.array([0.0, 0.0, h])
-        return [{"t": T, "position": p.tolist(), "quaternion": obj.quaternion.tolist()}]
-    if "duration" in d:
-        raise r.get("duration").error("'duration' goes with 'lift' (waypoints carry times)")
-    wr = r.get("waypoints")
-    if not isinstance(wr.value, list) or not wr.value:
-        raise wr.error(f"expected a non-empty list of {{t, position, quaternion|rpy}}, got "
-                       f"{describe(wr.value)}")
-    out = []
-    for k, w in enumerate(wr.value):
-        c = wr.child(k, w)
-        c.mapping(("t", "position", "quaternion", "rpy"), required=("t", "position"))
-        M = Reader(c.file, c.path, {k2: v for k2, v in w.items() if k2 != "t"}).placement()
-        out.append({"t": c.get("t").number(nonnegative=True),
-                    "position": M.translation.tolist(),
-                    "quaternion": pin.Quaternion(M.rotation).coeffs().tolist()})
-    return out
+        wr = Reader(r.file, f"{r.path}.lift", [{"t": T, "position": p.tolist(),
+                                                 "quaternion": obj.quaternion.tolist()}])
+    else:
+        if "duration" in d:
+            raise r.get("duration").error("'duration' goes with 'lift' (waypoints carry "
+                                          "times)")
+        wr = r.get("waypoints")
+    trajectory = parse_waypoints(wr, obj)
+    given = len(wr.value)  # the rows after the prepended start pose
+    waypoints = [{"t": float(t), "position": p.tolist(), "quaternion": q.tolist()}
+                 for t, p, q in zip(trajectory["times"][-given:],
+                                    trajectory["positions"][-given:],
+                                    trajectory["quaternions"][-given:], strict=True)]
+    return waypoints, trajectory
 
 
 def _parse_arms(r: Reader, base_dir: Path) -> tuple[ArmSlot, ...]:
@@ -312,8 +318,12 @@ def _parse_arms(r: Reader, base_dir: Path) -> tuple[ArmSlot, ...]:
             else:
                 if not isinstance(fr.value, list) or not fr.value:
                     raise fr.error(f"expected a named gripper ({', '.join(GRIPPERS)}) or a "
-                                   f"list of fingertip frame names, got {describe(fr.value)}")
-                tips = tuple(fr.child(k, v).string() for k, v in enumerate(fr.value))
+                                   f"list of fingertips (frame names or centres [x, y, z] in "
+                                   f"the tool frame [m]), got {describe(fr.value)}")
+                tips = tuple(_parse_tip(fr.child(k, v)) for k, v in enumerate(fr.value))
+                if len(tips) < 3:
+                    raise fr.error(f"a fingertip gripper fitted around a box corner needs at "
+                                   f"least 3 tips (one per face), got {len(tips)}")
             if "tip_radius" in gd:
                 radius = gr.get("tip_radius").number(nonnegative=True)
         if (robot is None) == (urdf is None):
@@ -337,6 +347,16 @@ def _parse_arms(r: Reader, base_dir: Path) -> tuple[ArmSlot, ...]:
     if len(set(names)) != len(names):
         raise r.error(f"arm names must be unique, got {names}")
     return tuple(slots)
+
+
+def _parse_tip(r: Reader) -> str | tuple[float, float, float]:
+    """A fingertip: a frame name of the arm, or its centre ``[x, y, z]`` in the tool frame."""
+    if isinstance(r.value, str):
+        return r.string()
+    if not isinstance(r.value, list):
+        raise r.error(f"expected a frame name or a fingertip centre [x, y, z] in the tool "
+                      f"frame [m], got {describe(r.value)}")
+    return tuple(float(v) for v in r.array((3,), "fingertip centre in the tool frame [m]"))
 
 
 def _parse_bases(r: Reader, n_arms: int) -> BaseRegion:

@@ -119,12 +119,23 @@ def _placed_target(spec: ArmSpec, oMo: pin.SE3) -> pin.SE3:
     return oMo * spec.joint.placement_in_object * J_t.inverse()
 
 
-def _tips_in_tool(scenario, spec: ArmSpec, arm) -> np.ndarray:
-    """(K, 3) fingertip centres in the tool frame, from the arm's (rigid) tip frames."""
+def tips_in_tool(scenario, spec: ArmSpec, arm) -> np.ndarray:
+    """(K, 3) fingertip centres in the tool frame [m] of a ``fingertips`` joint's arm.
+
+    A tip given as a point (``tip_in_tool``) is that point; a tip given by a frame is that
+    frame's origin at the neutral configuration (a rigid gripper: the same at every
+    configuration).
+
+    Raises:
+        ScenarioError: a tip frame that the arm's model does not have (with did-you-mean).
+    """
     q = arm.neutral()
     oMt = arm.tool_placement(q)
     out = []
     for k, c in enumerate(spec.joint.contacts):
+        if c.tip_in_tool is not None:
+            out.append(np.asarray(c.tip_in_tool, float))
+            continue
         if not arm.model.existFrame(c.tip):
             frames = [f for f in arm.frame_names if f != "universe"]
             raise ScenarioError(
@@ -135,8 +146,20 @@ def _tips_in_tool(scenario, spec: ArmSpec, arm) -> np.ndarray:
     return np.array(out)
 
 
-def _contact_targets(scenario, spec: ArmSpec, poly, oMo: pin.SE3):
-    """IK targets for fingertips on faces: a plane per tip (primary), a point (preference)."""
+def contact_targets(scenario, spec: ArmSpec, poly, oMo: pin.SE3, tool: str):
+    """IK targets for fingertips on faces: a plane per tip (primary), a point (preference).
+
+    Args:
+        scenario: the :class:`Scenario` (for messages).
+        spec: the arm's spec (a ``fingertips`` joint).
+        poly: the object's :class:`~multiarm_pin.model.polyhedron.Polyhedron`.
+        oMo: the object's placement in the world.
+        tool: the name of the arm's tool frame (a tip given in the tool frame is a point
+            fixed to it).
+
+    Raises:
+        ScenarioError: an unknown face, or a point off its face.
+    """
     from multiarm_pin.model.ik import PlaneTarget, PointTarget
 
     r = spec.joint.params.get("tip_radius", 0.0)
@@ -160,12 +183,13 @@ def _contact_targets(scenario, spec: ArmSpec, poly, oMo: pin.SE3):
         n_w = oMo.rotation @ n_o
         # sphere centre on the plane offset by the radius along the outward normal
         d_w = float(n_w @ oMo.translation) + d_o + r
-        targets.append(PlaneTarget(c.tip, n_w, d_w))
-        targets.append(PointTarget(c.tip, oMo.act(p_o + r * n_o), primary=False))
+        frame, at = (c.tip, None) if c.tip_in_tool is None else (tool, c.tip_in_tool)
+        targets.append(PlaneTarget(frame, n_w, d_w, point=at))
+        targets.append(PointTarget(frame, oMo.act(p_o + r * n_o), primary=False, offset=at))
     return targets
 
 
-def _joint_targets(spec: ArmSpec, tool: str, oMo: pin.SE3) -> tuple[list, str]:
+def joint_targets(spec: ArmSpec, tool: str, oMo: pin.SE3) -> tuple[list, str]:
     """IK targets of a placed joint: only what the joint constrains.
 
     The joint frame ``J_t`` on the tool must meet ``J_o`` on the object: its origin alone for
@@ -207,13 +231,13 @@ def _solve_arm_ik(scenario, spec: ArmSpec, arm, poly, oMo, hints: bool = True):
     if seed is not None and len(seed) != arm.nq:
         raise ScenarioError(scenario.file, f"arms[{spec.index}].q_seed",
                             f"expected {arm.nq} numbers (nq of {arm.source}), got {len(seed)}")
+    tool = arm.model.frames[arm.tool_frame_id].name
     if JOINT_TYPES[spec.joint.type].from_contacts:
-        targets = _contact_targets(scenario, spec, poly, oMo)
+        targets = contact_targets(scenario, spec, poly, oMo, tool)
         what = f"arm {spec.name!r}: fingertips on faces"
         key = f"arms[{spec.index}].joint.contacts"
     else:
-        tool = arm.model.frames[arm.tool_frame_id].name
-        targets, goal = _joint_targets(spec, tool, oMo)
+        targets, goal = joint_targets(spec, tool, oMo)
         what = f"arm {spec.name!r} ({spec.joint.type} joint): {goal}"
         key = f"arms[{spec.index}].joint.placement_in_object"
         # among the configurations meeting the joint, prefer one near the seed (fingertips
@@ -245,7 +269,7 @@ def _fingertip_joint(scenario, spec: ArmSpec, arm, obj, oMt: pin.SE3, oMo: pin.S
     from multiarm_pin.constraints import make_joint, relative_placement
 
     j = spec.joint
-    tips = _tips_in_tool(scenario, spec, arm)
+    tips = tips_in_tool(scenario, spec, arm)
     M = relative_placement(oMt, oMo)
     r = j.params.get("tip_radius", 0.0)
     contacts = []
@@ -328,7 +352,7 @@ def build_scenario(scenario: Scenario, load_visuals: bool = True) -> BuiltScenar
         arm = build_arm(scenario, spec, load_visuals)
         key = f"arms[{spec.index}]"
         if JOINT_TYPES[spec.joint.type].from_contacts:
-            _tips_in_tool(scenario, spec, arm)  # fingertip frames exist (did-you-mean)
+            tips_in_tool(scenario, spec, arm)  # fingertip frames exist (did-you-mean)
         if spec.q0 is not None:
             if len(spec.q0) != arm.nq:
                 raise ScenarioError(scenario.file, f"{key}.q0",
@@ -409,4 +433,5 @@ def _build_supports(scenario: Scenario, obj) -> list:
     return out
 
 
-__all__ = ["BuiltScenario", "build_arm", "build_object", "build_scenario"]
+__all__ = ["BuiltScenario", "build_arm", "build_object", "build_scenario", "contact_targets",
+           "joint_targets", "tips_in_tool"]

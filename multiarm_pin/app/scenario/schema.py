@@ -42,8 +42,9 @@ Joint types (the placeable entries of :data:`~multiarm_pin.constraints.JOINT_TYP
 ``corner_gripper`` (parameters ``size``, ``tip_radius``, ``points_on`` (not for
 ``corner_gripper``), and optionally ``placement_in_object`` / ``placement_in_tool`` of the
 joint frame), and ``fingertips`` (spherical fingertips on named faces: ``tip_radius`` and
-``contacts: [{tip: frame, face: +x, point: [..]}, ...]``; the old name ``contacts`` is still
-read, with a deprecation warning). Without ``placement_in_object`` a joint is built where
+``contacts: [{tip: frame, face: +x, point: [..]}, ...]``, where ``tip`` is the frame of the
+sphere's centre or its centre ``[x, y, z]`` in the tool frame [m]; the old name ``contacts`` is
+still read, with a deprecation warning). Without ``placement_in_object`` a joint is built where
 the tool is at ``q0``. Without ``q0`` the arm is placed by inverse kinematics
 (:mod:`multiarm_pin.model.ik`) from ``q_seed``, meeting only what the joint constrains (the
 centre of a spherical joint; centre and axis of a revolute one; axis and line of a
@@ -141,8 +142,8 @@ def parse_scenario(data, file: str = "<scenario>") -> Scenario:
     description = root.get("description").string() if "description" in d else ""
     gravity = (root.get("gravity").array((3,), "m/s^2") if "gravity" in d
                else np.array([0.0, 0.0, -9.81]))
-    obj = _parse_object(root.get("object"))
-    supports = _parse_supports(root.get("supports")) if "supports" in d else ()
+    obj = parse_object(root.get("object"))
+    supports = parse_supports(root.get("supports")) if "supports" in d else ()
     arms_r = root.get("arms")
     if not isinstance(arms_r.value, list) or (not arms_r.value and not supports):
         raise arms_r.error(f"expected a non-empty list of arms (or an empty list with "
@@ -156,14 +157,14 @@ def parse_scenario(data, file: str = "<scenario>") -> Scenario:
                                               f"arms[{i}].name")
     controller = _parse_controller(root.get("controller"), obj) if "controller" in d else \
         ControllerSpec("none")
-    sim = _parse_simulation(root.get("simulation")) if "simulation" in d else SimulationSpec()
+    sim = parse_simulation(root.get("simulation")) if "simulation" in d else SimulationSpec()
     clean = dict(d)
     clean["arms"] = [dict(a) for a in d["arms"]]
     for a, spec in zip(clean["arms"], arms, strict=True):
         if spec.urdf is not None:
             a["urdf"] = spec.urdf
     limits = _parse_limits(root.get("limits")) if "limits" in d else LimitsSpec()
-    ground = _parse_ground(root.get("ground")) if "ground" in d else 0.0
+    ground = parse_ground(root.get("ground")) if "ground" in d else 0.0
     return Scenario(name, file, description, gravity, obj, arms, controller, sim, clean,
                     supports, limits, ground)
 
@@ -179,7 +180,7 @@ def _parse_limits(r: Reader) -> LimitsSpec:
                                             else _POLICIES) for k in d})
 
 
-def _parse_ground(r: Reader) -> float | None:
+def parse_ground(r: Reader) -> float | None:
     """``ground: {height: h}`` [m] (the plane z = h), or ``ground: null`` for none."""
     if r.value is None:
         return None
@@ -187,7 +188,12 @@ def _parse_ground(r: Reader) -> float | None:
     return r.get("height").number()
 
 
-def _parse_supports(r: Reader) -> tuple[SupportSpec, ...]:
+def parse_supports(r: Reader) -> tuple[SupportSpec, ...]:
+    """The ``supports:`` block (module docstring) as :class:`SupportSpec` s.
+
+    Raises:
+        ScenarioError: invalid content (key path and what was expected).
+    """
     if not isinstance(r.value, list):
         raise r.error(f"expected a list of supports {{name, plane, points, restitution, "
                       f"extent, x_axis}}, got {describe(r.value)}")
@@ -244,7 +250,12 @@ def _parse_supports(r: Reader) -> tuple[SupportSpec, ...]:
     return tuple(out)
 
 
-def _parse_object(r: Reader) -> ObjectSpec:
+def parse_object(r: Reader) -> ObjectSpec:
+    """The ``object:`` block (shape, mass, inertia, pose, twist, external wrenches).
+
+    Raises:
+        ScenarioError: invalid content (key path and what was expected).
+    """
     d = r.mapping(_OBJECT_KEYS, required=("shape", "mass"))
     sr = r.get("shape")
     sd = sr.mapping(("type", "size", "vertices"), required=("type",))
@@ -372,7 +383,16 @@ def _parse_joint(r: Reader) -> JointSpec:
                 raise cc.get("face").error(f"expected a face name (e.g. +x) or index, got "
                                            f"{describe(face)}")
             point = cc.get("point").array((3,), "object frame [m]") if "point" in cd else None
-            contacts.append(ContactSpec(cc.get("tip").string(), face, point))
+            tr = cc.get("tip")
+            if isinstance(tr.value, str):
+                contacts.append(ContactSpec(tr.string(), face, point))
+            elif isinstance(tr.value, list):
+                tip = tr.array((3,), "a frame name or the tip's centre [x, y, z] in the tool "
+                               "frame [m]")
+                contacts.append(ContactSpec(f"tip{k}", face, point, tip))
+            else:
+                raise tr.error(f"expected a frame name or the tip's centre [x, y, z] in the "
+                               f"tool frame [m], got {describe(tr.value)}")
         return JointSpec(kind, params, contacts=tuple(contacts))
     if "contacts" in d:
         raise r.get("contacts").error(f"only 'fingertips' joints take contacts, not {kind!r}")
@@ -404,32 +424,51 @@ def _parse_controller(r: Reader, obj: ObjectSpec) -> ControllerSpec:
     if "waypoints" in d:
         if "trajectory" in d:
             raise r.get("waypoints").error("give either waypoints or trajectory, not both")
-        wr = r.get("waypoints")
-        if not isinstance(wr.value, list) or not wr.value:
-            raise wr.error(f"expected a non-empty list of {{t, position, quaternion|rpy}}, got "
-                           f"{describe(wr.value)}")
-        times, positions, quats = [], [], []
-        for k, w in enumerate(wr.value):
-            c = wr.child(k, w)
-            c.mapping(("t", "position", "quaternion", "rpy"), required=("t", "position"))
-            t = c.get("t").number(nonnegative=True)
-            if times and t <= times[-1]:
-                raise c.get("t").error(f"waypoint times must increase strictly; {t} after "
-                                       f"{times[-1]}")
-            M = Reader(c.file, c.path, {k2: v for k2, v in w.items() if k2 != "t"}).placement()
-            times.append(t)
-            positions.append(M.translation.copy())
-            quats.append(pin.Quaternion(M.rotation).coeffs().copy())
-        if times[0] > 0:
-            times.insert(0, 0.0)
-            positions.insert(0, obj.position.copy())
-            quats.insert(0, obj.quaternion.copy())
-        params["trajectory"] = {"times": np.array(times), "positions": np.array(positions),
-                                "quaternions": np.array(quats)}
+        params["trajectory"] = parse_waypoints(r.get("waypoints"), obj)
     return ControllerSpec(kind, params)
 
 
-def _parse_simulation(r: Reader) -> SimulationSpec:
+def parse_waypoints(r: Reader, obj: ObjectSpec) -> dict:
+    """object_pd's ``waypoints: [{t, position, quaternion | rpy}, ...]`` as a trajectory.
+
+    The waypoints are world poses of the object's COM frame at strictly increasing times
+    [s]; the object's initial pose is prepended at t = 0 when the first waypoint is later.
+
+    Returns:
+        ``{times: (T,), positions: (T, 3), quaternions: (T, 4) [x, y, z, w]}``.
+
+    Raises:
+        ScenarioError: not a non-empty list of such mappings, or times not increasing.
+    """
+    if not isinstance(r.value, list) or not r.value:
+        raise r.error(f"expected a non-empty list of {{t, position, quaternion|rpy}}, got "
+                      f"{describe(r.value)}")
+    times, positions, quats = [], [], []
+    for k, w in enumerate(r.value):
+        c = r.child(k, w)
+        c.mapping(("t", "position", "quaternion", "rpy"), required=("t", "position"))
+        t = c.get("t").number(nonnegative=True)
+        if times and t <= times[-1]:
+            raise c.get("t").error(f"waypoint times must increase strictly; {t} after "
+                                   f"{times[-1]}")
+        M = Reader(c.file, c.path, {k2: v for k2, v in w.items() if k2 != "t"}).placement()
+        times.append(t)
+        positions.append(M.translation.copy())
+        quats.append(pin.Quaternion(M.rotation).coeffs().copy())
+    if times[0] > 0:
+        times.insert(0, 0.0)
+        positions.insert(0, obj.position.copy())
+        quats.insert(0, obj.quaternion.copy())
+    return {"times": np.array(times), "positions": np.array(positions),
+            "quaternions": np.array(quats)}
+
+
+def parse_simulation(r: Reader) -> SimulationSpec:
+    """The ``simulation:`` block (duration, integrator, dt, solver, baumgarte).
+
+    Raises:
+        ScenarioError: invalid content (key path and what was expected).
+    """
     d = r.mapping(_SIM_KEYS)
     s = SimulationSpec()
     duration = r.get("duration").number(positive=True) if "duration" in d else s.duration
@@ -448,4 +487,5 @@ def _parse_simulation(r: Reader) -> SimulationSpec:
     return SimulationSpec(duration, integrator, dt, solver, baum)
 
 
-__all__ = ["load_scenario", "parse_scenario"]
+__all__ = ["load_scenario", "parse_ground", "parse_object", "parse_scenario", "parse_simulation",
+           "parse_supports", "parse_waypoints"]

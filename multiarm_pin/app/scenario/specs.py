@@ -92,15 +92,19 @@ class ContactSpec:
     """One fingertip contact of a ``fingertips`` joint.
 
     Attributes:
-        tip: frame name of the fingertip's sphere centre in the arm's model.
+        tip: the fingertip's name: the frame name of its sphere centre in the arm's model,
+            or ``tip<k>`` (k its position in ``contacts``) when ``tip_in_tool`` gives it.
         face: face name (``+x`` ...) or index of the object's polyhedron.
         point: (3,) desired contact point on that face, object frame [m], or None (the
             face's centre is used as a preference).
+        tip_in_tool: (3,) the sphere centre in the arm's tool frame [m] (a gripper with no
+            frame of its own per tip), or None (the frame ``tip`` gives it).
     """
 
     tip: str
     face: str | int
     point: np.ndarray | None
+    tip_in_tool: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
