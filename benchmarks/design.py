@@ -123,7 +123,11 @@ def main(argv=None) -> int:
     lines += ["", "## Designs against the shipped, hand-made scenarios", "",
               "Scores of the shipped scenario's own design and of the best design (by the "
               "objective); `at least as good`: on every score; Pareto: the ranks of the "
-              "designs of the front (in `report.md`) at least as good on every score.", "",
+              "designs of the front (in `report.md`) at least as good on every score. "
+              "Issue 26's \"done when\" asks for such a design on each of these specs; "
+              "`tests/design/test_search.py` asserts it for two_ur5_box.yaml only: the other "
+              "specs need their full search (the budget of their files) to find one, longer "
+              "than a test may take, so this table is where they are checked.", "",
               "| spec | | objective | " + " | ".join(SCORES) + " |",
               "|---" * (len(SCORES) + 3) + "|"]
 
@@ -135,8 +139,9 @@ def main(argv=None) -> int:
                      " | ".join(fmt(ship.get(n)) for n in SCORES) + " |")
         lines.append(f"| | best design | {best.objective:.4g} | " +
                      " | ".join(fmt(best.scores.get(n)) for n in SCORES) + " |")
-        lines.append(f"| | at least as good: best {'yes' if better else 'no'}; Pareto "
-                     f"{', '.join(map(str, front[:8])) or 'none'} |" + " |" * (len(SCORES) + 1))
+        lines.append(f"| | **{'found' if front else 'NOT found'}**: a design at least as "
+                     f"good on every score (best {'yes' if better else 'no'}; Pareto "
+                     f"{', '.join(map(str, front[:8])) or 'none'}) |" + " |" * (len(SCORES) + 1))
     (out / "design.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     print(f"report: {out / 'design.md'}")
     return 0

@@ -221,8 +221,14 @@ def sample_base(problem, contact_world: np.ndarray, normal_world: np.ndarray, re
 
 
 AIMED_SEED_FRACTION = 0.75
-"""Share of IK seeds whose first joint (a vertical base axis) turns the arm toward its grasp."""
+"""Share of IK seeds whose first joint (a vertical base axis) turns the arm toward its grasp
+(arms without :data:`BRANCHES`; the others aim by their shoulder branch)."""
 
+BRANCHES = 8
+"""IK branches of a 6-joint arm whose first joint turns about its base's vertical axis (the
+UR arms, the mp6): shoulder (the first joint turned toward its grasp or away from it), elbow
+(the sign of the third joint) and wrist (the sign of the fifth), bits 2, 1 and 0 of the branch
+number (:func:`branch_of`). Other arms have one: their seeds are drawn at random."""
 
 SEED_TRIES = 30
 """Draws of an IK seed before one whose joints are all above the ground is kept (else the
@@ -231,30 +237,91 @@ last)."""
 SEED_GROUND_CLEARANCE = 0.05
 """Height [m] above the ground of every joint origin of an IK seed."""
 
+BRANCH_JOINT_RANGE = (0.3, np.pi - 0.3)
+"""Range [rad] of the magnitude of a branch seed's elbow and wrist angles (their signs are
+the branch's; away from 0 and ±π, where the branches meet)."""
+
+
+def n_branches(problem, slot: int) -> int:
+    """The number of IK branches the search tells apart for an arm (:data:`BRANCHES` or 1)."""
+    lo, _ = problem.seed_bounds[slot]
+    return BRANCHES if problem.pan_offset[slot] is not None and len(lo) == 6 else 1
+
+
+def _aim(problem, slot: int, base: np.ndarray, target: np.ndarray) -> float:
+    """The first joint's angle [rad] that turns the arm's neutral reach toward ``target``."""
+    d = target - base[:3]
+    return float(np.arctan2(d[1], d[0]) - base[3] - problem.pan_offset[slot])
+
+
+def _wrap(a):
+    return np.angle(np.exp(1j * np.asarray(a, float)))
+
+
+def branch_of(problem, slot: int, base: np.ndarray, target: np.ndarray, q: np.ndarray) -> int:
+    """The IK branch (:data:`BRANCHES`) of an arm's configuration, or 0 for one-branch arms.
+
+    Shoulder: the first joint more than π/2 from aiming at ``target`` (world [m], the grasp);
+    elbow: the third joint's angle (wrapped to ``(-π, π]``) positive; wrist: the fifth's.
+    """
+    if n_branches(problem, slot) == 1:
+        return 0
+    q = np.asarray(q, float)
+    shoulder = int(np.cos(q[0] - _aim(problem, slot, base, target)) < 0.0)
+    return 4 * shoulder + 2 * int(_wrap(q[2]) > 0.0) + int(_wrap(q[4]) > 0.0)
+
 
 def random_seed_configuration(problem, slot: int, base: np.ndarray, target: np.ndarray,
-                              rng) -> np.ndarray:
-    """An IK seed: uniform within the joint limits (each at most ±π), mostly aimed.
+                              rng, branch: int | None = None) -> np.ndarray:
+    """An IK seed: uniform within the joint limits (each at most ±π), on an IK branch.
 
-    With probability :data:`AIMED_SEED_FRACTION`, when the arm's first joint turns about its
-    base's vertical axis, that joint is set so that the arm's neutral reach direction
-    (:attr:`~.evaluation.DesignProblem.pan_offset`) points at ``target`` (world [m]), give or
-    take a normal 0.2 rad. Seeds are drawn again (up to :data:`SEED_TRIES` times) until every
-    joint origin is :data:`SEED_GROUND_CLEARANCE` above the ground.
+    For an arm with :data:`BRANCHES`, the seed lies on ``branch`` (None: one drawn at
+    random): its first joint aims the arm's neutral reach direction
+    (:attr:`~.evaluation.DesignProblem.pan_offset`) at ``target`` (world [m]), or away from it
+    for the shoulder's other branch, give or take a normal 0.2 rad; its elbow and wrist
+    angles have the branch's signs and magnitudes in :data:`BRANCH_JOINT_RANGE`. For other
+    arms, with probability :data:`AIMED_SEED_FRACTION`, when the arm's first joint turns about
+    its base's vertical axis, that joint aims at ``target``. Seeds are drawn again (up to
+    :data:`SEED_TRIES` times) until every joint origin is :data:`SEED_GROUND_CLEARANCE` above
+    the ground.
     """
     lo, hi = problem.seed_bounds[slot]
-    aim = rng.random() < AIMED_SEED_FRACTION
+    branched = n_branches(problem, slot) > 1
+    if branched and branch is None:
+        branch = int(rng.integers(BRANCHES))
+    aim = branched or rng.random() < AIMED_SEED_FRACTION
     offset = problem.pan_offset[slot]
     for _ in range(SEED_TRIES):
         q = rng.uniform(lo, hi)
         if aim and offset is not None:
-            d = target - base[:3]
-            pan = np.arctan2(d[1], d[0]) - base[3] - offset + rng.normal(0.0, 0.2)
-            pan = float(np.angle(np.exp(1j * pan)))
+            away = np.pi if branched and branch & 4 else 0.0
+            pan = float(_wrap(_aim(problem, slot, base, target) + away + rng.normal(0.0, 0.2)))
             q[0] = float(np.clip(pan, lo[0], hi[0]))
+        if branched:
+            for j, bit in ((2, 2), (4, 1)):
+                sign = 1.0 if branch & bit else -1.0
+                q[j] = float(np.clip(sign * rng.uniform(*BRANCH_JOINT_RANGE), lo[j], hi[j]))
         if problem.lowest_joint(slot, q) + base[2] > problem.ground + SEED_GROUND_CLEARANCE:
             break
     return q
+
+
+SHOULDER_AWAY_FRACTION = 0.25
+"""Share of the randomly sampled candidates' arms seeded with the shoulder turned away from
+their grasps (reaching back over the base: rarely the best posture, so fewer; every arm of
+the best designs tries it in the search's branch round)."""
+
+
+def sampled_branch(index: int, arm: int, rng) -> int:
+    """The IK branch of arm ``arm``'s seed in the randomly sampled candidate ``index``.
+
+    The elbow and wrist signs run through their 4 combinations in turn, for each arm (arm
+    k's once per ``4 ** k`` candidates, shifted by the index), so that 4 successive candidates
+    cover them for every arm and the first 16 every pair of the first two arms'; the shoulder
+    is turned away with probability :data:`SHOULDER_AWAY_FRACTION` (drawn from ``rng``).
+    """
+    away = 4 if rng.random() < SHOULDER_AWAY_FRACTION else 0
+    return away + (index // 4 ** arm + (index if arm else 0)) % 4
 
 
 def sample_candidate(problem, index: int) -> Candidate:
@@ -291,8 +358,9 @@ def sample_candidate(problem, index: int) -> Candidate:
         else:
             base = sample_base(problem, c_w, n_w, problem.reach[i], bases, rng)
         bases.append(base)
-        arms.append(ArmChoice(base, faces, points, roll,
-                              random_seed_configuration(problem, i, base, c_w, rng), tool))
+        branch = sampled_branch(index, i, rng) if n_branches(problem, i) > 1 else None
+        q = random_seed_configuration(problem, i, base, c_w, rng, branch)
+        arms.append(ArmChoice(base, faces, points, roll, q, tool))
     return Candidate(index, tuple(arms))
 
 
@@ -446,11 +514,12 @@ def perturb(problem, parent: Candidate, q0s: list[np.ndarray], index: int,
 
 
 def reseed(problem, parent: Candidate, q0s: list[np.ndarray], index: int,
-           arm: int) -> Candidate:
+           arm: int, branch: int | None = None) -> Candidate:
     """The same design with arm ``arm`` on another IK branch: a fresh seed for its posture.
 
     Bases and grasps stay; every other arm is seeded with its configuration found for the
-    parent; arm ``arm`` with a new :func:`random_seed_configuration` (aimed at its grasp).
+    parent; arm ``arm`` with a new :func:`random_seed_configuration` on ``branch`` (None: a
+    random one) aimed by it at its grasp.
     With the tool held fully (a weld, a fitted gripper) a 6-joint arm's posture is one of
     its IK branches, which decides how far its links' weight and the object's act from its
     shoulder: the static torques.
@@ -461,7 +530,7 @@ def reseed(problem, parent: Candidate, q0s: list[np.ndarray], index: int,
         if i == arm:
             q = random_seed_configuration(problem, i, a.base,
                                           problem.object_placement.act(a.points.mean(axis=0)),
-                                          rng)
+                                          rng, branch)
         else:
             q = np.asarray(q0s[i], float).copy()
         arms.append(replace(a, q_seed=q))
@@ -548,7 +617,8 @@ def recombine(problem, pool: dict, index: int) -> Candidate | None:
     return Candidate(index, tuple(arms), -1)
 
 
-__all__ = ["ArmChoice", "Candidate", "approach", "arm_pool", "candidate_rng", "face_edge_margin",
-           "fingertip_faces", "perturb", "point_allowed", "project_to_face", "recombine", "reseed",
-           "sample_base", "sample_candidate", "sample_face_point", "supported_rectangles",
-           "weld_faces"]
+__all__ = ["BRANCHES", "ArmChoice", "Candidate", "approach", "arm_pool", "branch_of",
+           "candidate_rng", "face_edge_margin", "fingertip_faces", "n_branches", "perturb",
+           "point_allowed", "project_to_face", "random_seed_configuration", "recombine", "reseed",
+           "sample_base", "sample_candidate", "sample_face_point", "sampled_branch",
+           "supported_rectangles", "weld_faces"]

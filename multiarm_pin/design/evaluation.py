@@ -10,7 +10,9 @@
    (:func:`~multiarm_pin.grasp.form_closure.form_closure`); welds are full rank by construction;
 3. ``path``: inverse kinematics at every pose of the task (its waypoints and
    ``path_samples`` poses within each segment), each warm-started from the previous one, with no
-   joint moving more than :data:`MAX_JOINT_STEP` between two poses (one continuous branch);
+   joint moving more than :data:`MAX_JOINT_STEP` between two poses and every arm's tool
+   Jacobian's smallest singular value at least :data:`MIN_SINGULAR_VALUE` at every pose (one
+   continuous branch, away from the singularities where branches meet);
 4. ``collision``: the clearances along the task (:class:`~multiarm_pin.feasibility.CollisionScene`
    ``scan``, as ``feasibility_report``: arm-object apart from the grasping links, arm-arm,
    arm-support, arm-ground, self) at least the spec's ``clearance`` margin, and no collision;
@@ -49,6 +51,12 @@ MAX_JOINT_STEP = 0.5
 
 IK_ITERATIONS = 40
 """Levenberg-Marquardt iterations per phase of each inverse kinematics solve."""
+
+MIN_SINGULAR_VALUE = 0.05
+"""Smallest singular value of each arm's tool Jacobian (world-aligned at the tool, [m/rad]
+and [rad/rad] rows together) accepted at every pose of the task: a path through a
+singularity (a UR5's wrist at sin q5 = 0) changes IK branch there, and the simulation's
+contact-space matrix ``W M⁻¹ Wᵀ`` loses rank with the Jacobian."""
 
 SEED_RETRIES = 2
 """IK seeds tried after the candidate's own when an arm's start pose is not found (drawn
@@ -356,6 +364,13 @@ def _start_ik(problem: DesignProblem, sc, cand: Candidate):
     return (q0s, points, arms), None
 
 
+def _smallest_singular_value(arm, q: np.ndarray) -> float:
+    """Smallest singular value of the arm's (6, nv) tool Jacobian at ``q`` (world-aligned)."""
+    J = pin.computeFrameJacobian(arm.model, arm.data, q, arm.tool_frame_id,
+                                 pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+    return float(np.linalg.svd(J, compute_uv=False)[-1])
+
+
 def _manipulability(arm, q: np.ndarray) -> float:
     J = pin.computeFrameJacobian(arm.model, arm.data, q, arm.tool_frame_id,
                                  pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
@@ -451,6 +466,17 @@ def evaluate(problem: DesignProblem, cand: Candidate) -> Evaluation:
             row.append(ik.q)
         Q.append(np.concatenate(row))
     Q = np.array(Q)
+    for k, q in enumerate(Q):
+        at = 0
+        for i, arm in enumerate(arms):
+            sigma = _smallest_singular_value(arm, q[at:at + arm.nq])
+            at += arm.nq
+            if sigma < MIN_SINGULAR_VALUE:
+                return _fail(cand, "path", MIN_SINGULAR_VALUE - sigma,
+                             f"{spec.arms[i].name} near a singularity at t = "
+                             f"{problem.path_times[k]:.3g} s (smallest singular value of its "
+                             f"tool Jacobian {sigma:.3g}, needs {MIN_SINGULAR_VALUE:g})",
+                             q0=q0s, scenario=data, solved=_without(q0s, i))
     # collisions and clearances along the task
     from multiarm_pin.feasibility import CollisionScene
 
@@ -508,9 +534,9 @@ def evaluate(problem: DesignProblem, cand: Candidate) -> Evaluation:
                       int(np.argmin(manip)))
 
 
-__all__ = ["CONDITIONS", "DesignProblem", "Evaluation", "candidate_from_scenario",
-           "closure_scores", "evaluate",
-           "grasp_of", "scenario_data", "weld_placement"]
+__all__ = ["CONDITIONS", "MIN_SINGULAR_VALUE", "DesignProblem", "Evaluation",
+           "candidate_from_scenario", "closure_scores", "evaluate", "grasp_of", "scenario_data",
+           "weld_placement"]
 
 
 def candidate_from_scenario(problem: DesignProblem, scenario, index: int = 0) -> Candidate:

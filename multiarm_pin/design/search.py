@@ -7,12 +7,16 @@ of the :data:`PARENTS` best candidates so far whose bases differ (:data:`PARENT_
 best designs by the objective, or, while no candidate met every condition, those that got
 furthest: the latest condition, the best value there); the other half recombinations
 (:func:`~.candidates.recombine`) of arms that reached their grasps in any candidate so far
-(with one arm, fresh random candidates). After them, :data:`POLISH_ROUNDS` rounds of a
+(with one arm, fresh random candidates). Then a branch round tries every other IK branch
+of each arm of the best designs (:func:`_branch_round`; the random candidates' seeds already
+run through the elbow and wrist branches of every arm in turn, the shoulder turned away for
+some, :func:`~.candidates.sampled_branch`). After them, :data:`POLISH_ROUNDS` rounds of a
 quarter as many candidates refine the Pareto front (:func:`_polish`: other IK branches of
-the arm with the worst torque, bases toward or away from their grasps, small steps).
-Candidates are evaluated (:func:`~.evaluation.evaluate`) in
-parallel on Dask (a ``LocalCluster`` of ``workers`` processes or the scheduler at
-``scheduler``, as ``multiarm-pin sweep``), or in this process when ``workers`` is 1.
+the arm with the worst torque, bases toward or away from their grasps, small steps). A
+design found twice is ranked once (:func:`_distinct`). Candidates are evaluated
+(:func:`~.evaluation.evaluate`) in parallel on Dask (a ``LocalCluster`` of ``workers``
+processes or the scheduler at ``scheduler``, as ``multiarm-pin sweep``), or in this process
+when ``workers`` is 1.
 
 Determinism: a candidate depends only on the spec's seed, its index and its parent
 (:func:`~.candidates.candidate_rng`); an evaluation only on its candidate; parents and designs
@@ -32,8 +36,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from multiarm_pin.design.candidates import (
+    BRANCHES,
     approach,
     arm_pool,
+    branch_of,
+    n_branches,
     perturb,
     recombine,
     reseed,
@@ -125,7 +132,7 @@ def make_and_evaluate(problem: DesignProblem, recipe: tuple) -> Evaluation:
 
     Recipes: ``("sample", index)`` (:func:`~.candidates.sample_candidate`), ``("perturb",
     parent, q0s, index, scale)`` (:func:`~.candidates.perturb`), ``("reseed", parent, q0s,
-    index, arm)`` (:func:`~.candidates.reseed`), ``("approach", parent, q0s, index, arm,
+    index, arm[, branch])`` (:func:`~.candidates.reseed`), ``("approach", parent, q0s, index, arm,
     step)`` (:func:`~.candidates.approach`), ``("ready", candidate)``.
     Making the candidate in the task spreads the fingertip grips' fits over the workers too.
     """
@@ -242,6 +249,9 @@ def run_design(spec, workers: int = 1, scheduler: str | None = None, client=None
             nxt += per_round
             new = runner.map(problem, cands)
             evals += new
+        cands = _branch_round(problem, sorted(evals, key=key), nxt)
+        nxt += len(cands)
+        evals += runner.map(problem, cands)
         for r in range(1, POLISH_ROUNDS + 1):
             if progress is not None:
                 progress(_round_line(s.refine + r - 1, evals))
@@ -253,7 +263,7 @@ def run_design(spec, workers: int = 1, scheduler: str | None = None, client=None
         runner.close()
     if progress is not None:
         progress(_round_line(s.refine + POLISH_ROUNDS, evals))
-    ok = sorted((e for e in evals if e.ok), key=key)
+    ok = _distinct(sorted((e for e in evals if e.ok), key=key))
     failures = {c: sum(1 for e in evals if e.condition == c) for c in CONDITIONS}
     if not ok:
         raise _impossible(problem, evals)
@@ -263,7 +273,8 @@ def run_design(spec, workers: int = 1, scheduler: str | None = None, client=None
     for k, d in enumerate(designs):
         d.pareto = k in front
     return DesignResult(spec, designs[:spec.top], [d for d in designs if d.pareto],
-                        len(evals), len(ok), failures, time.perf_counter() - t0,
+                        len(evals), sum(1 for e in evals if e.ok), failures,
+                        time.perf_counter() - t0,
                         1 if isinstance(runner, _Loop) else max(workers, 1))
 
 
@@ -300,7 +311,7 @@ def _polish(ranked: list, n: int, first: int, scale: float) -> list:
     front, so that the front moves outward where the random rounds left it; candidates
     indexed from ``first``.
     """
-    ok = [e for e in ranked if e.ok]
+    ok = _distinct([e for e in ranked if e.ok])
     if not ok:
         return []
     front = [ok[i] for i in pareto_front([_all_scores(e) for e in ok])]
@@ -322,6 +333,49 @@ def _polish(ranked: list, n: int, first: int, scale: float) -> list:
                         sign * APPROACH_STEP))
         else:
             out.append(("perturb", p.candidate, p.q0, first + j, scale))
+    return out
+
+
+def _branch_round(problem, ranked: list, first: int) -> list:
+    """Every other IK branch of every arm of the best designs: the branch round's recipes.
+
+    For each parent (:func:`_parents`: the :data:`PARENTS` best designs whose bases differ
+    and the design best on each score; while none met every condition, the furthest
+    candidates whose start pose was found), each arm with :data:`~.candidates.BRANCHES` and
+    each branch other than the one its start
+    configuration is on (:func:`~.candidates.branch_of`): the design with that arm seeded on
+    that branch (:func:`~.candidates.reseed`; the other arms keep their configurations).
+    Seeds that converge to a configuration already found give the same design, which the
+    ranking keeps once (:func:`_distinct`). Candidates indexed from ``first``.
+    """
+    ok = [e for e in ranked if e.ok]
+    out = []
+    for p in (_parents(ranked) if ok else _diverse([e for e in ranked if e.q0 is not None],
+                                                   PARENTS)):
+        for i, a in enumerate(p.candidate.arms):
+            if n_branches(problem, i) == 1:
+                continue
+            target = problem.object_placement.act(a.points.mean(axis=0))
+            own = branch_of(problem, i, a.base, target, p.q0[i])
+            out += [("reseed", p.candidate, p.q0, first + len(out) + k, i, b)
+                    for k, b in enumerate(b for b in range(BRANCHES) if b != own)]
+    return out
+
+
+def _distinct(ranked: list) -> list:
+    """The evaluations of a ranking without repeats (the same design found twice).
+
+    A design whose bases, grasps and start configurations equal (to 1e-6 m or rad) those of
+    one ranked before it is left out.
+    """
+    seen, out = set(), []
+    for e in ranked:
+        key = tuple(np.round(np.concatenate(
+            [np.concatenate([a.base, np.ravel(a.points), [a.roll], q])
+             for a, q in zip(e.candidate.arms, e.q0, strict=True)]), 6).tolist())
+        if key not in seen:
+            seen.add(key)
+            out.append(e)
     return out
 
 

@@ -38,7 +38,7 @@ def ur5_tips_spec_data() -> dict:
         "arms": [{"robot": "ur5", "count": 2,
                   "gripper": {"fingertips": UR5_TIPS, "tip_radius": 0.015}}],
         "bases": {"region": {"x": [-0.9, 0.9], "y": [-0.9, 0.9], "z": 0.0}, "yaw": "free"},
-        "search": {"candidates": 24, "refine": 1, "seed": 0, "clearance": 0.01,
+        "search": {"candidates": 12, "refine": 0, "seed": 0, "clearance": 0.01,
                    "face_margin": 0.015},
         "top": 2,
         "simulation": {"duration": 1.2, "dt": 0.002},

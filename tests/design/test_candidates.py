@@ -7,19 +7,26 @@ import pytest
 
 from multiarm_pin.design import load_design, parse_design
 from multiarm_pin.design.candidates import (
+    BRANCHES,
     MIN_BASE_DISTANCE,
     approach,
+    branch_of,
+    candidate_rng,
     face_edge_margin,
     perturb,
     point_allowed,
+    random_seed_configuration,
     reseed,
     sample_candidate,
     sample_face_point,
+    sampled_branch,
     weld_faces,
 )
-from multiarm_pin.design.evaluation import DesignProblem, weld_placement
+from multiarm_pin.design.evaluation import DesignProblem, candidate_from_scenario, weld_placement
+from multiarm_pin.exceptions import UnreachableError
+from multiarm_pin.model.ik import PoseTarget, solve_ik
 from multiarm_pin.model.polyhedron import box
-from tests.design.design_cases import TWO_UR5_SPEC, spec_data
+from tests.design.design_cases import TWO_UR5_SCENARIO, TWO_UR5_SPEC, spec_data
 
 
 def test_edge_margin_of_a_box_face_is_the_distance_to_its_nearest_edge():
@@ -130,3 +137,50 @@ def test_weld_tool_points_into_its_face():
         np.testing.assert_allclose(M.rotation[:, 2], -poly.normals[f], atol=1e-12)
         np.testing.assert_allclose(M.rotation.T @ M.rotation, np.eye(3), atol=1e-12)
         assert np.linalg.det(M.rotation) == pytest.approx(1.0)
+
+
+def test_sampled_candidates_run_through_every_branch_of_every_arm():
+    """Each arm's elbow and wrist signs take their 4 combinations in turn (the first 16
+    candidates every pair of the first two arms'); the shoulder is turned away for about a
+    quarter of them."""
+    rng = np.random.default_rng(0)
+    b = np.array([[sampled_branch(i, arm, rng) for arm in range(3)] for i in range(400)])
+    assert sorted(b[:4, 0] % 4) == [0, 1, 2, 3]
+    assert len({(x % 4, y % 4) for x, y in b[:16, :2]}) == 16
+    assert np.all(np.bincount((b[:64, 1:] % 4).ravel(), minlength=4) == 32)
+    away = np.mean(b >= 4)
+    assert 0.15 < away < 0.35  # 1200 draws of probability 0.25: 8 standard deviations
+    assert set(b.ravel()) == set(range(BRANCHES))
+
+
+def test_branch_seeds_reach_the_ur5_branches_of_a_weld_pose():
+    """Seeds on each of the 8 branches (shoulder toward/away, elbow and wrist signs) of the
+    demo's UR5s at their shipped weld poses: each seed lies on its branch, and inverse
+    kinematics from them finds configurations on most branches (a UR5 has 8 at a generic
+    pose), each holding the weld pose (forward kinematics, below 1e-6 m and rad)."""
+    import pinocchio as pin
+
+    problem = DesignProblem(load_design(TWO_UR5_SPEC))
+    cand = candidate_from_scenario(problem, TWO_UR5_SCENARIO)
+    for i, a in enumerate(cand.arms):
+        arm = problem.arm(i, a.base)
+        M = problem.object_placement * weld_placement(problem.poly, a.faces[0], a.points[0],
+                                                      a.roll)
+        tool = arm.model.frames[arm.tool_frame_id].name
+        grasp = problem.object_placement.act(a.points.mean(axis=0))
+        rng = candidate_rng(0, 7)
+        found = set()
+        for b in range(BRANCHES):
+            for _ in range(3):
+                q = random_seed_configuration(problem, i, a.base, grasp, rng, b)
+                assert branch_of(problem, i, a.base, grasp, q) == b
+                try:
+                    ik = solve_ik(arm.model, [PoseTarget(tool, M)], q, max_iter=40, restarts=0)
+                except UnreachableError:
+                    continue
+                pin.framesForwardKinematics(arm.model, arm.data, ik.q)
+                err = arm.data.oMf[arm.tool_frame_id].actInv(M)
+                assert np.linalg.norm(err.translation) < 1e-6
+                assert np.linalg.norm(pin.log3(err.rotation)) < 1e-6
+                found.add(branch_of(problem, i, a.base, grasp, ik.q))
+        assert len(found) >= 5, (i, found)

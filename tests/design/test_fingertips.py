@@ -80,6 +80,6 @@ def test_a_gripper_given_by_tip_positions_on_a_ur5_designs_and_runs(tmp_path):
     path = tmp_path / "design_1.yaml"
     path.write_text(yaml.safe_dump(result.designs[0].scenario), encoding="utf-8")
     out = tmp_path / "run"
-    assert main(["run", str(path), "--out", str(out), "--quiet"]) == 0
+    assert main(["run", str(path), "--out", str(out), "--quiet", "--no-html"]) == 0
     summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert summary["status"] == "complete" and summary["feasible"] is True

@@ -19,7 +19,7 @@ from multiarm_pin.design.evaluation import (
     candidate_from_scenario,
     evaluate,
 )
-from multiarm_pin.design.scoring import at_least_as_good, objective
+from multiarm_pin.design.scoring import SCORES, at_least_as_good, objective
 from multiarm_pin.feasibility import CollisionScene
 from tests.design.design_cases import (
     TWO_UR5_SCENARIO,
@@ -136,3 +136,54 @@ def test_same_seed_same_designs_on_one_and_two_workers():
         assert a.scores == b.scores
         assert a.scenario == b.scenario
     assert one.failures == two.failures
+
+
+def test_a_path_near_a_singularity_fails_the_path_condition(monkeypatch):
+    """The shipped demo's arms keep their tool Jacobians' smallest singular values above 0.1
+    along the task (numpy's SVD of Pinocchio's Jacobian); asked for 0.2, the design
+    fails the ``path`` condition at the first pose below it, naming the arm."""
+    import multiarm_pin.design.evaluation as ev
+
+    problem = DesignProblem(load_design(TWO_UR5_SPEC))
+    cand = candidate_from_scenario(problem, TWO_UR5_SCENARIO)
+    e = evaluate(problem, cand)
+    assert e.ok
+    built = build_scenario(parse_scenario(e.scenario, problem.spec.file), load_visuals=False)
+    sigma = []
+    for q in e.path_q:
+        for i, arm in enumerate(built.system.arms):
+            J = pin.computeFrameJacobian(arm.model, arm.data, q[built.system.arm_set.q_slices[i]],
+                                         arm.tool_frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+            sigma.append(np.linalg.svd(J, compute_uv=False)[-1])
+    assert 0.1 < min(sigma) < 0.15
+    monkeypatch.setattr(ev, "MIN_SINGULAR_VALUE", 0.2)
+    e = evaluate(problem, cand)
+    assert not e.ok and e.condition == "path" and "near a singularity" in e.detail
+    first = next(x for x in sigma if x < 0.2)  # the first pose and arm below, in task order
+    assert e.value == pytest.approx(0.2 - first, abs=1e-9)
+
+
+def test_the_branch_round_tries_every_other_branch_of_each_arm(searched):
+    """For each parent and arm: the 7 branches other than its own, one re-seed each; a design
+    found twice is ranked once."""
+    from multiarm_pin.design.candidates import BRANCHES, branch_of
+    from multiarm_pin.design.search import PARENTS, _branch_round, _distinct
+
+    spec, result = searched
+    problem = DesignProblem(spec)
+    evals = [d.evaluation for d in result.pareto]
+    recipes = _branch_round(problem, evals, 10_000)
+    assert [r[3] for r in recipes] == list(range(10_000, 10_000 + len(recipes)))
+    parents = {r[1].index: r for r in recipes}
+    assert 1 <= len(parents) <= PARENTS + len(SCORES)  # the best, and the best on each score
+    for r in parents.values():
+        parent = next(e for e in evals if e.index == r[1].index)
+        for arm, a in enumerate(parent.candidate.arms):
+            g = problem.object_placement.act(a.points.mean(axis=0))
+            own = branch_of(problem, arm, a.base, g, parent.q0[arm])
+            tried = sorted(x[5] for x in recipes if x[1].index == parent.index and x[4] == arm)
+            assert tried == [b for b in range(BRANCHES) if b != own]
+    def indices(es):
+        return [e.index for e in es]
+
+    assert indices(_distinct(evals + evals)) == indices(_distinct(evals)) == indices(evals)

@@ -30,6 +30,15 @@ def test_arms_with_a_count_become_named_slots_and_grippers_their_hands():
     assert slot.urdf.endswith("mp6_4f.urdf") and slot.tool_frame == "tool0"
 
 
+def test_a_gripper_given_by_tip_positions_in_the_tool_frame():
+    d = spec_data()
+    tips = [[0.05, 0.0, 0.1], [-0.05, 0.0, 0.1], [0.0, 0.05, 0.12]]
+    d["arms"] = [{"robot": "ur5", "gripper": {"fingertips": tips, "tip_radius": 0.01}}]
+    slot = parse_design(d, "s.yaml").arms[0]
+    assert slot.gripper == "fingertips" and slot.robot == "ur5" and slot.tip_radius == 0.01
+    assert slot.tips == tuple(tuple(t) for t in tips)
+
+
 def test_a_lift_task_is_one_waypoint_straight_up():
     d = spec_data()
     d["task"] = {"lift": 0.2, "duration": 1.5}
@@ -50,6 +59,15 @@ def test_a_lift_task_is_one_waypoint_straight_up():
     (lambda d: d["object"].update(mass=-1), "object.mass", "positive"),
     (lambda d: d.update(bases={"fixed": [{"position": [0, 0, 0]}]}), "bases.fixed",
      "expected 2 base placements"),
+    (lambda d: d["arms"][0].update(gripper={"fingertips": [[0, 0, 0.1], [0, 0.1]]}),
+     "arms[0].gripper.fingertips[1]", "expected 3 numbers"),
+    (lambda d: d["arms"][0].update(gripper={"fingertips": [[0, 0, 0.1], 3, [0, 0, 0.2]]}),
+     "arms[0].gripper.fingertips[1]", "a frame name or a fingertip centre [x, y, z]"),
+    (lambda d: d["arms"][0].update(gripper={"fingertips": [[0, 0, 0.1], [0, 0.1, 0.1]]}),
+     "arms[0].gripper.fingertips", "at least 3 tips"),
+    (lambda d: d["task"].update(waypoints=[{"t": 1.0, "position": [0, 0, 1]},
+                                           {"t": 0.5, "position": [0, 0, 1]}]),
+     "task.waypoints[1].t", "increase strictly"),
 ])
 def test_errors_name_the_key_path(edit, key, words):
     d = spec_data()
