@@ -221,8 +221,8 @@ def sample_base(problem, contact_world: np.ndarray, normal_world: np.ndarray, re
 
 
 AIMED_SEED_FRACTION = 0.75
-"""Share of IK seeds whose first joint (a vertical base axis) turns the arm toward its grasp
-(arms without :data:`BRANCHES`; the others aim by their shoulder branch)."""
+"""Share of random IK seeds whose first joint (a vertical base axis) turns the arm toward its
+grasp (seeds not asked for a branch)."""
 
 BRANCHES = 8
 """IK branches of a 6-joint arm whose first joint turns about its base's vertical axis (the
@@ -239,7 +239,8 @@ SEED_GROUND_CLEARANCE = 0.05
 
 BRANCH_JOINT_RANGE = (0.3, np.pi - 0.3)
 """Range [rad] of the magnitude of a branch seed's elbow and wrist angles (their signs are
-the branch's; away from 0 and ±π, where the branches meet)."""
+the branch's; away from 0 and ±π, where the branches meet; the upper end within the joint's
+limit)."""
 
 
 def n_branches(problem, slot: int) -> int:
@@ -273,22 +274,20 @@ def branch_of(problem, slot: int, base: np.ndarray, target: np.ndarray, q: np.nd
 
 def random_seed_configuration(problem, slot: int, base: np.ndarray, target: np.ndarray,
                               rng, branch: int | None = None) -> np.ndarray:
-    """An IK seed: uniform within the joint limits (each at most ±π), on an IK branch.
+    """An IK seed: uniform within the joint limits (each at most ±π), aimed or on a branch.
 
-    For an arm with :data:`BRANCHES`, the seed lies on ``branch`` (None: one drawn at
-    random): its first joint aims the arm's neutral reach direction
-    (:attr:`~.evaluation.DesignProblem.pan_offset`) at ``target`` (world [m]), or away from it
-    for the shoulder's other branch, give or take a normal 0.2 rad; its elbow and wrist
-    angles have the branch's signs and magnitudes in :data:`BRANCH_JOINT_RANGE`. For other
-    arms, with probability :data:`AIMED_SEED_FRACTION`, when the arm's first joint turns about
-    its base's vertical axis, that joint aims at ``target``. Seeds are drawn again (up to
-    :data:`SEED_TRIES` times) until every joint origin is :data:`SEED_GROUND_CLEARANCE` above
-    the ground.
+    Without ``branch``: with probability :data:`AIMED_SEED_FRACTION`, when the arm's first
+    joint turns about its base's vertical axis, that joint is set so that the arm's neutral
+    reach direction (:attr:`~.evaluation.DesignProblem.pan_offset`) points at ``target``
+    (world [m]), give or take a normal 0.2 rad; the seed falls on whichever branch it falls.
+    With ``branch`` (an arm with :data:`BRANCHES`): the seed lies on that branch: its first
+    joint aims at ``target``, or away from it for the shoulder's other branch, give or take
+    a normal 0.2 rad; its elbow and wrist angles have the branch's signs and magnitudes in
+    :data:`BRANCH_JOINT_RANGE`. Seeds are drawn again (up to :data:`SEED_TRIES` times) until
+    every joint origin is :data:`SEED_GROUND_CLEARANCE` above the ground.
     """
     lo, hi = problem.seed_bounds[slot]
-    branched = n_branches(problem, slot) > 1
-    if branched and branch is None:
-        branch = int(rng.integers(BRANCHES))
+    branched = branch is not None and n_branches(problem, slot) > 1
     aim = branched or rng.random() < AIMED_SEED_FRACTION
     offset = problem.pan_offset[slot]
     for _ in range(SEED_TRIES):
@@ -300,28 +299,12 @@ def random_seed_configuration(problem, slot: int, base: np.ndarray, target: np.n
         if branched:
             for j, bit in ((2, 2), (4, 1)):
                 sign = 1.0 if branch & bit else -1.0
-                q[j] = float(np.clip(sign * rng.uniform(*BRANCH_JOINT_RANGE), lo[j], hi[j]))
+                top = min(BRANCH_JOINT_RANGE[1], hi[j] if sign > 0 else -lo[j])
+                bottom = min(BRANCH_JOINT_RANGE[0], top)
+                q[j] = float(np.clip(sign * rng.uniform(bottom, top), lo[j], hi[j]))
         if problem.lowest_joint(slot, q) + base[2] > problem.ground + SEED_GROUND_CLEARANCE:
             break
     return q
-
-
-SHOULDER_AWAY_FRACTION = 0.25
-"""Share of the randomly sampled candidates' arms seeded with the shoulder turned away from
-their grasps (reaching back over the base: rarely the best posture, so fewer; every arm of
-the best designs tries it in the search's branch round)."""
-
-
-def sampled_branch(index: int, arm: int, rng) -> int:
-    """The IK branch of arm ``arm``'s seed in the randomly sampled candidate ``index``.
-
-    The elbow and wrist signs run through their 4 combinations in turn, for each arm (arm
-    k's once per ``4 ** k`` candidates, shifted by the index), so that 4 successive candidates
-    cover them for every arm and the first 16 every pair of the first two arms'; the shoulder
-    is turned away with probability :data:`SHOULDER_AWAY_FRACTION` (drawn from ``rng``).
-    """
-    away = 4 if rng.random() < SHOULDER_AWAY_FRACTION else 0
-    return away + (index // 4 ** arm + (index if arm else 0)) % 4
 
 
 def sample_candidate(problem, index: int) -> Candidate:
@@ -358,8 +341,7 @@ def sample_candidate(problem, index: int) -> Candidate:
         else:
             base = sample_base(problem, c_w, n_w, problem.reach[i], bases, rng)
         bases.append(base)
-        branch = sampled_branch(index, i, rng) if n_branches(problem, i) > 1 else None
-        q = random_seed_configuration(problem, i, base, c_w, rng, branch)
+        q = random_seed_configuration(problem, i, base, c_w, rng)
         arms.append(ArmChoice(base, faces, points, roll, q, tool))
     return Candidate(index, tuple(arms))
 
@@ -518,8 +500,8 @@ def reseed(problem, parent: Candidate, q0s: list[np.ndarray], index: int,
     """The same design with arm ``arm`` on another IK branch: a fresh seed for its posture.
 
     Bases and grasps stay; every other arm is seeded with its configuration found for the
-    parent; arm ``arm`` with a new :func:`random_seed_configuration` on ``branch`` (None: a
-    random one) aimed by it at its grasp.
+    parent; arm ``arm`` with a new :func:`random_seed_configuration` on ``branch`` (None:
+    a random seed, mostly aimed at its grasp).
     With the tool held fully (a weld, a fitted gripper) a 6-joint arm's posture is one of
     its IK branches, which decides how far its links' weight and the object's act from its
     shoulder: the static torques.
@@ -620,5 +602,5 @@ def recombine(problem, pool: dict, index: int) -> Candidate | None:
 __all__ = ["BRANCHES", "ArmChoice", "Candidate", "approach", "arm_pool", "branch_of",
            "candidate_rng", "face_edge_margin", "fingertip_faces", "n_branches", "perturb",
            "point_allowed", "project_to_face", "random_seed_configuration", "recombine", "reseed",
-           "sample_base", "sample_candidate", "sample_face_point", "sampled_branch",
+           "sample_base", "sample_candidate", "sample_face_point",
            "supported_rectangles", "weld_faces"]

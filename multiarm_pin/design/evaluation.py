@@ -52,7 +52,7 @@ MAX_JOINT_STEP = 0.5
 IK_ITERATIONS = 40
 """Levenberg-Marquardt iterations per phase of each inverse kinematics solve."""
 
-MIN_SINGULAR_VALUE = 0.05
+MIN_SINGULAR_VALUE = 0.02
 """Smallest singular value of each arm's tool Jacobian (world-aligned at the tool, [m/rad]
 and [rad/rad] rows together) accepted at every pose of the task: a path through a
 singularity (a UR5's wrist at sin q5 = 0) changes IK branch there, and the simulation's

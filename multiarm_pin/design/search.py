@@ -8,9 +8,8 @@ best designs by the objective, or, while no candidate met every condition, those
 furthest: the latest condition, the best value there); the other half recombinations
 (:func:`~.candidates.recombine`) of arms that reached their grasps in any candidate so far
 (with one arm, fresh random candidates). Then a branch round tries every other IK branch
-of each arm of the best designs (:func:`_branch_round`; the random candidates' seeds already
-run through the elbow and wrist branches of every arm in turn, the shoulder turned away for
-some, :func:`~.candidates.sampled_branch`). After them, :data:`POLISH_ROUNDS` rounds of a
+of each arm of the best designs (:func:`_branch_round`: not only the branches their random
+seeds fell into). After them, :data:`POLISH_ROUNDS` rounds of a
 quarter as many candidates refine the Pareto front (:func:`_polish`: other IK branches of
 the arm with the worst torque, bases toward or away from their grasps, small steps). A
 design found twice is ranked once (:func:`_distinct`). Candidates are evaluated

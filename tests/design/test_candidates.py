@@ -19,7 +19,6 @@ from multiarm_pin.design.candidates import (
     reseed,
     sample_candidate,
     sample_face_point,
-    sampled_branch,
     weld_faces,
 )
 from multiarm_pin.design.evaluation import DesignProblem, candidate_from_scenario, weld_placement
@@ -137,20 +136,6 @@ def test_weld_tool_points_into_its_face():
         np.testing.assert_allclose(M.rotation[:, 2], -poly.normals[f], atol=1e-12)
         np.testing.assert_allclose(M.rotation.T @ M.rotation, np.eye(3), atol=1e-12)
         assert np.linalg.det(M.rotation) == pytest.approx(1.0)
-
-
-def test_sampled_candidates_run_through_every_branch_of_every_arm():
-    """Each arm's elbow and wrist signs take their 4 combinations in turn (the first 16
-    candidates every pair of the first two arms'); the shoulder is turned away for about a
-    quarter of them."""
-    rng = np.random.default_rng(0)
-    b = np.array([[sampled_branch(i, arm, rng) for arm in range(3)] for i in range(400)])
-    assert sorted(b[:4, 0] % 4) == [0, 1, 2, 3]
-    assert len({(x % 4, y % 4) for x, y in b[:16, :2]}) == 16
-    assert np.all(np.bincount((b[:64, 1:] % 4).ravel(), minlength=4) == 32)
-    away = np.mean(b >= 4)
-    assert 0.15 < away < 0.35  # 1200 draws of probability 0.25: 8 standard deviations
-    assert set(b.ravel()) == set(range(BRANCHES))
 
 
 def test_branch_seeds_reach_the_ur5_branches_of_a_weld_pose():
