@@ -106,8 +106,9 @@ INTEGRATORS: dict[str, IntegratorEntry] = {e.name: e for e in (
 """Every integrator, by name (the names :func:`simulate` and scenarios accept)."""
 
 MONITOR_STRETCH = 512
-"""Largest number of samples the compiled loops simulate in one call: a run's monitors
-(:func:`simulate`'s ``monitors``) see each such stretch as soon as it is done."""
+"""Largest number of samples the compiled loops simulate in one call, and that a run's
+monitors (:func:`simulate`'s ``monitors``) are shown at once: they see each stretch soon after
+it is done."""
 
 MONITOR_STRIDE = 32
 """Samples the stepper records one by one before the monitors are shown them."""
@@ -280,6 +281,7 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
         if integrator == "rk4" and stepper.edges:
             stepper.notes.append(FINITE_SUPPORTS_NOTE)
         stretch = _Stretch(every, n_steps)
+        watch.longest_stretch(stretch.top)
         k, retaken = 0, -1  # the sample whose step the stepper took last
         while True:
             if loop is not None and loop.ready(state):
@@ -384,13 +386,28 @@ class _Watch:
     have ended) and read only samples that are settled (the loops write later ones). A
     violation is raised at the next call (or at :meth:`finish`): the samples simulated since
     are dropped, so the run ends exactly as if the checks had been made in line.
+
+    While the worker is still checking, the samples recorded since wait and are shown
+    together once it is done (at most :attr:`batch` samples at once, then the loop waits for
+    it): a check's fixed cost is paid once for several stretches where the checks fall behind
+    (a machine without a free core), and a stop still comes within two batches of its sample.
     """
 
     def __init__(self, monitors: Sequence[Monitor]):
         self.monitors = tuple(monitors)
         self.checked = 0  # samples shown to the monitors
+        self.batch = MONITOR_STRETCH  # most samples shown at once
+        self._step = 1  # most samples a loop records between two calls
         self._pool: ThreadPoolExecutor | None = None
         self._pending: Future | None = None
+
+    def longest_stretch(self, samples: int) -> None:
+        """A loop's calls come at most ``samples`` samples apart.
+
+        Batches then hold at most twice that (and :data:`MONITOR_STRETCH`).
+        """
+        self._step = max(1, int(samples))
+        self.batch = min(MONITOR_STRETCH, 2 * self._step)
 
     def recorded(self, rec: Recorder, count: int) -> None:
         """Samples ``0 .. count - 1`` are recorded; show the monitors the settled ones.
@@ -404,6 +421,9 @@ class _Watch:
         end = count if last else count - 1
         if end - self.checked < (1 if last else MONITOR_STRIDE):
             return
+        busy = self._pending is not None and not self._pending.done()
+        if busy and not last and end - self.checked + self._step <= self.batch:
+            return  # shown with the next ones, once the worker is done
         k0, self.checked = self.checked, end
         self._raise(self._collect())
         if last:
