@@ -57,9 +57,9 @@ KEPT_PLACEMENTS = 1_000_000
 BOUND_BLOCK = 262_144
 """Largest samples x pairs whose bounds a clearance's branch and bound computes at once."""
 
-FIRST_BLOCK = 32768
-"""Samples x pairs whose path lengths a search for the first sample beyond a bound compares at
-once."""
+FIRST_BLOCK = 4096
+"""Samples x pairs whose path lengths a search for the first sample beyond a bound compares
+at once, before it searches the rest of the stretch."""
 
 PATH_BLOCK = 128
 """Samples per block of the path lengths' computation (its arrays stay in the CPU cache)."""
@@ -339,30 +339,37 @@ class RunScan:
     def _first_exceeding(self, ks: np.ndarray, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
         """First sample in ``[lo, hi)`` where each pair's bound falls to its target.
 
-        That is where ``C(s) - C(last) > budget``: ``C`` compared at every sample of a block
-        of samples, all pairs at once, block after block until each pair's is found (most
-        are in the first block).
+        That is where ``C(s) - C(last) > budget``: ``C`` compared at every sample of a first
+        block of samples, all pairs at once (most pairs due are due there), then a binary
+        search (``C`` is non-decreasing) for the others.
 
         Returns:
             ``(samples (K,), found (K,) bool)``.
         """
+        if lo >= hi:
+            return np.full(len(ks), hi), np.zeros(len(ks), dtype=bool)
         geo = self.geo
         u, rho = geo.joint_pair[ks], geo.rho[ks]
         last = self.last[ks]
         thr = self.path_shift[last, u] + rho * self.path_turn[last, u] + self.budget[ks]
-        at = np.full(len(ks), hi)
-        todo = np.arange(len(ks))
-        block = max(8, FIRST_BLOCK // max(len(ks), 1))
-        b0 = lo
-        while len(todo) and b0 < hi:
-            b1 = min(hi, b0 + block)
-            ut = u[todo]
-            over = (self.path_shift[b0:b1, ut] + rho[todo] * self.path_turn[b0:b1, ut]
-                    > thr[todo])  # (b, K')
-            hit = over.any(axis=0)
-            at[todo[hit]] = b0 + over[:, hit].argmax(axis=0)
-            todo = todo[~hit]
-            b0 = b1
+        b1 = min(hi, lo + max(8, FIRST_BLOCK // max(len(ks), 1)))
+        over = (self.path_shift[lo:b1, u] + rho * self.path_turn[lo:b1, u] > thr)  # (b, K)
+        hit = over.any(axis=0)
+        at = np.where(hit, lo + over.argmax(axis=0), hi)
+        todo = np.flatnonzero(~hit)
+        if len(todo) and b1 < hi:
+            U = self.path_shift.shape[1]
+            shift, turn = self.path_shift.reshape(-1), self.path_turn.reshape(-1)
+            ut, rt, tt = u[todo], rho[todo], thr[todo]
+            a = np.full(len(todo), b1)
+            b = np.full(len(todo), hi)
+            for _ in range(max(1, int(hi - b1).bit_length())):
+                mid = (a + b) >> 1
+                flat = np.minimum(mid, hi - 1) * U + ut
+                beyond = shift.take(flat) + rt * turn.take(flat) > tt
+                b = np.where(beyond, mid, b)
+                a = np.where(beyond | (a >= b), a, mid + 1)
+            at[todo] = a
         return at, at < hi
 
     def _openings(self, centres, contact_points, n0: int, n1: int) -> np.ndarray:
@@ -559,7 +566,9 @@ class RunScan:
         if n0 >= n:
             return
         geo = self.geo
-        k, s = np.nonzero(~np.isnan(self.exact[n0:n].T))  # by pair, then by sample
+        s, k = np.nonzero(~np.isnan(self.exact[n0:n]))
+        by_pair = np.argsort(k, kind="stable")  # by pair, then by sample
+        k, s = k[by_pair], s[by_pair]
         self._summed = n
         if not len(k):
             return
