@@ -312,7 +312,15 @@ class CollisionScene:
         a convex shape), else the deepest of the triangle contacts' penetration depths (two
         meshes, whose distance coal reports as 0 once they overlap).
         """
+        return self.mesh_penetrations(q_scene, [k])[0]
+
+    def mesh_penetrations(self, q_scene: np.ndarray, ks) -> list:
+        """:meth:`mesh_penetration` of the pairs ``ks`` at one configuration (placed once)."""
         pin.updateGeometryPlacements(self.model, self.data, self.mesh, self.mesh_data, q_scene)
+        return [self._placed_mesh_penetration(int(k)) for k in ks]
+
+    def _placed_mesh_penetration(self, k: int):
+        """:meth:`mesh_penetration` with the meshes already placed."""
         if not pin.computeCollision(self.mesh, self.mesh_data, int(k)):
             return None
         res = self.mesh_data.collisionResults[int(k)]

@@ -490,10 +490,14 @@ class RunScan:
         """The hull penetrations of the stretch checked on the meshes; the first hit's sample."""
         scene = self.scene
         first = None
-        rows, cols = np.nonzero(self.exact[n0:n1] < -self.tol)
-        for i, k in sorted(zip(rows.tolist(), cols.tolist(), strict=True)):
+        rows, cols = np.nonzero(self.exact[n0:n1] < -self.tol)  # by sample, then by pair
+        hits = []  # the meshes placed once per sample for all its pairs
+        for i in np.unique(rows).tolist():
+            ks = cols[rows == i].tolist()
+            hits += zip([i] * len(ks), ks, scene.mesh_penetrations(self.configs[n0 + i], ks),
+                        strict=True)
+        for i, k, hit in hits:
             s = n0 + i
-            hit = scene.mesh_penetration(self.configs[s], k)
             if hit is None:
                 continue
             if scene.grasp_pair[k] and contact_points is not None:
