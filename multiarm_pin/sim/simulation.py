@@ -280,7 +280,7 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
         events = ContactLoop.for_run(stepper, integrator)
         if integrator == "rk4" and stepper.edges:
             stepper.notes.append(FINITE_SUPPORTS_NOTE)
-        stretch = _Stretch(every, n_steps)
+        stretch = _Stretch(every, n_steps, tapered=bool(watch.monitors))
         watch.longest_stretch(stretch.top)
         k, retaken = 0, -1  # the sample whose step the stepper took last
         while True:
@@ -337,15 +337,24 @@ class _Stretch:
 
     WALL = 0.01
 
-    def __init__(self, every: int, n_steps: int):
+    def __init__(self, every: int, n_steps: int, tapered: bool = False):
         self.size = min(every, MONITOR_STRETCH)
         self.top = min(max(every, n_steps // 10), MONITOR_STRETCH)
         self.n_samples = n_steps + 1
+        self.tapered = tapered
         self._t0 = 0.0
 
     def end(self, k: int) -> int:
-        """One past the last sample of a call from sample ``k``."""
-        return min(self.n_samples, k + self.size)
+        """One past the last sample of a call from sample ``k``.
+
+        Tapered (a run with monitors): at most a quarter of the samples left, and at least
+        :data:`MONITOR_STRIDE`, so that the checks of the last stretches, which nothing
+        simulated beside them hides, are short.
+        """
+        size = self.size
+        if self.tapered:
+            size = min(size, max(MONITOR_STRIDE, (self.n_samples - k) // 4))
+        return min(self.n_samples, k + size)
 
     def __enter__(self):
         self._t0 = time.perf_counter()
