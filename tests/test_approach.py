@@ -106,12 +106,22 @@ def test_an_approach_into_the_object_or_on_a_mechanical_joint_is_a_clear_error(t
         load_scenario(p)
 
 
-def test_a_joint_that_starts_apart_still_rejects_penetration(tmp_path):
-    built = build_scenario(load_scenario(_scenario(tmp_path)), load_visuals=False)
-    s, state = built.system, built.initial_state
-    s.check_initial_state(state)  # 4 mm apart: accepted
+def test_a_tip_beside_its_face_starts_apart_and_the_other_joints_are_checked(tmp_path):
+    """An offset past the +x face and 4 mm down puts the +z tips beside the top face, below
+    its extended plane (gaps -4 mm - nothing touched): accepted, their rows inactive at
+    t = 0; the other gripper's joint is still checked (a moved object is an error)."""
     from multiarm_pin.model.rigid_object import ObjectState
+    from multiarm_pin.sim.stepper import Stepper
     from multiarm_pin.system import SystemState
+
+    built = build_scenario(load_scenario(_scenario(tmp_path, approach=[0.2, 0.004, -0.004])),
+                           load_visuals=False)
+    s, state = built.system, built.initial_state
+    phi = s.blocks(state).constraints.phi
+    np.testing.assert_allclose(phi[0, :4], [0.2, 0.004, -0.004, -0.004], atol=1e-9)
+    stepper = Stepper(s, None, "object_first", None)
+    stepper.init_active(stepper.blocks_at(0.0, state)[1], 1e-6)
+    assert not stepper.active[0, :4].any() and stepper.active[1, :3].all()
     o = state.obj
     pushed = SystemState(state.q, state.v, ObjectState(o.position + [0.01, 0.0, 0.0],
                                                        o.quaternion, o.twist))

@@ -220,12 +220,14 @@ class Stepper:
         self.events.append(ContactEvent(float(t), kind, int(b), int(r), label, body, **kw))
 
     def init_active(self, rows: ContactRows, tol: float) -> None:
-        """Active at t = 0: bilateral rows, and unilateral rows whose gap is within ``tol``.
+        """Active at t = 0: bilateral rows, and unilateral rows whose gap is within ``±tol``.
 
-        A row of a finite support is active only if its point is inside the rectangle.
+        A row of a finite support is active only if its point is inside the rectangle. A
+        fingertip that starts apart (``Joint.starts_apart``) beside its face has a negative
+        gap to the face's extended plane: it touches nothing and is not active.
         """
         s = self.system
-        touching = rows.phi <= tol
+        touching = np.abs(rows.phi) <= tol
         if self.edges:
             touching &= self.rows_margins(rows) > 0.0
         self.active = s.contact_mask & (~s.contact_unilateral | touching)

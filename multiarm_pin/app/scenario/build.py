@@ -170,8 +170,10 @@ def _contact_targets(scenario, spec: ArmSpec, poly, oMo: pin.SE3):
 def _approach(scenario, spec: ArmSpec, poly) -> np.ndarray:
     """(3,) the fingertip joint's ``approach`` offset (object frame [m]), zero if none.
 
-    Every tip must start on or off its face's plane, never into it: ``n_f · approach >= 0``
-    with ``n_f`` the face's outward normal.
+    No tip may start in the object: a tip moved to the inner side of its face's plane
+    (``n_f · approach < 0``, ``n_f`` the outward normal) must be beside the face (the
+    projection of its contact point so moved onto the face's plane outside the face), where
+    its gap is a distance to the plane extended beyond the face, not a penetration.
     """
     a = np.asarray(spec.joint.params.get("approach", np.zeros(3)), dtype=float)
     for k, c in enumerate(spec.joint.contacts):
@@ -179,12 +181,18 @@ def _approach(scenario, spec: ArmSpec, poly) -> np.ndarray:
             f = poly.face_index(c.face)
         except MultiArmError:
             continue  # reported on its contact's key by the caller
-        if float(poly.normals[f] @ a) < 0.0:
-            raise ScenarioError(
-                scenario.file, f"arms[{spec.index}].joint.approach",
-                f"the offset {a.tolist()} m moves contact {k} ({c.tip} on face {c.face!r}) "
-                f"into the object (outward normal {poly.normals[f].tolist()}); an approach "
-                "offset must move every tip away from its face or along it")
+        n = poly.normals[f]
+        if float(n @ a) >= 0.0:
+            continue
+        point = c.point if c.point is not None else poly.vertices[list(poly.faces[f])].mean(0)
+        moved = point + a - float(n @ a) * n  # on the face's plane
+        if not poly.point_on_face(moved, f, 1e-9):
+            continue  # beside the face
+        raise ScenarioError(
+            scenario.file, f"arms[{spec.index}].joint.approach",
+            f"the offset {a.tolist()} m moves contact {k} ({c.tip} on face {c.face!r}) "
+            f"into the object (outward normal {n.tolist()}); an approach offset must move "
+            "every tip away from its face, or beside it")
     return a
 
 

@@ -11,6 +11,10 @@ without recomputing them (the protocol :class:`ControllerFunction`). Build one b
   not compensated);
 - ``joint_pd``: ``τ = g(q) + K_p (q_ref ⊖ q) - K_d v`` (``q_ref`` defaults to the
   configuration at the first call, i.e. ``q0``);
+- ``phased_pd``: ``object_pd`` through phases (:mod:`~multiarm_pin.sim.controllers.phased`:
+  tilt about a pivot edge, move, hold), each with the support rows that keep pressing, the
+  arms released and the arms' held-point offsets (approach, retract); the supports are in
+  its force distribution. Reference path only (no compiled kernel; a run says so once);
 - ``object_pd``: object-level computed torque. A desired object trajectory
   (:class:`~multiarm_pin.sim.trajectories.MinimumJerkTrajectory`, or ``waypoints``; default:
   hold the pose of the first call) and PD on the object pose give a desired acceleration
@@ -55,6 +59,7 @@ from multiarm_pin.sim.controllers.object_pd import (
     ObjectPDPlan,
     grasp_rank,
 )
+from multiarm_pin.sim.controllers.phased import PhasedPD
 from multiarm_pin.sim.controllers.relative_motion import tool_acceleration_from_object
 from multiarm_pin.system import MultiArmSystem
 
@@ -91,6 +96,9 @@ CONTROLLERS: dict[str, ControllerType] = {e.name: e for e in (
                    "g(q) + K_p (q_ref - q) - K_d v toward the first call's configuration"),
     ControllerType("object_pd", ObjectPD, True,
                    "object-level computed torque with force distribution (waypoints)"),
+    ControllerType("phased_pd", PhasedPD, False,
+                   "object_pd through phases (tilt, move, hold) with their own contact sets, "
+                   "the supports in its force distribution (no compiled kernel)"),
 )}
 """Every controller type, by name (the names :func:`make_controller` and scenarios accept)."""
 
@@ -128,6 +136,7 @@ __all__ = [
     "JointPD",
     "ObjectPD",
     "ObjectPDPlan",
+    "PhasedPD",
     "ZeroTorque",
     "grasp_rank",
     "make_controller",

@@ -496,7 +496,6 @@ class ObjectPD(Controller):
         """
         s = self.system
         b = evaluation.blocks
-        arms = evaluation.arms
         o = state.obj
         if self.q_ref is None:
             self.q_ref = np.array(state.q, dtype=float)
@@ -528,6 +527,34 @@ class ObjectPD(Controller):
             self.margin_kept = False
         if self._forces is not None and index is None:  # next warm start: this active set
             self._forces.seed(fd.mu, self.margin)
+        qdd_desired = self.joint_accelerations(state, evaluation, a_d)
+        try:
+            last = inverse_dynamics(b, a_d, qdd_desired, fd.mu_I, fd.basis)
+        except DynamicsError as exc:
+            return self._hold_still(t, state, evaluation.blocks,
+                                    f"no inverse dynamics on the touching contacts ({exc})")
+        if index is not None:  # multipliers back at the rows of the full blocks
+            last = InverseDynamicsResult(last.tau, expand_rows(last.mu, index), last.qdd,
+                                         last.a_o, last.mu_I, last.basis)
+        self.last = last
+        self.holding = False
+        return s.unpad(last.tau)
+
+    def joint_accelerations(self, state: SystemState, evaluation: Evaluation,
+                            a_d: np.ndarray) -> np.ndarray:
+        """(n, nv_max) desired joint accelerations of the held points' tasks (steps 1-4).
+
+        Sets :attr:`last_point_acceleration`.
+
+        Args:
+            state: the state.
+            evaluation: its evaluation (tools' kinematics, Jacobians).
+            a_d: (6,) the object's desired acceleration, world axes at the COM.
+        """
+        s = self.system
+        arms = evaluation.arms
+        o = state.obj
+        b = evaluation.blocks
         e, u, d, r = self._hold_terms(state, evaluation)
         n, m = self.hold_mask.shape
         zero = np.zeros((n * m, 3))
@@ -556,18 +583,7 @@ class ObjectPD(Controller):
         scale = np.trace(AtA, axis1=1, axis2=2) / b.nv
         AtA += (JACOBIAN_DAMPING * scale)[:, None, None] * np.eye(AtA.shape[1])
         resid = rhs - (A @ z[:, :, None])[:, :, 0]
-        qdd_desired = z + np.linalg.solve(AtA, (At @ resid[:, :, None]))[:, :, 0]
-        try:
-            last = inverse_dynamics(b, a_d, qdd_desired, fd.mu_I, fd.basis)
-        except DynamicsError as exc:
-            return self._hold_still(t, state, evaluation.blocks,
-                                    f"no inverse dynamics on the touching contacts ({exc})")
-        if index is not None:  # multipliers back at the rows of the full blocks
-            last = InverseDynamicsResult(last.tau, expand_rows(last.mu, index), last.qdd,
-                                         last.a_o, last.mu_I, last.basis)
-        self.last = last
-        self.holding = False
-        return s.unpad(last.tau)
+        return z + np.linalg.solve(AtA, (At @ resid[:, :, None]))[:, :, 0]
 
 
 __all__ = ["GRASP_RANK_TOLERANCE", "JACOBIAN_DAMPING", "ObjectPD", "ObjectPDPlan", "grasp_rank"]
