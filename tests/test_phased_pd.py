@@ -166,3 +166,33 @@ def test_bad_phases_are_clear_errors():
         make_controller("phased_pd", s, phases=[{"press": [7]}])
     with pytest.raises(InputError, match=r"unknown arm 'left'"):
         make_controller("phased_pd", s, phases=[{"release": ["left"]}])
+
+
+def test_released_grippers_stop_pushing_and_separate(tmp_path):
+    """``pick_from_table``'s grippers hold the box on its stand, then both are released
+    (no planned force) and move 1 cm away from their grasp (object frame): every fingertip
+    separates after the release starts, no multiplier is ever negative, and the box stays
+    on the stand (the stand's rows take its weight: their sum is m g at the end)."""
+    d = yaml.safe_load((ROBOTS.parent.parent / "scenarios" / "pick_from_table.yaml")
+                       .read_text(encoding="utf-8"))
+    for arm in d["arms"]:
+        arm["urdf"] = str(ROBOTS / Path(arm["urdf"]).name)
+    d["controller"] = {"type": "phased_pd", "margin": 2.0, "phases": [
+        {"name": "hold", "kind": "hold", "t": 0.0, "duration": 0.1},
+        {"name": "release", "kind": "hold", "t": 0.1, "duration": 0.15, "margin": 0.0,
+         "release": ["four_finger", "three_finger"],
+         "offsets": {"four_finger": [0.01, 0.01, 0.01], "three_finger": [-0.01, -0.01, -0.01]}},
+    ]}
+    p = tmp_path / "release.yaml"
+    p.write_text(yaml.safe_dump(d), encoding="utf-8")
+    sc = load_scenario(p)
+    built = build_scenario(sc, load_visuals=False)
+    res = simulate_built(built, scenario_controller(built), 0.3, 0.002, sc.simulation.solver)
+    left = {(e.block, e.row): e.t for e in res.events if e.kind == "separation" and e.block < 2}
+    assert set(left) == {(0, 0), (0, 1), (0, 2), (0, 3), (1, 0), (1, 1), (1, 2)}
+    assert min(left.values()) >= 0.1
+    assert not any(e.kind == "touchdown" and e.block < 2 for e in res.events)
+    assert res.mu.min() >= 0.0
+    assert not res.active[-1, :2].any()
+    assert np.abs(res.object_position - res.object_position[0]).max() < 1e-6
+    assert res.mu[-1, 2, :4].sum() == pytest.approx(MASS * G, rel=1e-6)

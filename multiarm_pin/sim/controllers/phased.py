@@ -329,8 +329,12 @@ class PhasedPD(ObjectPD):
             self.margin_kept = False
         self.last_support_mu = dist.support_mu
         qdd_desired = self.joint_accelerations(state, evaluation, dist.a_o)
-        on_object = b.replaced(h_o=b.h_o + dist.support_wrench)
         fd = dist.forces
+        # the supports act on the object like an external wrench: h_o + Σ λ_k G_kᵀ, which
+        # the distribution made equal to M_o a_o - W_o μ (to round-off); written as the
+        # latter, the arms' wrench is not a difference of weight-sized terms (it vanishes
+        # when the supports carry the object)
+        on_object = b.replaced(h_o=b.M_o @ dist.a_o - b.stacked_W_o() @ fd.mu_flat)
         try:
             last = inverse_dynamics(on_object, dist.a_o, qdd_desired, fd.mu_I, fd.basis)
         except DynamicsError as exc:
