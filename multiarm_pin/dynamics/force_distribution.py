@@ -21,7 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import linprog, nnls
+from scipy.optimize import linprog, lsq_linear, nnls
 
 from multiarm_pin.dynamics.blocks import SystemBlocks
 from multiarm_pin.dynamics.inverse_dynamics import InternalForceBasis, internal_force_basis
@@ -242,6 +242,7 @@ def distribute_with_supports(
     G_support: np.ndarray,
     kappa_support: np.ndarray,
     support_margin: np.ndarray,
+    best_effort: bool = False,
 ) -> SupportedDistribution:
     """Arm contact forces and support forces together (the object resting on supports).
 
@@ -272,9 +273,15 @@ def distribute_with_supports(
         kappa_support: (K,) their velocity-product terms [m/s²].
         support_margin: (K,) least force [N] of each support row planned to press, NaN for
             rows not planned.
+        best_effort: when no forces meet the margins, instead of raising, the smallest
+            forces that meet them and make the wrench closest to ``w`` in the ``M_o⁻¹``
+            metric (bounded least squares, :func:`scipy.optimize.lsq_linear`, then
+            :func:`min_norm_forces` on its wrench); the rest of ``w`` is left to the motion
+            (``unreached``, in ``a_o``), as in step 2.
 
     Raises:
-        DynamicsError: no forces meet the margins (see :func:`min_norm_forces`).
+        DynamicsError: no forces meet the margins (see :func:`min_norm_forces`), unless
+            ``best_effort``.
         InputError: wrong shapes.
     """
     b = blocks
@@ -301,7 +308,23 @@ def distribute_with_supports(
     Ka = W_arm.shape[1]
     U = np.concatenate([U_arm, np.ones(len(G), dtype=bool)])
     margins = np.concatenate([np.where(U_arm, margin, 0.0), sm[P]])
-    mu_all = min_norm_forces(W, w_r, U, margins) if W.shape[1] else np.zeros(0)
+    try:
+        mu_all = min_norm_forces(W, w_r, U, margins) if W.shape[1] else np.zeros(0)
+    except DynamicsError:
+        if not best_effort:
+            raise
+        # pushing forces only: the wrench closest to w they make (every multiplier here is
+        # unilateral or bilateral as U says)
+        lb = np.where(U, margins, -np.inf)
+        x = lsq_linear(S @ W, S @ w, bounds=(lb, np.inf), method="bvls", tol=1e-12).x
+        # that wrench by the smallest such forces (the bounded least squares leaves the
+        # internal forces arbitrary; x itself shows they exist)
+        try:
+            mu_all = min_norm_forces(W, W @ x, U, margins)
+        except DynamicsError:  # pragma: no cover - round-off at the cone's boundary
+            mu_all = x
+        unreached = w - W @ mu_all
+        a_o = a - np.linalg.solve(b.M_o, unreached)
     mu_flat = mu_all[:Ka]
     lam = np.zeros(K)
     lam[P] = mu_all[Ka:]

@@ -301,3 +301,41 @@ def test_an_unreachable_wrench_is_left_to_the_motion_without_moving_the_pivot():
     np.testing.assert_allclose(G_s[:2] @ d.a_o + kappa[:2], 0.0, atol=1e-12)
     lhs = W_c @ d.forces.mu_flat + G_s.T @ d.support_mu
     np.testing.assert_allclose(lhs, M_o @ d.a_o - h_o, atol=1e-9)
+
+
+def test_best_effort_forces_push_and_make_the_closest_wrench():
+    """Two opposed arm contacts and the pivot, asked to turn the box about -y (the far
+    side down, into the table: only pulls would do it): without ``best_effort`` it
+    raises; with it, every multiplier meets its margin and the wrench is the closest one
+    (in the M_o⁻¹ metric) that such forces make (the bounded least-squares optimum: an
+    independent solve on the shifted, nonnegative multipliers by NNLS)."""
+    from scipy.optimize import nnls
+
+    from multiarm_pin.dynamics.force_distribution import distribute_with_supports
+
+    rng = np.random.default_rng(2)
+    W_c = contact_wrenches([((-0.3, 0.0, 0.05), (1, 0, 0)), ((0.3, 0.0, -0.08), (-1, 0, 0))])
+    M_o = np.diag([MASS] * 3 + [0.1, 0.2, 0.25])
+    h_o = np.r_[0.0, 0.0, -MASS * G, 0.0, 0.0, 0.0]
+    b = SystemBlocks.from_lists([random_spd(rng, 6)] * 2, [np.zeros(6)] * 2,
+                                [rng.normal(size=(6, 1))] * 2, [W_c[:, :1], W_c[:, 1:]],
+                                [np.zeros(1)] * 2, M_o, h_o)
+    G_s, kappa = support_rows(np.zeros(3))
+    a_d = np.array([0.0, 0.0, 0.0, 0.0, -100.0, 0.0])
+    sm = np.array([2.0, 2.0, np.nan, np.nan])
+    U = np.ones((2, 1), bool)
+    with pytest.raises(DynamicsError):
+        distribute_with_supports(b, a_d, U, 5.0, G_s, kappa, sm)
+    d = distribute_with_supports(b, a_d, U, 5.0, G_s, kappa, sm, best_effort=True)
+    m = np.array([5.0, 5.0, 2.0, 2.0])
+    x = np.r_[d.forces.mu_flat, d.support_mu[:2]]
+    assert np.all(x >= m - 1e-9)
+    W = np.hstack([W_c, G_s[:2].T])
+    a = d.a_o + np.linalg.solve(M_o, d.unreached)  # the acceleration before step 2's rest
+    w = M_o @ a - h_o
+    np.testing.assert_allclose(W @ x + d.unreached, w, atol=1e-9)
+    ev, V = np.linalg.eigh(M_o)
+    S = (V / np.sqrt(ev)) @ V.T
+    y, _ = nnls(S @ W, S @ (w - W @ m))
+    ref = np.linalg.norm(S @ (W @ (y + m) - w))
+    assert np.linalg.norm(S @ d.unreached) <= ref + 1e-9

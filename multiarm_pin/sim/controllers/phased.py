@@ -117,7 +117,7 @@ def parse_phases(phases, arm_names: list[str], n_support_rows: int) -> list[Phas
             raise InputError(f"{where}.kind: expected one of {PHASE_KINDS}, got {kind!r}")
         t = float(d.get("t", 0.0 if not out else np.nan))
         duration = float(d.get("duration", 1.0))
-        if not (np.isfinite(t) and t >= 0.0) or (out and t < out[-1].t + out[-1].duration):
+        if not (np.isfinite(t) and t >= 0.0) or (out and t < out[-1].t + out[-1].duration - 1e-9):
             raise InputError(f"{where}.t: expected a start time >= 0 [s] after the previous "
                              f"phase's end, got {d.get('t')!r}")
         if not (np.isfinite(duration) and duration > 0.0):
@@ -322,10 +322,11 @@ class PhasedPD(ObjectPD):
                                             st.kappa, sm)
             self.margin_kept = True
         except DynamicsError:
-            # no forces keep the margins: the least-norm ones (a contact that would have to
-            # pull separates in the simulation)
-            dist = distribute_with_supports(b, a_d, np.zeros_like(unilateral), 0.0,
-                                            st.G_object, st.kappa, np.where(press, 0.0, np.nan))
+            # no forces keep the margins: pushing forces (margins 0) that make the wrench
+            # closest to the desired one; the rest is left to the motion (an impact's
+            # aftermath that no pushing contact can correct, until the grasp can)
+            dist = distribute_with_supports(b, a_d, unilateral, 0.0, st.G_object, st.kappa,
+                                            np.where(press, 0.0, np.nan), best_effort=True)
             self.margin_kept = False
         self.last_support_mu = dist.support_mu
         qdd_desired = self.joint_accelerations(state, evaluation, dist.a_o)
