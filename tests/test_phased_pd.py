@@ -166,6 +166,9 @@ def test_bad_phases_are_clear_errors():
         make_controller("phased_pd", s, phases=[{"press": [7]}])
     with pytest.raises(InputError, match=r"unknown arm 'left'"):
         make_controller("phased_pd", s, phases=[{"release": ["left"]}])
+    with pytest.raises(InputError, match=r"phases\[0\]\.loose: unknown contact 'stop:tip\[3\]'"):
+        make_controller("phased_pd", s, phases=[{"loose": ["stop:tip[3]"]}])
+    make_controller("phased_pd", s, phases=[{"loose": ["stop:tip[0]"]}])
 
 
 def test_released_grippers_stop_pushing_and_separate(tmp_path):

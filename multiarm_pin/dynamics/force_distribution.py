@@ -238,7 +238,7 @@ def distribute_with_supports(
     blocks: SystemBlocks,
     a_desired,
     unilateral,
-    margin: float,
+    margin: float | np.ndarray,
     G_support: np.ndarray,
     kappa_support: np.ndarray,
     support_margin: np.ndarray,
@@ -268,7 +268,7 @@ def distribute_with_supports(
         blocks: the arms' blocks (touching rows; ``W_o``, ``M_o``, ``h_o``, ``N`` are used).
         a_desired: (6,) desired object acceleration [m/s², rad/s²], world axes at the COM.
         unilateral: (n, N_max) bool, the arms' rows that must push with ``margin``.
-        margin: the arms' margin [N].
+        margin: the arms' margin [N], one for all or (n, N_max) one per row.
         G_support: (K, 6) the support rows ``[n; r × n]`` (world axes at the COM).
         kappa_support: (K,) their velocity-product terms [m/s²].
         support_margin: (K,) least force [N] of each support row planned to press, NaN for
@@ -307,7 +307,9 @@ def distribute_with_supports(
     U_arm = b.flatten_mu(np.asarray(unilateral, dtype=bool))
     Ka = W_arm.shape[1]
     U = np.concatenate([U_arm, np.ones(len(G), dtype=bool)])
-    margins = np.concatenate([np.where(U_arm, margin, 0.0), sm[P]])
+    m_arm = (np.full(len(U_arm), float(margin)) if np.ndim(margin) == 0
+             else b.flatten_mu(np.asarray(margin, dtype=float)))
+    margins = np.concatenate([np.where(U_arm, m_arm, 0.0), sm[P]])
     try:
         mu_all = min_norm_forces(W, w_r, U, margins) if W.shape[1] else np.zeros(0)
     except DynamicsError:
@@ -331,7 +333,7 @@ def distribute_with_supports(
     basis = internal_force_basis(W_arm, "svd")
     forces = ForceDistribution(
         mu=b.unflatten_mu(mu_flat), mu_flat=mu_flat, mu_I=basis.coordinates(mu_flat),
-        basis=basis, margin=float(margin),
+        basis=basis, margin=float(np.max(margin, initial=0.0)),
         min_unilateral=float(mu_flat[U_arm].min()) if U_arm.any() else float("inf"))
     return SupportedDistribution(forces, lam, a_o, G.T @ mu_all[Ka:], unreached)
 

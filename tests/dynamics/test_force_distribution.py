@@ -339,3 +339,21 @@ def test_best_effort_forces_push_and_make_the_closest_wrench():
     y, _ = nnls(S @ W, S @ (w - W @ m))
     ref = np.linalg.norm(S @ (W @ (y + m) - w))
     assert np.linalg.norm(S @ d.unreached) <= ref + 1e-9
+
+
+def test_per_row_arm_margins_with_supports_are_the_qp():
+    """Arm margins given row by row (0 on two rows: they may rest without force) and the
+    pivot pressing: the forces are the minimum-norm ones under those bounds (KKT)."""
+    from multiarm_pin.dynamics.force_distribution import distribute_with_supports
+
+    rng = np.random.default_rng(7)
+    b = box_blocks(rng)
+    G_s, kappa = support_rows(np.zeros(3))
+    m = np.array([[4.0, 0.0, 4.0, 4.0], [0.0, 4.0, 4.0, 0.0]])
+    U = b.constraint_mask.copy()
+    d = distribute_with_supports(b, rng.normal(size=6), U, m, G_s, kappa,
+                                 np.array([1.0, 1.0, np.nan, np.nan]))
+    W = np.hstack([b.stacked_W_o(), G_s[:2].T])
+    x = np.r_[d.forces.mu_flat, d.support_mu[:2]]
+    assert_kkt_optimal(W, b.M_o @ d.a_o - b.h_o, np.ones(9, dtype=bool),
+                       np.r_[b.flatten_mu(m), 1.0, 1.0], x)

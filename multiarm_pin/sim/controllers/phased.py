@@ -68,8 +68,10 @@ class Phase:
         offsets: arm name -> (3,) object-frame offset of its held points [m]; arms not named
             keep the previous phase's.
         margin: least push [N] of the arms' engaged contacts in this phase (None: the
-            controller's ``margin``; 0 lets a contact rest without force, e.g. one side of a
-            gripper touching before the other side).
+            controller's ``margin``).
+        loose: labels (``"<arm>:tip[k]"``) of contacts planned with no least push in this
+            phase (they may rest without force: e.g. a gripper's tip on a side face whose
+            opposite face no contact touches yet).
     """
 
     name: str
@@ -84,6 +86,7 @@ class Phase:
     release: tuple[str, ...]
     offsets: dict
     margin: float | None = None
+    loose: tuple[str, ...] = ()
 
 
 def _vector(d: dict, key: str, where: str, default=None) -> np.ndarray:
@@ -94,7 +97,8 @@ def _vector(d: dict, key: str, where: str, default=None) -> np.ndarray:
     return a
 
 
-def parse_phases(phases, arm_names: list[str], n_support_rows: int) -> list[Phase]:
+def parse_phases(phases, arm_names: list[str], n_support_rows: int,
+                 contact_labels: tuple[str, ...] = ()) -> list[Phase]:
     """:class:`Phase` list from plain mappings (a scenario's ``controller.phases``).
 
     Raises:
@@ -108,7 +112,7 @@ def parse_phases(phases, arm_names: list[str], n_support_rows: int) -> list[Phas
         if not isinstance(d, dict):
             raise InputError(f"{where}: expected a mapping, got {d!r}")
         known = {"name", "kind", "t", "duration", "pivot", "axis", "angle", "displacement",
-                 "press", "release", "offsets", "margin"}
+                 "press", "release", "offsets", "margin", "loose"}
         bad = sorted(set(d) - known)
         if bad:
             raise InputError(f"{where}: unknown keys {bad}; accepted: {sorted(known)}")
@@ -156,8 +160,13 @@ def parse_phases(phases, arm_names: list[str], n_support_rows: int) -> list[Phas
             margin = float(margin)
             if not (np.isfinite(margin) and margin >= 0.0):
                 raise InputError(f"{where}.margin: expected a force >= 0 [N], got {margin!r}")
+        loose = tuple(str(x) for x in d.get("loose", ()))
+        for label in loose:
+            if label not in contact_labels:
+                raise InputError(f"{where}.loose: unknown contact {label!r}; contacts: "
+                                 f"{list(contact_labels)}")
         out.append(Phase(str(d.get("name", f"phase{k}")), kind, t, duration, pivot, axis,
-                         angle, disp, press, release, offsets, margin))
+                         angle, disp, press, release, offsets, margin, loose))
     return out
 
 
@@ -193,8 +202,12 @@ class PhasedPD(ObjectPD):
                              f"{support_margin!r}")
         self.support_margin = float(support_margin)
         self.arm_names = [a.name for a in system.arms]
+        # arm rows by label: "<arm>:<contact>" -> (arm, row)
+        self.rows_by_label = {lab: (b, r) for b, r, lab in system.contact_labels
+                              if b < system.n_arms}
         self.phases = parse_phases([{"kind": "hold"}] if phases is None else phases,
-                                   self.arm_names, system.supports.n_rows)
+                                   self.arm_names, system.supports.n_rows,
+                                   tuple(self.rows_by_label))
         self._starts: list[tuple[np.ndarray, np.ndarray]] | None = None
         self._grasp_points: np.ndarray | None = None
         self._offset_start = np.zeros((system.n_arms, 3))
@@ -316,7 +329,15 @@ class PhasedPD(ObjectPD):
         press[list(range(s.supports.n_rows)) if phase.press is None else list(phase.press)] = True
         press &= st.phi <= PRESSING_GAP
         sm = np.where(press, self.support_margin, np.nan)
-        margin = self.margin if phase.margin is None else phase.margin
+        margin = np.full(s.unilateral.shape, self.margin if phase.margin is None
+                         else phase.margin)
+        for label in phase.loose:
+            margin[self.rows_by_label[label]] = 0.0
+        if index is not None:  # the rows kept, in the restricted blocks' order
+            kept = np.zeros((b.n, b.N_max))
+            i, k = np.nonzero(index >= 0)
+            kept[i, k] = margin[i, index[i, k]]
+            margin = kept
         try:
             dist = distribute_with_supports(b, a_d, unilateral, margin, st.G_object,
                                             st.kappa, sm)
