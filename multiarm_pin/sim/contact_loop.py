@@ -179,7 +179,9 @@ class ContactLoop:
         wrench or a :class:`~multiarm_pin.sim.disturbances.WrenchSchedule` itself (its
         intervals are the kernel's table; a subclass with its own ``__call__`` is not), no
         torque saturation, and no support with an ``extent`` (the kernel's supports are whole
-        planes: such runs are the stepper's, with the note :data:`FINITE_SUPPORTS_NOTE`).
+        planes: such runs are the stepper's, with the note :data:`FINITE_SUPPORTS_NOTE`), and
+        no fingertip that starts beside its face (:attr:`Stepper.beside_start`: the stepper
+        keeps it out of the recorded penetration).
         """
         from multiarm_pin.sim.controllers.object_pd import ObjectPD
 
@@ -191,6 +193,8 @@ class ContactLoop:
             return None  # a schedule of another kind (a subclass): its own __call__ decides
         if s.supports.finite:
             return None  # rectangles: off-edge events, which the kernel does not locate
+        if stepper.beside_start.any():
+            return None  # fingertips beside their faces at t = 0: the stepper's bookkeeping
         if s.n_arms and (s.compiled is None or s.arm_set.compiled_model is None):
             return None
         if ctrl is not None and (type(ctrl) is not ObjectPD or not ctrl.compiled
