@@ -16,7 +16,12 @@ import pinocchio as pin
 
 from multiarm_pin._compiled import controller_kernels, layout
 from multiarm_pin._compiled.controller_kernels import GRASP_RANK_TOLERANCE
-from multiarm_pin.dynamics.blocks import SystemBlocks, expand_rows, restrict_rows
+from multiarm_pin.dynamics.blocks import (
+    SystemBlocks,
+    expand_rows,
+    restrict_rows,
+    select_rows,
+)
 from multiarm_pin.dynamics.force_distribution import distribute_forces
 from multiarm_pin.dynamics.force_qp import WarmForceDistribution
 from multiarm_pin.dynamics.inverse_dynamics import InverseDynamicsResult, inverse_dynamics
@@ -509,9 +514,7 @@ class ObjectPD(Controller):
         if active is not None and not np.all(np.asarray(active)[b.constraint_mask]):
             full = b
             b, index = restrict_rows(full, active)
-            unilateral = np.zeros_like(s.unilateral)
-            i, k = np.nonzero(index >= 0)
-            unilateral[i, k] = s.unilateral[i, index[i, k]]
+            unilateral = select_rows(s.unilateral, index)
             rank = grasp_rank(b)
             if rank < 6:
                 return self._hold_still(t, state, full, _rank_reason(rank))

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from multiarm_pin.dynamics.blocks import expand_rows, restrict_rows
+from multiarm_pin.dynamics.blocks import expand_rows, restrict_rows, select_rows
 from multiarm_pin.dynamics.force_distribution import distribute_with_supports
 from multiarm_pin.dynamics.inverse_dynamics import InverseDynamicsResult, inverse_dynamics
 from multiarm_pin.exceptions import DynamicsError, InputError
@@ -320,9 +320,7 @@ class PhasedPD(ObjectPD):
         unilateral = s.unilateral
         if not np.all(engaged[b.constraint_mask]):
             b, index = restrict_rows(b, engaged)
-            unilateral = np.zeros((b.n, b.N_max), dtype=bool)
-            i, k = np.nonzero(index >= 0)
-            unilateral[i, k] = s.unilateral[i, index[i, k]]
+            unilateral = select_rows(s.unilateral, index)
         a_d = self.desired_acceleration(t, state)
         st = s.support_terms(state)
         press = np.zeros(s.supports.n_rows, dtype=bool)
@@ -334,10 +332,7 @@ class PhasedPD(ObjectPD):
         for label in phase.loose:
             margin[self.rows_by_label[label]] = 0.0
         if index is not None:  # the rows kept, in the restricted blocks' order
-            kept = np.zeros((b.n, b.N_max))
-            i, k = np.nonzero(index >= 0)
-            kept[i, k] = margin[i, index[i, k]]
-            margin = kept
+            margin = select_rows(margin, index)
         try:
             dist = distribute_with_supports(b, a_d, unilateral, margin, st.G_object,
                                             st.kappa, sm)
