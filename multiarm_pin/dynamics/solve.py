@@ -23,7 +23,7 @@ from multiarm_pin.dynamics.object_first import (
     solve_object_first,
     solve_object_first_numpy,
 )
-from multiarm_pin.dynamics.singular import solve_singular
+from multiarm_pin.dynamics.singular import finish_singular, solve_singular
 from multiarm_pin.exceptions import InputError
 
 
@@ -43,20 +43,20 @@ def solve_auto(blocks: SystemBlocks, rcond_tol: float = DEFAULT_RCOND_TOL, *,
             False: the numpy reference alone.
     """
     if compiled:
-        return solve_object_first(blocks, rcond_tol, fallback=True)
-    return solve_object_first_numpy(blocks, rcond_tol, fallback=True)
+        return solve_object_first(blocks, rcond_tol, fallback=finish_singular)
+    return solve_object_first_numpy(blocks, rcond_tol, fallback=finish_singular)
 
 
 def _object_first(blocks: SystemBlocks, rcond_tol: float = DEFAULT_RCOND_TOL, *,
                   compiled: bool = True) -> Solution:
     """Object-first, raising :class:`~multiarm_pin.exceptions.SingularityError` when singular."""
     if compiled:
-        return solve_object_first(blocks, rcond_tol, fallback=False)
-    return solve_object_first_numpy(blocks, rcond_tol, fallback=False)
+        return solve_object_first(blocks, rcond_tol)
+    return solve_object_first_numpy(blocks, rcond_tol)
 
 
 def _object_first_numpy(blocks: SystemBlocks, rcond_tol: float = DEFAULT_RCOND_TOL) -> Solution:
-    return solve_object_first_numpy(blocks, rcond_tol, fallback=False)
+    return solve_object_first_numpy(blocks, rcond_tol)
 
 
 def _dense_kkt(blocks: SystemBlocks, rcond_tol: float = DEFAULT_RCOND_TOL) -> Solution:

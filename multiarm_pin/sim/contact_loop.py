@@ -21,9 +21,8 @@ from __future__ import annotations
 import numpy as np
 
 from multiarm_pin._compiled import contact_loop as kernels
-from multiarm_pin._compiled import layout
+from multiarm_pin._compiled import layout, mlcp
 from multiarm_pin._compiled.function_pointers import entry_point
-from multiarm_pin.dynamics import mlcp
 from multiarm_pin.dynamics.unilateral import UNILATERAL_SOLVERS
 from multiarm_pin.sim import contact_events as ce
 from multiarm_pin.sim import event_location as el
