@@ -271,6 +271,9 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
                integrator: str, rtol: float, atol: float, report, watch: _Watch) -> None:
     """Run the integrator over the time grid, recording every sample (and watching them)."""
     n_steps = len(times) - 1
+    note = reference_note(stepper, integrator)
+    if note is not None:
+        stepper.notes.append(note)
     if integrator == "rk45":
         _run_rk45(stepper, rec, state, times, rtol, atol, report, watch)
     else:
@@ -321,6 +324,25 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
             if k % every == 0:
                 report((k + 1) / n_steps)
             k += 1
+
+
+REFERENCE_NOTE = "the run is taken by the reference (numpy) stepper, not a compiled loop: {why}"
+"""The note (once in a run's warnings) of a run that no compiled loop serves, and why."""
+
+
+def reference_note(stepper: Stepper, integrator: str) -> str | None:
+    """The note of a run that the compiled loop of its kind declines, or None.
+
+    The loop of its kind is :class:`ContactLoop` with unilateral rows, :class:`CompiledLoop`
+    without; its ``declines`` gives the reason (the integrator, the solver, the controller's
+    registry entry, a joint kind...). Torque saturation and finite supports have notes of
+    their own.
+    """
+    loop = ContactLoop if stepper.unilateral else CompiledLoop
+    why = loop.declines(stepper, integrator)
+    if why is None or why == FINITE_SUPPORTS_NOTE or stepper.torque_limit is not None:
+        return None
+    return REFERENCE_NOTE.format(why=why)
 
 
 class _Stretch:
@@ -518,6 +540,7 @@ __all__ = [
     "IntegratorEntry",
     "MONITOR_STRETCH",
     "MONITOR_STRIDE",
+    "REFERENCE_NOTE",
     "ContactEvent",
     "Monitor",
     "Controller",
@@ -525,5 +548,6 @@ __all__ = [
     "default_record_limit",
     "partial_result",
     "record_bytes",
+    "reference_note",
     "simulate",
 ]
