@@ -12,6 +12,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import re
+import types
 import warnings
 
 import numpy as np
@@ -26,7 +27,7 @@ from multiarm_pin.exceptions import InputError, RobotNotFoundError, ScenarioErro
 from multiarm_pin.model.arm import Arm
 from multiarm_pin.model.polyhedron import box
 from multiarm_pin.model.robots import ROBOTS, robot_entry
-from multiarm_pin.sim.compiled_loop import CompiledLoop
+from multiarm_pin.sim.compiled_loop import CompiledLoop, unsupported_joints_note
 from multiarm_pin.sim.contact_loop import ContactLoop
 from multiarm_pin.sim.controllers import (
     CONTROLLER_KERNELS,
@@ -325,6 +326,16 @@ def test_a_run_no_kernel_serves_says_so_once_and_runs_on_the_stepper(two_arms, m
                                                   "loop (RK4 only)")] and not kernel_calls
     r = simulate(system, state, make_controller("object_pd", system), 0.02, 0.01)
     assert notes(r) == [] and kernel_calls  # the compiled closed loop took it
+
+
+def test_the_note_names_a_joint_kind_the_compiled_pass_lacks():
+    model = pin.Model()
+    j = model.addJoint(0, pin.JointModelRZ(), pin.SE3.Identity(), "shoulder")
+    model.addJoint(j, pin.JointModelSpherical(), pin.SE3.Identity(), "wrist")
+    system = types.SimpleNamespace(arm_set=types.SimpleNamespace(model=model))
+    assert unsupported_joints_note(system) == (
+        "joint 'wrist' is of kind JointModelSpherical, which the compiled rigid-body pass does "
+        "not support")
 
 
 # ----------------------------------------------------------------------------- integrators
