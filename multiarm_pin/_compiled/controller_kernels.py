@@ -178,7 +178,7 @@ def _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilater
     drops out.
 
     Not inlined (``inline="always"``): numba deep-copies the IR of an inlined function, which
-    for this one cost more than the separate compile (1.6 s CPU).
+    for this one costs more than compiling it separately.
     """
     n, k, m = W.shape
     hold_kp, hold_kd = gains[GAIN_HOLD_KP], gains[GAIN_HOLD_KD]
@@ -536,7 +536,7 @@ def touching_rank(W_o, N):  # pragma: no cover - compiled
         return 0
     A = np.ascontiguousarray(A[:, :cols])
     sv = np.empty(cols)
-    singular_values(A, sv)  # (one-sided Jacobi: no LAPACK call, 1 µs instead of 15)
+    singular_values(A, sv)  # (one-sided Jacobi: no LAPACK call)
     top = 0.0
     for a in range(cols):
         top = max(top, sv[a])

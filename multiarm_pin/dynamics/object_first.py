@@ -41,10 +41,8 @@ def _batched_solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """``A⁻¹ B`` for stacks (n, k, k) SPD, (n, k, p); NaN for arms whose ``A`` fails to factor.
 
     The compiled batched Cholesky solve (:func:`multiarm_pin._compiled.linalg.batched_spd_solve`):
-    the mass matrices and the padded ``S_i`` are symmetric positive definite. Measured on the
-    2-UR5 weld benchmark (8 states): 2.5x faster than the LAPACK gufunc behind
-    ``numpy.linalg.solve`` called without its wrapper (the public wrapper costs 3x more per
-    call), results equal to 4e-15 relative.
+    the mass matrices and the padded ``S_i`` are symmetric positive definite (cheaper on these
+    small stacks than the LAPACK gufunc behind ``numpy.linalg.solve``).
     """
     return batched_spd_solve(A, B)
 

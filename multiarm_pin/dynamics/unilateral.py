@@ -42,10 +42,7 @@ everywhere, else from ``A = ∅``.
 Cost: per arm one ``nv_i``-Cholesky and ``N_i + 1`` solves (as the bilateral solver), then
 ``O(p²)`` for ``G`` on the ``p`` active rows and ``O(|A|³)`` per pivot (``G_AA`` is
 refactored; about ``p`` pivots from a cold start): negligible against the per-arm work for
-tens of contacts. Measured (``benchmarks/results/unilateral.md``): 11 rows of the
-two-gripper scenario + table, ~65 µs (~52 µs warm-started with ``guess``), against ~700 µs
-for the bilateral ``"auto"`` solve of the same rows (singular-arm path) and ~25 µs for the
-compiled bilateral solve of the 7 fingertip rows alone.
+tens of contacts. Timings against the bilateral solves: ``benchmarks/results/unilateral.md``.
 
 Impacts (:func:`solve_impact`) are the same problem at velocity level: with ``h = h_o = 0``
 the impulse ``P`` gives ``φ̇⁺ = φ̇⁻ + G P``, and Newton's law
