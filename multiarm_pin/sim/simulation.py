@@ -288,9 +288,6 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
         events = ContactLoop.for_run(stepper, integrator)
         if integrator == "rk4" and stepper.edges:
             stepper.notes.append(FINITE_SUPPORTS_NOTE)
-        note = getattr(stepper.controller, "kernel_note", None)
-        if note:  # a controller without a compiled kernel says so once
-            stepper.notes.append(note)
         stretch = _Stretch(every, n_steps)
         k, retaken = 0, -1  # the sample whose step the stepper took last
         while True:

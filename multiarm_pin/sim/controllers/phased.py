@@ -20,8 +20,8 @@ The force distribution knows the supports
 (:func:`~multiarm_pin.dynamics.force_distribution.distribute_with_supports`): the pressing
 rows push with at least ``support_margin`` and the object's desired acceleration keeps them
 on their plane, so no arm contact is asked to pull and the pivot keeps pressing. The
-controller has no compiled kernel: runs take the Python stepper and say so once
-(:data:`KERNEL_NOTE`).
+controller has no compiled kernel (its registry entry names none): runs take the Python
+stepper and say so once (:data:`~multiarm_pin.sim.simulation.REFERENCE_NOTE`).
 """
 
 from __future__ import annotations
@@ -38,10 +38,6 @@ from multiarm_pin.exceptions import DynamicsError, InputError
 from multiarm_pin.sim.controllers.object_pd import ObjectPD
 from multiarm_pin.sim.trajectories import PoseSample, minimum_jerk, pose_error
 from multiarm_pin.system import Evaluation, MultiArmSystem, SystemState
-
-KERNEL_NOTE = ("controller phased_pd has no compiled kernel: the run is taken by the Python "
-               "stepper (the reference path)")
-"""The note a run with :class:`PhasedPD` carries once in its warnings."""
 
 PRESSING_GAP = 1e-6
 """[m] A support row planned to press is planned only while its gap is below this (the
@@ -190,7 +186,6 @@ class PhasedPD(ObjectPD):
     """
 
     name = "phased_pd"
-    kernel_note = KERNEL_NOTE
 
     def __init__(self, system: MultiArmSystem, phases=None, support_margin: float = 1.0,
                  kp=100.0, kd=20.0, margin: float = 1.0, null_kp: float = 25.0,
@@ -365,4 +360,4 @@ class PhasedPD(ObjectPD):
         return s.unpad(last.tau)
 
 
-__all__ = ["KERNEL_NOTE", "PHASE_KINDS", "Phase", "PhasedPD", "parse_phases"]
+__all__ = ["PHASE_KINDS", "Phase", "PhasedPD", "parse_phases"]
