@@ -3,6 +3,8 @@ sample by sample, including the steps the kernel hands back and an interrupted r
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from closed_loop_cases import RUN_FIELDS, rel_err, run_scenario, run_tolerance
@@ -93,3 +95,30 @@ def test_an_interrupt_keeps_the_samples_so_far(monkeypatch):
     for field in RUN_FIELDS:
         np.testing.assert_array_equal(getattr(part, field), getattr(full, field)[:n])
     assert (part.solver == compiled_loop.RECORDED_SOLVER[False]).all()
+
+
+def test_compiled_false_takes_every_step_on_the_reference(monkeypatch):
+    """``simulation: {compiled: false}``: neither compiled loop is asked for a stretch, and
+    the run is the reference run (the compiled loops switched off), sample for sample."""
+    from closed_loop_cases import SCENARIOS
+
+    from multiarm_pin.app.runner import scenario_controller, simulate_built
+    from multiarm_pin.app.scenario import build_scenario, load_scenario
+    from multiarm_pin.sim.compiled_loop import CompiledLoop
+    from multiarm_pin.sim.contact_loop import ContactLoop
+
+    ref, _ = run_scenario("box_on_table", 0.05, False, monkeypatch)
+    sc = load_scenario(SCENARIOS / "box_on_table.yaml")
+    sc = dataclasses.replace(sc, simulation=dataclasses.replace(sc.simulation, compiled=False))
+    built = build_scenario(sc, load_visuals=False)
+
+    def refused(*args, **kwargs):
+        raise AssertionError("a compiled loop was asked for a run")
+
+    monkeypatch.setattr(CompiledLoop, "for_run", refused)
+    monkeypatch.setattr(ContactLoop, "for_run", refused)
+    result = simulate_built(built, scenario_controller(built), 0.05, sc.simulation.dt,
+                            sc.simulation.solver)
+    for field in RUN_FIELDS:
+        np.testing.assert_array_equal(getattr(result, field), getattr(ref, field), field)
+    assert [(e.kind, e.t) for e in result.events] == [(e.kind, e.t) for e in ref.events]
