@@ -29,6 +29,22 @@ def test_runs_equal_the_python_loop(name, monkeypatch):
     assert np.abs(ref.object_twist).max() > 1e-3  # it moved
 
 
+@pytest.mark.parametrize("name", ["two_ur5_box", "ur5_panda_box", "fingertips_form_closure"])
+def test_semi_implicit_runs_equal_the_python_loop(name, monkeypatch):
+    """Semi-implicit Euler in the compiled loop (one evaluation a step) against the stepper's."""
+    fast, calls = run_scenario(name, 0.1, True, monkeypatch, integrator="semi_implicit")
+    ref, _ = run_scenario(name, 0.1, False, monkeypatch, integrator="semi_implicit")
+    rk4, _ = run_scenario(name, 0.1, True, monkeypatch)
+    assert calls, "the compiled loop did not run"
+    assert fast.integrator == "semi_implicit"
+    for field in RUN_FIELDS:
+        assert rel_err(getattr(fast, field), getattr(ref, field)) <= run_tolerance(field), field
+    np.testing.assert_array_equal(fast.active, ref.active)
+    assert fast.warnings == ref.warnings
+    # a different integrator: first order, so it differs from RK4 by far more than round-off
+    assert rel_err(fast.q, rk4.q) > 1e-7
+
+
 def test_steps_handed_back_keep_the_events(monkeypatch):
     """Fingertips that let go (grasp_failure): the kernel hands those steps back, the
     stepper locates the same separations."""
