@@ -3,7 +3,7 @@
 See :class:`ObjectPD` (the algorithm, step by step) and the package docstring of
 :mod:`multiarm_pin.sim.controllers`. Its compiled path is
 :mod:`multiarm_pin._compiled.controller_kernels`; :meth:`ObjectPD.reference` is the numpy
-reference it mirrors. The module is close to 500 lines because the controller's two paths
+reference it mirrors. The module is long because the controller's two paths
 (compiled and reference) and its hold-still fallback share its state and belong together.
 """
 
