@@ -339,7 +339,7 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
 
 def simulate_built(built: BuiltScenario, controller, duration: float, dt: float, solver: str,
                    progress=None, monitors=()):
-    """Simulate a built scenario with its simulation settings (integrator, Baumgarte).
+    """Simulate a built scenario with its simulation settings (integrator, Baumgarte, compiled).
 
     With ``limits: {torque: saturate}`` the actuators clip the applied torques to the arms'
     URDF effort limits (``simulate(torque_limit=...)``).
@@ -370,7 +370,7 @@ def simulate_built(built: BuiltScenario, controller, duration: float, dt: float,
                         integrator=sim.integrator, solver=solver, baumgarte=sim.baumgarte,
                         progress=progress,
                         external_wrench=built.scenario.object.external_wrench or None,
-                        torque_limit=limit, monitors=monitors)
+                        torque_limit=limit, monitors=monitors, compiled=sim.compiled)
 
 
 @dataclass

@@ -140,6 +140,7 @@ def simulate(
     external_wrench: WrenchSchedule | None = None,
     torque_limit=None,
     monitors: Sequence[Monitor] = (),
+    compiled: bool = True,
 ) -> SimulationResult:
     """Simulate the closed-loop system from ``initial_state`` for ``duration`` seconds.
 
@@ -180,6 +181,9 @@ def simulate(
             sample or None. The run then ends: :class:`~multiarm_pin.exceptions.
             RunStoppedError` is raised, its partial result ending at that sample (the samples
             after it are dropped). Stretches hold at most :data:`MONITOR_STRETCH` samples.
+        compiled: True (default): the compiled loops take the steps they serve. False: every
+            step is taken by the numpy reference (the stepper), nothing is compiled for the
+            loops; the results equal the compiled run's to rounding.
 
     Returns:
         :class:`SimulationResult`.
@@ -257,7 +261,8 @@ def simulate(
         stepper.init_active(stepper.blocks_at(0.0, state)[1], initial_tol)
     watch = _Watch(monitors)
     try:
-        _integrate(stepper, rec, state, times, integrator, rtol, atol, report, watch)
+        _integrate(stepper, rec, state, times, integrator, rtol, atol, report, watch,
+                   compiled)
         watch.finish()
     except BaseException as exc:  # keep what was simulated, for the caller to save
         stop = watch.settle()  # a violation found before the failure ends the run there
@@ -274,18 +279,22 @@ def simulate(
 
 
 def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.ndarray,
-               integrator: str, rtol: float, atol: float, report, watch: _Watch) -> None:
-    """Run the integrator over the time grid, recording every sample (and watching them)."""
+               integrator: str, rtol: float, atol: float, report, watch: _Watch,
+               compiled: bool = True) -> None:
+    """Run the integrator over the time grid, recording every sample (and watching them).
+
+    ``compiled`` False: the compiled loops take no step (the numpy reference alone).
+    """
     n_steps = len(times) - 1
-    note = reference_note(stepper, integrator)
+    note = reference_note(stepper, integrator) if compiled else None
     if note is not None:
         stepper.notes.append(note)
     if integrator == "rk45":
         _run_rk45(stepper, rec, state, times, rtol, atol, report, watch)
     else:
         every = max(1, n_steps // 100)
-        loop = CompiledLoop.for_run(stepper, integrator)
-        events = ContactLoop.for_run(stepper, integrator)
+        loop = CompiledLoop.for_run(stepper, integrator) if compiled else None
+        events = ContactLoop.for_run(stepper, integrator) if compiled else None
         if integrator == "rk4" and stepper.edges:
             stepper.notes.append(FINITE_SUPPORTS_NOTE)
         stretch = _Stretch(every, n_steps)

@@ -106,7 +106,7 @@ _ARM_KEYS = ("name", "robot", "urdf", "tool_frame", "tool_offset", "base", "lock
              "q0", "q_seed", "v0", "joint")
 _JOINT_KEYS = ("type", "size", "tip_radius", "points_on", "placement_in_object",
                "placement_in_tool", "contacts", "unilateral", "approach")
-_SIM_KEYS = ("duration", "integrator", "dt", "solver", "baumgarte")
+_SIM_KEYS = ("duration", "integrator", "dt", "solver", "baumgarte", "compiled")
 
 
 def load_scenario(path) -> Scenario:
@@ -452,7 +452,10 @@ def _parse_simulation(r: Reader) -> SimulationSpec:
         baum = (br.get("alpha").number(nonnegative=True), br.get("beta").number(nonnegative=True))
     if dt > duration:
         raise r.get("dt").error(f"dt = {dt} s is longer than the duration {duration} s")
-    return SimulationSpec(duration, integrator, dt, solver, baum)
+    compiled = d.get("compiled", s.compiled)
+    if not isinstance(compiled, bool):
+        raise r.get("compiled").error(f"expected true or false, got {compiled!r}")
+    return SimulationSpec(duration, integrator, dt, solver, baum, compiled)
 
 
 __all__ = ["load_scenario", "parse_scenario"]
