@@ -39,6 +39,17 @@ import pinocchio as pin
 
 from multiarm_pin.feasibility.batch_kinematics import joint_placements, placement_plan
 
+CATEGORIES = ("arm_self", "arm_arm", "arm_object", "arm_support", "arm_ground")
+"""Pair categories, in the order of the codes of
+:attr:`~multiarm_pin.feasibility.collisions.CollisionScene.category`."""
+
+JOINT_ZONE_RADIUS = 0.05
+"""Radius [m] around each contact point of an arm's grasp inside which its carrying links
+may touch or enter the object (the grasp, not a collision)."""
+
+PENETRATION_TOLERANCE = 1e-6
+"""Depth [m] beyond which a penetration counts (round-off of touching surfaces)."""
+
 ADVANCE_FRACTION = 0.5
 """A measured pair is measured again where its bound falls below this fraction of the distance
 measured."""
@@ -70,7 +81,7 @@ class ScanResult:
     """What :class:`RunScan` found along a run.
 
     Attributes:
-        clearance: per category of :data:`~multiarm_pin.feasibility.collisions.CATEGORIES`,
+        clearance: per category of :data:`CATEGORIES`,
             the smallest hull distance over the run [m] (grasp pairs left out), or None when
             the category has no pair.
         hits: per pair index, its collisions ``(sample, distance [m] on the meshes, point
@@ -191,8 +202,6 @@ class RunScan:
     """
 
     def __init__(self, scene, capacity: int):
-        from multiarm_pin.feasibility.collisions import PENETRATION_TOLERANCE
-
         self.scene = scene
         self.geo = scan_geometry(scene)
         self.tol = PENETRATION_TOLERANCE
@@ -379,12 +388,10 @@ class RunScan:
         bounding-sphere centres at the stretch's samples [m].
 
         A carrying link whose bounding sphere lies, at a sample, within
-        :data:`~multiarm_pin.feasibility.collisions.JOINT_ZONE_RADIUS` of one of its arm's
+        :data:`JOINT_ZONE_RADIUS` of one of its arm's
         contact points touches the object (if at all) at the grasp: such samples are skipped.
         Every other pair may collide at every sample (its own index).
         """
-        from multiarm_pin.feasibility.collisions import JOINT_ZONE_RADIUS
-
         scene, geo = self.scene, self.geo
         m, P = n1 - n0, len(scene.pairs)
         opens = np.broadcast_to(np.arange(n0, n1 + 1)[:, None], (m + 1, P)).copy()
@@ -621,8 +628,6 @@ class RunScan:
         samples whose bound is below the smallest measured distance are measured until none
         is (within :data:`CLEARANCE_TOLERANCE`).
         """
-        from multiarm_pin.feasibility.collisions import CATEGORIES
-
         scene = self.scene
         minima = self._column_minima() if self.n else None
         clearance = {}
@@ -729,7 +734,7 @@ class RunScan:
         return best
 
 
-__all__ = ["ADVANCE_FRACTION", "ADVANCE_STRIDE", "BOUND_BLOCK", "CLEARANCE_TOLERANCE",
-           "FIRST_BLOCK", "KEPT_PLACEMENTS", "PATH_BLOCK",
-           "RunScan", "ScanResult",
+__all__ = ["ADVANCE_FRACTION", "ADVANCE_STRIDE", "BOUND_BLOCK", "CATEGORIES",
+           "CLEARANCE_TOLERANCE", "FIRST_BLOCK", "JOINT_ZONE_RADIUS", "KEPT_PLACEMENTS",
+           "PATH_BLOCK", "PENETRATION_TOLERANCE", "RunScan", "ScanResult",
            "scan_geometry"]

@@ -57,7 +57,7 @@ from multiarm_pin._compiled.closed_loop import STAGE_OK, STAGE_RELEASE
 from multiarm_pin._compiled.contact_loop import STAGE_EVENTS_FULL
 from multiarm_pin._registry import lookup
 from multiarm_pin.constraints.joint import INITIAL_GAP_TOLERANCE
-from multiarm_pin.dynamics import solver_entry
+from multiarm_pin.dynamics.solve import solver_for_rows
 from multiarm_pin.exceptions import DynamicsError, InputError, RunStoppedError
 from multiarm_pin.model.rigid_object import ObjectState
 from multiarm_pin.sim.compiled_loop import CompiledLoop
@@ -141,6 +141,7 @@ def simulate(
     external_wrench: WrenchSchedule | None = None,
     torque_limit=None,
     monitors: Sequence[Monitor] = (),
+    compiled: bool = True,
 ) -> SimulationResult:
     """Simulate the closed-loop system from ``initial_state`` for ``duration`` seconds.
 
@@ -153,7 +154,10 @@ def simulate(
         duration: simulated time [s] (> 0).
         dt: sampling period [s] (and step of the fixed-step integrators).
         integrator: ``"rk4"``, ``"rk45"`` or ``"semi_implicit"``.
-        solver: forward-dynamics solver name (:data:`multiarm_pin.dynamics.SOLVERS`).
+        solver: forward-dynamics solver name (:data:`multiarm_pin.dynamics.SOLVERS`). With
+            unilateral rows only the solvers whose entry serves them (``auto``,
+            ``object_first``: the mixed LCP on the object-first Delassus operator); any other
+            is refused, never replaced.
         baumgarte: ``(α, β)`` [1/s] constraint stabilisation (thesis Sec 4.3), or None.
         progress: optional ``callable(fraction)`` called as the run advances (0..1).
         check_initial: validate the initial state first.
@@ -178,6 +182,9 @@ def simulate(
             sample or None. The run then ends: :class:`~multiarm_pin.exceptions.
             RunStoppedError` is raised, its partial result ending at that sample (the samples
             after it are dropped). Stretches hold at most :data:`MONITOR_STRETCH` samples.
+        compiled: True (default): the compiled loops take the steps they serve. False: every
+            step is taken by the numpy reference (the stepper), nothing is compiled for the
+            loops; the results equal the compiled run's to rounding.
 
     Returns:
         :class:`SimulationResult`.
@@ -189,6 +196,8 @@ def simulate(
     Raises:
         InputError: unknown integrator or solver (lists the known ones), bad ``dt``/duration,
             or a run whose record would not fit in memory (before allocating it).
+        UnsupportedSolverError: a solver that cannot serve the system's unilateral rows
+            (names the solver and the rows).
         ConstraintError: an initial state that violates the joints.
         DynamicsError: NaN in the state, or no solution of the dynamics (with the time).
         RunStoppedError: a monitor found a violation (``monitor``, ``sample``, ``t``).
@@ -197,7 +206,8 @@ def simulate(
     if max_record_bytes is None:
         max_record_bytes = default_record_limit()
     lookup(INTEGRATORS, integrator, "integrator")
-    solver_entry(solver)
+    solver_for_rows(solver, [label for b, r, label in system.contact_labels
+                             if system.contact_unilateral[b, r]])
     duration, dt = float(duration), float(dt)
     if not (np.isfinite(dt) and dt > 0):
         raise InputError(f"dt: expected a positive time step [s], got {dt}")
@@ -252,7 +262,8 @@ def simulate(
         stepper.init_active(stepper.blocks_at(0.0, state)[1], initial_tol)
     watch = _Watch(monitors)
     try:
-        _integrate(stepper, rec, state, times, integrator, rtol, atol, report, watch)
+        _integrate(stepper, rec, state, times, integrator, rtol, atol, report, watch,
+                   compiled)
         watch.finish()
     except BaseException as exc:  # keep what was simulated, for the caller to save
         stop = watch.settle()  # a violation found before the failure ends the run there
@@ -269,15 +280,22 @@ def simulate(
 
 
 def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.ndarray,
-               integrator: str, rtol: float, atol: float, report, watch: _Watch) -> None:
-    """Run the integrator over the time grid, recording every sample (and watching them)."""
+               integrator: str, rtol: float, atol: float, report, watch: _Watch,
+               compiled: bool = True) -> None:
+    """Run the integrator over the time grid, recording every sample (and watching them).
+
+    ``compiled`` False: the compiled loops take no step (the numpy reference alone).
+    """
     n_steps = len(times) - 1
+    note = reference_note(stepper, integrator) if compiled else None
+    if note is not None:
+        stepper.notes.append(note)
     if integrator == "rk45":
         _run_rk45(stepper, rec, state, times, rtol, atol, report, watch)
     else:
         every = max(1, n_steps // 100)
-        loop = CompiledLoop.for_run(stepper, integrator)
-        events = ContactLoop.for_run(stepper, integrator)
+        loop = CompiledLoop.for_run(stepper, integrator) if compiled else None
+        events = ContactLoop.for_run(stepper, integrator) if compiled else None
         if integrator == "rk4" and stepper.edges:
             stepper.notes.append(FINITE_SUPPORTS_NOTE)
         stretch = _Stretch(every, n_steps, tapered=bool(watch.monitors))
@@ -323,6 +341,25 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
             if k % every == 0:
                 report((k + 1) / n_steps)
             k += 1
+
+
+REFERENCE_NOTE = "the run is taken by the reference (numpy) stepper, not a compiled loop: {why}"
+"""The note (once in a run's warnings) of a run that no compiled loop serves, and why."""
+
+
+def reference_note(stepper: Stepper, integrator: str) -> str | None:
+    """The note of a run that the compiled loop of its kind declines, or None.
+
+    The loop of its kind is :class:`ContactLoop` with unilateral rows, :class:`CompiledLoop`
+    without; its ``declines`` gives the reason (the integrator, the solver, the controller's
+    registry entry, a joint kind...). Torque saturation and finite supports have notes of
+    their own.
+    """
+    loop = ContactLoop if stepper.unilateral else CompiledLoop
+    why = loop.declines(stepper, integrator)
+    if why is None or why == FINITE_SUPPORTS_NOTE or stepper.torque_limit is not None:
+        return None
+    return REFERENCE_NOTE.format(why=why)
 
 
 class _Stretch:
@@ -547,6 +584,7 @@ __all__ = [
     "IntegratorEntry",
     "MONITOR_STRETCH",
     "MONITOR_STRIDE",
+    "REFERENCE_NOTE",
     "ContactEvent",
     "Monitor",
     "Controller",
@@ -554,5 +592,6 @@ __all__ = [
     "default_record_limit",
     "partial_result",
     "record_bytes",
+    "reference_note",
     "simulate",
 ]
