@@ -105,6 +105,10 @@ class RoleGrip:
         yaw: nominal base yaw in the pivot frame [rad].
         q_seed: the IK seed of its arm.
         approach: (3,) pivot-frame approach offset (None: starts touching).
+        reach_over: per pivot-frame horizontal axis the arm reaches over the table's edge
+            along (``(axis, sign, distance)``: the grip's table margin [m] from the anchor to
+            the edge along ``sign`` × axis that ``base`` was placed for); the base moves out
+            by the table's actual margin less that one.
     """
 
     faces: tuple
@@ -114,28 +118,33 @@ class RoleGrip:
     yaw: float
     q_seed: tuple
     approach: tuple | None = None
+    reach_over: tuple = ()
 
 
 ROLE_GRIPS = {
     "pusher": RoleGrip(("-x", "-x", "-x"), lambda a, b, c: _tri(-a, 0.05, c - 0.08, 1.0),
                        lambda a, b, c: (-a, 0.05, c - 0.08), (-0.65, 0.05, -0.47), 0.0,
-                       (0.0, 0.3, -1.2, 0.0, 0.9, 0.0)),
+                       (0.0, 0.3, -1.2, 0.0, 0.9, 0.0), None, ((0, -1.0, 0.4),)),
     "stop": RoleGrip(("+x", "+x", "+x"), lambda a, b, c: _tri(a, 0.05, -c + 0.08, -1.0),
                      lambda a, b, c: (a, 0.05, -c + 0.08), (0.65, -0.35, -0.38), np.pi,
-                     (0.0, 0.3, -1.2, 0.0, 0.9, 0.0)),
+                     (0.0, 0.3, -1.2, 0.0, 0.9, 0.0), None, ((0, 1.0, 0.4),)),
     "top": RoleGrip(("+x", "+y", "+z", "+z"),
                     lambda a, b, c: [(a, b - 0.05, c - 0.05), (a - 0.05, b, c - 0.05),
                                      (a - 0.02, b - 0.05, c), (a - 0.17, b - 0.05, c)],
                     lambda a, b, c: (a, b, c), (0.6, 0.15, -0.6), 2.5,
-                    (0.8, -1.15, 1.05, 0.6, 0.9, -0.8), (0.04, 0.04, 0.04)),
+                    (0.8, -1.15, 1.05, 0.6, 0.9, -0.8), (0.04, 0.04, 0.04),
+                    ((0, 1.0, 0.4), (1, 1.0, 0.3))),
     "insert": RoleGrip(("-x", "-y", "-z"),
                        lambda a, b, c: [(-a, -b + 0.05, -c + 0.05), (-a + 0.05, -b, -c + 0.05),
                                         (-a + 0.02, -b + 0.05, -c)],
                        lambda a, b, c: (-a, -b, -c), (-0.4, -0.4, -0.7), 0.8,
-                       (0.0, 0.0, -1.4, 0.0, 0.7, -0.75), (-0.08, -0.04, 0.03)),
+                       (0.0, 0.0, -1.4, 0.0, 0.7, -0.75), (-0.08, -0.04, 0.03),
+                       ((0, -1.0, 0.4), (1, -1.0, 0.3))),
 }
 """The grips of the shipped grippers (mp6_3f flat on a face, mp6_4f and mp6_3f around a
-corner as in ``pick_from_table``), relative to the box's faces and corners."""
+corner as in ``pick_from_table``), relative to the box's faces and corners, their bases as
+in the hand-planned ``tilt_pick`` (a 0.8 x 0.6 x 0.4 m box on a table 0.4 and 0.3 m wider
+on each side)."""
 
 _AXES = {"+x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "-y": (1, -1.0), "+z": (2, 1.0),
          "-z": (2, -1.0)}
@@ -277,6 +286,30 @@ class PickUpPlanner:
                         f"for its length toward this edge")
         return out, None
 
+    def table_margin(self, point: np.ndarray, direction: np.ndarray) -> float:
+        """Horizontal distance [m] from ``point`` along ``direction`` to the table's edge.
+
+        The table is the support's rectangle (``extent`` about its point, sides along its x
+        axis); without an extent, the box's own footprint edge (distance 0 beyond it is
+        taken as the bottom face's edge: no margin).
+        """
+        from multiarm_pin.constraints.supports import plane_x_axis
+
+        sp = self.spec.supports[0]
+        if sp.extent is None:
+            return 0.0
+        n = np.asarray(sp.normal, float)
+        ex = plane_x_axis(n, sp.x_axis)
+        ey = np.cross(n, ex)
+        d = np.asarray(direction, float)
+        rel = np.asarray(point, float) - np.asarray(sp.point, float)
+        t = np.inf
+        for e, half in ((ex, sp.extent[0] / 2), (ey, sp.extent[1] / 2)):
+            u, x = float(e @ d), float(e @ rel)
+            if abs(u) > 1e-12:
+                t = min(t, ((half if u > 0 else -half) - x) / u)
+        return float(t)
+
     def frame(self, pivot: str) -> np.ndarray:
         """(3, 3) the pivot frame's axes in the object frame."""
         return _rz(PIVOTS[pivot])
@@ -301,7 +334,12 @@ class PickUpPlanner:
             faces = [_face_name(P @ _axis(f)) for f in g.faces]
             off = np.asarray(cand.offsets.get(role, (0.0, 0.0, 0.0, 0.0)), float)
             anchor = p0 + Rw @ np.array(g.anchor(a, b, c))
-            pos = anchor + Rw @ (np.array(g.base) + off[:3])
+            shift = np.zeros(3)
+            for k, sign, dist in g.reach_over:
+                shift[k] = sign * (self.table_margin(anchor, Rw[:, k] * sign) - dist)
+            pos = anchor + Rw @ (np.array(g.base) + shift + off[:3])
+            if spec.bases.fixed is None:  # into the region (the IK checks the reach)
+                pos = np.clip(pos, spec.bases.lower, spec.bases.upper)
             yaw = float(np.arctan2(Rw[1, 0], Rw[0, 0])) + g.yaw + off[3]
             yaw = float(np.arctan2(np.sin(yaw), np.cos(yaw)))
             joint = {"type": "fingertips", "tip_radius": float(slot.tip_radius)}
@@ -610,7 +648,7 @@ def plan_pick_up(spec, seed: int | None = None, progress=None,
 
     Pivot edges are tried smallest tilt first (the edge the box is longest toward), each
     at its angles smallest first. ``first``: stop at the first plan that meets every check
-    (no random bases; what a quick plan or a test needs).
+    (random bases only while none met every check: what a quick plan or a test needs).
 
     Raises:
         DesignImpossibleError: no candidate met every check (the message names every pivot
@@ -633,8 +671,10 @@ def plan_pick_up(spec, seed: int | None = None, progress=None,
     if progress is not None:
         progress(f"{len(checked)} pivot edges and angles at the nominal bases, "
                  f"{sum(c.ok for c in checked)} met every check")
-    if combos and not first:
+    if combos and not (first and any(c.ok for c in checked)):
         for _ in range(spec.search.candidates):
+            if first and checked[-1].ok:
+                break
             ok = sorted((c for c in checked if c.ok), key=_rank)
             parent = ok[0] if ok else min(checked, key=_progress)
             offs = {}
@@ -678,6 +718,36 @@ def has_overhang(spec) -> bool:
     return bool(bottom) and not all(_covered(problem, f) for f in bottom)
 
 
+def with_box(data: dict, size, mass: float, yaw: float = 0.0,
+             margin=(0.4, 0.3)) -> dict:
+    """A pick-up spec mapping for another box on the same table plane.
+
+    The box (``size`` (3,) [m], ``mass`` [kg], turned ``yaw`` [rad] about z) lies with its
+    centre above the spec's box's; the support is a rectangle with its sides along the box's
+    (``x_axis``) ``margin`` [m] wider than the box on each side along the box's x and y
+    (the table larger than the box), its points the bottom face's corners. ``data`` (a
+    parsed spec mapping) is not changed.
+    """
+    import copy
+
+    out = copy.deepcopy(data)
+    size = np.asarray(size, float)
+    sp = out["supports"][0]
+    h = float(np.asarray(sp["plane"]["point"], float)[2])
+    p = np.asarray(out["object"]["pose"]["position"], float)
+    out["object"]["shape"] = {"type": "box", "size": _r(size)}
+    out["object"]["mass"] = float(mass)
+    out["object"]["pose"] = {"position": _r([p[0], p[1], h + size[2] / 2]),
+                             "rpy": [0.0, 0.0, float(yaw)]}
+    sp["extent"] = _r(size[:2] + 2 * np.asarray(margin, float))
+    sp["x_axis"] = _r(_rz(yaw)[:, 0])
+    sp["plane"] = {"point": _r([p[0], p[1], h]), "normal": [0.0, 0.0, 1.0]}
+    half = size / 2
+    sp["points"] = [_r([sx * half[0], sy * half[1], -half[2]]) for sx in (1, -1)
+                    for sy in (1, -1)]
+    return out
+
+
 def use_tilt(spec) -> bool:
     """Whether a pick-up spec takes the tilt plan.
 
@@ -700,4 +770,4 @@ def describe_plan(c: PlanCheck) -> str:
 __all__ = ["CHECKS", "PIVOTS", "ROLES", "ROLE_GRIPS", "Candidate", "PickUpPlanner",
            "PickUpResult", "PlanCheck", "assign_roles", "check_pick_up_spec", "check_plan",
            "describe_plan", "grasp_wrenches", "has_overhang", "plan_pick_up",
-           "tilt_angle_range", "use_tilt"]
+           "tilt_angle_range", "use_tilt", "with_box"]

@@ -179,3 +179,71 @@ def test_a_box_too_tall_to_tilt_is_reported_with_its_reason():
     with pytest.raises(DesignImpossibleError, match="too tall") as exc:
         plan_pick_up(_spec(d), first=True)
     assert str(exc.value).count("too tall") == 4
+
+
+DRAW_CASES = 6
+"""Boxes drawn by the random-draw test (the benchmark draws more and simulates each)."""
+
+IMPOSSIBLE_BOUND = 0.25
+"""Largest fraction of drawn boxes the planner may report impossible (README)."""
+
+
+def test_drawn_boxes_plan_or_say_why():
+    """Boxes drawn in the README's range (edges 0.4-1.0 m, masses 1-8 kg, lying along the
+    table's axes, the table 0.4 and 0.3 m wider on each side): each plans (every check met,
+    the 13 contacts form closure by scipy's LP, clearance at least the margin, IK residual
+    below 1e-6 m) or is reported impossible with its reason; at most IMPOSSIBLE_BOUND of
+    them impossible."""
+    from multiarm_pin.design.pick_up import with_box
+
+    rng = np.random.default_rng(27)
+    impossible = []
+    for k in range(DRAW_CASES):
+        size, mass = rng.uniform(0.4, 1.0, 3), rng.uniform(1.0, 8.0)
+        spec = parse_design(with_box(_data(), size, mass), f"draw{k}")
+        try:
+            res = plan_pick_up(spec, first=True)
+        except DesignImpossibleError as exc:
+            assert "no tilt plan" in str(exc) and len(str(exc)) > 60
+            impossible.append(str(exc))
+            continue
+        c = res.plans[0]
+        assert c.ok and c.scores["ik_residual"] < 1e-6
+        assert c.scores["clearance"] >= spec.search.clearance
+        W = grasp_wrenches(_built(c.scenario))
+        assert W.shape[1] == 13 and _closure(W)
+    assert len(impossible) <= IMPOSSIBLE_BOUND * DRAW_CASES, impossible
+
+
+def test_the_shipped_spec_simulates_the_issues_events():
+    """The first plan of the shipped spec (+x, 0.14 rad) run through (the Python stepper):
+    the far edge's vertices separate first, then the insert tip touches down on the bottom
+    face, then the pivot's vertices separate; no contact force below zero; feasible; the
+    final pose on the closed form (the start turned 0.14 rad about the +x bottom edge, then
+    moved by (0.05, 0, 0.05) m) to 1e-3 m."""
+    from multiarm_pin.app.run_feasibility import check_initial_state
+    from multiarm_pin.app.runner import scenario_controller, simulate_built
+    from multiarm_pin.feasibility import feasibility_report
+
+    res = plan_pick_up(_spec(), first=True)
+    c = res.plans[0]
+    assert (c.candidate.pivot, c.candidate.angle) == SHIPPED
+    built = _built(c.scenario)
+    scene = check_initial_state(built)
+    sim = built.scenario.simulation
+    run = simulate_built(built, scenario_controller(built), sim.duration, sim.dt, sim.solver)
+    report = feasibility_report(built.system, run, ground=built.scenario.ground, scene=scene)
+    assert report.feasible, [v.describe() for v in report.violations]
+    first = {}
+    for e in run.events:
+        first.setdefault((e.kind, e.label), e.t)
+    far = max(first[("separation", "table[2]")], first[("separation", "table[3]")])
+    bottom = first[("touchdown", "three_finger:tip[2]")]
+    pivot = min(first[("separation", "table[0]")], first[("separation", "table[1]")])
+    assert far < bottom < pivot
+    assert run.mu.min() >= 0.0
+    th = SHIPPED[1]
+    R = pin.exp3(np.array([0.0, th, 0.0]))
+    p = np.array([0.4, 0.0, 0.7])
+    goal = p + R @ (np.array([0.0, 0.0, 0.9]) - p) + [0.05, 0.0, 0.05]
+    assert np.linalg.norm(run.object_position[-1] - goal) < 1e-3
