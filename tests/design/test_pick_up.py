@@ -247,3 +247,31 @@ def test_the_shipped_spec_simulates_the_issues_events():
     p = np.array([0.4, 0.0, 0.7])
     goal = p + R @ (np.array([0.0, 0.0, 0.9]) - p) + [0.05, 0.0, 0.05]
     assert np.linalg.norm(run.object_position[-1] - goal) < 1e-3
+
+
+def test_the_design_command_writes_a_pick_up_folder(tmp_path):
+    """``multiarm-pin design`` on a pick-up spec (one random base, --no-run): exit 0, a
+    report naming the plans, plan.json, and design_1.yaml a scenario the reader builds
+    whose tilt phase is the best plan's."""
+    import json
+
+    from multiarm_pin.app.cli import main
+    from multiarm_pin.app.scenario import load_scenario
+
+    d = _data()
+    d["search"]["candidates"] = 1
+    spec = tmp_path / "tilt_pick.yaml"
+    spec.write_text(yaml.safe_dump(d), encoding="utf-8")
+    out = tmp_path / "out"
+    code = main(["design", str(spec), "--out", str(out), "--workers", "1", "--quiet",
+                 "--no-run"])
+    assert code == 0
+    report = (out / "report.md").read_text(encoding="utf-8")
+    assert "## Plans" in report and "Not simulated" in report
+    plan = json.loads((out / "plan.json").read_text(encoding="utf-8"))
+    assert plan["checked"] == 13 and plan["plans"]
+    path = out / "designs" / "design_1.yaml"
+    assert load_scenario(path).controller.type == "phased_pd"
+    sc = yaml.safe_load(path.read_text(encoding="utf-8"))
+    tilt = next(p for p in sc["controller"]["phases"] if p["kind"] == "tilt")
+    assert abs(tilt["angle"] - plan["plans"][0]["angle"]) < 1e-12
