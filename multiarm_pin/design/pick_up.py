@@ -183,6 +183,8 @@ def check_pick_up_spec(root, obj, supports, arms) -> None:
     if abs(R[2, 2] - 1.0) > 1e-9:
         raise root.get("object").error("a pick-up's box lies flat: its z axis must be "
                                        f"vertical (it is {R[:, 2].round(6).tolist()})")
+    if "fixed" in (root.value.get("bases") or {}):
+        raise root.error("a pick-up places the bases itself: give a region", "bases.fixed")
     if len(supports) != 1:
         raise root.error("a pick-up needs exactly one support (the table)", "supports")
     sp = supports[0]
@@ -338,8 +340,7 @@ class PickUpPlanner:
             for k, sign, dist in g.reach_over:
                 shift[k] = sign * (self.table_margin(anchor, Rw[:, k] * sign) - dist)
             pos = anchor + Rw @ (np.array(g.base) + shift + off[:3])
-            if spec.bases.fixed is None:  # into the region (the IK checks the reach)
-                pos = np.clip(pos, spec.bases.lower, spec.bases.upper)
+            pos = np.clip(pos, spec.bases.lower, spec.bases.upper)  # the IK checks the reach
             yaw = float(np.arctan2(Rw[1, 0], Rw[0, 0])) + g.yaw + off[3]
             yaw = float(np.arctan2(np.sin(yaw), np.cos(yaw)))
             joint = {"type": "fingertips", "tip_radius": float(slot.tip_radius)}
@@ -512,12 +513,13 @@ def check_plan(planner: PickUpPlanner, cand: Candidate) -> PlanCheck:
         return PlanCheck(cand, False, cond, value, detail, data, **kw)
 
     # reach: the builder's IK at the start (tips on their faces, or apart by the approach)
+    lo, hi = spec.bases.yaw
     for arm in data["arms"]:
-        b = np.asarray(arm["base"]["position"])
-        lo, hi = spec.bases.lower, spec.bases.upper
-        if spec.bases.fixed is None and (np.any(b < lo - 1e-9) or np.any(b > hi + 1e-9)):
-            return fail("build", float(np.max(np.maximum(lo - b, b - hi))),
-                        f"{arm['name']}'s base {np.round(b, 3).tolist()} outside the region")
+        yaw = float(arm["base"]["rpy"][2])
+        turns = [yaw + 2 * np.pi * k for k in (-1, 0, 1)]
+        if not any(lo - 1e-9 <= y <= hi + 1e-9 for y in turns):
+            return fail("build", yaw, f"{arm['name']}'s base yaw {yaw:.3g} rad outside the "
+                                      f"region's [{lo:.3g}, {hi:.3g}]")
     try:
         built = build_scenario(parse_scenario(data, spec.file), load_visuals=False)
     except UnreachableError as exc:

@@ -163,6 +163,10 @@ def test_strategy_and_bad_specs():
     with pytest.raises(DesignError, match="arms"):
         _spec(bad)
     bad = _data()
+    bad["bases"] = {"fixed": [{"position": [0, 0, 0]}] * 4}
+    with pytest.raises(DesignError, match="bases.fixed"):
+        _spec(bad)
+    bad = _data()
     bad["task"]["strategy"] = "roll"
     with pytest.raises(DesignError, match="strategy"):
         _spec(bad)
