@@ -74,9 +74,11 @@ def judge(plan, run, report) -> tuple[bool, str]:
     err = float(np.linalg.norm(run.object_position[-1] - goal))
     mu_min = float(run.mu.min())
     ok = far < bottom < pivot and mu_min >= 0.0 and report.feasible and err < 1e-3
+    why = "" if report.feasible else " (" + "; ".join(
+        v.describe() for v in report.violations[:3]) + ")"
     return ok, (f"events far {far:.3f} s < bottom {bottom:.3f} s < pivot {pivot:.3f} s: "
                 f"{far < bottom < pivot}; min force {mu_min:.3g} N; feasible "
-                f"{report.feasible}; final pose error {err:.2g} m")
+                f"{report.feasible}{why}; final pose error {err:.2g} m")
 
 
 def main(argv=None) -> int:
