@@ -282,7 +282,7 @@ def cold_start(duration: float) -> dict:
     build = None
     if precompiled.load() is None:
         t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "multiarm_pin._compiled.precompiled"],
+        subprocess.run([sys.executable, "-m", "multiarm_pin.app.precompile"],
                        check=True, cwd=ROOT)
         build = time.perf_counter() - t0
     env = {k: v for k, v in os.environ.items() if k != precompiled.ENV_SWITCH}

@@ -253,6 +253,30 @@ class UnsupportedJointError(MultiArmError, ValueError):
             f"only){others}: use Pinocchio's path for this model")
 
 
+class UnsupportedSolverError(InputError):
+    """A forward-dynamics solver was named for rows it cannot serve (it is never replaced).
+
+    Attributes:
+        solver: the solver's name.
+        rows: labels of the rows it cannot serve (``"<arm>:<contact>"``, ``"<support>[j]"``).
+        serving: the solvers that serve them.
+    """
+
+    def __init__(self, solver: str, rows: Sequence[str], serving: Sequence[str]):
+        self.solver = solver
+        self.rows = list(rows)
+        self.serving = list(serving)
+        shown = ", ".join(self.rows[:6]) + (f" and {len(self.rows) - 6} more"
+                                            if len(self.rows) > 6 else "")
+        super().__init__(
+            f"solver {solver!r} cannot serve the unilateral rows of this system ({shown}): it "
+            "holds every row as an equality, where a unilateral row may push only and "
+            f"separate; name one of {', '.join(self.serving)}")
+
+    def __reduce__(self):
+        return type(self), (self.solver, self.rows, self.serving)
+
+
 class UnreachableError(MultiArmError, ValueError):
     """Inverse kinematics found no configuration meeting the targets (out of reach).
 

@@ -23,10 +23,10 @@ concatenated in arm order (``system.arm_set.q_slices`` / ``v_slices``); the obje
 own :class:`~.model.rigid_object.ObjectState` (COM position, quaternion ``[x, y, z, w]``,
 twist ``[ẋ; ω]`` in world axes).
 
-This module is the public system only (about 650 lines, most of them the public methods'
-docstrings); the compiled evaluation and its buffer views are in
-:mod:`multiarm_pin.dynamics.evaluation`, the stacking of every contact row (arms and
-supports) in :mod:`multiarm_pin.dynamics.contact_rows`.
+This module is the public system only (most of it the public methods' docstrings); the
+compiled evaluation and its buffer views are in :mod:`multiarm_pin.dynamics.evaluation`, the
+stacking of every contact row (arms and supports) in
+:mod:`multiarm_pin.dynamics.contact_rows`.
 """
 
 from __future__ import annotations

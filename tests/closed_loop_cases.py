@@ -6,6 +6,7 @@ of the library plus fingertips, states moving and slightly off the constraint ma
 
 from __future__ import annotations
 
+import dataclasses
 from functools import cache
 from pathlib import Path
 
@@ -109,16 +110,20 @@ def hold_task_conditions(ctrl, ev) -> np.ndarray:
     return np.array(out)
 
 
-def run_scenario(name, duration, compiled, monkeypatch, **kw):
+def run_scenario(name, duration, compiled, monkeypatch, integrator=None, **kw):
     """A run of a shipped scenario, with or without the compiled loops.
 
     ``compiled`` False turns off both the compiled closed loop and the compiled contact loop;
-    ``"closed"`` or ``"contact"`` keeps only that one.
+    ``"closed"`` or ``"contact"`` keeps only that one. ``integrator``: the scenario's own, or
+    this one.
 
     Returns ``(result, calls)``: ``calls`` lists the ``(k0, k1)`` of every stretch the
     compiled loops were asked to run.
     """
     sc = load_scenario(SCENARIOS / f"{name}.yaml")
+    if integrator is not None:
+        sc = dataclasses.replace(sc, simulation=dataclasses.replace(sc.simulation,
+                                                                    integrator=integrator))
     built = build_scenario(sc, load_visuals=False)
     sim = sc.simulation
     calls = []

@@ -3,6 +3,8 @@ sample by sample, including the steps the kernel hands back and an interrupted r
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from closed_loop_cases import RUN_FIELDS, rel_err, run_scenario, run_tolerance
@@ -25,6 +27,22 @@ def test_runs_equal_the_python_loop(name, monkeypatch):
     assert list(fast.solver) == list(ref.solver)
     assert fast.warnings == ref.warnings
     assert np.abs(ref.object_twist).max() > 1e-3  # it moved
+
+
+@pytest.mark.parametrize("name", ["two_ur5_box", "ur5_panda_box", "fingertips_form_closure"])
+def test_semi_implicit_runs_equal_the_python_loop(name, monkeypatch):
+    """Semi-implicit Euler in the compiled loop (one evaluation a step) against the stepper's."""
+    fast, calls = run_scenario(name, 0.1, True, monkeypatch, integrator="semi_implicit")
+    ref, _ = run_scenario(name, 0.1, False, monkeypatch, integrator="semi_implicit")
+    rk4, _ = run_scenario(name, 0.1, True, monkeypatch)
+    assert calls, "the compiled loop did not run"
+    assert fast.integrator == "semi_implicit"
+    for field in RUN_FIELDS:
+        assert rel_err(getattr(fast, field), getattr(ref, field)) <= run_tolerance(field), field
+    np.testing.assert_array_equal(fast.active, ref.active)
+    assert fast.warnings == ref.warnings
+    # a different integrator: first order, so it differs from RK4 by far more than round-off
+    assert rel_err(fast.q, rk4.q) > 1e-7
 
 
 def test_steps_handed_back_keep_the_events(monkeypatch):
@@ -93,3 +111,30 @@ def test_an_interrupt_keeps_the_samples_so_far(monkeypatch):
     for field in RUN_FIELDS:
         np.testing.assert_array_equal(getattr(part, field), getattr(full, field)[:n])
     assert (part.solver == compiled_loop.RECORDED_SOLVER[False]).all()
+
+
+def test_compiled_false_takes_every_step_on_the_reference(monkeypatch):
+    """``simulation: {compiled: false}``: neither compiled loop is asked for a stretch, and
+    the run is the reference run (the compiled loops switched off), sample for sample."""
+    from closed_loop_cases import SCENARIOS
+
+    from multiarm_pin.app.runner import scenario_controller, simulate_built
+    from multiarm_pin.app.scenario import build_scenario, load_scenario
+    from multiarm_pin.sim.compiled_loop import CompiledLoop
+    from multiarm_pin.sim.contact_loop import ContactLoop
+
+    ref, _ = run_scenario("box_on_table", 0.05, False, monkeypatch)
+    sc = load_scenario(SCENARIOS / "box_on_table.yaml")
+    sc = dataclasses.replace(sc, simulation=dataclasses.replace(sc.simulation, compiled=False))
+    built = build_scenario(sc, load_visuals=False)
+
+    def refused(*args, **kwargs):
+        raise AssertionError("a compiled loop was asked for a run")
+
+    monkeypatch.setattr(CompiledLoop, "for_run", refused)
+    monkeypatch.setattr(ContactLoop, "for_run", refused)
+    result = simulate_built(built, scenario_controller(built), 0.05, sc.simulation.dt,
+                            sc.simulation.solver)
+    for field in RUN_FIELDS:
+        np.testing.assert_array_equal(getattr(result, field), getattr(ref, field), field)
+    assert [(e.kind, e.t) for e in result.events] == [(e.kind, e.t) for e in ref.events]

@@ -13,13 +13,14 @@ from closed_loop_cases import (
     run_scenario,
 )
 
-from multiarm_pin.app.runner import scenario_controller
+from multiarm_pin.app.runner import scenario_controller, simulate_built
 from multiarm_pin.app.scenario import build_scenario, load_scenario
 from multiarm_pin.sim import contact_events as ce
 from multiarm_pin.sim import contact_loop
 from multiarm_pin.sim import event_location as el
 from multiarm_pin.sim.compiled_loop import CompiledLoop
 from multiarm_pin.sim.contact_loop import ContactLoop
+from multiarm_pin.sim.controllers import make_controller
 from multiarm_pin.sim.disturbances import WrenchSchedule
 from multiarm_pin.sim.stepper import Stepper
 
@@ -97,3 +98,23 @@ def test_a_wrench_schedule_of_another_kind_stays_on_the_stepper():
             stepper = Stepper(built.system, scenario_controller(built), "object_first", None,
                               wrench)
             assert (loop.for_run(stepper, "rk4") is not None) == takes, (name, takes)
+
+
+def test_zero_torque_with_arms_runs_on_the_contact_loop_as_on_the_stepper(monkeypatch):
+    """The registry's ``none`` (zero torque) is served by the contact loop's zero-torque mode:
+    the fingertips of grasp_failure let the box fall, the same run as the stepper's."""
+    built = build_scenario(load_scenario(SCENARIOS / "grasp_failure.yaml"), load_visuals=False)
+    sim = built.scenario.simulation
+    runs, calls, run = [], [], ContactLoop.run
+    monkeypatch.setattr(ContactLoop, "run", lambda self, *a: calls.append(a[3]) or run(self, *a))
+    for compiled in (True, False):
+        calls.clear()
+        with monkeypatch.context() as mp:
+            if not compiled:
+                mp.setattr(ContactLoop, "for_run", classmethod(lambda cls, *a: None))
+            ctrl = make_controller("none", built.system)
+            runs.append(simulate_built(built, ctrl, 0.1, sim.dt, sim.solver))
+        assert bool(calls) == compiled
+    fast, ref = runs
+    assert fast.events and not [w for w in fast.warnings if "reference" in w]
+    assert_same_contact_run(fast, ref, 1e-9)

@@ -22,7 +22,8 @@ def two_arms():
 
 def test_registry_errors(two_arms):
     system, _ = two_arms
-    assert set(CONTROLLERS) == {"none", "gravity_compensation", "joint_pd", "object_pd"}
+    assert set(CONTROLLERS) == {"none", "gravity_compensation", "joint_pd", "object_pd",
+                                "phased_pd"}
     with pytest.raises(InputError, match="unknown controller type 'pid'.*gravity_compensation"):
         make_controller("pid", system)
     with pytest.raises(InputError, match="bad parameters"):

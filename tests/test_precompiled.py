@@ -1,4 +1,5 @@
-"""The closed loop compiled ahead of time (``_compiled/precompiled.py``): built, loaded only
+"""The closed loop compiled ahead of time (``_compiled/precompiled.py``, built by
+``app/precompile.py``): built, loaded only
 where it fits (these sources, this machine, these argument types), and the same results as
 the JIT kernel, bit for bit."""
 
@@ -15,6 +16,7 @@ from closed_loop_cases import RUN_FIELDS, run_scenario
 
 from multiarm_pin._compiled import closed_loop as kernels
 from multiarm_pin._compiled import precompiled
+from multiarm_pin.app import precompile
 
 OLD = precompiled.PREFIX + "0123456789abcdef.json"  # a module of other sources
 
@@ -25,7 +27,7 @@ def folder(tmp_path_factory):
     out = tmp_path_factory.mktemp("aot")
     (out / OLD).write_text("{}")
     try:
-        precompiled.build(out)
+        precompile.build(out)
     except Exception as exc:  # noqa: BLE001
         headers = Path(sysconfig.get_paths()["include"]) / "Python.h"
         if (shutil.which("cc") is None and shutil.which("gcc") is None) or not headers.exists():
@@ -75,8 +77,12 @@ def test_runs_equal_the_jit_kernel_bit_for_bit(name, folder, monkeypatch):
         np.testing.assert_array_equal(getattr(aot, field), getattr(jit, field), err_msg=field)
 
 
+def test_every_kernel_has_example_arguments():
+    assert set(precompile.EXAMPLES) == set(precompiled.KERNELS)
+
+
 def test_arguments_of_other_types_go_to_the_jit_kernel(folder):
-    args = list(precompiled.example_arguments())
+    args = list(precompile.run_rk4_arguments())
     assert args[-1] is not kernels.closed_loop_stage  # the JIT path's pointer to the stage
     assert precompiled.run_rk4_for(tuple(args), folder) is not kernels.run_rk4
     x = args[3]
@@ -127,8 +133,8 @@ def test_a_failed_build_says_so_and_keeps_the_jit(tmp_path, monkeypatch, capsys)
     def fail(*a, **k):
         raise OSError("no C compiler found")
 
-    monkeypatch.setattr(precompiled, "build", fail)
-    assert precompiled.main(["--folder", str(tmp_path)]) == 1
+    monkeypatch.setattr(precompile, "build", fail)
+    assert precompile.main(["--folder", str(tmp_path)]) == 1
     err = capsys.readouterr().err
     assert "not built (OSError: no C compiler found)" in err and "Traceback" not in err
     assert not list(tmp_path.iterdir())
@@ -138,7 +144,7 @@ def test_the_command_line_builds_only_when_stale(monkeypatch, capsys):
     from multiarm_pin.app.cli import main
 
     built = []
-    monkeypatch.setattr(precompiled, "build", lambda folder=None: built.append(folder) or
+    monkeypatch.setattr(precompile, "build", lambda folder=None: built.append(folder) or
                         precompiled.FOLDER / "x.so")
     monkeypatch.setattr(precompiled, "load", lambda folder=None: ("run_rk4", []))
     assert main(["precompile", "--if-stale"]) == 0

@@ -10,7 +10,9 @@ Registries: joint types (:data:`multiarm_pin.constraints.JOINT_TYPES`), robots
 from __future__ import annotations
 
 import copy
+import dataclasses
 import re
+import types
 import warnings
 
 import numpy as np
@@ -25,8 +27,17 @@ from multiarm_pin.exceptions import InputError, RobotNotFoundError, ScenarioErro
 from multiarm_pin.model.arm import Arm
 from multiarm_pin.model.polyhedron import box
 from multiarm_pin.model.robots import ROBOTS, robot_entry
-from multiarm_pin.sim.controllers import CONTROLLERS, ObjectPD, make_controller
-from multiarm_pin.sim.simulation import INTEGRATORS, simulate
+from multiarm_pin.sim.compiled_loop import CompiledLoop, unsupported_joints_note
+from multiarm_pin.sim.contact_loop import ContactLoop
+from multiarm_pin.sim.controllers import (
+    CONTROLLER_KERNELS,
+    CONTROLLERS,
+    ObjectPD,
+    controller_kernel,
+    make_controller,
+)
+from multiarm_pin.sim.simulation import INTEGRATORS, REFERENCE_NOTE, simulate
+from multiarm_pin.sim.stepper import Stepper
 from multiarm_pin.sim.trajectories import MinimumJerkTrajectory
 
 HALF_PI = float(np.pi / 2)
@@ -261,6 +272,74 @@ def test_object_pd_waypoints_through_make_controller(two_arms):
         ObjectPD(system, trajectory=same.trajectory, waypoints=waypoints)
     with pytest.raises(InputError, match="waypoint 0: expected a mapping with t, position"):
         make_controller("object_pd", system, waypoints=[{"time": 1.0, "position": goal}])
+
+
+def test_every_controller_kernel_is_one_the_loops_know():
+    for entry in CONTROLLERS.values():
+        assert entry.kernel is None or entry.kernel in CONTROLLER_KERNELS, entry.name
+    served = set(CompiledLoop.CONTROLLER_KERNELS) | set(ContactLoop.CONTROLLER_KERNELS)
+    assert served == set(CONTROLLER_KERNELS)
+
+
+def test_the_loops_read_the_controller_registry(two_arms, monkeypatch):
+    """Which kernel serves a controller is its registry entry's: with the entry of
+    ``object_pd`` saying none, neither loop takes an ``ObjectPD`` run, and the reason names it."""
+    system, _ = two_arms
+    pd = make_controller("object_pd", system)
+    assert controller_kernel(None) == ("zero_torque", "")
+    assert controller_kernel(make_controller("none", system)) == ("zero_torque", "")
+    assert controller_kernel(pd) == ("object_pd", "")
+    assert controller_kernel(make_controller("joint_pd", system)) == (
+        None, "controller 'joint_pd' has no compiled kernel")
+    assert controller_kernel(ObjectPD(system, compiled=False)) == (
+        None, "controller 'object_pd' was built with compiled=False")
+
+    class Mine(ObjectPD):  # a subclass may compute something else: not its parent's kernel
+        pass
+
+    assert controller_kernel(Mine(system))[0] is None
+    assert "Mine is not a type of the registry" in controller_kernel(Mine(system))[1]
+    stepper = Stepper(system, pd, "object_first", None)
+    assert CompiledLoop.declines(stepper, "rk4") is None
+    monkeypatch.setitem(CONTROLLERS, "object_pd",
+                        dataclasses.replace(CONTROLLERS["object_pd"], kernel=None))
+    assert CompiledLoop.for_run(stepper, "rk4") is None
+    assert CompiledLoop.declines(stepper, "rk4") == "controller 'object_pd' has no compiled kernel"
+
+
+def test_a_run_no_kernel_serves_says_so_once_and_runs_on_the_stepper(two_arms, monkeypatch):
+    system, state = two_arms
+    kernel_calls = []
+    run = CompiledLoop.run
+    monkeypatch.setattr(CompiledLoop, "run",
+                        lambda self, *a: kernel_calls.append(a[3]) or run(self, *a))
+
+    def notes(r):
+        return [w for w in r.warnings if "reference (numpy) stepper" in w]
+
+    r = simulate(system, state, make_controller("joint_pd", system), 0.02, 0.01)
+    assert notes(r) == [REFERENCE_NOTE.format(why="controller 'joint_pd' has no compiled "
+                                                  "kernel")] and not kernel_calls
+    r = simulate(system, state, make_controller("object_pd", system), 0.02, 0.01,
+                 integrator="rk45")
+    assert notes(r) == [REFERENCE_NOTE.format(why="integrator 'rk45' has no compiled loop (RK4 "
+                                                  "and semi-implicit only)")]
+    assert not kernel_calls
+    for integrator in ("semi_implicit", "rk4"):
+        r = simulate(system, state, make_controller("object_pd", system), 0.02, 0.01,
+                     integrator=integrator)
+        assert notes(r) == [] and kernel_calls  # the compiled closed loop took it
+        kernel_calls.clear()
+
+
+def test_the_note_names_a_joint_kind_the_compiled_pass_lacks():
+    model = pin.Model()
+    j = model.addJoint(0, pin.JointModelRZ(), pin.SE3.Identity(), "shoulder")
+    model.addJoint(j, pin.JointModelSpherical(), pin.SE3.Identity(), "wrist")
+    system = types.SimpleNamespace(arm_set=types.SimpleNamespace(model=model))
+    assert unsupported_joints_note(system) == (
+        "joint 'wrist' is of kind JointModelSpherical, which the compiled rigid-body pass does "
+        "not support")
 
 
 # ----------------------------------------------------------------------------- integrators

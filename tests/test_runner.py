@@ -139,6 +139,15 @@ def test_bad_overrides(tmp_path):
     assert cli.main(["run", str(tmp_path / "missing.yaml"), "--out", str(tmp_path)]) == 2
 
 
+def test_a_solver_that_cannot_serve_the_rows_is_bad_input_naming_the_key(tmp_path):
+    """grasp_failure's fingertips are unilateral: dense_kkt (equalities only) is refused."""
+    with pytest.raises(ScenarioError, match="cannot serve the unilateral rows") as info:
+        run_scenario(REPO / "scenarios" / "grasp_failure.yaml", tmp_path, solver="dense_kkt",
+                     html=False, plots=False)
+    assert info.value.key == "--solver" and "'dense_kkt'" in str(info.value)
+    assert not list(tmp_path.iterdir())  # nothing written
+
+
 def test_progress_bar_draws_and_ends_line():
     buf = io.StringIO()
     bar = ProgressBar("x", 2.0, stream=buf, delay=0.0, min_interval=0.0)

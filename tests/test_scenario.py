@@ -314,3 +314,13 @@ def test_weld_inside_the_object_is_a_warning(tmp_path):
         in warns[0]
     ok = build_scenario(load_scenario(write(tmp_path, copy.deepcopy(BASE), "ok.yaml")))
     assert input_warnings(ok, 0.1) == []  # on the surface: no warning
+
+
+def test_simulation_compiled_is_a_boolean(tmp_path):
+    assert parse_scenario(copy.deepcopy(BASE), "x.yaml").simulation.compiled is True
+    data = copy.deepcopy(BASE)
+    data["simulation"]["compiled"] = False
+    assert parse_scenario(data, "x.yaml").simulation.compiled is False
+    data["simulation"]["compiled"] = "no"
+    err = error_of(tmp_path, data)
+    assert err.key == "simulation.compiled" and "true or false" in str(err)

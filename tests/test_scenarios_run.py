@@ -59,9 +59,13 @@ def test_scenario_runs_and_is_physical(path, tmp_path):
     # object_pd scenarios follow their reference at the start (no jump)
     if sc.controller.type == "object_pd":
         assert np.linalg.norm(r.object_position[-1] - r.object_position[0]) < 0.05
-    # unilateral fingertips must push
+    # unilateral fingertips must push while they touch (a gripper that starts apart,
+    # tilt_pick's, carries no force until it touches down)
     if built.system.unilateral.any():
-        assert s["min_unilateral_contact_force"] > 0
+        n, uni = built.system.n_arms, built.system.unilateral
+        touching = r.active[:, :n, :uni.shape[1]] & uni
+        assert r.mu[:, :n, :uni.shape[1]][touching].min() > 0
+        assert s["min_unilateral_contact_force"] >= 0
 
 
 def test_fingertip_grasp_is_form_closure():
@@ -92,8 +96,13 @@ FAILING_ON_PURPOSE = {"grasp_failure": "its README line: not feasible (joint vel
                                        "gripper in its own wrist)"}
 """Shipped scenarios that show a failure on purpose, with why."""
 
+WHOLE_RUN_ELSEWHERE = {"tilt_pick": "tests/test_tilt_pick.py runs it whole once (the Python "
+                                    "stepper: the slowest run) and checks its feasibility"}
+"""Shipped scenarios whose whole run another test checks, with where."""
 
-@pytest.mark.parametrize("path", SCENARIOS, ids=[p.stem for p in SCENARIOS])
+
+@pytest.mark.parametrize("path", [p for p in SCENARIOS if p.stem not in WHOLE_RUN_ELSEWHERE],
+                         ids=[p.stem for p in SCENARIOS if p.stem not in WHOLE_RUN_ELSEWHERE])
 def test_every_shipped_scenario_is_feasible_over_its_whole_run(path):
     # no false alarms: within the URDF's limits and collision-free at every recorded sample
     # of the whole run (the test above runs 0.1 s of each)

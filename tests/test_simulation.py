@@ -1,11 +1,20 @@
 """Integrators, records, progress, warnings and errors of simulate()."""
 
+import pickle
+
 import numpy as np
 import pinocchio as pin
 import pytest
 from system_builders import build_system, moving_state, one_dof_arm
 
-from multiarm_pin.exceptions import ConstraintError, DynamicsError, InputError
+from multiarm_pin.dynamics import SOLVERS
+from multiarm_pin.dynamics.unilateral import UNILATERAL_SOLVERS
+from multiarm_pin.exceptions import (
+    ConstraintError,
+    DynamicsError,
+    InputError,
+    UnsupportedSolverError,
+)
 from multiarm_pin.model.rigid_object import ObjectState, RigidObject
 from multiarm_pin.sim.simulation import INTEGRATORS, simulate
 from multiarm_pin.system import MultiArmSystem, SystemState
@@ -130,6 +139,36 @@ def test_bad_input(moving):
         simulate(system, state, lambda t, s, e: np.zeros(2), 0.1, 0.01)
     with pytest.raises(DynamicsError, match="NaN"):
         simulate(system, state, lambda t, s, e: np.full(system.nv, np.nan), 0.1, 0.01)
+
+
+def test_a_solver_is_honoured_or_refused_never_replaced(moving):
+    """Bilateral rows: every solver runs and is what the record names (``auto`` may choose
+    among the registry's). Unilateral rows: ``auto`` and ``object_first`` run the mixed LCP
+    (recorded under its names), the others are refused, naming the solver and the rows."""
+    system, state = moving
+    for name in SOLVERS:
+        recorded = set(simulate(system, state, None, 0.02, 0.01, solver=name).solver)
+        assert recorded <= set(SOLVERS), (name, recorded)
+        if name in ("dense_kkt", "singular", "object_first"):
+            assert recorded == {name}
+    specs = [{"type": "fingertips", "contacts": [("-z", [0.0, 0.0, -0.1]),
+                                                 ("+x", [0.2, 0.0, 0.0])], "radius": 0.01}]
+    system, state = build_system(["ur5"], specs, None)
+    rows = [label for b, r, label in system.contact_labels if system.contact_unilateral[b, r]]
+    assert len(rows) == 2
+    for name, entry in SOLVERS.items():
+        if entry.unilateral:
+            recorded = set(simulate(system, state, None, 0.02, 0.01, solver=name).solver)
+            assert recorded <= set(UNILATERAL_SOLVERS), (name, recorded)
+            continue
+        with pytest.raises(UnsupportedSolverError) as info:
+            simulate(system, state, None, 0.02, 0.01, solver=name)
+        err = info.value
+        assert isinstance(err, InputError) and err.solver == name and err.rows == rows
+        assert str(err).startswith(f"solver {name!r} cannot serve the unilateral rows of this "
+                                   f"system ({rows[0]}, {rows[1]})")
+        assert str(err).endswith("name one of auto, object_first")
+        assert pickle.loads(pickle.dumps(err)).rows == rows  # a worker's error reaches the driver
 
 
 # ----------------------------------------------------------------------------- issue 13

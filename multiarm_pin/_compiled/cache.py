@@ -25,11 +25,9 @@ PACKAGE = Path(__file__).resolve().parent.parent
 """The ``multiarm_pin`` package folder."""
 
 KERNEL_FILES = tuple(sorted(
-    [p.relative_to(PACKAGE).as_posix() for p in (PACKAGE / "_compiled").glob("*.py")]
-    + ["dynamics/force_qp.py", "dynamics/delassus.py", "dynamics/mlcp.py"]))
+    p.relative_to(PACKAGE).as_posix() for p in (PACKAGE / "_compiled").glob("*.py")))
 """Package-relative paths of every file that defines or feeds compiled kernels: the
-``_compiled`` package and the three dynamics modules with kernels of their own (a test checks
-that no other file of the package uses numba)."""
+``_compiled`` package (a test checks that no other file of the package uses numba)."""
 
 _digest: str | None = None
 

@@ -10,9 +10,10 @@ Python calls per evaluation:
 - :func:`closed_loop_stage`: one evaluation at a state, its arm terms computed by
   :func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass` or given (Pinocchio's), and its
   tangent;
-- :func:`run_rk4`: RK4 steps over a stretch of the time grid, the arm terms computed by
-  :func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass`, every sample recorded into the
-  run's record arrays.
+- :func:`run_rk4`: RK4 steps (or semi-implicit Euler steps, ``Stepper.step``'s other
+  branch, when ``params[P_SEMI_IMPLICIT]`` is 1) over a stretch of the time grid, the arm
+  terms computed by :func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass`, every sample
+  recorded into the run's record arrays.
 
 Whatever these kernels cannot decide exactly as the Python path would, they hand back (a
 status and the sample where they stopped, the state left at that sample): a doubtful
@@ -49,6 +50,7 @@ from multiarm_pin._compiled.layout import (
     P_GRAVITY,
     P_INERTIA,
     P_MASS,
+    P_SEMI_IMPLICIT,
     REFERENCE_SIZE,
     ROW_NORMAL,
     ROW_PHI,
@@ -312,6 +314,81 @@ def _advance(model_ints, x, d, h, hd, out):  # pragma: no cover - compiled
         out[X_TWIST + a] = x[X_TWIST + a] + hd[b + 7 + a]
 
 
+@njit(cache=True, error_model="numpy")
+def _advance_semi_implicit(model_ints, x, d, h, v_new, R, out):  # pragma: no cover - compiled
+    """One semi-implicit Euler step ``h`` [s] of ``x`` with the tangent ``d`` into ``out``.
+
+    ``Stepper.step``'s semi-implicit branch: velocities first (``v + h q̈``, twist ``+ h a``),
+    then the configuration with the new velocities (the arms' by ``integrate``, the position
+    ``+ h ẋ``, the orientation by the exact exponential of ``h ω``:
+    :func:`~multiarm_pin.spatial.integrate_quaternion`, its Rodrigues formula and Eigen's
+    rotation-to-quaternion conversion, ``w >= 0``). ``v_new`` (nv,) and ``R`` (3, 3) are
+    workspaces.
+    """
+    nv = v_new.shape[0]
+    nq = x.shape[0] - OBJECT_STATE_SIZE - 2 * nv
+    q0 = OBJECT_STATE_SIZE
+    v0 = q0 + nq
+    b = 2 * nv
+    for j in range(nv):
+        v_new[j] = x[v0 + j] + h * d[nv + j]
+        out[v0 + nv + j] = 0.0  # τ
+    for a in range(6):
+        out[X_TWIST + a] = x[X_TWIST + a] + h * d[b + 7 + a]
+    for j in range(nv):
+        out[v0 + j] = v_new[j]
+        v_new[j] = h * v_new[j]
+    integrate(model_ints, x[q0:q0 + nq], v_new, out[q0:q0 + nq])
+    for a in range(3):
+        out[X_POSITION + a] = x[X_POSITION + a] + h * out[X_TWIST + a]
+    # dR = exp3(h ω) (Rodrigues; its Taylor series near zero), then dR R(quat)
+    wx, wy, wz = out[X_TWIST + 3] * h, out[X_TWIST + 4] * h, out[X_TWIST + 5] * h
+    t2 = wx * wx + wy * wy + wz * wz
+    if t2 > 1e-8:
+        t = math.sqrt(t2)
+        ct, st = math.cos(t), math.sin(t)
+        a_vx, a_vxvx = st / t, (1.0 - ct) / t2
+    else:
+        ct = 1.0 - t2 / 2.0
+        a_vx, a_vxvx = 1.0 - t2 / 6.0, 0.5 - t2 / 24.0
+    dR00, dR11, dR22 = ct + a_vxvx * wx * wx, ct + a_vxvx * wy * wy, ct + a_vxvx * wz * wz
+    dR01, dR10 = a_vxvx * wx * wy - a_vx * wz, a_vxvx * wx * wy + a_vx * wz
+    dR02, dR20 = a_vxvx * wx * wz + a_vx * wy, a_vxvx * wx * wz - a_vx * wy
+    dR12, dR21 = a_vxvx * wy * wz - a_vx * wx, a_vxvx * wy * wz + a_vx * wx
+    quaternion_rotation(x[X_QUATERNION:X_QUATERNION + 4], R)
+    m = np.empty((3, 3))
+    for c in range(3):
+        m[0, c] = dR00 * R[0, c] + dR01 * R[1, c] + dR02 * R[2, c]
+        m[1, c] = dR10 * R[0, c] + dR11 * R[1, c] + dR12 * R[2, c]
+        m[2, c] = dR20 * R[0, c] + dR21 * R[1, c] + dR22 * R[2, c]
+    o = X_QUATERNION  # Eigen's Quaternion(Matrix3) (as pin.Quaternion), then w >= 0
+    tr = m[0, 0] + m[1, 1] + m[2, 2]
+    if tr > 0.0:
+        t = math.sqrt(tr + 1.0)
+        out[o + 3] = 0.5 * t
+        t = 0.5 / t
+        out[o] = (m[2, 1] - m[1, 2]) * t
+        out[o + 1] = (m[0, 2] - m[2, 0]) * t
+        out[o + 2] = (m[1, 0] - m[0, 1]) * t
+    else:
+        i = 0
+        if m[1, 1] > m[0, 0]:
+            i = 1
+        if m[2, 2] > m[i, i]:
+            i = 2
+        j = (i + 1) % 3
+        k = (j + 1) % 3
+        t = math.sqrt(m[i, i] - m[j, j] - m[k, k] + 1.0)
+        out[o + i] = 0.5 * t
+        t = 0.5 / t
+        out[o + 3] = (m[k, j] - m[j, k]) * t
+        out[o + j] = (m[j, i] + m[i, j]) * t
+        out[o + k] = (m[k, i] + m[i, k]) * t
+    if out[o + 3] < 0.0:
+        for a in range(4):
+            out[o + a] = -out[o + a]
+
+
 @njit(cache=True, error_model="numpy", nogil=True)  # monitors check beside it
 def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_starts, ints,
             floats, params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
@@ -319,11 +396,13 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
             work_nle, work_H, work_energy, buf, tau, mu, qdd, a_pts, a_d, r_q, r_v, r_p, r_quat,
             r_tw, r_tau, r_mu, r_phi, r_phi_dot, r_points, r_normals, r_a_o, r_qdd, r_violation,
             r_wrench, r_kinetic, r_potential, r_momentum, evaluate):  # pragma: no cover - compiled
-    """RK4 steps from sample ``k0``, recording samples ``k0 .. k1 - 1``.
+    """RK4 (or semi-implicit Euler) steps from sample ``k0``, recording samples ``k0 .. k1 - 1``.
 
     Sample ``k`` is evaluated (stage 1), recorded, and unless it is the grid's last, the state
     advances to sample ``k + 1`` by RK4 with ``h = times[k + 1] - times[k]`` (stages at
-    ``t + h/2``, ``t + h/2``, ``t + h``), exactly as ``Stepper.step``.
+    ``t + h/2``, ``t + h/2``, ``t + h``), exactly as ``Stepper.step``; when
+    ``params[P_SEMI_IMPLICIT]`` is 1, by one semi-implicit Euler step from that evaluation
+    alone (:func:`_advance_semi_implicit`, ``Stepper.step``'s other branch).
 
     Args:
         k0: first sample.
@@ -408,10 +487,13 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
     E = np.empty((3, 3))
     z = np.empty((n, k))
     ds = (d1, d2, d3, d4)
+    semi_implicit = params[P_SEMI_IMPLICIT] != 0.0
+    stages = 1 if semi_implicit else 4
+    v_new = np.empty(nv)
     for s in range(k0, k1):
         t = times[s]
         h = times[s + 1] - t if s + 1 < times.shape[0] else 0.0
-        for stage in range(4):
+        for stage in range(stages):
             if stage == 0:
                 ts, xe = t, x
             else:  # RK4: from x along the previous stage's tangent, h/2, h/2, h
@@ -436,6 +518,11 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
                 return STAGE_SEPARATION, s
             if s == times.shape[0] - 1:
                 return STAGE_OK, s + 1
+        if semi_implicit:
+            _advance_semi_implicit(model_ints, x, d1, h, v_new, E, xs)
+            for a in range(nx):
+                x[a] = xs[a]
+            continue
         for a in range(nd):  # (d1 + 2 d2 + 2 d3 + d4) / 6, numpy's order of operations
             d1[a] = (((d1[a] + 2.0 * d2[a]) + 2.0 * d3[a]) + d4[a]) / 6.0
         _advance(model_ints, x, d1, h, hd, xs)

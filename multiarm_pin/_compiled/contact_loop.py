@@ -23,7 +23,7 @@ support rows (``constraints/supports.py``), every row stacked as
 block), and the mixed LCP of ``solve_unilateral``: the bilateral object-first solve when every
 row is active, there are no supports and every arm has as many joints as rows, accepted when
 every unilateral multiplier is ``>= 0``; otherwise the active-set kernel
-(:func:`~multiarm_pin.dynamics.delassus.contact_kernel`).
+(:func:`~multiarm_pin._compiled.delassus.contact_kernel`).
 
 The evaluation, the rows alone, the controller's torques, the active-set kernel and the step
 with its events are handed to :func:`run_contact_rk4` as function pointers
@@ -68,6 +68,7 @@ from multiarm_pin._compiled.controller_kernels import (
     object_pd_step,
     touching_torques,
 )
+from multiarm_pin._compiled.delassus import contact_kernel
 from multiarm_pin._compiled.evaluate import (
     _arm_segments,
     _block_segments,
@@ -98,11 +99,10 @@ from multiarm_pin._compiled.layout import (
     X_TWIST,
     offsets,
 )
+from multiarm_pin._compiled.mlcp import OK as LCP_OK
 from multiarm_pin._compiled.object_first import SOLVE_OK, object_first
 from multiarm_pin._compiled.rigid_body import difference, rigid_body_pass
 from multiarm_pin._compiled.trajectory import reference_motion
-from multiarm_pin.dynamics.delassus import contact_kernel
-from multiarm_pin.dynamics.mlcp import OK as LCP_OK
 
 STAGE_TOO_MANY_EVENTS = 7
 """Status: more contact events in one step than the rules allow (the stepper raises)."""
@@ -381,7 +381,7 @@ def contact_stage(t, x, active, sy, ctl, wk, out, d, torques, lcp
     The rows and blocks (:func:`_rows_and_blocks`), the controller (``torques``:
     :func:`_torques` or :func:`_zero_torques`), the external wrench on ``h_o``, then the
     mixed LCP as ``solve_unilateral`` (see the module docstring; ``lcp``:
-    :func:`~multiarm_pin.dynamics.delassus.contact_kernel`). Outputs in ``out``: ``a_o``
+    :func:`~multiarm_pin._compiled.delassus.contact_kernel`). Outputs in ``out``: ``a_o``
     (6,), ``qdd_c`` (B, kc), ``mu`` and ``phi_dd`` (B, R), ``tau`` (n, k); the rows in ``wk``.
 
     Returns:
@@ -457,7 +457,7 @@ def stage_functions(x, active, sy, ctl, wk, out, d):
     ``(contact_stage, _rows_and_blocks, torques, lcp)``: the controller's torques
     (:func:`_torques` for ``object_pd``, :func:`_zero_torques` without a controller: only the
     one a run uses is compiled) and the active-set kernel
-    (:func:`~multiarm_pin.dynamics.delassus.contact_kernel`). Each is compiled once and
+    (:func:`~multiarm_pin._compiled.delassus.contact_kernel`). Each is compiled once and
     called through its address (:mod:`~multiarm_pin._compiled.function_pointers`): the
     loop's module, and the stage's, do not compile them again.
     """

@@ -6,7 +6,7 @@ the force distribution and the inverse dynamics of thesis Eq 3.7-3.10. Its numpy
 (``ObjectPD.reference``) is the oracle; :func:`object_pd_torques` computes the same torques
 arm by arm from the flat buffer of :mod:`multiarm_pin._compiled.evaluate` (no dense system over
 all arms, no SVD: the internal forces come from
-:func:`~multiarm_pin.dynamics.force_qp.least_norm_forces`, each arm's constraint rows are met
+:func:`~multiarm_pin._compiled.force_qp.least_norm_forces`, each arm's constraint rows are met
 by a Householder QR of ``W_i``), and :func:`closed_loop_step` then solves the forward dynamics
 with these torques on the same blocks (one Pinocchio pass and one set of blocks per
 evaluation).
@@ -36,6 +36,7 @@ from multiarm_pin._compiled.evaluate import (
     _solution_segments,
     quaternion_rotation,
 )
+from multiarm_pin._compiled.force_qp import QP_OK, least_norm_forces
 from multiarm_pin._compiled.layout import (
     DIMS_K,
     DIMS_M,
@@ -62,7 +63,6 @@ from multiarm_pin._compiled.layout import (
 )
 from multiarm_pin._compiled.linalg import cholesky, cholesky_solve, singular_values
 from multiarm_pin._compiled.object_first import object_first
-from multiarm_pin.dynamics.force_qp import QP_OK, least_norm_forces
 
 NO_WRENCH = np.zeros(6)
 """The ``wrench`` of :func:`object_pd_step` when no external wrench acts."""
@@ -178,7 +178,7 @@ def _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilater
     drops out.
 
     Not inlined (``inline="always"``): numba deep-copies the IR of an inlined function, which
-    for this one cost more than the separate compile (1.6 s CPU).
+    for this one costs more than compiling it separately.
     """
     n, k, m = W.shape
     hold_kp, hold_kd = gains[GAIN_HOLD_KP], gains[GAIN_HOLD_KD]
@@ -536,7 +536,7 @@ def touching_rank(W_o, N):  # pragma: no cover - compiled
         return 0
     A = np.ascontiguousarray(A[:, :cols])
     sv = np.empty(cols)
-    singular_values(A, sv)  # (one-sided Jacobi: no LAPACK call, 1 µs instead of 15)
+    singular_values(A, sv)  # (one-sided Jacobi: no LAPACK call)
     top = 0.0
     for a in range(cols):
         top = max(top, sv[a])

@@ -18,8 +18,8 @@ the parameter vector (``P_*``), ``dims`` (``DIMS_*``) and the flat output buffer
 object quantities at the COM, ``μ > 0`` pushing.
 
 Compilation is cached on disk (``cache=True``, in ``__pycache__``): the first call in a fresh
-checkout compiles every kernel (about 30 s of CPU for the demo's kernels, see
-``benchmarks/compile_times.py``), later processes load them. Compile time grows with every
+checkout compiles every kernel (its time: ``benchmarks/compile_times.py``), later processes
+load them. Compile time grows with every
 jitted function on a kernel's call path (each is compiled, and its LLVM code optimised again
 inside each caller), so the kernels here call the leaf kernels directly, with their views
 taken by inlined helpers.
@@ -386,7 +386,7 @@ def state_tables(model_ints, model_floats, arm_ints, v_starts, ints, floats, dim
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The constant inputs of :func:`evaluate_state` packed in three flat arrays.
 
-    Each array argument of a kernel costs ~0.13 µs of dispatch per call (issue 14): eight
+    Each array argument of a kernel adds to its dispatch at every call (issue 14): eight
     tables become three, grouped so that each unpacked table keeps its type (read-only or
     writable) and the kernels called with them compile no other specialisation.
 

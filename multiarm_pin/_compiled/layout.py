@@ -275,10 +275,11 @@ def dims_vector(k: int, m: int, nv: int, n: int) -> np.ndarray:
 # ------------------------------------------------------------------ parameters
 PARAM_FIELDS = (("mass", 1), ("inertia", 9), ("gravity", 3), ("baumgarte_alpha", 1),
                 ("baumgarte_beta", 1), ("baumgarte_on", 1), ("rcond_tol", 1),
-                ("object_rcond_tol", 1))
+                ("object_rcond_tol", 1), ("semi_implicit", 1))
 """The float64 parameter vector: object mass [kg], inertia about the COM in object axes
 (row-major) [kg m²], gravity [m/s²], Baumgarte ``α``, ``β`` [1/s] and on-flag (1.0 = on), the
-solver thresholds on each ``S_i`` and on the reduced object matrix."""
+solver thresholds on each ``S_i`` and on the reduced object matrix, and the integrator of the
+closed loop's steps (1.0 = semi-implicit Euler, 0.0 = RK4)."""
 _P, N_PARAMS = _starts(PARAM_FIELDS)
 P_MASS = _P["mass"]
 P_INERTIA = _P["inertia"]
@@ -288,6 +289,7 @@ P_BAUMGARTE_BETA = _P["baumgarte_beta"]
 P_BAUMGARTE_ON = _P["baumgarte_on"]
 P_RCOND_TOL = _P["rcond_tol"]
 P_OBJECT_RCOND_TOL = _P["object_rcond_tol"]
+P_SEMI_IMPLICIT = _P["semi_implicit"]
 
 
 def parameter_vector(mass: float, inertia: np.ndarray, gravity: np.ndarray, rcond_tol: float,
@@ -300,6 +302,13 @@ def parameter_vector(mass: float, inertia: np.ndarray, gravity: np.ndarray, rcon
     params[P_RCOND_TOL] = rcond_tol
     params[P_OBJECT_RCOND_TOL] = object_rcond_tol
     return params
+
+
+def with_integrator(params: np.ndarray, integrator: str) -> np.ndarray:
+    """A copy of ``params`` whose steps are ``integrator``'s (``"rk4"`` or ``"semi_implicit"``)."""
+    out = params.copy()
+    out[P_SEMI_IMPLICIT] = 1.0 if integrator == "semi_implicit" else 0.0
+    return out
 
 
 def with_baumgarte(params: np.ndarray, alpha: float, beta: float) -> np.ndarray:

@@ -1,12 +1,13 @@
 """The closed loop built ahead of time (optional): a first run compiles nothing.
 
 numba compiles a kernel at its first call and caches it on disk. ``make precompile`` (or
-``multiarm-pin precompile``, or ``python -m multiarm_pin._compiled.precompiled``; not part
-of the install, and never needed) compiles the closed loop
-(:func:`multiarm_pin._compiled.closed_loop.run_rk4`, :data:`KERNELS`) once with numba's
-ahead-of-time compiler (``numba.pycc``) into one extension module next to this file, for
-this machine's CPU; :class:`~multiarm_pin.sim.compiled_loop.CompiledLoop` calls it when it is
-there and fits the call (:func:`kernel_for`), and numba's JIT (cached on disk) otherwise.
+``multiarm-pin precompile``, :mod:`multiarm_pin.app.precompile`, which gives :func:`build` the
+example arguments of a short run of the demo scenario; not part of the install, and never
+needed) compiles the closed loop (:func:`multiarm_pin._compiled.closed_loop.run_rk4`,
+:data:`KERNELS`) once with numba's ahead-of-time compiler (``numba.pycc``) into one extension
+module next to this file, for this machine's CPU;
+:class:`~multiarm_pin.sim.compiled_loop.CompiledLoop` calls it when it is there and fits the
+call (:func:`kernel_for`), and numba's JIT (cached on disk) otherwise.
 Same code, same results (tested: equal to the JIT kernel's to the bit). The contact loop is
 not in the module: the JIT compiles it, its stages once each
 (:mod:`~multiarm_pin._compiled.function_pointers`).
@@ -36,11 +37,10 @@ import importlib.machinery
 import importlib.util
 import json
 import os
-import sys
 import tempfile
 import time
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -72,8 +72,6 @@ class Kernel:
     Attributes:
         name: its name (the module's function, :data:`KERNELS`' key).
         dispatcher: the JIT kernel (the same code, compiled at first use).
-        example: ``() -> arguments`` of a short run of a shipped scenario, whose types fix the
-            module's signature (every shipped scenario passes the same types: tested).
         bound: its last parameters that are kernels (the stages the JIT path passes as
             function pointers), by name: the module calls these kernels directly and does not
             take them.
@@ -81,17 +79,11 @@ class Kernel:
 
     name: str
     dispatcher: Callable
-    example: Callable[[], tuple]
     bound: dict = field(default_factory=dict)
 
 
-def _closed_loop_example() -> tuple:
-    return example_arguments()
-
-
 KERNELS: dict[str, Kernel] = {k.name: k for k in (
-    Kernel("run_rk4", kernels.run_rk4, _closed_loop_example,
-           {"evaluate": kernels.closed_loop_stage}),
+    Kernel("run_rk4", kernels.run_rk4, {"evaluate": kernels.closed_loop_stage}),
 )}
 """The kernels the module holds, by name."""
 
@@ -113,8 +105,8 @@ def machine() -> list[str]:
 def fingerprints(args: Sequence) -> list[bytes]:
     """Numba's dispatch fingerprints of ``args`` (dtype, dimensions, layout, writability).
 
-    What numba's own dispatcher compares to pick a compiled kernel, computed in C: 10 us for
-    the 56 arguments, where ``numba.typeof`` of each takes 1 ms.
+    What numba's own dispatcher compares to pick a compiled kernel, computed in C (where
+    ``numba.typeof`` of each argument would run Python for each).
     """
     return [_fingerprint(a) for a in args]
 
@@ -195,39 +187,19 @@ def _entry(kernel: Kernel):
     return scope["entry"]
 
 
-def example_arguments() -> tuple:
-    """The arguments of ``run_rk4`` in a short run of the shipped demo scenario.
-
-    Every shipped scenario passes arguments of the same types (tested), so these fix the
-    module's signature.
-    """
-    from multiarm_pin.app.runner import scenario_controller
-    from multiarm_pin.app.scenario import build_scenario, load_scenario
-    from multiarm_pin.data import DEMO_SCENARIO, data_path
-    from multiarm_pin.sim.compiled_loop import CompiledLoop
-    from multiarm_pin.sim.stepper import Stepper
-
-    built = build_scenario(load_scenario(data_path("scenarios", DEMO_SCENARIO)),
-                           load_visuals=False)
-    sim = built.scenario.simulation
-    stepper = Stepper(built.system, scenario_controller(built), sim.solver, sim.baumgarte)
-    loop = CompiledLoop.for_run(stepper, "rk4")
-    if loop is None or not loop.ready(built.initial_state):
-        raise RuntimeError("the demo scenario does not run on the compiled closed loop")
-    return loop.example_arguments(built.initial_state)
-
-
-def build(folder: Path | None = None, verbose: bool = False,
-          names: Sequence[str] | None = None) -> Path:
+def build(examples: Mapping[str, Sequence], folder: Path | None = None,
+          verbose: bool = False) -> Path:
     """Compile the kernels ahead of time into ``folder``; returns the module's path.
 
-    Writes the module and its sidecar atomically and removes modules of other sources. Takes
-    a few minutes (the same compile the first runs would otherwise do).
+    Writes the module and its sidecar atomically and removes modules of other sources (the
+    same compile the first runs would otherwise do).
 
     Args:
+        examples: kernel name (:data:`KERNELS`) -> its arguments in a real run (with or
+            without its :attr:`Kernel.bound` stages), whose types fix the module's signature;
+            the kernels named are built.
         folder: where (default :data:`FOLDER`).
         verbose: the AOT compiler's messages.
-        names: the kernels (default: all of :data:`KERNELS`).
 
     Raises:
         Exception: whatever numba's AOT compiler or the C toolchain raises (e.g. no compiler).
@@ -236,7 +208,7 @@ def build(folder: Path | None = None, verbose: bool = False,
         warnings.simplefilter("ignore", NumbaPendingDeprecationWarning)  # when it goes, the
         from numba.pycc import CC  # ImportError is a failed build, and the JIT is used
 
-    chosen = [KERNELS[n] for n in (KERNELS if names is None else names)]
+    chosen = [(KERNELS[n], tuple(args)) for n, args in examples.items()]
     folder = FOLDER if folder is None else Path(folder)
     name = module_name()
     with tempfile.TemporaryDirectory(dir=folder, prefix=".aot-") as tmp:
@@ -245,9 +217,9 @@ def build(folder: Path | None = None, verbose: bool = False,
         cc.target_cpu = "host"
         cc.verbose = verbose
         arguments, prints = {}, {}
-        for kernel in chosen:
-            args = kernel.example()
-            args = args[:len(args) - len(kernel.bound)]
+        for kernel, args in chosen:
+            free = kernel.dispatcher.py_func.__code__.co_argcount - len(kernel.bound)
+            args = args[:free]
             types = [numba.typeof(a) for a in args]
             cc.export(kernel.name, RETURN_TYPE(*types))(_entry(kernel))
             arguments[kernel.name] = [str(t) for t in types]
@@ -269,33 +241,5 @@ def build(folder: Path | None = None, verbose: bool = False,
     return target
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Command line: build the module (``--if-stale``: only when none fits these sources)."""
-    import argparse
-
-    parser = argparse.ArgumentParser(description="Compile the simulation loops ahead of time.")
-    parser.add_argument("--if-stale", action="store_true",
-                        help="do nothing if a module of these sources is built")
-    parser.add_argument("--folder", type=Path, default=None,
-                        help="where to build (default: the package's _compiled folder)")
-    opts = parser.parse_args(argv)
-    if opts.if_stale and load(opts.folder) is not None:
-        print(f"precompiled loops up to date ({module_name()})")
-        return 0
-    t0 = time.perf_counter()
-    try:
-        path = build(opts.folder)
-    except Exception as exc:  # noqa: BLE001 - any build failure: the JIT stays in use
-        print(f"precompiled loops not built ({type(exc).__name__}: {exc}); the kernels "
-              "will be compiled at first use instead", file=sys.stderr)
-        return 1
-    print(f"precompiled loops built in {time.perf_counter() - t0:.0f} s: {path.name}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
-
-
-__all__ = ["ENV_SWITCH", "KERNELS", "Kernel", "build", "example_arguments", "fingerprints",
-           "kernel_for", "load", "machine", "module_name", "run_rk4_for"]
+__all__ = ["ENV_SWITCH", "KERNELS", "Kernel", "build", "fingerprints", "kernel_for", "load",
+           "machine", "module_name", "run_rk4_for"]

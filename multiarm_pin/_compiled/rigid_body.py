@@ -18,9 +18,8 @@ the joints' in the forward pass. A spatial inertia at the world origin is the 6x
 ``[[m 1, -m [c]ₓ], [m [c]ₓ, I_O]]`` (``c`` the COM, ``I_O`` the rotational inertia about the
 origin). Spatial vectors are ``[linear; angular]`` as in Pinocchio.
 
-Cost: one work array of ``(rows + 2, 68)`` floats allocated per call, ~0.35 µs per joint
-(median, this 2-core machine); cold compile ~4.3 s CPU for ``rigid_body_pass``
-(``benchmarks/rigid_body_pass.py``).
+Cost: one work array of ``(rows + 2, 68)`` floats allocated per call (its time per joint
+and its compile time: ``benchmarks/rigid_body_pass.py``).
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ Subcommands:
 
 The argument parsing of ``run``, ``replay``, ``demo`` and ``scenarios`` lives here; the work is
 done by :mod:`multiarm_pin.app.runner` (``grasp``, ``sweep`` and ``design`` bring their own
-parsers from :mod:`multiarm_pin.grasp.cli`, :mod:`multiarm_pin.study.cli` and
+parsers from :mod:`multiarm_pin.app.grasp_cli`, :mod:`multiarm_pin.study.cli` and
 :mod:`multiarm_pin.design.cli`).
 """
 
@@ -180,7 +180,7 @@ def _build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
     p = sub.add_parser("grasp", help="grasp analysis of a YAML grasp file")
     if command in (None, "grasp"):
-        from multiarm_pin.grasp import cli as grasp_cli
+        from multiarm_pin.app import grasp_cli
 
         grasp_cli.configure_parser(p)
         p.set_defaults(func=grasp_cli.run)
@@ -230,10 +230,10 @@ def _build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 
 def _precompile(args: argparse.Namespace) -> int:
-    """``multiarm-pin precompile``: :mod:`multiarm_pin._compiled.precompiled`'s build."""
-    from multiarm_pin._compiled import precompiled
+    """``multiarm-pin precompile``: :mod:`multiarm_pin.app.precompile`'s build."""
+    from multiarm_pin.app import precompile
 
-    return precompiled.main(["--if-stale"] if args.if_stale else [])
+    return precompile.main(["--if-stale"] if args.if_stale else [])
 
 
 def _demo(args: argparse.Namespace) -> int:

@@ -24,7 +24,6 @@ from dataclasses import replace
 import numpy as np
 import pinocchio as pin
 
-from multiarm_pin.app.precheck import effort_limits, joint_names
 from multiarm_pin.exceptions import MultiArmError
 
 STABILITY_LIMITS = {"rk4": 2.785, "semi_implicit": 2.0}
@@ -202,6 +201,8 @@ def torques_over_limits(built, result) -> list[str]:
     The commanded torque (``tau_commanded``): where the actuators saturate, the applied one
     never exceeds the limit, and the command that asked for more is the cause.
     """
+    from multiarm_pin.feasibility.limits import arm_limits
+
     system = built.system
     if not system.n_arms or len(result.t) == 0:
         return []
@@ -210,9 +211,10 @@ def torques_over_limits(built, result) -> list[str]:
     commanded = result.tau if commanded is None else commanded
     for arm, sl in zip(system.arms, system.arm_set.v_slices, strict=True):
         tau = np.asarray(commanded)[:, sl]
-        ratio = np.abs(tau) / effort_limits(arm)[None, :]
+        limits = arm_limits(arm)
+        effort, names = limits.effort, list(limits.joints)
+        ratio = np.abs(tau) / effort[None, :]
         ratio[~np.isfinite(ratio)] = 0.0
-        names = joint_names(arm)
         for c in range(arm.nv):
             k = int(np.argmax(ratio[:, c]))
             if ratio[k, c] > 1.0:
@@ -220,7 +222,7 @@ def torques_over_limits(built, result) -> list[str]:
                 rows.append((ratio[k, c], f"arm {arm.name!r} joint {names[c]!r}: "
                              f"{tau[k, c]:.5g} N m at t = {result.t[k]:.4g} s, "
                              f"{ratio[k, c]:.3g}x its effort limit "
-                             f"{effort_limits(arm)[c]:g} N m (over it from t = "
+                             f"{effort[c]:g} N m (over it from t = "
                              f"{result.t[first]:.4g} s)"))
     rows.sort(key=lambda r: -r[0])
     if not rows:

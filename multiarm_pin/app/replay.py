@@ -212,7 +212,7 @@ class _ArmDrawer:
         if arm.visual_model is not None:
             self.geom = arm.visual_model
             self.geom_data = pin.GeometryData(self.geom)
-            viz = None  # Pinocchio's MeshcatVisualizer, imported only for a primitive (~1 s)
+            viz = None  # Pinocchio's MeshcatVisualizer: imported only for a primitive
             self.nodes = []
             self.scales = []
             self.links = [arm.model.frames[g.parentFrame].name

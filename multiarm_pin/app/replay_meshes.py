@@ -1,8 +1,8 @@
 """The arms' visual meshes as compact Meshcat objects, coloured by their materials.
 
 A mesh geometry (a :class:`coal.BVHModelBase` in a Pinocchio ``GeometryObject``) is sent to
-the viewer as binary arrays rather than as its mesh file's text: a page with two UR5s
-shrinks from about 19 MB of COLLADA to a few MB. Coal's BVH is one merged triangle soup
+the viewer as binary arrays rather than as its mesh file's text (COLLADA's text is several
+times larger). Coal's BVH is one merged triangle soup
 without materials, so the colours come from elsewhere, in this order of precedence:
 
 1. an explicit colour (``ReplayArm.color``) paints the whole geometry;
@@ -92,7 +92,7 @@ def _bvh_vertices(bvh) -> np.ndarray:
 
 
 def _bvh_faces(bvh) -> np.ndarray:
-    """(F, 3) uint32 vertex indices of coal's BVH triangles (a Python loop: ~10 us each)."""
+    """(F, 3) uint32 vertex indices of coal's BVH triangles (a Python loop over the triangles)."""
     faces = np.empty((bvh.num_tris, 3), dtype=np.uint32)
     for k in range(bvh.num_tris):
         tri = bvh.tri_indices(k)

@@ -45,9 +45,9 @@ def run_monitors(built, scene) -> tuple:
     beside the simulation: :func:`~multiarm_pin.sim.simulation.simulate`'s ``monitors``);
     the report reuses it.
     """
-    from multiarm_pin.feasibility.monitors import stop_monitors
+    from multiarm_pin.feasibility.monitors import feasibility_monitors
 
-    return stop_monitors(built.system, built.scenario.limits.stops(), scene)
+    return feasibility_monitors(built.system, built.scenario.limits.stops(), scene)
 
 
 def apply_policies(built, result, scene, status: str, error: str | None,

@@ -285,7 +285,7 @@ def replay_parts(arms, obj, trajectory: dict):
     Returns:
         ``(replay_arms, replay_object, replay_contacts)``.
     """
-    from multiarm_pin.app.replay import (
+    from multiarm_pin.app.replay_scene import (
         ReplayArm,
         ReplayContacts,
         ReplayEvent,

@@ -53,6 +53,7 @@ from multiarm_pin.exceptions import (
     RunInterrupted,
     RunStoppedError,
     ScenarioError,
+    UnsupportedSolverError,
 )
 
 
@@ -228,6 +229,7 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
         if duration < sim.dt:
             raise ScenarioError(sc.file, "--duration", f"{duration:g} s is shorter than the "
                                 f"time step simulation.dt = {sim.dt:g} s")
+    solver_key = "simulation.solver" if solver is None else "--solver"
     solver = solver or sim.solver
     T = float(duration) if duration is not None else sim.duration
     dt = sim.dt
@@ -279,7 +281,8 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
             signals.hold()
             result = partial_result(exc)
             if result is None:  # refused before integrating: an input error
-                raise ScenarioError(sc.file, "", str(exc)) from exc
+                key = solver_key if isinstance(exc, UnsupportedSolverError) else ""
+                raise ScenarioError(sc.file, key, str(exc)) from exc
             status = "failed"
             error = f"{sc.file}: simulation failed: {exc}"
             if len(result.t):  # name the cause: singular arm, torques over limits, dt
@@ -336,7 +339,7 @@ def run_scenario(scenario, out=None, solver: str | None = None, duration: float 
 
 def simulate_built(built: BuiltScenario, controller, duration: float, dt: float, solver: str,
                    progress=None, monitors=()):
-    """Simulate a built scenario with its simulation settings (integrator, Baumgarte).
+    """Simulate a built scenario with its simulation settings (integrator, Baumgarte, compiled).
 
     With ``limits: {torque: saturate}`` the actuators clip the applied torques to the arms'
     URDF effort limits (``simulate(torque_limit=...)``).
@@ -367,7 +370,7 @@ def simulate_built(built: BuiltScenario, controller, duration: float, dt: float,
                         integrator=sim.integrator, solver=solver, baumgarte=sim.baumgarte,
                         progress=progress,
                         external_wrench=built.scenario.object.external_wrench or None,
-                        torque_limit=limit, monitors=monitors)
+                        torque_limit=limit, monitors=monitors, compiled=sim.compiled)
 
 
 @dataclass

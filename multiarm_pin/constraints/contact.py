@@ -33,6 +33,7 @@ import numpy as np
 from multiarm_pin.constraints.surfaces import Surface, _array
 from multiarm_pin.exceptions import ConstraintError
 from multiarm_pin.model.kinematics import BodyKinematics
+from multiarm_pin.spatial import cross
 
 POINT_ON = ("tool", "object")
 
@@ -110,16 +111,16 @@ class Contact:
         H = Rs @ hess @ Rs.T
         r_c, r_s = c - xc, c - xs
         wc, ws = tc[3:], ts[3:]
-        c_dot = tc[:3] + np.cross(wc, r_c)
-        u = c_dot - ts[:3] - np.cross(ws, r_s)
-        G_c = np.concatenate([nu, np.cross(r_c, nu)])
-        G_s = -np.concatenate([nu, np.cross(r_s, nu)])
+        c_dot = tc[:3] + cross(wc, r_c)
+        u = c_dot - ts[:3] - cross(ws, r_s)
+        G_c = np.concatenate([nu, cross(r_c, nu)])
+        G_s = -np.concatenate([nu, cross(r_s, nu)])
         kappa = (
             u @ H @ u
-            + nu @ (np.cross(wc, np.cross(wc, r_c)) - np.cross(ws, np.cross(ws, r_s)))
-            - 2.0 * nu @ np.cross(ws, u)
+            + nu @ (cross(wc, cross(wc, r_c)) - cross(ws, cross(ws, r_s)))
+            - 2.0 * nu @ cross(ws, u)
         )
-        nu_dot = np.cross(ws, nu) + H @ u
+        nu_dot = cross(ws, nu) + H @ u
         sign = -1.0 if self.tip_on_tool else 1.0  # push direction on the object = sign * ν
         G_tool, G_object = (G_c, G_s) if self.tip_on_tool else (G_s, G_c)
         phi = g - self.radius

@@ -32,6 +32,7 @@ def fingertips_on_faces(
     name: str = "",
     tol: float = 1e-6,
     unilateral: bool = True,
+    starts_apart: bool = False,
 ) -> Joint:
     """Spherical fingertips of one arm's tool touching faces of a polyhedral object.
 
@@ -47,6 +48,8 @@ def fingertips_on_faces(
         tol: largest mismatch [m] between the tips and the contact points.
         unilateral: fingertips on faces only push (True, the default); False holds them as
             bilateral rows.
+        starts_apart: the tips may start away from their faces (positive gaps) and touch
+            down during the run (:class:`~multiarm_pin.constraints.joint.Joint`).
 
     Raises:
         ConstraintError: a point off its face, a count mismatch, or tips that no rigid
@@ -72,14 +75,14 @@ def fingertips_on_faces(
     ]
     try:
         return Joint(contact_list, M, kind="fingertips", name=name or "fingertips",
-                     gap_tolerance=tol)
+                     gap_tolerance=tol, starts_apart=starts_apart)
     except ConstraintError as exc:
         raise ConstraintError(f"fingertips_on_faces: tips do not match the points: {exc}") from exc
 
 
 def fingertips_from_placements(polyhedron: Polyhedron, contacts, radius: float, tool_placement,
                                object_placement, name: str = "", tol: float = 1e-6,
-                               unilateral: bool = True) -> Joint:
+                               unilateral: bool = True, starts_apart: bool = False) -> Joint:
     """Fingertips placed where they are at t = 0 (tips computed from the initial placements).
 
     Args:
@@ -91,11 +94,13 @@ def fingertips_from_placements(polyhedron: Polyhedron, contacts, radius: float, 
         name: label.
         tol: tolerance [m] for points on faces.
         unilateral: as in :func:`fingertips_on_faces`.
+        starts_apart: as in :func:`fingertips_on_faces`.
     """
     M = relative_placement(tool_placement, object_placement)
     centres, _ = _face_contacts(polyhedron, contacts, radius, tol)
     tips = np.array([M.actInv(c) for c in centres])
-    return fingertips_on_faces(polyhedron, contacts, radius, tips, M, name, tol, unilateral)
+    return fingertips_on_faces(polyhedron, contacts, radius, tips, M, name, tol, unilateral,
+                               starts_apart)
 
 
 def _face_contacts(polyhedron, contacts, radius, tol):

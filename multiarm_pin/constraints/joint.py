@@ -142,6 +142,12 @@ class Joint:
         gap_tolerance: largest gap [m] accepted at the reference placement.
         unilateral: if given, overrides every contact's :attr:`Contact.unilateral` (a
             scenario's per-joint ``unilateral: true/false``); None keeps the contacts' own.
+        starts_apart: the unilateral contacts may start separated (e.g. a gripper that
+            approaches the object and touches down during the run): :meth:`check_initial`
+            does not check their gaps (a tip beside its face has a negative gap to the face's
+            extended plane without touching anything: whoever places the tool checks that
+            no tip starts in the object, as the scenario builder does). The contacts are
+            still defined at ``tool_in_object``.
 
     Raises:
         ConstraintError: no contacts, a contact not touching its surface at the reference,
@@ -158,8 +164,10 @@ class Joint:
         alpha_rows: Sequence[int | str] | None = None,
         gap_tolerance: float = INITIAL_GAP_TOLERANCE,
         unilateral: bool | None = None,
+        starts_apart: bool = False,
     ):
         self.kind = kind
+        self.starts_apart = bool(starts_apart)
         self.name = name or kind
         self.contacts: tuple[Contact, ...] = tuple(contacts)
         if not self.contacts:
@@ -321,10 +329,15 @@ class Joint:
                       arm: int | None = None) -> None:
         """Raise if any contact (kept or dropped) has ``|φ| > tol`` at this state.
 
+        With :attr:`starts_apart`, the unilateral contacts are not checked (they start
+        apart and may touch down later).
+
         Raises:
             InitialGapError: names the arm (if given), the joint, the contact, the gap, tol.
         """
         for k, s in enumerate(self.contact_states(tool, obj, active_only=False)):
+            if self.starts_apart and self.contacts[k].unilateral:
+                continue
             if abs(s.phi) > tol:
                 where = f"arm {arm}: " if arm is not None else ""
                 raise InitialGapError(

@@ -44,6 +44,13 @@ def run(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"design {spec.name}: {line}", file=sys.stderr, flush=True)
 
+    if spec.pick_up is not None:
+        from multiarm_pin.design.pick_up import use_tilt
+
+        if use_tilt(spec):
+            return _run_pick_up(spec, args, say)
+        say("the supports leave an overhang fingertips reach (or an arm welds): the plain "
+            "design search lifts the box (task strategy auto)")
     try:
         result = run_design(spec, workers=args.workers, scheduler=args.scheduler,
                             seed=args.seed, progress=say)
@@ -57,6 +64,30 @@ def run(args: argparse.Namespace) -> int:
     for d in result.designs:
         s = ", ".join(f"{k} {v:.4g}" for k, v in d.scores.items() if v is not None)
         print(f"  {d.rank}. candidate {d.index}: objective {d.objective:.4g} ({s})")
+    print(f"designs: {out / 'designs'}")
+    print(f"report:  {out / 'report.md'}")
+    if args.simulate:
+        print(f"best run: {out / 'best_run'} (replay: {out / 'best_run' / 'replay.html'})")
+    return 0
+
+
+def _run_pick_up(spec, args: argparse.Namespace, say) -> int:
+    """A pick-up by tilting (:mod:`.pick_up`): plan, write the folder, print the plans."""
+    from multiarm_pin.design.pick_up import describe_plan, plan_pick_up
+    from multiarm_pin.design.report import write_pick_up
+    from multiarm_pin.exceptions import DesignImpossibleError
+
+    try:
+        result = plan_pick_up(spec, seed=args.seed, progress=say)
+    except DesignImpossibleError as exc:
+        print(f"impossible: {exc}", file=sys.stderr)
+        return 1
+    out = write_pick_up(result, args.out, simulate=args.simulate,
+                        overwrite=bool(args.overwrite), quiet=True)
+    print(f"design {spec.name}: {len(result.checked)} tilt plans checked in "
+          f"{result.wall_time:.1f} s, {len(result.plans)} met every check")
+    for k, c in enumerate(result.plans[:spec.top], start=1):
+        print(f"  {k}. candidate {c.candidate.index}: {describe_plan(c)}")
     print(f"designs: {out / 'designs'}")
     print(f"report:  {out / 'report.md'}")
     if args.simulate:

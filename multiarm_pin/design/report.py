@@ -230,6 +230,102 @@ def write_design(result, out, simulate: bool = True, overwrite: bool = False,
     return target
 
 
+def pick_up_report(result, run_summary: dict | None, files: dict) -> str:
+    """``report.md`` of a pick-up plan (:mod:`.pick_up`): the plans, the checks, the run."""
+    from multiarm_pin.design.pick_up import CHECKS, ROLES, describe_plan
+
+    spec = result.spec
+    checked = result.checked
+    fails = {c: sum(1 for x in checked if x.condition == c) for c in CHECKS}
+    lines = [f"# Pick-up plan: {spec.name}", "",
+             f"Spec: `{spec.file}`; strategy `{spec.pick_up['strategy']}`: tilt the box about "
+             "a bottom edge, slide a gripper under the raised side, lift in form closure "
+             "(`multiarm_pin.design.pick_up`).", "",
+             f"{len(checked)} candidates checked in {result.wall_time:.1f} s; "
+             f"{len(result.plans)} met every check. Failed, by the first check failed: " +
+             ", ".join(f"{k} {v}" for k, v in fails.items()) + ".", ""]
+    if result.excluded:
+        lines += ["Pivot edges not tried:", ""] + [f"- {w}" for w in result.excluded] + [""]
+    roles = result.plans[0].scenario["arms"] if result.plans else []
+    lines += ["Roles: " + ", ".join(f"{r} `{a['name']}`" for r, a in zip(ROLES, roles,
+                                                                          strict=False)), "",
+              "## Plans", "", "| rank | candidate | plan | file |", "|---|---|---|---|"]
+    for k, c in enumerate(result.plans[:spec.top], start=1):
+        lines.append(f"| {k} | {c.candidate.index} | {describe_plan(c)} | "
+                     f"`{files.get(k, '')}` |")
+    if result.plans:
+        best = result.plans[0]
+        lines += ["", "Phases of the best plan:", "", "| phase | kind | t [s] | duration [s] |",
+                  "|---|---|---|---|"]
+        for p in best.scenario["controller"]["phases"]:
+            lines.append(f"| {p['name']} | {p['kind']} | {p['t']:g} | {p['duration']:g} |")
+        lines += ["", "Key poses checked (IK within joint limits on one branch, clearances, "
+                  "and static torques at rest and carried): " + ", ".join(best.labels) + "."]
+    lines += ["", "## The best plan, simulated", ""]
+    if run_summary is None:
+        lines.append("Not simulated (`--no-run`).")
+    else:
+        lines.append(f"`best_run/`: status {run_summary.get('status')}, feasible "
+                     f"{run_summary.get('feasible')}, {run_summary.get('steps')} steps; "
+                     "replay: `best_run/replay.html`.")
+        ev = run_summary.get("events") or []
+        if ev:
+            lines += ["", "Events: " + "; ".join(
+                f"{e.get('t', 0):.3f} s {e.get('kind')} {e.get('label')}"
+                for e in ev if isinstance(e, dict)) + "."]
+    return "\n".join(lines) + "\n"
+
+
+def write_pick_up(result, out, simulate: bool = True, overwrite: bool = False,
+                  quiet: bool = True) -> Path:
+    """Write a pick-up plan's results folder; returns its path.
+
+    As :func:`write_design`'s: ``report.md``, ``plan.json``, ``designs/design_<k>.yaml``,
+    ``best_run/``.
+    """
+    from multiarm_pin.app.results_io import ResultsWriter
+    from multiarm_pin.app.runner import run_scenario
+    from multiarm_pin.app.scenario.schema import parse_scenario
+
+    spec = result.spec
+    target = Path(os.path.abspath(out))
+    with ResultsWriter(target, spec.file, overwrite) as w:
+        (w.path / "designs").mkdir()
+        files = {}
+        for k, c in enumerate(result.plans[:spec.top], start=1):
+            rel = f"designs/design_{k}.yaml"
+            from multiarm_pin.design.pick_up import describe_plan
+
+            head = (f"# plan {k} of {Path(spec.file).name} (multiarm-pin design, pick_up): "
+                    f"{describe_plan(c)}\n")
+            (w.path / rel).write_text(head + yaml.safe_dump(c.scenario, sort_keys=False,
+                                                            default_flow_style=None),
+                                      encoding="utf-8")
+            files[k] = rel
+        summary = None
+        if simulate and result.plans:
+            sc = parse_scenario(result.plans[0].scenario, str(target / files[1]))
+            run = run_scenario(sc, w.path / "best_run", quiet=quiet, html=True)
+            summary = run.summary
+        plan = {"spec": str(Path(spec.file).resolve()), "checked": len(result.checked),
+                "wall_time": result.wall_time, "excluded": result.excluded,
+                "plans": [{"candidate": c.candidate.index, "pivot": c.candidate.pivot,
+                           "angle": c.candidate.angle, "scores": c.scores}
+                          for c in result.plans[:spec.top]],
+                "failed": [{"candidate": c.candidate.index, "pivot": c.candidate.pivot,
+                            "angle": c.candidate.angle, "condition": c.condition,
+                            "value": c.value, "detail": c.detail}
+                           for c in result.checked if not c.ok],
+                "best_run": None if summary is None else {
+                    k: summary.get(k) for k in ("status", "feasible", "clearance", "steps")}}
+        (w.path / "plan.json").write_text(json.dumps(plan, indent=1, default=_jsonable),
+                                          encoding="utf-8")
+        (w.path / "report.md").write_text(pick_up_report(result, summary, files),
+                                          encoding="utf-8")
+        w.publish()
+    return target
+
+
 def _jsonable(x):
     if isinstance(x, np.generic):
         return x.item()
@@ -238,4 +334,5 @@ def _jsonable(x):
     raise TypeError(type(x).__name__)
 
 
-__all__ = ["design_json", "draw_design", "report_text", "scenario_text", "write_design"]
+__all__ = ["design_json", "draw_design", "pick_up_report", "report_text", "scenario_text",
+           "write_design", "write_pick_up"]

@@ -153,6 +153,9 @@ class DesignSpec:
         weights: the objective's weight of each score (:data:`~.scoring.SCORES`).
         top: number of designs returned.
         controller: object_pd parameters of the output scenarios (besides waypoints).
+        pick_up: ``task: {pick_up: {lift, carry}, strategy}`` read as ``{"lift": (3,),
+            "carry": (3,), "strategy": "tilt" | "auto"}`` (world displacements [m]), or None
+            for a waypoint task (:mod:`.pick_up` plans it).
     """
 
     name: str
@@ -169,6 +172,7 @@ class DesignSpec:
     weights: dict = field(default_factory=dict)
     top: int = 3
     controller: dict = field(default_factory=dict)
+    pick_up: dict | None = None
 
 
 def load_design(path) -> DesignSpec:
@@ -206,6 +210,7 @@ def _parse(data, file: str) -> DesignSpec:
         parse_object,
         parse_simulation,
         parse_supports,
+        parse_waypoints,
     )
 
     root = Reader(file, "", data)
@@ -218,7 +223,12 @@ def _parse(data, file: str) -> DesignSpec:
     supports = parse_supports(root.get("supports")) if "supports" in d else ()
     if "ground" in d:
         parse_ground(root.get("ground"))
-    waypoints, trajectory = _parse_task(root.get("task"), obj)
+    pick_up = _parse_pick_up(root.get("task"), obj)
+    if pick_up is None:
+        waypoints, trajectory = _parse_task(root.get("task"), obj)
+    else:
+        waypoints = pick_up.pop("waypoints")
+        trajectory = parse_waypoints(Reader(file, "task", list(waypoints)), obj)
     controller = {}
     if "controller" in d:
         cr = root.get("controller")
@@ -246,8 +256,46 @@ def _parse(data, file: str) -> DesignSpec:
     top = 3
     if "top" in d:
         top = int(root.get("top").number(positive=True))
+    if pick_up is not None:
+        from multiarm_pin.design.pick_up import check_pick_up_spec
+
+        check_pick_up_spec(root, obj, supports, arms)
     return DesignSpec(name, file, description, base, obj, supports, tuple(waypoints),
-                      trajectory, arms, bases, search, weights, top, controller)
+                      trajectory, arms, bases, search, weights, top, controller, pick_up)
+
+
+PICK_UP_STRATEGIES = ("tilt", "auto")
+"""``task.strategy`` of a pick-up: ``tilt`` always plans the tilt; ``auto`` uses the plain
+design search when the supports leave an overhang fingertips reach (or an arm welds)."""
+
+
+def _parse_pick_up(r: Reader, obj) -> dict | None:
+    """``task: {pick_up: {lift: h, carry: [dx, dy, dz]}, strategy: tilt | auto}``, or None.
+
+    ``task: pick_up`` alone takes the defaults (lift 0.05 m, no carry, strategy auto).
+    """
+    if r.value == "pick_up":
+        v = {"pick_up": {}}
+        r = Reader(r.file, r.path, v)
+    elif not isinstance(r.value, Mapping) or "pick_up" not in r.value:
+        return None
+    d = r.mapping(("pick_up", "strategy"), required=("pick_up",))
+    pr = r.get("pick_up")
+    lift, carry = 0.05, np.zeros(3)
+    if pr.value is not None:
+        pd = pr.mapping(("lift", "carry"))
+        if "lift" in pd:
+            lift = pr.get("lift").number(positive=True)
+        if "carry" in pd:
+            carry = pr.get("carry").array((3,), "[dx, dy, dz] world [m]")
+    strategy = r.get("strategy").string(PICK_UP_STRATEGIES) if "strategy" in d else "auto"
+    up = np.array([0.0, 0.0, lift])
+    p0 = np.asarray(obj.position, float)
+    q = np.asarray(obj.quaternion, float).tolist()
+    waypoints = [{"t": 0.5, "position": (p0 + up).tolist(), "quaternion": q}]
+    if np.any(carry != 0.0):
+        waypoints.append({"t": 1.0, "position": (p0 + up + carry).tolist(), "quaternion": q})
+    return {"lift": up, "carry": carry, "strategy": strategy, "waypoints": waypoints}
 
 
 def _parse_task(r: Reader, obj) -> tuple[list[dict], dict]:
@@ -428,5 +476,5 @@ def _parse_weights(r: Reader) -> dict:
     return {k: r.get(k).number(nonnegative=True) for k in d}
 
 
-__all__ = ["GRIPPERS", "ArmSlot", "BaseRegion", "DesignSpec", "Gripper", "SearchSettings",
-           "load_design", "parse_design"]
+__all__ = ["GRIPPERS", "PICK_UP_STRATEGIES", "ArmSlot", "BaseRegion", "DesignSpec", "Gripper",
+           "SearchSettings", "load_design", "parse_design"]

@@ -452,6 +452,23 @@ def expand_rows(values, index: np.ndarray) -> np.ndarray:
     return out
 
 
+def select_rows(values, index: np.ndarray) -> np.ndarray:
+    """(n, N_max) values of the full rows taken at the restricted rows (zero on padding).
+
+    The inverse of :func:`expand_rows` (e.g. per-row flags or margins of the full blocks
+    for the blocks of :func:`restrict_rows`).
+
+    Args:
+        values: (n, N_max) per row of the full blocks.
+        index: the ``index`` of :func:`restrict_rows`.
+    """
+    values = np.asarray(values)
+    out = np.zeros(index.shape, dtype=values.dtype)
+    i, k = np.nonzero(index >= 0)
+    out[i, k] = values[i, index[i, k]]
+    return out
+
+
 def _replacement(value, old: np.ndarray, name: str) -> np.ndarray:
     """``value`` as a float64 array of the shape of ``old`` (see :meth:`SystemBlocks.replaced`)."""
     arr = np.asarray(value, dtype=float)

@@ -25,6 +25,7 @@ through.)
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,10 +41,8 @@ def _batched_solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """``A⁻¹ B`` for stacks (n, k, k) SPD, (n, k, p); NaN for arms whose ``A`` fails to factor.
 
     The compiled batched Cholesky solve (:func:`multiarm_pin._compiled.linalg.batched_spd_solve`):
-    the mass matrices and the padded ``S_i`` are symmetric positive definite. Measured on the
-    2-UR5 weld benchmark (8 states): 2.5x faster than the LAPACK gufunc behind
-    ``numpy.linalg.solve`` called without its wrapper (the public wrapper costs 3x more per
-    call), results equal to 4e-15 relative.
+    the mass matrices and the padded ``S_i`` are symmetric positive definite (cheaper on these
+    small stacks than the LAPACK gufunc behind ``numpy.linalg.solve``).
     """
     return batched_spd_solve(A, B)
 
@@ -156,6 +155,11 @@ def _reduce(b: SystemBlocks) -> tuple[np.ndarray, ...]:
     return X, S, r, Z, smax * np.abs(Z.reshape(n, -1)[:, 7 :: m + 8]).max(axis=1)
 
 
+
+Finisher = Callable[[SystemBlocks, ArmReduction, np.ndarray], Solution] | None
+"""The ``fallback`` of the object-first solves: ``(blocks, reduction, singular (n,) bool) ->
+Solution``, the singular-arm variant that finishes the solve (None: raise instead)."""
+
 def _check_reduction(b: SystemBlocks, X: np.ndarray, rcond: np.ndarray) -> np.ndarray:
     """Rare path: NaN in the inputs, singular ``M_i``; failed solve of ``S_i`` -> rcond 0."""
     bad = ~np.isfinite(rcond)
@@ -172,7 +176,7 @@ def _check_reduction(b: SystemBlocks, X: np.ndarray, rcond: np.ndarray) -> np.nd
 
 
 def solve_object_first(
-    blocks: SystemBlocks, rcond_tol: float = DEFAULT_RCOND_TOL, *, fallback: bool = False
+    blocks: SystemBlocks, rcond_tol: float = DEFAULT_RCOND_TOL, *, fallback: Finisher = None
 ) -> Solution:
     """Forward dynamics by eliminating the multipliers into the object (Eq 4.10-4.12), compiled.
 
@@ -216,7 +220,7 @@ def _c(a: np.ndarray) -> np.ndarray:
 
 
 def solve_object_first_numpy(
-    blocks: SystemBlocks, rcond_tol: float = DEFAULT_RCOND_TOL, *, fallback: bool = False
+    blocks: SystemBlocks, rcond_tol: float = DEFAULT_RCOND_TOL, *, fallback: Finisher = None
 ) -> Solution:
     """Forward dynamics by eliminating the multipliers into the object (Eq 4.10-4.12), numpy.
 
@@ -226,10 +230,11 @@ def solve_object_first_numpy(
         blocks: the system blocks (see :class:`SystemBlocks`).
         rcond_tol: arms whose estimated reciprocal condition number of ``S_i`` is below this
             are singular.
-        fallback: if True, singular arms are handed to the singular-arm variant
-            (:func:`multiarm_pin.dynamics.singular.finish_singular`), and the solution says
-            so in ``solver``/``singular_arms``; all arms are handed over when the reduced
-            object matrix is badly conditioned (``OBJECT_RCOND_TOL``). If False both raise.
+        fallback: the singular-arm variant to hand singular arms to (the ``auto`` policy
+            passes :func:`multiarm_pin.dynamics.singular.finish_singular`, called as
+            ``fallback(blocks, reduction, singular_mask)``; the solution says so in
+            ``solver``/``singular_arms``); all arms are handed over when the reduced object
+            matrix is badly conditioned (``OBJECT_RCOND_TOL``). If None both raise.
 
     Returns:
         The solution: ``a_o`` (6,) [m/s², rad/s²] LWA at the COM, ``qdd`` (n, nv_max),
@@ -237,7 +242,7 @@ def solve_object_first_numpy(
 
     Raises:
         SingularityError: some ``S_i``, or the reduced object matrix, is singular or badly
-            conditioned and ``fallback`` is False.
+            conditioned and ``fallback`` is None.
         DynamicsError: singular ``M_i``.
         InputError: NaN or infinity in the blocks, ``M_o`` not positive definite.
     """
@@ -248,10 +253,8 @@ def solve_object_first_numpy(
         if not float(cond.max()) * rcond_tol <= 1.0:  # also catches NaN
             rcond = _check_reduction(b, X, 1.0 / cond)
             singular = rcond < rcond_tol
-            if fallback:
-                from multiarm_pin.dynamics.singular import finish_singular
-
-                return finish_singular(b, ArmReduction(X, S, r, Z[:, :, :7], rcond), singular)
+            if fallback is not None:
+                return fallback(b, ArmReduction(X, S, r, Z[:, :, :7], rcond), singular)
             arms = np.flatnonzero(singular).tolist()
             worst = float(rcond[singular].min())
             raise SingularityError(
@@ -267,11 +270,9 @@ def solve_object_first_numpy(
     rcond_A = lapack.dpocon(chol, A.trace())[0] if info == 0 else 0.0
     if not (rcond_A >= OBJECT_RCOND_TOL and math.isfinite(a_o.sum())):
         b.check_finite()
-        if fallback:  # e.g. arms far heavier than the object along their constraints
-            from multiarm_pin.dynamics.singular import finish_singular
-
+        if fallback is not None:  # e.g. arms far heavier than the object along their rows
             rcond = _check_reduction(b, X, 1.0 / cond)
-            return finish_singular(
+            return fallback(
                 b, ArmReduction(X, S, r, Z7, rcond), np.ones(b.n, dtype=bool)
             )
         raise SingularityError(

@@ -12,7 +12,7 @@ with ``compiled=False``, the numpy reference, so results and errors are those of
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 from multiarm_pin._registry import lookup
@@ -23,8 +23,8 @@ from multiarm_pin.dynamics.object_first import (
     solve_object_first,
     solve_object_first_numpy,
 )
-from multiarm_pin.dynamics.singular import solve_singular
-from multiarm_pin.exceptions import InputError
+from multiarm_pin.dynamics.singular import finish_singular, solve_singular
+from multiarm_pin.exceptions import InputError, UnsupportedSolverError
 
 
 def solve_auto(blocks: SystemBlocks, rcond_tol: float = DEFAULT_RCOND_TOL, *,
@@ -43,20 +43,20 @@ def solve_auto(blocks: SystemBlocks, rcond_tol: float = DEFAULT_RCOND_TOL, *,
             False: the numpy reference alone.
     """
     if compiled:
-        return solve_object_first(blocks, rcond_tol, fallback=True)
-    return solve_object_first_numpy(blocks, rcond_tol, fallback=True)
+        return solve_object_first(blocks, rcond_tol, fallback=finish_singular)
+    return solve_object_first_numpy(blocks, rcond_tol, fallback=finish_singular)
 
 
 def _object_first(blocks: SystemBlocks, rcond_tol: float = DEFAULT_RCOND_TOL, *,
                   compiled: bool = True) -> Solution:
     """Object-first, raising :class:`~multiarm_pin.exceptions.SingularityError` when singular."""
     if compiled:
-        return solve_object_first(blocks, rcond_tol, fallback=False)
-    return solve_object_first_numpy(blocks, rcond_tol, fallback=False)
+        return solve_object_first(blocks, rcond_tol)
+    return solve_object_first_numpy(blocks, rcond_tol)
 
 
 def _object_first_numpy(blocks: SystemBlocks, rcond_tol: float = DEFAULT_RCOND_TOL) -> Solution:
-    return solve_object_first_numpy(blocks, rcond_tol, fallback=False)
+    return solve_object_first_numpy(blocks, rcond_tol)
 
 
 def _dense_kkt(blocks: SystemBlocks, rcond_tol: float = DEFAULT_RCOND_TOL) -> Solution:
@@ -76,6 +76,11 @@ class SolverEntry:
         compiled: a compiled path exists that runs fused with the compiled blocks.
         accepts_singular_arms: takes ``singular_arms`` (arms treated as singular in any case).
         description: one line for humans.
+        unilateral: it serves systems with unilateral rows (a simulation then solves the
+            mixed LCP on the object-first Delassus operator,
+            :func:`~multiarm_pin.dynamics.unilateral.solve_unilateral`, whose fast path is the
+            object-first solve); the others hold every row as an equality and a simulation
+            with unilateral rows refuses them (:func:`solver_for_rows`).
     """
 
     name: str
@@ -83,13 +88,16 @@ class SolverEntry:
     compiled: bool
     accepts_singular_arms: bool
     description: str
+    unilateral: bool = False
 
 
 SOLVERS: dict[str, SolverEntry] = {e.name: e for e in (
     SolverEntry("auto", solve_auto, True, False,
-                "object-first, switching to the singular-arm variant when an arm is singular"),
+                "object-first, switching to the singular-arm variant when an arm is singular",
+                unilateral=True),
     SolverEntry("object_first", _object_first, True, False,
-                "object-first (Eq 4.10-4.12), compiled; raises SingularityError when singular"),
+                "object-first (Eq 4.10-4.12), compiled; raises SingularityError when singular",
+                unilateral=True),
     SolverEntry("dense_kkt", _dense_kkt, False, False,
                 "the dense KKT system (reference); raises on a singular KKT matrix"),
     SolverEntry("singular", solve_singular, False, True,
@@ -107,6 +115,29 @@ def solver_entry(solver: str) -> SolverEntry:
         InputError: unknown name (lists the known ones, with a did-you-mean).
     """
     return lookup(SOLVERS, solver, "solver")
+
+
+def solver_for_rows(solver: str, unilateral_rows: Sequence[str]) -> SolverEntry:
+    """The registry entry of the solver a run names, checked against the run's rows.
+
+    A solver is honoured or refused, never replaced: with unilateral rows only the entries
+    whose :attr:`SolverEntry.unilateral` is True serve (``auto`` and ``object_first``: the
+    mixed LCP on the object-first Delassus operator).
+
+    Args:
+        solver: a name of :data:`SOLVERS`.
+        unilateral_rows: labels of the run's unilateral rows (empty: bilateral rows only).
+
+    Raises:
+        InputError: unknown name.
+        UnsupportedSolverError: unilateral rows and a solver that does not serve them (the
+            message names the solver, the rows and the solvers that serve them).
+    """
+    entry = solver_entry(solver)
+    if len(unilateral_rows) and not entry.unilateral:
+        raise UnsupportedSolverError(solver, unilateral_rows,
+                                     [e.name for e in SOLVERS.values() if e.unilateral])
+    return entry
 
 
 def solve(
@@ -149,4 +180,4 @@ def solve(
     return entry.function(blocks, rcond_tol, singular_arms)
 
 
-__all__ = ["SOLVERS", "SolverEntry", "solve", "solve_auto", "solver_entry"]
+__all__ = ["SOLVERS", "SolverEntry", "solve", "solve_auto", "solver_entry", "solver_for_rows"]

@@ -21,7 +21,7 @@ coplanar vertices on a table, or rows of an arm with ``nv_i = 0`` acting on the 
 ``μ`` is then not unique.
 
 Method and termination: the dual active-set method of Goldfarb and Idnani written on ``G``,
-exact to round-off (:mod:`multiarm_pin.dynamics.mlcp`). The operator ``G``, ``b`` is built
+exact to round-off (:mod:`multiarm_pin._compiled.mlcp`). The operator ``G``, ``b`` is built
 object-first, by a compiled kernel that does the whole solve in one call or by the numpy
 reference (``reference=True``), which also takes the rare cases the kernel hands over (a
 singular ``M_i``, non-finite values) and raises the documented errors
@@ -42,10 +42,7 @@ everywhere, else from ``A = ∅``.
 Cost: per arm one ``nv_i``-Cholesky and ``N_i + 1`` solves (as the bilateral solver), then
 ``O(p²)`` for ``G`` on the ``p`` active rows and ``O(|A|³)`` per pivot (``G_AA`` is
 refactored; about ``p`` pivots from a cold start): negligible against the per-arm work for
-tens of contacts. Measured (``benchmarks/results/unilateral.md``): 11 rows of the
-two-gripper scenario + table, ~65 µs (~52 µs warm-started with ``guess``), against ~700 µs
-for the bilateral ``"auto"`` solve of the same rows (singular-arm path) and ~25 µs for the
-compiled bilateral solve of the 7 fingertip rows alone.
+tens of contacts. Timings against the bilateral solves: ``benchmarks/results/unilateral.md``.
 
 Impacts (:func:`solve_impact`) are the same problem at velocity level: with ``h = h_o = 0``
 the impulse ``P`` gives ``φ̇⁺ = φ̇⁻ + G P``, and Newton's law
@@ -57,21 +54,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from multiarm_pin.dynamics.blocks import SystemBlocks
-from multiarm_pin.dynamics.contact_results import (
-    SEPARATION_RTOL,
-    ContactResiduals,
-    ContactSolution,
-    ImpactSolution,
-)
-from multiarm_pin.dynamics.delassus import (
-    ACT_PADDING,
-    UNI_PADDING,
-    DelassusOperator,
-    contact_kernel,
-    delassus_operator,
-)
-from multiarm_pin.dynamics.mlcp import (
+from multiarm_pin._compiled.delassus import ACT_PADDING, UNI_PADDING, contact_kernel
+from multiarm_pin._compiled.mlcp import (
     CONSISTENCY_RTOL,
     DEPENDENCY_RTOL,
     INCONSISTENT,
@@ -79,9 +63,16 @@ from multiarm_pin.dynamics.mlcp import (
     MAX_PIVOTS,
     OK,
     VIOLATION_RTOL,
-    lcp_error,
     mlcp,
 )
+from multiarm_pin.dynamics.blocks import SystemBlocks
+from multiarm_pin.dynamics.contact_results import (
+    SEPARATION_RTOL,
+    ContactResiduals,
+    ContactSolution,
+    ImpactSolution,
+)
+from multiarm_pin.dynamics.delassus import DelassusOperator, delassus_operator
 from multiarm_pin.dynamics.object_first import solve_object_first
 from multiarm_pin.exceptions import DynamicsError, InputError, SingularityError
 
@@ -89,6 +80,30 @@ UNILATERAL_SOLVERS = ("bilateral", "active_set")
 """The solver names a unilateral solve records (``ContactSolution.solver``): its bilateral
 fast path (the object-first solve, every unilateral multiplier ``>= 0``), the active-set
 method; in the order of the compiled contact loop's solver codes."""
+
+
+def lcp_error(what: str, status: int, name: str, value: float, pivots: int) -> DynamicsError:
+    """The error of a failed :func:`~multiarm_pin._compiled.mlcp.mlcp` status.
+
+    For the caller ``what`` and the row ``name``.
+    """
+    if status == INFEASIBLE:
+        return DynamicsError(
+            f"{what}: the contacts cannot all hold: unilateral row ({name}) would penetrate "
+            f"({value:.3g}) and no force can prevent it; the bilateral constraints or the "
+            "other contacts forbid the motion"
+        )
+    if status == INCONSISTENT:
+        return DynamicsError(
+            f"{what}: the bilateral constraints are inconsistent: row ({name}) depends on the "
+            f"other active rows but its rate cannot be zeroed (residual {value:.3g}); check "
+            "c (velocity consistency) and W"
+        )
+    return DynamicsError(  # pragma: no cover - safety net of the finite method
+        f"{what}: the active-set method did not terminate in {pivots} pivots (last row "
+        f"{name}); round-off cycling, please report the state"
+    )
+
 
 # ------------------------------------------------------------------ inputs
 def _mask(value, name: str, blocks: SystemBlocks, padding: bool = True) -> np.ndarray:
@@ -267,7 +282,7 @@ def solve_unilateral(
 def _bilateral_fast_path(b: SystemBlocks, uni: np.ndarray) -> ContactSolution | None:
     """The bilateral object-first solution if it is regular and pushes on every unilateral row."""
     try:
-        sol = solve_object_first(b, fallback=False)
+        sol = solve_object_first(b)
     except (SingularityError, DynamicsError):
         return None
     if not (sol.mu[uni] >= 0.0).all():

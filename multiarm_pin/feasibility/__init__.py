@@ -9,12 +9,13 @@
   Pinocchio geometry model; collisions and clearances at a state.
 - :mod:`.scan`: collisions and clearances along a run, stretch by stretch (:class:`RunScan`).
 - :mod:`.report`: :func:`feasibility_report` of a run, :func:`check_design` of a state.
-- :mod:`.monitors`: the checks of the ``stop`` policies while a run runs
-  (:func:`stop_monitors`, for ``simulate(monitors=...)``).
+- :mod:`.monitors`: the checks made while a run runs, those of the ``stop`` policies and the
+  collision scan its report reuses (:func:`feasibility_monitors`, for
+  ``simulate(monitors=...)``).
 """
 
 from multiarm_pin.feasibility.collisions import CATEGORIES, CollisionScene
-from multiarm_pin.feasibility.monitors import stop_monitors
+from multiarm_pin.feasibility.monitors import feasibility_monitors
 from multiarm_pin.feasibility.report import (
     LIMIT_KINDS,
     POLICIES,
@@ -32,6 +33,6 @@ __all__ = [
     "FeasibilityReport",
     "Violation",
     "check_design",
+    "feasibility_monitors",
     "feasibility_report",
-    "stop_monitors",
 ]

@@ -35,12 +35,43 @@ def _axis(joint) -> tuple[str, np.ndarray]:
     raise UnsupportedJointError(joint.shortname(), joint.shortname())
 
 
-def joint_placements(model: pin.Model, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def placement_plan(model: pin.Model) -> tuple:
+    """What :func:`joint_placements` needs of each joint of ``model``, read once.
+
+    Returns:
+        Per joint ``1 .. njoints - 1``: ``(kind, parent, idx_q, translation (3,), B, axis
+        (3,))``, ``kind`` one of ``"R"``, ``"RUB"``, ``"P"``, ``"FF"`` and ``B`` its
+        placement's rotation ``Rm`` (3, 3), for a revolute joint ``[Rm, Rm K, Rm K²]`` (3, 9)
+        (``K`` the axis' cross-product matrix).
+
+    Raises:
+        UnsupportedJointError: a joint type outside those of :func:`joint_placements`.
+    """
+    plan = []
+    for j in range(1, model.njoints):
+        joint = model.joints[j]
+        kind, axis = _axis(joint)
+        M = model.jointPlacements[j]
+        Rm = np.array(M.rotation)
+        if kind in ("R", "RUB"):
+            K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]],
+                          [-axis[1], axis[0], 0.0]])
+            B = np.concatenate([Rm, Rm @ K, Rm @ K @ K], axis=1)
+        else:
+            B = Rm
+        plan.append((kind, int(model.parents[j]), int(joint.idx_q),
+                     np.array(M.translation), B, axis))
+    return tuple(plan)
+
+
+def joint_placements(model: pin.Model, q: np.ndarray,
+                     plan: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
     """World placements of every joint of ``model`` at T configurations.
 
     Args:
         model: a Pinocchio model of the supported joint types.
         q: (T, nq) configurations.
+        plan: ``placement_plan(model)``, if kept (read here otherwise).
 
     Returns:
         ``(R (T, njoints, 3, 3), p (T, njoints, 3))``: joint axes -> world axes and joint
@@ -51,46 +82,34 @@ def joint_placements(model: pin.Model, q: np.ndarray) -> tuple[np.ndarray, np.nd
     """
     q = np.asarray(q, float)
     T = len(q)
+    if plan is None:
+        plan = placement_plan(model)
     # joint-first while building (each joint's (T, 3, 3) block contiguous), returned as a
     # (T, njoints, ...) view
     R = np.empty((model.njoints, T, 3, 3))
     p = np.empty((model.njoints, T, 3))
     R[0], p[0] = np.eye(3), 0.0
-
-    def times(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-        """(T, 3, 3) @ a constant (3, 3), as one (3T, 3) @ (3, 3) matrix product."""
-        return (A.reshape(-1, 3) @ B).reshape(A.shape)
-
-    for j in range(1, model.njoints):
-        joint = model.joints[j]
-        kind, axis = _axis(joint)
-        parent = model.parents[j]
-        M = model.jointPlacements[j]
+    for j, (kind, parent, i, t, B, axis) in enumerate(plan, start=1):
         Rpar = R[parent]
-        t = np.asarray(M.translation)
         pp = p[parent] + Rpar[..., 0] * t[0] + Rpar[..., 1] * t[1] + Rpar[..., 2] * t[2]
-        i = joint.idx_q
+        # Rpar times a constant (3, 3) or (3, 9), as one (3T, 3) @ (3, k) matrix product
+        RB = (Rpar.reshape(-1, 3) @ B).reshape(T, 3, -1)
         if kind in ("R", "RUB"):
-            # Rp (I + sin K + (1 - cos) K²), K the axis' cross-product matrix
+            # Rp (I + sin K + (1 - cos) K²)
             cos, sin = ((np.cos(q[:, i]), np.sin(q[:, i])) if kind == "R"
                         else (q[:, i], q[:, i + 1]))
-            K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]],
-                          [-axis[1], axis[0], 0.0]])
-            Rm = np.asarray(M.rotation)
-            R[j] = (times(Rpar, Rm) + sin[:, None, None] * times(Rpar, Rm @ K)
-                    + (1.0 - cos)[:, None, None] * times(Rpar, Rm @ K @ K))
+            R[j] = (RB[..., :3] + sin[:, None, None] * RB[..., 3:6]
+                    + (1.0 - cos)[:, None, None] * RB[..., 6:])
             p[j] = pp
         elif kind == "P":
-            Rp = times(Rpar, np.asarray(M.rotation))
-            R[j] = Rp
-            p[j] = pp + (Rp[..., 0] * axis[0] + Rp[..., 1] * axis[1]
-                         + Rp[..., 2] * axis[2]) * q[:, i, None]
+            R[j] = RB
+            p[j] = pp + (RB[..., 0] * axis[0] + RB[..., 1] * axis[1]
+                         + RB[..., 2] * axis[2]) * q[:, i, None]
         else:
-            Rp = times(Rpar, np.asarray(M.rotation))
             Rj = Rotation.from_quat(q[:, i + 3:i + 7]).as_matrix()
-            R[j] = Rp @ Rj
-            p[j] = pp + np.einsum("tij,tj->ti", Rp, q[:, i:i + 3])
+            R[j] = RB @ Rj
+            p[j] = pp + np.einsum("tij,tj->ti", RB, q[:, i:i + 3])
     return np.moveaxis(R, 0, 1), np.moveaxis(p, 0, 1)
 
 
-__all__ = ["joint_placements"]
+__all__ = ["joint_placements", "placement_plan"]

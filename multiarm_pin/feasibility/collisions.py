@@ -38,14 +38,14 @@ import numpy as np
 import pinocchio as pin
 
 from multiarm_pin.feasibility.arm_geometry import ArmGeometry, arm_collision_geometry
-from multiarm_pin.feasibility.scan import CLEARANCE_TOLERANCE, RunScan, ScanResult
-
-CATEGORIES = ("arm_self", "arm_arm", "arm_object", "arm_support", "arm_ground")
-"""Pair categories, in the order of :attr:`CollisionScene.category` codes."""
-
-JOINT_ZONE_RADIUS = 0.05
-"""Radius [m] around each contact point of an arm's grasp inside which its carrying links
-may touch or enter the object (the grasp, not a collision)."""
+from multiarm_pin.feasibility.scan import (
+    CATEGORIES,
+    CLEARANCE_TOLERANCE,
+    JOINT_ZONE_RADIUS,
+    PENETRATION_TOLERANCE,
+    RunScan,
+    ScanResult,
+)
 
 MOUNT_TOLERANCE = 0.01
 """Largest distance [m] between an arm's base origin and the ground for it to stand on it."""
@@ -60,9 +60,6 @@ where the object's support points rest, as a stand under some points of a face).
 GJK_TOLERANCE = 1e-11
 """Tolerance of coal's GJK on the hulls' distances [m] (its default, 1e-6, leaves the
 distance of two hulls uncertain by about 1e-7 m)."""
-
-PENETRATION_TOLERANCE = 1e-6
-"""Depth [m] beyond which a penetration counts (round-off of touching surfaces)."""
 
 
 @dataclass(frozen=True)
@@ -312,7 +309,15 @@ class CollisionScene:
         a convex shape), else the deepest of the triangle contacts' penetration depths (two
         meshes, whose distance coal reports as 0 once they overlap).
         """
+        return self.mesh_penetrations(q_scene, [k])[0]
+
+    def mesh_penetrations(self, q_scene: np.ndarray, ks) -> list:
+        """:meth:`mesh_penetration` of the pairs ``ks`` at one configuration (placed once)."""
         pin.updateGeometryPlacements(self.model, self.data, self.mesh, self.mesh_data, q_scene)
+        return [self._placed_mesh_penetration(int(k)) for k in ks]
+
+    def _placed_mesh_penetration(self, k: int):
+        """:meth:`mesh_penetration` with the meshes already placed."""
         if not pin.computeCollision(self.mesh, self.mesh_data, int(k)):
             return None
         res = self.mesh_data.collisionResults[int(k)]

@@ -89,21 +89,27 @@ class CollisionMonitor:
         return hit if self.stop else None
 
 
-def stop_monitors(system, kinds, scene=None) -> tuple:
-    """The monitors of the ``stop`` policies ``kinds`` (of :data:`~.report.LIMIT_KINDS`).
+def feasibility_monitors(system, stops, scene=None) -> tuple:
+    """A run's feasibility monitors: those of its ``stop`` policies, and its collision scan.
 
     Args:
         system: the :class:`~multiarm_pin.system.MultiArmSystem`.
-        kinds: the kinds whose policy is ``stop``.
-        scene: its :class:`~multiarm_pin.feasibility.CollisionScene` (built for
-            ``"collision"`` with arms when None). Given without a ``"collision"`` stop, a
-            monitor that only scans is added (the report reuses its scan).
+        stops: the kinds (of :data:`~.report.LIMIT_KINDS`) whose policy is ``stop``.
+        scene: its :class:`~multiarm_pin.feasibility.CollisionScene`; built for a
+            ``"collision"`` stop when None.
+
+    Returns:
+        A :class:`LimitMonitor` of the joint kinds among ``stops`` (if any), and a
+        :class:`CollisionMonitor` when ``"collision"`` is a stop (it stops the run) or when a
+        ``scene`` is given (it only scans, so that the run's report reuses its scan:
+        :func:`~multiarm_pin.feasibility.feasibility_report`'s ``scan``); none for a system
+        without arms.
     """
     monitors = []
-    joint_kinds = [k for k in kinds if k in ("torque", "velocity", "position")]
+    joint_kinds = [k for k in stops if k in ("torque", "velocity", "position")]
     if joint_kinds and system.n_arms:
         monitors.append(LimitMonitor(system, joint_kinds))
-    if "collision" in kinds and system.n_arms:
+    if "collision" in stops and system.n_arms:
         if scene is None:
             from multiarm_pin.feasibility.collisions import CollisionScene
 
@@ -114,4 +120,4 @@ def stop_monitors(system, kinds, scene=None) -> tuple:
     return tuple(monitors)
 
 
-__all__ = ["CollisionMonitor", "LimitMonitor", "stop_monitors"]
+__all__ = ["CollisionMonitor", "LimitMonitor", "feasibility_monitors"]

@@ -37,7 +37,18 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from multiarm_pin.feasibility.batch_kinematics import joint_placements
+from multiarm_pin.feasibility.batch_kinematics import joint_placements, placement_plan
+
+CATEGORIES = ("arm_self", "arm_arm", "arm_object", "arm_support", "arm_ground")
+"""Pair categories, in the order of the codes of
+:attr:`~multiarm_pin.feasibility.collisions.CollisionScene.category`."""
+
+JOINT_ZONE_RADIUS = 0.05
+"""Radius [m] around each contact point of an arm's grasp inside which its carrying links
+may touch or enter the object (the grasp, not a collision)."""
+
+PENETRATION_TOLERANCE = 1e-6
+"""Depth [m] beyond which a penetration counts (round-off of touching surfaces)."""
 
 ADVANCE_FRACTION = 0.5
 """A measured pair is measured again where its bound falls below this fraction of the distance
@@ -54,6 +65,13 @@ whose bound is within it of the smallest distance found is not measured again)."
 KEPT_PLACEMENTS = 1_000_000
 """Largest samples x joints whose placements a scan keeps (96 bytes each)."""
 
+BOUND_BLOCK = 262_144
+"""Largest samples x pairs whose bounds a clearance's branch and bound computes at once."""
+
+FIRST_BLOCK = 4096
+"""Samples x pairs whose path lengths a search for the first sample beyond a bound compares
+at once, before it searches the rest of the stretch."""
+
 PATH_BLOCK = 128
 """Samples per block of the path lengths' computation (its arrays stay in the CPU cache)."""
 
@@ -63,7 +81,7 @@ class ScanResult:
     """What :class:`RunScan` found along a run.
 
     Attributes:
-        clearance: per category of :data:`~multiarm_pin.feasibility.collisions.CATEGORIES`,
+        clearance: per category of :data:`CATEGORIES`,
             the smallest hull distance over the run [m] (grasp pairs left out), or None when
             the category has no pair.
         hits: per pair index, its collisions ``(sample, distance [m] on the meshes, point
@@ -91,6 +109,7 @@ class _ScanGeometry:
             shape.computeLocalAABB()
             centre[g] = o.placement.act(np.array(shape.aabb_center))  # in its joint's frame
             radius[g] = float(shape.aabb_radius)
+        self.plan = placement_plan(scene.model)
         self.joint = np.array([o.parentJoint for o in hull.geometryObjects], dtype=int)
         self.centre, self.radius = centre, radius
         reach = np.linalg.norm(centre, axis=1) + radius  # any point's distance to its joint
@@ -137,6 +156,9 @@ class _ScanGeometry:
             elif self.round[a] is None:
                 continue
             self.ground[k] = True
+        self.boxed_ground = np.array(sorted(self.vertices), dtype=int)
+        self.corners = (np.array([self.vertices[k] for k in self.boxed_ground])
+                        if self.vertices else np.zeros((0, 8, 3)))
 
     def support(self, g: int, u: np.ndarray) -> np.ndarray | None:
         """``max u·x`` over geometry ``g`` (x in its joint's frame) for directions u (m, 3).
@@ -180,8 +202,6 @@ class RunScan:
     """
 
     def __init__(self, scene, capacity: int):
-        from multiarm_pin.feasibility.collisions import PENETRATION_TOLERANCE
-
         self.scene = scene
         self.geo = scan_geometry(scene)
         self.tol = PENETRATION_TOLERANCE
@@ -207,6 +227,18 @@ class RunScan:
         kept = T * J <= KEPT_PLACEMENTS
         self._R = np.empty((T, J, 3, 3)) if kept else None
         self._p = np.empty((T, J, 3)) if kept else None
+        # the bodies' bounding-sphere centres (world) at every sample, for the same bounds
+        G = len(self.geo.joint)
+        self._centres = np.empty((T, G, 3)) if kept else None
+        # each pair's measurements so far, summed up for the clearances' bounds
+        # (:meth:`_column_minima`): its last one (distance, path length C), the smallest
+        # bound of the segments between consecutive ones, the bound before its first one
+        self._last_d = np.full(P, np.nan)
+        self._last_C = np.zeros(P)
+        self._segment_min = np.full(P, np.inf)
+        self._before_first = np.full(P, np.inf)
+        self._smallest = np.full(P, np.inf)  # its smallest distance measured
+        self._summed = 0  # samples whose measurements are summed up
 
     # ------------------------------------------------------------------ stretches
     def extend(self, q: np.ndarray, object_position: np.ndarray, object_quaternion: np.ndarray,
@@ -232,11 +264,17 @@ class RunScan:
         scene = self.scene
         configs = self.configs
         configs[n0:n1] = np.concatenate([q, object_position, object_quaternion], axis=1)
-        R, p = joint_placements(scene.model, configs[n0:n1])
+        R, p = joint_placements(scene.model, configs[n0:n1], self.geo.plan)
+        geo = self.geo
+        centres = p[:, geo.joint].copy()  # (m, G, 3) bounding spheres': sums of products
+        Rg = R[:, geo.joint]
+        for i in range(3):
+            centres += Rg[..., i] * geo.centre[:, i, None]
         if self._R is not None:
             self._R[n0:n1], self._p[n0:n1] = R, p
+            self._centres[n0:n1] = centres
         self._paths(R, p, n0, n1)
-        opens = self._openings(R, p, contact_points, n0, n1)
+        opens = self._openings(centres, contact_points, n0, n1)
         self._ground(R, p, n0, n1)
         # pairs whose bound held to the last stretch's end: where does it fail in this one?
         waiting = np.flatnonzero(self.pending)
@@ -249,6 +287,7 @@ class RunScan:
         self.due[live] = opens[self.due[live] - n0, np.flatnonzero(live)]
         self._advance(opens, n0, n1)
         self.n = n1
+        self._sum_measurements()
         return self._check_hits(contact_points, n0, n1)
 
     def _paths(self, R, p, n0: int, n1: int) -> None:
@@ -275,8 +314,10 @@ class RunScan:
             R_prev = np.concatenate([self._last_rel[0][None], R[:-1]])
             p_prev = np.concatenate([self._last_rel[1][None], p[:-1]])
         # joint-first layouts (J, ..., m): gathering by joint copies contiguous blocks
-        A = np.ascontiguousarray(np.moveaxis(R @ np.swapaxes(R_prev, -1, -2), 0, -1)
-                                 ).reshape(-1, 9, m)  # (J, 9, m)
+        Rj = np.ascontiguousarray(np.moveaxis(R, 0, -1))  # (J, 3, 3, m)
+        Pj = np.ascontiguousarray(np.moveaxis(R_prev, 0, -1))
+        # A[r, c] = Σ_k R[r, k] R_prev[c, k]: products summed, not 3x3 matrix products
+        A = (Rj[:, :, None] * Pj[:, None]).sum(axis=3).reshape(-1, 9, m)  # (J, 9, m)
         pc = np.ascontiguousarray(np.moveaxis(p, 0, -1))  # (J, 3, m)
         qc = np.ascontiguousarray(np.moveaxis(p_prev, 0, -1))
         Ab = A[ub]  # (U, 9, m)
@@ -307,55 +348,66 @@ class RunScan:
     def _first_exceeding(self, ks: np.ndarray, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
         """First sample in ``[lo, hi)`` where each pair's bound falls to its target.
 
-        That is where ``C(s) - C(last) > budget`` (``C`` is non-decreasing: a binary search,
-        all pairs at once, on the flat arrays).
+        That is where ``C(s) - C(last) > budget``: ``C`` compared at every sample of a first
+        block of samples, all pairs at once (most pairs due are due there), then a binary
+        search (``C`` is non-decreasing) for the others.
 
         Returns:
             ``(samples (K,), found (K,) bool)``.
         """
-        U = self.path_shift.shape[1]
-        shift, turn = self.path_shift.reshape(-1), self.path_turn.reshape(-1)
-        u = self.geo.joint_pair[ks]
-        rho = self.geo.rho[ks]
-        at = self.last[ks] * U + u
-        thr = shift.take(at) + rho * turn.take(at) + self.budget[ks]
-        a = np.full(len(ks), lo)
-        b = np.full(len(ks), hi)
-        for _ in range(max(1, int(hi - lo).bit_length())):
-            mid = (a + b) >> 1
-            at = np.minimum(mid, hi - 1) * U + u
-            over = shift.take(at) + rho * turn.take(at) > thr
-            b = np.where(over, mid, b)
-            a = np.where(over | (a >= b), a, mid + 1)
-        return a, a < hi
+        if lo >= hi:
+            return np.full(len(ks), hi), np.zeros(len(ks), dtype=bool)
+        geo = self.geo
+        u, rho = geo.joint_pair[ks], geo.rho[ks]
+        last = self.last[ks]
+        thr = self.path_shift[last, u] + rho * self.path_turn[last, u] + self.budget[ks]
+        b1 = min(hi, lo + max(8, FIRST_BLOCK // max(len(ks), 1)))
+        over = (self.path_shift[lo:b1, u] + rho * self.path_turn[lo:b1, u] > thr)  # (b, K)
+        hit = over.any(axis=0)
+        at = np.where(hit, lo + over.argmax(axis=0), hi)
+        todo = np.flatnonzero(~hit)
+        if len(todo) and b1 < hi:
+            U = self.path_shift.shape[1]
+            shift, turn = self.path_shift.reshape(-1), self.path_turn.reshape(-1)
+            ut, rt, tt = u[todo], rho[todo], thr[todo]
+            a = np.full(len(todo), b1)
+            b = np.full(len(todo), hi)
+            for _ in range(max(1, int(hi - b1).bit_length())):
+                mid = (a + b) >> 1
+                flat = np.minimum(mid, hi - 1) * U + ut
+                beyond = shift.take(flat) + rt * turn.take(flat) > tt
+                b = np.where(beyond, mid, b)
+                a = np.where(beyond | (a >= b), a, mid + 1)
+            at[todo] = a
+        return at, at < hi
 
-    def _openings(self, R, p, contact_points, n0: int, n1: int) -> np.ndarray:
+    def _openings(self, centres, contact_points, n0: int, n1: int) -> np.ndarray:
         """(m + 1, P) from each sample of the stretch on, the first where a pair can collide.
 
-        Run indices; ``n1``: none in the stretch.
+        Run indices; ``n1``: none in the stretch. ``centres`` (m, G, 3): the bodies'
+        bounding-sphere centres at the stretch's samples [m].
 
         A carrying link whose bounding sphere lies, at a sample, within
-        :data:`~multiarm_pin.feasibility.collisions.JOINT_ZONE_RADIUS` of one of its arm's
+        :data:`JOINT_ZONE_RADIUS` of one of its arm's
         contact points touches the object (if at all) at the grasp: such samples are skipped.
         Every other pair may collide at every sample (its own index).
         """
-        from multiarm_pin.feasibility.collisions import JOINT_ZONE_RADIUS
-
         scene, geo = self.scene, self.geo
         m, P = n1 - n0, len(scene.pairs)
         opens = np.broadcast_to(np.arange(n0, n1 + 1)[:, None], (m + 1, P)).copy()
         if contact_points is None:
             return opens
-        for k in np.flatnonzero(scene.grasp_pair):
-            g = int(scene.pairs[k, 0])
-            cps = np.asarray(contact_points[scene.arm_of_pair[k]]).reshape(m, -1, 3)
+        grasp = np.flatnonzero(scene.grasp_pair)
+        for arm in np.unique(scene.arm_of_pair[grasp]):  # each arm's carrying links at once
+            ks = grasp[scene.arm_of_pair[grasp] == arm]
+            cps = np.asarray(contact_points[arm]).reshape(m, -1, 3)
             if not cps.shape[1]:
                 continue
-            j = geo.joint[g]
-            c = np.einsum("tij,j->ti", R[:, j], geo.centre[g]) + p[:, j]
-            near = np.min(np.linalg.norm(cps - c[:, None], axis=2), axis=1) + geo.radius[g]
-            nxt = np.where(near <= JOINT_ZONE_RADIUS, n1, np.arange(n0, n1))
-            opens[:m, k] = np.minimum.accumulate(nxt[::-1])[::-1]
+            g = scene.pairs[ks, 0]
+            gap = cps[:, None] - centres[:, g, None]  # (m, K, N, 3)
+            near = np.sqrt(np.einsum("mkni,mkni->mkn", gap, gap)).min(axis=2) + geo.radius[g]
+            nxt = np.where(near <= JOINT_ZONE_RADIUS, n1, np.arange(n0, n1)[:, None])
+            opens[:m, ks] = np.minimum.accumulate(nxt[::-1], axis=0)[::-1]
         return opens
 
     def _ground(self, R, p, n0: int, n1: int) -> None:
@@ -381,13 +433,18 @@ class RunScan:
 
         every = np.arange(n1 - n0)
         for k in ks:
-            if k in geo.vertices:
-                j = joint[int(pairs[k, 0])]
-                low[:, k] = self._lowest(geo.vertices[k], R[:, j, 2, :], p[:, j, 2])
-            else:
+            if k not in geo.vertices:
                 self.exact[n0:n1, k] = low[:, k] = lowest(k, every)
                 self.ground_best = min(self.ground_best, float(low[:, k].min()))
-        for k in sorted(geo.vertices, key=lambda k: float(low[:, k].min())):
+        boxed = geo.boxed_ground  # the polytopes' pairs, all at once
+        if len(boxed):
+            j = joint[pairs[boxed, 0]]
+            low[:, boxed] = self._lowest(geo.corners, R[:, j, 2, :], p[:, j, 2])
+        lowest_bound = low[:, boxed].min(axis=0)
+        for i in np.argsort(lowest_bound, kind="stable"):
+            if lowest_bound[i] >= max(self.ground_best, self.tol):
+                break  # and every later pair's bound is at least as large
+            k = int(boxed[i])
             rows = np.flatnonzero(low[:, k] < max(self.ground_best, self.tol))
             if not len(rows):
                 continue
@@ -395,15 +452,16 @@ class RunScan:
             self.exact[n0 + rows, k] = low[rows, k] = d
             self.ground_best = min(self.ground_best, float(d.min()))
 
-    def _lowest(self, local: np.ndarray, Rz: np.ndarray, pz: np.ndarray) -> np.ndarray:
-        """(m,) height above the ground [m] of the lowest of ``local`` (V, 3) points.
+    def _lowest(self, corners: np.ndarray, Rz: np.ndarray, pz: np.ndarray) -> np.ndarray:
+        """(m, K) height above the ground [m] of the lowest of each body's ``corners``.
 
-        ``Rz`` (m, 3): the joint's third rotation row; ``pz`` (m,): its origin's height.
-        Sums of products, not a BLAS call (small operands).
+        ``corners`` (K, V, 3) in each body's joint frame; ``Rz`` (m, K, 3): the joints'
+        third rotation rows; ``pz`` (m, K): their origins' heights. Sums of products, not a
+        BLAS call (small operands).
         """
-        z = (local[:, 0, None] * Rz[None, :, 0] + local[:, 1, None] * Rz[None, :, 1]
-             + local[:, 2, None] * Rz[None, :, 2])
-        return z.min(axis=0) + pz - self.scene.ground
+        z = (corners[None, :, :, 0] * Rz[:, :, None, 0] + corners[None, :, :, 1]
+             * Rz[:, :, None, 1] + corners[None, :, :, 2] * Rz[:, :, None, 2])
+        return z.min(axis=2) + pz - self.scene.ground
 
     def _advance(self, opens: np.ndarray, n0: int, n1: int) -> None:
         """Measure every pair due in the stretch, and find when each is due again."""
@@ -439,10 +497,14 @@ class RunScan:
         """The hull penetrations of the stretch checked on the meshes; the first hit's sample."""
         scene = self.scene
         first = None
-        rows, cols = np.nonzero(self.exact[n0:n1] < -self.tol)
-        for i, k in sorted(zip(rows.tolist(), cols.tolist(), strict=True)):
+        rows, cols = np.nonzero(self.exact[n0:n1] < -self.tol)  # by sample, then by pair
+        hits = []  # the meshes placed once per sample for all its pairs
+        for i in np.unique(rows).tolist():
+            ks = cols[rows == i].tolist()
+            hits += zip([i] * len(ks), ks, scene.mesh_penetrations(self.configs[n0 + i], ks),
+                        strict=True)
+        for i, k, hit in hits:
             s = n0 + i
-            hit = scene.mesh_penetration(self.configs[s], k)
             if hit is None:
                 continue
             if scene.grasp_pair[k] and contact_points is not None:
@@ -463,67 +525,98 @@ class RunScan:
         """(n,) lower bounds of pair ``k``'s hull distance at the samples scanned [m].
 
         The measured value where measured; elsewhere the best of the bounds from the
-        measurements before and after (``d - |C(s') - C(s)|``); a ground pair's own.
+        measurements before and after (``d - |C(s') - C(s)|``), and the gap of the pair's
+        bounding spheres; a ground pair's own.
         """
-        n = self.n
-        if self.geo.ground[k]:
-            return self.ground_lower[:n, k].copy()
-        d = self.exact[:n, k]
-        C = self._column_path(k)
+        return self.column_bounds(np.array([k]))[:, 0]
+
+    def column_bounds(self, ks: np.ndarray) -> np.ndarray:
+        """(n, K) :meth:`column_bound` of the pairs ``ks`` (K,), all at once [m]."""
+        n, geo = self.n, self.geo
+        ks = np.asarray(ks, dtype=int)
+        d = self.exact[:n, ks]
+        u, rho = geo.joint_pair[ks], geo.rho[ks]
+        C = self.path_shift[:n, u] + rho * self.path_turn[:n, u]
         missing = np.isnan(d)
-        ahead = np.maximum.accumulate(np.where(missing, -np.inf, d + C)) - C
-        behind = np.maximum.accumulate(np.where(missing, -np.inf, d - C)[::-1])[::-1] + C
+        ahead = np.maximum.accumulate(np.where(missing, -np.inf, d + C), axis=0) - C
+        behind = np.maximum.accumulate(np.where(missing, -np.inf, d - C)[::-1],
+                                       axis=0)[::-1] + C
         bound = np.maximum(ahead, behind)
-        spheres = self._sphere_bound(k)
+        spheres = self._sphere_bounds(ks)
         if spheres is not None:
             bound = np.maximum(bound, spheres)
-        return np.where(missing, bound, d)
+        bound = np.where(missing, bound, d)
+        ground = geo.ground[ks]
+        if ground.any():
+            bound[:, ground] = self.ground_lower[:n, ks[ground]]
+        return bound
 
-    def _sphere_bound(self, k: int) -> np.ndarray | None:
-        """(n,) the gap between pair ``k``'s bounding spheres at every sample [m].
+    def _sphere_bounds(self, ks: np.ndarray) -> np.ndarray | None:
+        """(n, K) the gap between pairs ``ks``' bounding spheres at every sample [m].
 
-        A lower bound of the hulls' distance; None without the placements kept, for a
-        ground pair, or a body without a sphere.
+        A lower bound of the hulls' distance; ``-inf`` for a ground pair or a body without a
+        sphere; None without the placements kept.
         """
         geo = self.geo
-        a, b = (int(g) for g in self.scene.pairs[k])
-        if self._R is None or geo.ground[k] or not (geo.radius[a] and geo.radius[b]):
+        if self._centres is None:
             return None
-        n = self.n
-        ja, jb = geo.joint[a], geo.joint[b]
-        R, p = self._R[:n], self._p[:n]
-        ea, eb = geo.centre[a], geo.centre[b]
-        gap = p[:, ja] - p[:, jb]  # (n, 3): sums of products on strided views, no matmul
-        for i in range(3):
-            gap += R[:, ja, :, i] * ea[i] - R[:, jb, :, i] * eb[i]
-        return np.sqrt(np.einsum("ni,ni->n", gap, gap)) - geo.radius[a] - geo.radius[b]
+        a, b = self.scene.pairs[ks, 0], self.scene.pairs[ks, 1]
+        gap = self._centres[:self.n, a] - self._centres[:self.n, b]  # (n, K, 3)
+        out = np.sqrt(np.einsum("nki,nki->nk", gap, gap)) - geo.radius[a] - geo.radius[b]
+        out[:, geo.ground[ks] | (geo.radius[a] == 0) | (geo.radius[b] == 0)] = -np.inf
+        return out
+
+    def _sum_measurements(self) -> None:
+        """Sum up the measurements at the samples scanned since the last call (by pair).
+
+        For :meth:`_column_minima`: between two consecutive measurements ``(d_a, C_a)``,
+        ``(d_b, C_b)`` of a pair its bounds are at least ``(d_a + d_b - (C_b - C_a)) / 2``;
+        before the first, ``d - (C - C(0))``.
+        """
+        n0, n = self._summed, self.n
+        if n0 >= n:
+            return
+        geo = self.geo
+        s, k = np.nonzero(~np.isnan(self.exact[n0:n]))
+        by_pair = np.argsort(k, kind="stable")  # by pair, then by sample
+        k, s = k[by_pair], s[by_pair]
+        self._summed = n
+        if not len(k):
+            return
+        s = s + n0
+        d = self.exact[s, k]
+        u, rho = geo.joint_pair[k], geo.rho[k]
+        C = self.path_shift[s, u] + rho * self.path_turn[s, u]
+        new = np.concatenate([[True], k[1:] != k[:-1]])  # a pair's first here
+        end = np.concatenate([k[1:] != k[:-1], [True]])  # its last here
+        # each pair's previous measurement: the last before these, or the one before it here
+        d_prev = np.where(new, self._last_d[k], np.concatenate([[np.nan], d[:-1]]))
+        C_prev = np.where(new, self._last_C[k], np.concatenate([[0.0], C[:-1]]))
+        seg = np.where(np.isnan(d_prev), np.inf, 0.5 * (d_prev + d - (C - C_prev)))
+        starts = np.flatnonzero(new)
+        ks = k[starts]
+        self._segment_min[ks] = np.minimum(self._segment_min[ks],
+                                           np.minimum.reduceat(seg, starts))
+        self._smallest[ks] = np.minimum(self._smallest[ks], np.minimum.reduceat(d, starts))
+        first = new & np.isnan(self._last_d[k])  # a pair's first measurement of the run
+        C0 = self.path_shift[0, u] + rho * self.path_turn[0, u]
+        self._before_first[k[first]] = (d - (C - C0))[first]
+        self._last_d[k[end]], self._last_C[k[end]] = d[end], C[end]
 
     def _column_minima(self) -> np.ndarray:
         """(P,) lower bounds of each pair's smallest hull distance over the samples [m].
 
-        From its measurements alone: between two consecutive ones ``(d_a, C_a)``,
-        ``(d_b, C_b)`` the bounds are at least ``(d_a + d_b - (C_b - C_a)) / 2``; before the
-        first and after the last, ``d - |C - C(end)|``. ``-inf`` for a pair never measured.
+        From its measurements alone (:meth:`_sum_measurements`): the smallest bound between
+        two consecutive ones, before the first (``d - (C - C(0))``) and after the last
+        (``d - (C(end) - C)``). ``-inf`` for a pair never measured.
         """
-        n, P = self.n, len(self.scene.pairs)
-        geo = self.geo
-        out = np.full(P, -np.inf)
-        k, s = np.nonzero(~np.isnan(self.exact[:n].T))  # by pair, then by sample
-        if len(k):
-            d = self.exact[s, k]
-            u, rho = geo.joint_pair[k], geo.rho[k]
-            C = self.path_shift[s, u] + rho * self.path_turn[s, u]
-            C0 = self.path_shift[0, u] + rho * self.path_turn[0, u]
-            Cn = self.path_shift[n - 1, u] + rho * self.path_turn[n - 1, u]
-            new = np.concatenate([[True], k[1:] != k[:-1]])
-            end = np.concatenate([k[1:] != k[:-1], [True]])
-            val = np.where(new, d - (C - C0), np.inf)
-            val = np.minimum(val, np.where(end, d - (Cn - C), np.inf))
-            seg = np.full(len(k), np.inf)
-            seg[:-1] = 0.5 * (d[:-1] + d[1:] - (C[1:] - C[:-1]))
-            val = np.minimum(val, np.where(end, np.inf, seg))
-            starts = np.flatnonzero(new)
-            out[k[starts]] = np.minimum.reduceat(val, starts)
+        self._sum_measurements()
+        n, geo = self.n, self.geo
+        u, rho = geo.joint_pair, geo.rho
+        Cn = self.path_shift[n - 1, u] + rho * self.path_turn[n - 1, u]
+        after = self._last_d - (Cn - self._last_C)
+        out = np.minimum(np.minimum(self._segment_min, self._before_first), after)
+        out[np.isnan(self._last_d)] = -np.inf
         g = np.flatnonzero(geo.ground)
         out[g] = self.ground_lower[:n, g].min(axis=0)
         return out
@@ -535,8 +628,6 @@ class RunScan:
         samples whose bound is below the smallest measured distance are measured until none
         is (within :data:`CLEARANCE_TOLERANCE`).
         """
-        from multiarm_pin.feasibility.collisions import CATEGORIES
-
         scene = self.scene
         minima = self._column_minima() if self.n else None
         clearance = {}
@@ -553,7 +644,7 @@ class RunScan:
         if self._R is not None:
             return (self._R[samples[:, None], joints[None, :]],
                     self._p[samples[:, None], joints[None, :]])
-        R, p = joint_placements(self.scene.model, self.configs[samples])
+        R, p = joint_placements(self.scene.model, self.configs[samples], self.geo.plan)
         return R[:, joints], p[:, joints]
 
     def _separation(self, k: int, normal: np.ndarray, s: int, samples: np.ndarray
@@ -591,18 +682,27 @@ class RunScan:
         scene = self.scene
         model, data, hull, hd = scene.model, scene.data, scene.hull, scene.hull_data
         n = self.n
-        sub = self.exact[:n, cols]
-        best = float(np.nanmin(sub)) if np.any(~np.isnan(sub)) else np.inf
+        best = float(self._smallest[cols].min())  # measured while scanning
         self.visits = 0
         configs = self.configs
-        for j in np.argsort(minima[cols], kind="stable"):
-            k = int(cols[j])
+        order = cols[np.argsort(minima[cols], kind="stable")]
+        order = order[minima[order] < best - CLEARANCE_TOLERANCE]
+        block = max(1, BOUND_BLOCK // max(n, 1))
+        bounds, first = None, 0
+        for j, k in enumerate(order.tolist()):
             if minima[k] >= best - CLEARANCE_TOLERANCE:
                 break  # and every later pair's bound is at least as large
-            bound = self.column_bound(k)
-            bound[~np.isnan(self.exact[:n, k])] = np.inf  # measured: not again
-            if bound.min() >= best - CLEARANCE_TOLERANCE:
+            if bounds is None or j - first >= bounds.shape[1]:
+                # a pair's bounds change only where it is measured, which is below: the
+                # bounds of the next pairs are computed together (one pass for a block)
+                first = j
+                ks = order[j:j + block]
+                bounds = self.column_bounds(ks)
+                bounds[~np.isnan(self.exact[:n, ks])] = np.inf  # measured: not again
+                lowest = bounds.min(axis=0)
+            if lowest[j - first] >= best - CLEARANCE_TOLERANCE:
                 continue
+            bound = bounds[:, j - first]
             C = None
             while True:
                 below = np.flatnonzero(bound < best - CLEARANCE_TOLERANCE)
@@ -634,6 +734,7 @@ class RunScan:
         return best
 
 
-__all__ = ["ADVANCE_FRACTION", "ADVANCE_STRIDE", "CLEARANCE_TOLERANCE", "KEPT_PLACEMENTS",
-           "RunScan", "ScanResult",
+__all__ = ["ADVANCE_FRACTION", "ADVANCE_STRIDE", "BOUND_BLOCK", "CATEGORIES",
+           "CLEARANCE_TOLERANCE", "FIRST_BLOCK", "JOINT_ZONE_RADIUS", "KEPT_PLACEMENTS",
+           "PATH_BLOCK", "PENETRATION_TOLERANCE", "RunScan", "ScanResult",
            "scan_geometry"]

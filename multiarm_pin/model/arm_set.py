@@ -31,11 +31,9 @@ from multiarm_pin.spatial import as_array
 GROUP_SIZE = 16
 """Most arms in one combined Pinocchio model of the hot path (:meth:`ArmSet.pinocchio_pass`).
 
-Pinocchio 4.1's algorithms slow down and its ``Data`` grows superlinearly with the size of
-one combined model (``Data`` of 64 UR5s: 3.8 GB). Measured here, the three calls of an
-evaluation cost per UR5 arm 3.8 µs in models of 4-8 arms, 4.0 µs at 16, 7.2 µs at 32 and
-~22 µs at 64; so larger systems are split into groups of at most 16 consecutive arms, each
-with its own combined model and ``Data``."""
+Pinocchio 4.1's algorithms slow down per arm, and its ``Data`` grows superlinearly, with the
+number of arms in one combined model; so larger systems are split into groups of at most 16
+consecutive arms, each with its own combined model and ``Data``."""
 
 
 @dataclass(frozen=True)
@@ -98,8 +96,8 @@ class ArmSet:
 
     Attributes:
         model: the combined model of all arms.
-        data: its ``Data``, created on first use when the arms are grouped (it is large for
-            many arms: 3.8 GB for 64 UR5s); :meth:`evaluate` and the energy/momentum helpers
+        data: its ``Data``, created on first use when the arms are grouped (it grows
+            superlinearly with the number of arms); :meth:`evaluate` and the energy/momentum helpers
             of the system use it, the hot path uses the groups'.
         groups: the :class:`ArmGroup` list (one group, sharing ``model`` and ``data``, when
             ``n <= group_size``).
@@ -296,10 +294,9 @@ class ArmSet:
         results stay in each group's ``data`` (``self.data`` for one group; read by
         :meth:`evaluate` and the compiled kernels of :mod:`multiarm_pin._compiled.arm_terms`).
 
-        Tool placements: one ``pin.updateFramePlacement`` per tool. Measured on 2 / 10 UR5s:
-        3.7 / 7.6 µs, against 5.3 / 15 µs for ``pin.updateFramePlacements`` (every frame) and
-        reading ``data.oMf``, and 11 / 45 µs for composing ``data.oMi`` with the frame
-        placements in Python.
+        Tool placements: one ``pin.updateFramePlacement`` per tool, which updates the tools'
+        frames only (``pin.updateFramePlacements`` updates every frame; composing
+        ``data.oMi`` with the frame placements would be Python work per arm).
 
         Args:
             q: (nq,) combined configuration.
@@ -377,8 +374,9 @@ class ArmSet:
         """Views of ``data.J`` (6, nv), ``data.dJ`` (6, nv), ``data.M`` (nv, nv), ``data.nle``.
 
         Pinocchio writes these in place (fixed sizes), so the views are made once per
-        ``Data`` object (each attribute read costs ~0.4 µs) and remade if ``self.data`` is
-        replaced. Valid while ``self.data`` is alive; read them after :meth:`pinocchio_pass`.
+        ``Data`` object (each attribute read of the bindings makes a new view) and remade if
+        ``self.data`` is replaced. Valid while ``self.data`` is alive; read them after
+        :meth:`pinocchio_pass`.
         """
         if self._views_of is not self.data:
             d = self.data

@@ -21,7 +21,7 @@ preferences, met as well as the primary tasks allow). Secondary tasks are solved
 together with the primary ones at a small weight; a last phase then refines the primary tasks
 alone, so the primary residual ends at the solver's precision and not at a compromise.
 
-One module of ~520 lines on purpose: the target types are plain data whose only reader is the
+One module on purpose: the target types are plain data whose only reader is the
 stacked problem (each target's residual and Jacobian), and the solve, its phases and its
 failure diagnosis all work on that problem; split, every change to a target would touch both.
 """

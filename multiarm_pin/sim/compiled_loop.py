@@ -1,13 +1,13 @@
-"""The compiled closed loop of :func:`~multiarm_pin.sim.simulation.simulate`: RK4 in one call.
+"""The compiled closed loop of :func:`~multiarm_pin.sim.simulation.simulate`: steps in one call.
 
 When a run is a system of arms whose rows are bilateral, or unilateral and all touching, with
 no supports (an external wrench schedule may act), under ``object_pd`` with a compiled solver
-and RK4, every evaluation of a step is the same compiled sequence (arm terms, blocks, controller,
-object-first solve) and the Python around it (the stepper's state objects, the record) is
-most of the cost. :class:`CompiledLoop` then runs stretches of steps in one call of
-:func:`multiarm_pin._compiled.closed_loop.run_rk4`, which computes the arm terms itself
-(:func:`multiarm_pin._compiled.rigid_body.rigid_body_pass`, Pinocchio's algorithms in numba,
-tested against Pinocchio) and records every sample straight into the run's
+and RK4 or semi-implicit Euler, every evaluation of a step is the same compiled sequence (arm
+terms, blocks, controller, object-first solve) and the Python around it (the stepper's state
+objects, the record) is most of the cost. :class:`CompiledLoop` then runs stretches of steps
+in one call of :func:`multiarm_pin._compiled.closed_loop.run_rk4`, which computes the arm
+terms itself (:func:`multiarm_pin._compiled.rigid_body.rigid_body_pass`, Pinocchio's
+algorithms in numba, tested against Pinocchio) and records every sample straight into the run's
 :class:`~multiarm_pin.sim.result.Recorder`.
 
 Whatever the kernel cannot decide as the Python path would (a doubtful controller or solver
@@ -43,23 +43,27 @@ bilateral rows; with unilateral rows, all pushing, the mixed LCP's fast path ``b
 
 
 class CompiledLoop:
-    """Stretches of RK4 steps of one run in single compiled calls (see the module).
+    """Stretches of RK4 (or semi-implicit Euler) steps of one run in single compiled calls.
+
+    See the module.
 
     Use :meth:`for_run`, which returns None when the run is not of the kind the kernel does.
 
     Args:
         stepper: the run's stepper (its system, controller, solver, Baumgarte gains).
+        integrator: ``"rk4"`` or ``"semi_implicit"``.
     """
 
-    def __init__(self, stepper):
+    def __init__(self, stepper, integrator: str = "rk4"):
         s = stepper.system
         self.stepper = stepper
         self.system = s
         path = s.compiled
         self.path = path
         self.model = s.arm_set.compiled_model
-        params = path.params if stepper.baumgarte is None else layout.with_baumgarte(
-            path.params, *stepper.baumgarte)
+        params = layout.with_integrator(path.params, integrator)
+        if stepper.baumgarte is not None:
+            params = layout.with_baumgarte(params, *stepper.baumgarte)
         self.params = params
         n, k, m = s.n_arms, s.arm_set.nv_max, s.N_max
         self.work = (*self.model.outputs(), np.zeros(path.layout.size), np.zeros((n, k)),
@@ -79,28 +83,48 @@ class CompiledLoop:
                          else np.array(stepper.wrench.table(), dtype=float))  # one array type
         self.last_status = kernels.STAGE_OK
 
-    @classmethod
-    def for_run(cls, stepper, integrator: str) -> CompiledLoop | None:
-        """The compiled loop of a run, or None when the run is not of the kind it does.
+    CONTROLLER_KERNELS = ("object_pd",)
+    """The compiled controllers the kernel runs (names of
+    :data:`~multiarm_pin.sim.controllers.CONTROLLER_KERNELS`)."""
 
-        It does: RK4, a compiled solver (:data:`~multiarm_pin.sim.closed_loop.FUSED_SOLVERS`),
-        arms whose every joint the compiled rigid-body pass supports, no supports, an
-        :class:`~multiarm_pin.sim.controllers.ObjectPD` controller on its compiled path, and no
-        external wrench or a :class:`~multiarm_pin.sim.disturbances.WrenchSchedule` itself
-        (its intervals are the kernel's table; a subclass with its own ``__call__`` is not),
-        and no torque saturation (the kernel adds the controller's torque as it is).
+    @classmethod
+    def declines(cls, stepper, integrator: str) -> str | None:
+        """Why a run is not of the kind the kernel does, or None when it is.
+
+        It does: RK4 or semi-implicit Euler, a compiled solver
+        (:data:`~multiarm_pin.sim.closed_loop.FUSED_SOLVERS`), arms whose every joint the
+        compiled rigid-body pass supports, no supports, a controller whose registry entry's
+        kernel (:func:`~multiarm_pin.sim.controllers.controller_kernel`) is one of
+        :data:`CONTROLLER_KERNELS`, and no external wrench or a
+        :class:`~multiarm_pin.sim.disturbances.WrenchSchedule` itself (its intervals are the
+        kernel's table; a subclass with its own ``__call__`` is not), and no torque saturation
+        (the kernel adds the controller's torque as it is).
         """
-        from multiarm_pin.sim.controllers.object_pd import ObjectPD
+        from multiarm_pin.sim.controllers import controller_kernel
 
         s = stepper.system
-        if (integrator != "rk4" or stepper.solver not in FUSED_SOLVERS or not s.n_arms
-                or s.supports.n_rows
-                or type(stepper.controller) is not ObjectPD or not stepper.controller.compiled
-                or s.arm_set.compiled_model is None
-                or (stepper.wrench is not None and type(stepper.wrench) is not WrenchSchedule)
-                or stepper.torque_limit is not None):
-            return None
-        return cls(stepper)
+        if integrator not in ("rk4", "semi_implicit"):
+            return f"integrator {integrator!r} has no compiled loop (RK4 and semi-implicit only)"
+        if stepper.solver not in FUSED_SOLVERS:
+            return f"solver {stepper.solver!r} has no compiled path"
+        if not s.n_arms or s.supports.n_rows:
+            return "a system with supports or without arms is the contact loop's"
+        kernel, why = controller_kernel(stepper.controller)
+        if kernel not in cls.CONTROLLER_KERNELS:
+            return why or (f"the compiled closed loop runs the controllers "
+                           f"{', '.join(cls.CONTROLLER_KERNELS)}, not {kernel}")
+        if s.arm_set.compiled_model is None:
+            return unsupported_joints_note(s)
+        if stepper.wrench is not None and type(stepper.wrench) is not WrenchSchedule:
+            return f"the external wrench is a {type(stepper.wrench).__name__}"
+        if stepper.torque_limit is not None:
+            return "torque saturation"
+        return None
+
+    @classmethod
+    def for_run(cls, stepper, integrator: str) -> CompiledLoop | None:
+        """The compiled loop of a run, or None when :meth:`declines` gives a reason."""
+        return None if cls.declines(stepper, integrator) else cls(stepper, integrator)
 
     def ready(self, state: SystemState) -> bool:
         """True when the kernel can take the steps from ``state``: every row touches.
@@ -245,6 +269,18 @@ class CompiledLoop:
         rec.active[done] = self.stepper.active
         rec.solver[done] = RECORDED_SOLVER[self.stepper.unilateral]
         rec.mark_recorded(done.stop)
+
+
+def unsupported_joints_note(system) -> str:
+    """Why a system's arms are not on the compiled loops (a sentence).
+
+    It names the first joint whose kind the compiled rigid-body pass does not support.
+    """
+    from multiarm_pin.model.compiled_model import unsupported_joints
+
+    name, kind = unsupported_joints(system.arm_set.model)[0]
+    return (f"joint {name!r} is of kind {kind}, which the compiled rigid-body pass does not "
+            "support")
 
 
 def state_from_vector(x: np.ndarray, nq: int, nv: int) -> SystemState:

@@ -21,13 +21,12 @@ from __future__ import annotations
 import numpy as np
 
 from multiarm_pin._compiled import contact_loop as kernels
-from multiarm_pin._compiled import layout
+from multiarm_pin._compiled import layout, mlcp
 from multiarm_pin._compiled.function_pointers import entry_point
-from multiarm_pin.dynamics import mlcp
 from multiarm_pin.dynamics.unilateral import UNILATERAL_SOLVERS
 from multiarm_pin.sim import contact_events as ce
 from multiarm_pin.sim import event_location as el
-from multiarm_pin.sim.compiled_loop import state_from_vector
+from multiarm_pin.sim.compiled_loop import state_from_vector, unsupported_joints_note
 from multiarm_pin.sim.disturbances import WrenchSchedule
 from multiarm_pin.sim.result import Recorder
 from multiarm_pin.system import SystemState
@@ -93,10 +92,14 @@ class ContactLoop:
 
     def __init__(self, stepper):
         from multiarm_pin.dynamics.object_first import DEFAULT_RCOND_TOL, OBJECT_RCOND_TOL
+        from multiarm_pin.sim.controllers import controller_kernel
 
         s = stepper.system
         self.stepper = stepper
         self.system = s
+        # the controller whose compiled inputs the kernel reads; None: zero torque
+        zero = controller_kernel(stepper.controller)[0] == "zero_torque"
+        self.controller = None if zero else stepper.controller
         n, B, R = s.n_arms, s.n_blocks, s.rows_max
         nq, nv = s.nq, s.nv
         table = s._contact_rows
@@ -169,34 +172,55 @@ class ContactLoop:
         self._kept_controller = None  # (controller inputs, the kernel's controller tuple)
         self._zero_x = np.zeros(nv)
 
+    CONTROLLER_KERNELS = ("zero_torque", "object_pd")
+    """The compiled controllers the kernel runs (names of
+    :data:`~multiarm_pin.sim.controllers.CONTROLLER_KERNELS`)."""
+
     @classmethod
-    def for_run(cls, stepper, integrator: str) -> ContactLoop | None:
-        """The contact loop of a run, or None when the run is not of the kind it does.
+    def declines(cls, stepper, integrator: str) -> str | None:
+        """Why a run is not of the kind the kernel does, or None when it is.
 
         It does: RK4, unilateral rows (fingertips or supports), arms whose every joint the
-        compiled rigid-body pass supports (or none), zero torque or an
-        :class:`~multiarm_pin.sim.controllers.ObjectPD` on its compiled path, and no external
-        wrench or a :class:`~multiarm_pin.sim.disturbances.WrenchSchedule` itself (its
-        intervals are the kernel's table; a subclass with its own ``__call__`` is not), no
-        torque saturation, and no support with an ``extent`` (the kernel's supports are whole
-        planes: such runs are the stepper's, with the note :data:`FINITE_SUPPORTS_NOTE`).
+        compiled rigid-body pass supports (or none), a controller whose registry entry's
+        kernel (:func:`~multiarm_pin.sim.controllers.controller_kernel`) is one of
+        :data:`CONTROLLER_KERNELS`, and no external wrench or a
+        :class:`~multiarm_pin.sim.disturbances.WrenchSchedule` itself (its intervals are the
+        kernel's table; a subclass with its own ``__call__`` is not), no torque saturation,
+        no support with an ``extent`` (the kernel's supports are whole planes: such runs
+        are the stepper's, with the note :data:`FINITE_SUPPORTS_NOTE`), and no fingertip
+        that starts beside its face (:attr:`Stepper.beside_start`: the stepper keeps it out
+        of the recorded penetration).
         """
-        from multiarm_pin.sim.controllers.object_pd import ObjectPD
+        from multiarm_pin.sim.controllers import controller_kernel
 
         s = stepper.system
-        ctrl = stepper.controller
-        if integrator != "rk4" or not stepper.unilateral or stepper.torque_limit is not None:
-            return None  # saturation: the kernel adds the controller's torque as it is
+        if integrator != "rk4":
+            return f"integrator {integrator!r} has no compiled loop (RK4 only)"
+        if not stepper.unilateral:
+            return "a system without unilateral rows is the closed loop's"
+        if stepper.torque_limit is not None:
+            return "torque saturation"  # the kernel adds the controller's torque as it is
         if stepper.wrench is not None and type(stepper.wrench) is not WrenchSchedule:
-            return None  # a schedule of another kind (a subclass): its own __call__ decides
+            return f"the external wrench is a {type(stepper.wrench).__name__}"
         if s.supports.finite:
-            return None  # rectangles: off-edge events, which the kernel does not locate
+            return FINITE_SUPPORTS_NOTE  # off-edge events, which the kernel does not locate
+        if stepper.beside_start.any():
+            return ("a fingertip starts beside its face (the stepper keeps it out of the "
+                    "recorded penetration)")
         if s.n_arms and (s.compiled is None or s.arm_set.compiled_model is None):
-            return None
-        if ctrl is not None and (type(ctrl) is not ObjectPD or not ctrl.compiled
-                                 or not s.n_arms):
-            return None
-        return cls(stepper)
+            return unsupported_joints_note(s)
+        kernel, why = controller_kernel(stepper.controller)
+        if kernel not in cls.CONTROLLER_KERNELS:
+            return why or (f"the compiled contact loop runs the controllers "
+                           f"{', '.join(cls.CONTROLLER_KERNELS)}, not {kernel}")
+        if kernel != "zero_torque" and not s.n_arms:  # pragma: no cover - no arms, no control
+            return "a controller without arms"
+        return None
+
+    @classmethod
+    def for_run(cls, stepper, integrator: str) -> ContactLoop | None:
+        """The contact loop of a run, or None when :meth:`declines` gives a reason."""
+        return None if cls.declines(stepper, integrator) else cls(stepper)
 
     def ready(self, state: SystemState) -> bool:
         """True when the kernel can take the steps from ``state``.
@@ -204,7 +228,7 @@ class ContactLoop:
         The first time, an ``object_pd`` controller fixes its state from a reference (numpy)
         evaluation of ``state`` (:meth:`ObjectPD.prepare`).
         """
-        ctrl = self.stepper.controller
+        ctrl = self.controller
         if ctrl is None:
             return True
         if ctrl.kernel_inputs() is None:
@@ -221,7 +245,7 @@ class ContactLoop:
         """
         s = self.system
         n, m, k = s.n_arms, self._m, self._k
-        ctrl = self.stepper.controller
+        ctrl = self.controller
         if ctrl is None:
             inputs = None
         else:
@@ -341,7 +365,7 @@ class ContactLoop:
             stepper._event(t, EVENT_KINDS[int(kind)], int(b), int(r), phi_dot=before,
                            phi_dot_after=after, impulse=impulse, rebound=bool(rebound))
         stepper.active = active & s.contact_mask
-        ctrl = stepper.controller
+        ctrl = self.controller
         if ctrl is not None:
             for t, rank in self.onsets[:int(self.n_onsets[0])].tolist():
                 ctrl.warnings.append(f"t = {t:.6g} s: object_pd: "

@@ -15,15 +15,42 @@ they carry along; the rules (tolerances, bands) are those of
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from multiarm_pin.sim import contact_events as ce
-from multiarm_pin.system import SystemState
+from multiarm_pin.system import ContactRows, MultiArmSystem, SystemState
 
-if TYPE_CHECKING:  # pragma: no cover - typing only
-    from multiarm_pin.sim.stepper import Stepper
+
+class Stepping(Protocol):
+    """What the searches use of the stepper that calls them.
+
+    :class:`~multiarm_pin.sim.stepper.Stepper` (which imports this module): its system, its
+    active set (``(B, R)`` bool), its finite-support rows, and these methods.
+    """
+
+    system: MultiArmSystem
+    unilateral: bool
+    active: np.ndarray
+    finite_rows: np.ndarray
+
+    def evaluate(self, t: float, state: SystemState) -> tuple:
+        """``(solution, evaluation, tau, rows)`` at ``(t, state)``, the current active set."""
+
+    def step(self, integrator: str, t: float, state: SystemState, sol: Any,
+             h: float) -> SystemState:
+        """One step of size ``h`` [s] from ``(t, state)`` whose solution is ``sol``."""
+
+    def edge_margins(self, state: SystemState) -> np.ndarray:
+        """(B, R) edge margins [m] at a state."""
+
+    def gaps(self, state: SystemState) -> np.ndarray:
+        """(B, R) gaps [m] of every row at a state."""
+
+    def rows_at(self, t: float, state: SystemState) -> ContactRows:
+        """The contact rows at a state."""
+
 
 RESTING_RELEASE = 1e-300
 """Value of :func:`release` for a group whose rows carry no force and none lifts: positive
@@ -120,7 +147,7 @@ def release(sol, rows: np.ndarray) -> float:
     return max(float(sol.mu[rows].sum()), RESTING_RELEASE)
 
 
-def locate_separation(stepper: Stepper, integrator: str, t: float, state: SystemState, sol,
+def locate_separation(stepper: Stepping, integrator: str, t: float, state: SystemState, sol,
                       h: float, new: SystemState, t_end: float):
     """The first separation inside a step, or None.
 
@@ -171,7 +198,7 @@ def locate_separation(stepper: Stepper, integrator: str, t: float, state: System
     return theta, s_hi, rows & (sol_hi.mu <= 0.0)
 
 
-def locate_off_edge(stepper: Stepper, integrator: str, t: float, state: SystemState, sol,
+def locate_off_edge(stepper: Stepping, integrator: str, t: float, state: SystemState, sol,
                     h: float, new: SystemState):
     """The first active row of a finite support leaving its rectangle inside a step, or None.
 
@@ -215,7 +242,7 @@ def locate_off_edge(stepper: Stepper, integrator: str, t: float, state: SystemSt
     return theta, s_hi, rows & (stepper.edge_margins(s_hi) <= 0.0)
 
 
-def locate_touchdown(stepper: Stepper, integrator: str, t: float, state: SystemState, sol,
+def locate_touchdown(stepper: Stepping, integrator: str, t: float, state: SystemState, sol,
                      h: float, watch: np.ndarray, g_hi: float) -> tuple[float, SystemState]:
     """``θ`` of the step where the smallest watched gap first reaches ``[-tol, 0]``.
 

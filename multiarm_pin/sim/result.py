@@ -50,7 +50,9 @@ class SimulationResult:
             world origin [kg m/s, kg m²/s].
         constraint_violation: (T,) ``max |φ|`` over bilateral and active rows, and the
             largest penetration ``-φ`` of separated rows [m] (not of support rows beside a
-            finite support's rectangle, or fallen past its edge: they penetrate nothing).
+            finite support's rectangle, or fallen past its edge, nor of fingertips that
+            started beside their face and have not been above its plane since: they
+            penetrate nothing).
         solver: (T,) name of the solver used at each sample.
         warnings: contact separations (unilateral contact with ``μ < 0``) with time and
             arm/contact index, at each onset.
@@ -190,6 +192,8 @@ class Recorder:
         beside = stepper.beside(ct)
         if beside is not None:  # below the plane beside (or under) a finite support
             free &= ~beside
+        stepper.update_beside_start(ct)
+        free &= ~stepper.beside_start  # fingertips that started beside their face
         viol = np.concatenate([np.abs(ct.phi[held]), np.maximum(-ct.phi[free], 0.0), [0.0]])
         self.violation[k] = float(viol.max())
         self.active[k] = stepper.active

@@ -57,7 +57,7 @@ from multiarm_pin._compiled.closed_loop import STAGE_OK, STAGE_RELEASE
 from multiarm_pin._compiled.contact_loop import STAGE_EVENTS_FULL
 from multiarm_pin._registry import lookup
 from multiarm_pin.constraints.joint import INITIAL_GAP_TOLERANCE
-from multiarm_pin.dynamics import solver_entry
+from multiarm_pin.dynamics.solve import solver_for_rows
 from multiarm_pin.exceptions import DynamicsError, InputError, RunStoppedError
 from multiarm_pin.model.rigid_object import ObjectState
 from multiarm_pin.sim.compiled_loop import CompiledLoop
@@ -106,8 +106,9 @@ INTEGRATORS: dict[str, IntegratorEntry] = {e.name: e for e in (
 """Every integrator, by name (the names :func:`simulate` and scenarios accept)."""
 
 MONITOR_STRETCH = 512
-"""Largest number of samples the compiled loops simulate in one call: a run's monitors
-(:func:`simulate`'s ``monitors``) see each such stretch as soon as it is done."""
+"""Largest number of samples the compiled loops simulate in one call, and that a run's
+monitors (:func:`simulate`'s ``monitors``) are shown at once: they see each stretch soon after
+it is done."""
 
 MONITOR_STRIDE = 32
 """Samples the stepper records one by one before the monitors are shown them."""
@@ -140,6 +141,7 @@ def simulate(
     external_wrench: WrenchSchedule | None = None,
     torque_limit=None,
     monitors: Sequence[Monitor] = (),
+    compiled: bool = True,
 ) -> SimulationResult:
     """Simulate the closed-loop system from ``initial_state`` for ``duration`` seconds.
 
@@ -152,7 +154,10 @@ def simulate(
         duration: simulated time [s] (> 0).
         dt: sampling period [s] (and step of the fixed-step integrators).
         integrator: ``"rk4"``, ``"rk45"`` or ``"semi_implicit"``.
-        solver: forward-dynamics solver name (:data:`multiarm_pin.dynamics.SOLVERS`).
+        solver: forward-dynamics solver name (:data:`multiarm_pin.dynamics.SOLVERS`). With
+            unilateral rows only the solvers whose entry serves them (``auto``,
+            ``object_first``: the mixed LCP on the object-first Delassus operator); any other
+            is refused, never replaced.
         baumgarte: ``(α, β)`` [1/s] constraint stabilisation (thesis Sec 4.3), or None.
         progress: optional ``callable(fraction)`` called as the run advances (0..1).
         check_initial: validate the initial state first.
@@ -177,6 +182,9 @@ def simulate(
             sample or None. The run then ends: :class:`~multiarm_pin.exceptions.
             RunStoppedError` is raised, its partial result ending at that sample (the samples
             after it are dropped). Stretches hold at most :data:`MONITOR_STRETCH` samples.
+        compiled: True (default): the compiled loops take the steps they serve. False: every
+            step is taken by the numpy reference (the stepper), nothing is compiled for the
+            loops; the results equal the compiled run's to rounding.
 
     Returns:
         :class:`SimulationResult`.
@@ -188,6 +196,8 @@ def simulate(
     Raises:
         InputError: unknown integrator or solver (lists the known ones), bad ``dt``/duration,
             or a run whose record would not fit in memory (before allocating it).
+        UnsupportedSolverError: a solver that cannot serve the system's unilateral rows
+            (names the solver and the rows).
         ConstraintError: an initial state that violates the joints.
         DynamicsError: NaN in the state, or no solution of the dynamics (with the time).
         RunStoppedError: a monitor found a violation (``monitor``, ``sample``, ``t``).
@@ -196,7 +206,8 @@ def simulate(
     if max_record_bytes is None:
         max_record_bytes = default_record_limit()
     lookup(INTEGRATORS, integrator, "integrator")
-    solver_entry(solver)
+    solver_for_rows(solver, [label for b, r, label in system.contact_labels
+                             if system.contact_unilateral[b, r]])
     duration, dt = float(duration), float(dt)
     if not (np.isfinite(dt) and dt > 0):
         raise InputError(f"dt: expected a positive time step [s], got {dt}")
@@ -251,7 +262,8 @@ def simulate(
         stepper.init_active(stepper.blocks_at(0.0, state)[1], initial_tol)
     watch = _Watch(monitors)
     try:
-        _integrate(stepper, rec, state, times, integrator, rtol, atol, report, watch)
+        _integrate(stepper, rec, state, times, integrator, rtol, atol, report, watch,
+                   compiled)
         watch.finish()
     except BaseException as exc:  # keep what was simulated, for the caller to save
         stop = watch.settle()  # a violation found before the failure ends the run there
@@ -268,18 +280,26 @@ def simulate(
 
 
 def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.ndarray,
-               integrator: str, rtol: float, atol: float, report, watch: _Watch) -> None:
-    """Run the integrator over the time grid, recording every sample (and watching them)."""
+               integrator: str, rtol: float, atol: float, report, watch: _Watch,
+               compiled: bool = True) -> None:
+    """Run the integrator over the time grid, recording every sample (and watching them).
+
+    ``compiled`` False: the compiled loops take no step (the numpy reference alone).
+    """
     n_steps = len(times) - 1
+    note = reference_note(stepper, integrator) if compiled else None
+    if note is not None:
+        stepper.notes.append(note)
     if integrator == "rk45":
         _run_rk45(stepper, rec, state, times, rtol, atol, report, watch)
     else:
         every = max(1, n_steps // 100)
-        loop = CompiledLoop.for_run(stepper, integrator)
-        events = ContactLoop.for_run(stepper, integrator)
+        loop = CompiledLoop.for_run(stepper, integrator) if compiled else None
+        events = ContactLoop.for_run(stepper, integrator) if compiled else None
         if integrator == "rk4" and stepper.edges:
             stepper.notes.append(FINITE_SUPPORTS_NOTE)
-        stretch = _Stretch(every, n_steps)
+        stretch = _Stretch(every, n_steps, tapered=bool(watch.monitors))
+        watch.longest_stretch(stretch.top)
         k, retaken = 0, -1  # the sample whose step the stepper took last
         while True:
             if loop is not None and loop.ready(state):
@@ -323,6 +343,25 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
             k += 1
 
 
+REFERENCE_NOTE = "the run is taken by the reference (numpy) stepper, not a compiled loop: {why}"
+"""The note (once in a run's warnings) of a run that no compiled loop serves, and why."""
+
+
+def reference_note(stepper: Stepper, integrator: str) -> str | None:
+    """The note of a run that the compiled loop of its kind declines, or None.
+
+    The loop of its kind is :class:`ContactLoop` with unilateral rows, :class:`CompiledLoop`
+    without; its ``declines`` gives the reason (the integrator, the solver, the controller's
+    registry entry, a joint kind...). Torque saturation and finite supports have notes of
+    their own.
+    """
+    loop = ContactLoop if stepper.unilateral else CompiledLoop
+    why = loop.declines(stepper, integrator)
+    if why is None or why == FINITE_SUPPORTS_NOTE or stepper.torque_limit is not None:
+        return None
+    return REFERENCE_NOTE.format(why=why)
+
+
 class _Stretch:
     """How many samples the next compiled call takes.
 
@@ -335,15 +374,24 @@ class _Stretch:
 
     WALL = 0.01
 
-    def __init__(self, every: int, n_steps: int):
+    def __init__(self, every: int, n_steps: int, tapered: bool = False):
         self.size = min(every, MONITOR_STRETCH)
         self.top = min(max(every, n_steps // 10), MONITOR_STRETCH)
         self.n_samples = n_steps + 1
+        self.tapered = tapered
         self._t0 = 0.0
 
     def end(self, k: int) -> int:
-        """One past the last sample of a call from sample ``k``."""
-        return min(self.n_samples, k + self.size)
+        """One past the last sample of a call from sample ``k``.
+
+        Tapered (a run with monitors): at most a quarter of the samples left, and at least
+        :data:`MONITOR_STRIDE`, so that the checks of the last stretches, which nothing
+        simulated beside them hides, are short.
+        """
+        size = self.size
+        if self.tapered:
+            size = min(size, max(MONITOR_STRIDE, (self.n_samples - k) // 4))
+        return min(self.n_samples, k + size)
 
     def __enter__(self):
         self._t0 = time.perf_counter()
@@ -384,13 +432,28 @@ class _Watch:
     have ended) and read only samples that are settled (the loops write later ones). A
     violation is raised at the next call (or at :meth:`finish`): the samples simulated since
     are dropped, so the run ends exactly as if the checks had been made in line.
+
+    While the worker is still checking, the samples recorded since wait and are shown
+    together once it is done (at most :attr:`batch` samples at once, then the loop waits for
+    it): a check's fixed cost is paid once for several stretches where the checks fall behind
+    (a machine without a free core), and a stop still comes within two batches of its sample.
     """
 
     def __init__(self, monitors: Sequence[Monitor]):
         self.monitors = tuple(monitors)
         self.checked = 0  # samples shown to the monitors
+        self.batch = MONITOR_STRETCH  # most samples shown at once
+        self._step = 1  # most samples a loop records between two calls
         self._pool: ThreadPoolExecutor | None = None
         self._pending: Future | None = None
+
+    def longest_stretch(self, samples: int) -> None:
+        """A loop's calls come at most ``samples`` samples apart.
+
+        Batches then hold at most twice that (and :data:`MONITOR_STRETCH`).
+        """
+        self._step = max(1, int(samples))
+        self.batch = min(MONITOR_STRETCH, 2 * self._step)
 
     def recorded(self, rec: Recorder, count: int) -> None:
         """Samples ``0 .. count - 1`` are recorded; show the monitors the settled ones.
@@ -404,6 +467,9 @@ class _Watch:
         end = count if last else count - 1
         if end - self.checked < (1 if last else MONITOR_STRIDE):
             return
+        busy = self._pending is not None and not self._pending.done()
+        if busy and not last and end - self.checked + self._step <= self.batch:
+            return  # shown with the next ones, once the worker is done
         k0, self.checked = self.checked, end
         self._raise(self._collect())
         if last:
@@ -518,6 +584,7 @@ __all__ = [
     "IntegratorEntry",
     "MONITOR_STRETCH",
     "MONITOR_STRIDE",
+    "REFERENCE_NOTE",
     "ContactEvent",
     "Monitor",
     "Controller",
@@ -525,5 +592,6 @@ __all__ = [
     "default_record_limit",
     "partial_result",
     "record_bytes",
+    "reference_note",
     "simulate",
 ]

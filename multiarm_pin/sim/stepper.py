@@ -45,6 +45,10 @@ class Stepper:
         fallen: (B, R) bool, rows of finite supports that went below their plane while
             outside its rectangle and have not come back above it (never watched for a
             touchdown, nor counted as penetrating; :mod:`multiarm_pin.sim.contact_events`).
+        beside_start: (B, R) bool, unilateral rows that started below their plane without
+            touching (a fingertip of a joint that starts apart, beside its face: its gap is
+            a distance to the face's extended plane) and have not come above it since: not
+            counted as penetrating (the builder checked that no tip starts in the object).
         notes: notes of the run (the result's warnings), e.g. why it is not on a compiled loop.
     """
 
@@ -73,6 +77,7 @@ class Stepper:
         if self.edges:
             self.finite_rows[system.n_arms, :sup.n_rows] = sup.finite_rows
         self.fallen = np.zeros_like(self.finite_rows)
+        self.beside_start = np.zeros_like(self.finite_rows)
         self._cache = None  # (t, state, active, result) of the last evaluation
         # id(state) -> (state, rows) of the last ROWS_KEPT states whose rows were evaluated
         # (the state is kept so that its id is not reused while the entry lives)
@@ -220,15 +225,25 @@ class Stepper:
         self.events.append(ContactEvent(float(t), kind, int(b), int(r), label, body, **kw))
 
     def init_active(self, rows: ContactRows, tol: float) -> None:
-        """Active at t = 0: bilateral rows, and unilateral rows whose gap is within ``tol``.
+        """Active at t = 0: bilateral rows, and unilateral rows whose gap is within ``±tol``.
 
-        A row of a finite support is active only if its point is inside the rectangle.
+        A row of a finite support is active only if its point is inside the rectangle. A
+        fingertip that starts apart (``Joint.starts_apart``) beside its face has a negative
+        gap to the face's extended plane: it touches nothing and is not active.
         """
         s = self.system
-        touching = rows.phi <= tol
+        touching = np.abs(rows.phi) <= tol
         if self.edges:
             touching &= self.rows_margins(rows) > 0.0
         self.active = s.contact_mask & (~s.contact_unilateral | touching)
+        self.beside_start = np.zeros_like(self.active)
+        self.beside_start[:s.n_arms] = (s.contact_mask & s.contact_unilateral & ~self.active
+                                        & (rows.phi < -tol))[:s.n_arms]
+
+    def update_beside_start(self, rows: ContactRows) -> None:
+        """Clear :attr:`beside_start` on the rows above their plane or touching."""
+        if self.beside_start.any():
+            self.beside_start &= (rows.phi < -ce.GAP_TOLERANCE) & ~self.active
 
     # ------------------------------------------------------------------ finite supports
     def _margins(self, support_points: np.ndarray) -> np.ndarray:

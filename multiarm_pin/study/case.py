@@ -65,6 +65,9 @@ def run_case(task: CaseTask) -> dict:
             values, extra = _simulation_case(task)
         summary.update(extra)
         status, error = "ok", ""
+    except _StoppedCaseError as exc:
+        summary.update(exc.extra)
+        values, status, error = exc.values, "error", f"RunStoppedError: {exc}"
     except MultiArmError as exc:
         values, status, error = {}, "error", f"{type(exc).__name__}: {exc}"
     except Exception as exc:  # noqa: BLE001 - a case's bug is its row, not the study's end
@@ -85,8 +88,16 @@ def run_case(task: CaseTask) -> dict:
 
 
 def _simulation_case(task: CaseTask) -> tuple[dict, dict]:
-    """Build and simulate the overridden scenario as ``multiarm-pin run`` does, no files."""
+    """Build and simulate the overridden scenario as ``multiarm-pin run`` does, no files.
+
+    The scenario's feasibility is applied as the run applies it
+    (:mod:`multiarm_pin.app.run_feasibility`): bodies colliding at the initial state are
+    bad input, the collision scan runs beside the simulation, and a ``stop`` policy ends the
+    run at its first violation: :class:`_StoppedCaseError` then carries the metrics of the
+    samples up to and including the violation.
+    """
     from multiarm_pin.app.precheck import precheck_warnings
+    from multiarm_pin.app.run_feasibility import apply_policies, check_initial_state, run_monitors
     from multiarm_pin.app.runner import (
         input_warnings,
         scenario_controller,
@@ -94,8 +105,8 @@ def _simulation_case(task: CaseTask) -> tuple[dict, dict]:
         summarize,
     )
     from multiarm_pin.app.scenario import build_scenario, parse_scenario
-    from multiarm_pin.exceptions import ScenarioError
-    from multiarm_pin.feasibility import feasibility_report
+    from multiarm_pin.exceptions import RunStoppedError, ScenarioError
+    from multiarm_pin.sim.simulation import partial_result
     from multiarm_pin.study.metrics import simulation_metrics
     from multiarm_pin.study.spec import apply_overrides
 
@@ -107,16 +118,40 @@ def _simulation_case(task: CaseTask) -> tuple[dict, dict]:
                             f"than the time step simulation.dt = {sim.dt:g} s")
     built = build_scenario(sc, load_visuals=False)
     controller = scenario_controller(built)
+    scene = check_initial_state(built)
     warnings = input_warnings(built, sim.duration) + precheck_warnings(built, sim.dt)
+    monitors = run_monitors(built, scene)
+    status, stopped = "complete", None
     t0 = time.perf_counter()
-    result = simulate_built(built, controller, sim.duration, sim.dt, sim.solver)
+    try:
+        result = simulate_built(built, controller, sim.duration, sim.dt, sim.solver,
+                                monitors=monitors)
+    except RunStoppedError as exc:
+        result, status, stopped = partial_result(exc), "failed", str(exc)
     wall = time.perf_counter() - t0
+    status, error, report = apply_policies(built, result, scene, status, None, stopped,
+                                           monitors)
     summary = summarize(built, result, sim.solver, wall)
-    summary["input_warnings"] = list(warnings)
-    report = feasibility_report(built.system, result, ground=sc.ground)
+    summary.update(input_warnings=list(warnings), status=status, error=error,
+                   t_end=float(result.t[-1]))
     summary.update(report.as_summary())
     values = simulation_metrics(built, result, controller, summary, report)
-    return values, {"run": summary, "metrics": values}
+    extra = {"run": summary, "metrics": values}
+    if status != "complete":
+        raise _StoppedCaseError(error, values, extra)
+    return values, extra
+
+
+class _StoppedCaseError(MultiArmError):
+    """A case that a ``limits:`` ``stop`` policy ended.
+
+    Its row is an error row that keeps the metrics of the samples simulated up to and
+    including the violation (its ``feasible`` is 0).
+    """
+
+    def __init__(self, message: str, values: dict, extra: dict):
+        super().__init__(message)
+        self.values, self.extra = values, extra
 
 
 def _grasp_case(task: CaseTask) -> tuple[dict, dict]:

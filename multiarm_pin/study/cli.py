@@ -1,8 +1,9 @@
 """``multiarm-pin sweep STUDY.yaml --out DIR [--workers N | --scheduler ADDRESS] [--resume]``.
 
-One concept at several layers: each layer's ``cli.py`` (``grasp``, ``study``, ``design``)
-holds its own subcommand of ``multiarm-pin`` (``configure_parser`` and ``run``), which
-:mod:`multiarm_pin.app.cli` wires into the one command line.
+One concept at several layers: the subcommands of ``multiarm-pin`` above the application
+shell (``study/cli.py``, ``design/cli.py``; the grasp analysis's is ``app/grasp_cli.py``) hold
+their ``configure_parser`` and ``run``, which :mod:`multiarm_pin.app.cli`, the command line
+at the top of the layers, wires into the one command line.
 """
 
 from __future__ import annotations

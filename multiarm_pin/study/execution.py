@@ -46,10 +46,8 @@ A worker runs its case in a thread while its event loop and statistical profiler
 other threads of the same process, so every wake-up of those takes the GIL from the case
 (after ``sys.getswitchinterval()``) and hands it back, ~150 times a second with Dask's
 defaults; when the machine's other core is busy, those threads also queue for the case's
-core. Measured (``benchmarks/study_worker_overhead.py``, four interleaved rounds on a
-shared machine): a study of ~0.85 s cases on a 1-worker cluster took +8 to +16 % (median
-+11 %) over a plain loop with Dask's defaults, +1 to +8 % (median +3 %) with these
-settings, while the case's own CPU time differed by at most ~5 %. Hence:
+core (``benchmarks/study_worker_overhead.py`` measures a study's time over a plain loop
+with Dask's defaults and with these settings). Hence:
 
 - ``profile.enabled: False``: no stack sample of the running case every 10 ms (the
   profile feeds the dashboard, which this cluster does not serve);

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from multiarm_pin.dynamics import solve
-from multiarm_pin.dynamics.blocks import SystemBlocks, expand_rows, restrict_rows
+from multiarm_pin.dynamics.blocks import SystemBlocks, expand_rows, restrict_rows, select_rows
 from multiarm_pin.exceptions import InputError
 
 from .synthetic import random_system
@@ -39,6 +39,10 @@ def test_restrict_rows_equals_blocks_built_from_the_kept_rows():
     np.testing.assert_allclose(s1.a_o, s2.a_o, rtol=1e-10, atol=1e-10)
     mu = expand_rows(s1.mu, index)
     assert mu[0, 1] == 0.0 and mu[1, 0] == 0.0
+    # select_rows takes full rows' values at the kept rows: the inverse of expand_rows
+    np.testing.assert_array_equal(select_rows(mu, index), np.where(index >= 0, s1.mu, 0.0))
+    full = np.arange(12.0).reshape(3, 4)
+    assert select_rows(full, index).tolist() == [[0, 2, 3, 0], [5, 6, 0, 0], [8, 9, 0, 0]]
     np.testing.assert_allclose(mu[0, [0, 2, 3]], s2.mu[0, :3], rtol=1e-9, atol=1e-9)
     # the kept columns themselves, in order; the rest is valid padding (checked constructor)
     for i, rows in enumerate([[0, 2, 3], [1, 2], [0, 1]]):

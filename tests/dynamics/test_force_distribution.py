@@ -68,10 +68,12 @@ def best_margin_lp(W, w, U, cap=1e3) -> float:
 
 def assert_kkt_optimal(W, w, U, margin, mu, tol=1e-8):
     """Certificate for the convex QP min ½‖μ‖² s.t. Wμ = w, μ_U >= m:
-    μ = Wᵀν + Σ_active λ_k e_k with λ >= 0 (stationarity, dual feasibility)."""
+    μ = Wᵀν + Σ_active λ_k e_k with λ >= 0 (stationarity, dual feasibility). ``margin``:
+    one for all or one per multiplier."""
     scale = max(np.abs(mu).max(), 1.0)
+    margin = np.broadcast_to(np.asarray(margin, dtype=float), mu.shape)
     np.testing.assert_allclose(W @ mu, w, atol=tol * scale)
-    assert np.all(mu[U] >= margin - tol * scale)
+    assert np.all(mu[U] >= margin[U] - tol * scale)
     active = np.flatnonzero(U & (mu <= margin + 1e-7 * scale))
     E = np.zeros((len(mu), len(active)))
     E[active, np.arange(len(active))] = 1.0
@@ -212,3 +214,146 @@ def test_no_unilateral_gives_min_norm_and_bad_input_raises():
     blocks = box_blocks(rng)
     with pytest.raises(InputError, match=r"shape \(2, 4\)"):
         distribute_forces(blocks, w, np.ones(7, bool))
+
+
+# The box's four bottom vertices on a table (normal +z): rows 0, 1 on the +x edge (a pivot).
+BOTTOM = [(0.3, 0.2, -0.1), (0.3, -0.2, -0.1), (-0.3, 0.2, -0.1), (-0.3, -0.2, -0.1)]
+
+
+def support_rows(omega):
+    """(G (4, 6), κ (4,)) of the bottom vertices at rest orientation, angular velocity ω."""
+    G_s = contact_wrenches([(p, (0, 0, 1)) for p in BOTTOM]).T
+    kappa = np.array([np.cross(omega, np.cross(omega, p))[2] for p in BOTTOM])
+    return G_s, kappa
+
+
+def test_per_multiplier_margins_are_the_qp_with_those_bounds():
+    rng = np.random.default_rng(11)
+    W = contact_wrenches(CONTACTS)
+    w = np.r_[0.0, 0.0, MASS * G, 0.0, 0.0, 0.0] + rng.normal(size=6)
+    U = np.ones(7, dtype=bool)
+    m = np.array([1.0, 0.0, 3.0, 0.5, 2.0, 0.0, 4.0])
+    mu = min_norm_forces(W, w, U, m)
+    assert_kkt_optimal(W, w, U, m, mu)  # an optimality certificate of the QP
+    assert np.any(np.abs(mu - m) < 1e-9) and np.all(mu >= m - 1e-9)  # some bound is active
+    # one margin for all is the scalar margin
+    np.testing.assert_array_equal(min_norm_forces(W, w, U, np.full(7, 2.0)),
+                                  min_norm_forces(W, w, U, 2.0))
+    with pytest.raises(InputError, match="margin"):
+        min_norm_forces(W, w, U, np.array([1.0, -1.0, 0, 0, 0, 0, 0]))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_forces_with_the_pivot_pressing_are_the_qp_and_keep_it_on_the_table(seed):
+    """Seven arm contacts (form closure) and the two +x bottom vertices pressing with a
+    margin: the object's acceleration keeps them on the table (``G a + κ = 0``), the
+    object's equation holds with the support forces, and the stacked forces are the
+    minimum-norm ones under the margins (a KKT certificate of the QP)."""
+    from multiarm_pin.dynamics.force_distribution import distribute_with_supports
+
+    rng = np.random.default_rng(seed)
+    b = box_blocks(rng)
+    omega = 0.3 * rng.normal(size=3)
+    G_s, kappa = support_rows(omega)
+    a_d = rng.normal(size=6)
+    sm = np.array([3.0, 3.0, np.nan, np.nan])
+    U = np.ones((2, 4), dtype=bool)
+    U[1, 3] = False  # padding
+    d = distribute_with_supports(b, a_d, U & b.constraint_mask, 1.0, G_s, kappa, sm)
+    np.testing.assert_allclose(G_s[:2] @ d.a_o + kappa[:2], 0.0, atol=1e-12)
+    np.testing.assert_allclose(d.unreached, 0.0, atol=1e-9)  # rank 6: all reachable
+    lhs = b.stacked_W_o() @ d.forces.mu_flat + G_s.T @ d.support_mu
+    np.testing.assert_allclose(lhs, b.M_o @ d.a_o - b.h_o, atol=1e-9)
+    assert d.support_mu[2] == d.support_mu[3] == 0.0
+    assert np.all(d.support_mu[:2] >= 3.0 - 1e-9) and d.forces.min_unilateral >= 1.0 - 1e-9
+    W = np.hstack([b.stacked_W_o(), G_s[:2].T])
+    w = b.M_o @ d.a_o - b.h_o
+    m = np.r_[np.ones(7), 3.0, 3.0]
+    assert_kkt_optimal(W, w, np.ones(9, dtype=bool), m, np.r_[d.forces.mu_flat,
+                                                              d.support_mu[:2]])
+    # the supports act on the object like an external wrench: the inverse dynamics of the
+    # arms with it in h_o returns the same arm multipliers
+    res = inverse_dynamics(b.replaced(h_o=b.h_o + d.support_wrench), d.a_o, None,
+                           d.forces.mu_I, d.forces.basis)
+    np.testing.assert_allclose(res.mu, d.forces.mu, atol=1e-9)
+
+
+def test_an_unreachable_wrench_is_left_to_the_motion_without_moving_the_pivot():
+    """Two arm contacts (±x) and the pivot: rank 4. The wrench part no contact makes is
+    ``M_o⁻¹``-orthogonal to every column (it changes no contact's acceleration) and the
+    pivot stays on the table; without supports or arms the desired motion is taken as is."""
+    from multiarm_pin.dynamics.force_distribution import distribute_with_supports
+
+    rng = np.random.default_rng(5)
+    W_c = contact_wrenches([((-0.3, 0.0, 0.05), (1, 0, 0)), ((0.3, 0.0, -0.08), (-1, 0, 0))])
+    M_o = np.diag([MASS] * 3 + [0.1, 0.2, 0.25])
+    h_o = np.r_[0.0, 0.0, -MASS * G, 0.0, 0.0, 0.0]
+    b = SystemBlocks.from_lists([random_spd(rng, 6)] * 2, [np.zeros(6)] * 2,
+                                [rng.normal(size=(6, 1))] * 2, [W_c[:, :1], W_c[:, 1:]],
+                                [np.zeros(1)] * 2, M_o, h_o)
+    G_s, kappa = support_rows(np.zeros(3))
+    a_d = rng.normal(size=6)
+    d = distribute_with_supports(b, a_d, np.ones((2, 1), bool), 0.0, G_s, kappa,
+                                 np.array([0.0, 0.0, np.nan, np.nan]))
+    W = np.hstack([W_c, G_s[:2].T])
+    assert np.linalg.norm(d.unreached) > 1e-3
+    np.testing.assert_allclose(W.T @ np.linalg.solve(M_o, d.unreached), 0.0, atol=1e-10)
+    np.testing.assert_allclose(G_s[:2] @ d.a_o + kappa[:2], 0.0, atol=1e-12)
+    lhs = W_c @ d.forces.mu_flat + G_s.T @ d.support_mu
+    np.testing.assert_allclose(lhs, M_o @ d.a_o - h_o, atol=1e-9)
+
+
+def test_best_effort_forces_push_and_make_the_closest_wrench():
+    """Two opposed arm contacts and the pivot, asked to turn the box about -y (the far
+    side down, into the table: only pulls would do it): without ``best_effort`` it
+    raises; with it, every multiplier meets its margin and the wrench is the closest one
+    (in the M_o⁻¹ metric) that such forces make (the bounded least-squares optimum: an
+    independent solve on the shifted, nonnegative multipliers by NNLS)."""
+    from scipy.optimize import nnls
+
+    from multiarm_pin.dynamics.force_distribution import distribute_with_supports
+
+    rng = np.random.default_rng(2)
+    W_c = contact_wrenches([((-0.3, 0.0, 0.05), (1, 0, 0)), ((0.3, 0.0, -0.08), (-1, 0, 0))])
+    M_o = np.diag([MASS] * 3 + [0.1, 0.2, 0.25])
+    h_o = np.r_[0.0, 0.0, -MASS * G, 0.0, 0.0, 0.0]
+    b = SystemBlocks.from_lists([random_spd(rng, 6)] * 2, [np.zeros(6)] * 2,
+                                [rng.normal(size=(6, 1))] * 2, [W_c[:, :1], W_c[:, 1:]],
+                                [np.zeros(1)] * 2, M_o, h_o)
+    G_s, kappa = support_rows(np.zeros(3))
+    a_d = np.array([0.0, 0.0, 0.0, 0.0, -100.0, 0.0])
+    sm = np.array([2.0, 2.0, np.nan, np.nan])
+    U = np.ones((2, 1), bool)
+    with pytest.raises(DynamicsError):
+        distribute_with_supports(b, a_d, U, 5.0, G_s, kappa, sm)
+    d = distribute_with_supports(b, a_d, U, 5.0, G_s, kappa, sm, best_effort=True)
+    m = np.array([5.0, 5.0, 2.0, 2.0])
+    x = np.r_[d.forces.mu_flat, d.support_mu[:2]]
+    assert np.all(x >= m - 1e-9)
+    W = np.hstack([W_c, G_s[:2].T])
+    a = d.a_o + np.linalg.solve(M_o, d.unreached)  # the acceleration before step 2's rest
+    w = M_o @ a - h_o
+    np.testing.assert_allclose(W @ x + d.unreached, w, atol=1e-9)
+    ev, V = np.linalg.eigh(M_o)
+    S = (V / np.sqrt(ev)) @ V.T
+    y, _ = nnls(S @ W, S @ (w - W @ m))
+    ref = np.linalg.norm(S @ (W @ (y + m) - w))
+    assert np.linalg.norm(S @ d.unreached) <= ref + 1e-9
+
+
+def test_per_row_arm_margins_with_supports_are_the_qp():
+    """Arm margins given row by row (0 on two rows: they may rest without force) and the
+    pivot pressing: the forces are the minimum-norm ones under those bounds (KKT)."""
+    from multiarm_pin.dynamics.force_distribution import distribute_with_supports
+
+    rng = np.random.default_rng(7)
+    b = box_blocks(rng)
+    G_s, kappa = support_rows(np.zeros(3))
+    m = np.array([[4.0, 0.0, 4.0, 4.0], [0.0, 4.0, 4.0, 0.0]])
+    U = b.constraint_mask.copy()
+    d = distribute_with_supports(b, rng.normal(size=6), U, m, G_s, kappa,
+                                 np.array([1.0, 1.0, np.nan, np.nan]))
+    W = np.hstack([b.stacked_W_o(), G_s[:2].T])
+    x = np.r_[d.forces.mu_flat, d.support_mu[:2]]
+    assert_kkt_optimal(W, b.M_o @ d.a_o - b.h_o, np.ones(9, dtype=bool),
+                       np.r_[b.flatten_mu(m), 1.0, 1.0], x)

@@ -110,7 +110,7 @@ def assert_clearances_are_brute_force(scene, result, scan) -> int:
     with coal pair by pair (``CollisionScene.hull_distances``), to 2e-10 m; None where the
     category has no pair.
 
-    Returns the brute-force distances' array size, (T, pairs).
+    Returns the brute-force distances, (T, pairs) [m].
     """
     import numpy as np
     import pytest
@@ -126,4 +126,4 @@ def assert_clearances_are_brute_force(scene, result, scan) -> int:
             assert scan.clearance[name] is None, name
             continue
         assert scan.clearance[name] == pytest.approx(brute[:, cols].min(), abs=2e-10), name
-    return brute.size
+    return brute

@@ -292,9 +292,9 @@ def test_scan_equals_every_pair_at_every_sample():
     cps = [result.contact_points[:, i, :int(built.system.constraint_set.N[i])]
            for i in range(built.system.n_arms)]
     scan = scene.scan(result.q, result.object_position, result.object_quaternion, cps)
-    n_brute = assert_clearances_are_brute_force(scene, result, scan)
+    brute = assert_clearances_are_brute_force(scene, result, scan)
     assert not scan.hits
-    assert scan.measured < n_brute / 2  # most (sample, pair) were bounded, not measured
+    assert scan.measured < brute.size / 2  # most (sample, pair) were bounded, not measured
 
 
 def test_arm_limits_are_the_urdf_limits_and_statistics_find_the_first_time(held):

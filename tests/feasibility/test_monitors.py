@@ -13,7 +13,7 @@ from multiarm_pin.app.scenario import build_scenario
 from multiarm_pin.app.scenario.schema import parse_scenario
 from multiarm_pin.exceptions import RunStoppedError
 from multiarm_pin.feasibility import feasibility_report
-from multiarm_pin.feasibility.monitors import LimitMonitor, stop_monitors
+from multiarm_pin.feasibility.monitors import LimitMonitor, feasibility_monitors
 from multiarm_pin.sim.simulation import MONITOR_STRETCH, MONITOR_STRIDE, partial_result, simulate
 from tests.feasibility.collision_cases import ALONG_A_RUN, demo_data
 
@@ -49,18 +49,20 @@ def test_a_collision_stop_ends_the_run_at_the_reports_first_collision():
     first = feasibility_report(built.system, full, ground=0.0, scene=scene).first(
         ("collision",))
     k = int(np.flatnonzero(full.t == first.t_first)[0])
-    # the longest stretch of this run: 10 % of it (compiled loops), or the stepper's stride
+    # the longest stretch of this run: 10 % of it (compiled loops), or the stepper's stride;
+    # the monitors are shown at most two at once (those recorded while the worker checked)
     top = max((len(full.t) - 1) // 10, MONITOR_STRIDE)
-    assert 0 < k < len(full.t) - top - 2  # a stop well before the end
+    assert 0 < k < len(full.t) - 2 * top - 2  # a stop well before the end
     spy = Spy()
     with pytest.raises(RunStoppedError, match="limits.collision") as info:
-        _simulate(built, stop_monitors(built.system, ("collision",), scene) + (spy,))
+        _simulate(built, feasibility_monitors(built.system, ("collision",), scene) + (spy,))
     assert info.value.sample == k and info.value.t == first.t_first
     part = partial_result(info.value)
     assert len(part.t) == k + 1 and part.t[-1] == first.t_first  # nothing after it
     np.testing.assert_array_equal(part.q, full.q[:k + 1])
-    # the simulation stopped within a stretch of the violation, not at the end of the run
-    assert max(b for _, b in spy.stretches) <= k + 1 + top < len(full.t)
+    # the simulation stopped within two stretches of the violation, not at the end of the run
+    assert max(b for _, b in spy.stretches) <= k + 2 * top < len(full.t)
+    assert all(b - a <= 2 * top for a, b in spy.stretches)
     again = feasibility_report(built.system, part, ground=0.0, scene=scene).first(
         ("collision",))
     assert (again.arm, again.link, again.other, again.t_first) == (
@@ -99,3 +101,39 @@ def test_monitors_see_every_sample_once_in_order(integrator):
     ends = [b for _, b in spy.stretches]
     assert starts[0] == 0 and ends[-1] == len(result.t) and starts[1:] == ends[:-1]
     assert all(0 < b - a <= MONITOR_STRETCH for a, b in spy.stretches)
+
+
+def test_stretches_recorded_while_the_worker_checks_are_shown_together():
+    # the first check holds the worker until the loop has handed back a stretch after the
+    # one it showed (without batches, the loop would wait for the worker there: the check
+    # fails at its timeout): the stretches recorded meanwhile are shown at once, every
+    # sample still once and in order
+    import threading
+
+    built = _built(demo_data(duration=2.5), "scenarios/two_ur5_box.yaml")
+    passed = threading.Event()
+    handed_back = []  # the samples at which the loop handed back (its progress reports)
+    n = 1250
+
+    class Held(Spy):
+        def check(self, record, k0, k1):
+            if not self.stretches:
+                self.first_end = k1
+                assert passed.wait(20.0), "the loop waited for the worker"
+            return super().check(record, k0, k1)
+
+    def progress(frac):
+        k = round(frac * n)
+        handed_back.append(k)
+        if spy.stretches or k > getattr(spy, "first_end", n) + 1:
+            passed.set()
+
+    spy = Held()
+    result = simulate(built.system, built.initial_state, scenario_controller(built), 2.5,
+                      0.002, monitors=(spy,), progress=progress)
+    assert len(result.t) == n + 1
+    starts = [a for a, _ in spy.stretches]
+    ends = [b for _, b in spy.stretches]
+    assert starts[0] == 0 and ends[-1] == len(result.t) and starts[1:] == ends[:-1]
+    a, b = spy.stretches[1]  # shown once the worker was free: several hand-backs
+    assert len([k for k in handed_back if a < k < b]) >= 1, (spy.stretches, handed_back)

@@ -163,6 +163,7 @@ def contact_targets(scenario, spec: ArmSpec, poly, oMo: pin.SE3, tool: str):
     from multiarm_pin.model.ik import PlaneTarget, PointTarget
 
     r = spec.joint.params.get("tip_radius", 0.0)
+    approach = _approach(scenario, spec, poly)
     targets = []
     for k, c in enumerate(spec.joint.contacts):
         key = f"arms[{spec.index}].joint.contacts[{k}]"
@@ -181,12 +182,43 @@ def contact_targets(scenario, spec: ArmSpec, poly, oMo: pin.SE3, tool: str):
         else:
             p_o = poly.vertices[list(poly.faces[f])].mean(axis=0)
         n_w = oMo.rotation @ n_o
-        # sphere centre on the plane offset by the radius along the outward normal
-        d_w = float(n_w @ oMo.translation) + d_o + r
+        # sphere centre on the plane offset by the radius along the outward normal (and by
+        # the approach offset: the gripper starts that far from its grasp)
+        d_w = float(n_w @ oMo.translation) + d_o + r + float(n_o @ approach)
         frame, at = (c.tip, None) if c.tip_in_tool is None else (tool, c.tip_in_tool)
         targets.append(PlaneTarget(frame, n_w, d_w, point=at))
-        targets.append(PointTarget(frame, oMo.act(p_o + r * n_o), primary=False, offset=at))
+        targets.append(PointTarget(frame, oMo.act(p_o + r * n_o + approach), primary=False,
+                                   offset=at))
     return targets
+
+
+def _approach(scenario, spec: ArmSpec, poly) -> np.ndarray:
+    """(3,) the fingertip joint's ``approach`` offset (object frame [m]), zero if none.
+
+    No tip may start in the object: a tip moved to the inner side of its face's plane
+    (``n_f · approach < 0``, ``n_f`` the outward normal) must be beside the face (the
+    projection of its contact point so moved onto the face's plane outside the face), where
+    its gap is a distance to the plane extended beyond the face, not a penetration.
+    """
+    a = np.asarray(spec.joint.params.get("approach", np.zeros(3)), dtype=float)
+    for k, c in enumerate(spec.joint.contacts):
+        try:
+            f = poly.face_index(c.face)
+        except MultiArmError:
+            continue  # reported on its contact's key by the caller
+        n = poly.normals[f]
+        if float(n @ a) >= 0.0:
+            continue
+        point = c.point if c.point is not None else poly.vertices[list(poly.faces[f])].mean(0)
+        moved = point + a - float(n @ a) * n  # on the face's plane
+        if not poly.point_on_face(moved, f, 1e-9):
+            continue  # beside the face
+        raise ScenarioError(
+            scenario.file, f"arms[{spec.index}].joint.approach",
+            f"the offset {a.tolist()} m moves contact {k} ({c.tip} on face {c.face!r}) "
+            f"into the object (outward normal {n.tolist()}); an approach offset must move "
+            "every tip away from its face, or beside it")
+    return a
 
 
 def joint_targets(spec: ArmSpec, tool: str, oMo: pin.SE3) -> tuple[list, str]:
@@ -270,6 +302,9 @@ def _fingertip_joint(scenario, spec: ArmSpec, arm, obj, oMt: pin.SE3, oMo: pin.S
 
     j = spec.joint
     tips = tips_in_tool(scenario, spec, arm)
+    approach = _approach(scenario, spec, obj.shape)
+    # the joint is where the tips touch: the tool's placement less the approach offset
+    oMt = pin.SE3(oMt.rotation, oMt.translation - oMo.rotation @ approach)
     M = relative_placement(oMt, oMo)
     r = j.params.get("tip_radius", 0.0)
     contacts = []
@@ -285,7 +320,8 @@ def _fingertip_joint(scenario, spec: ArmSpec, arm, obj, oMt: pin.SE3, oMo: pin.S
         contacts.append((f, point))
     return make_joint(j.type, polyhedron=obj.shape, contacts=contacts, radius=r,
                       tip_points_in_tool=tips, tool_in_object=M, name=f"{spec.name}:{j.type}",
-                      tol=1e-5, unilateral=j.params.get("unilateral", True))
+                      tol=1e-5, unilateral=j.params.get("unilateral", True),
+                      starts_apart="approach" in j.params)
 
 
 def _joint_spec(scenario, spec: ArmSpec, arm, obj):

@@ -43,9 +43,11 @@ Joint types (the placeable entries of :data:`~multiarm_pin.constraints.JOINT_TYP
 ``corner_gripper``), and optionally ``placement_in_object`` / ``placement_in_tool`` of the
 joint frame), and ``fingertips`` (spherical fingertips on named faces: ``tip_radius`` and
 ``contacts: [{tip: frame, face: +x, point: [..]}, ...]``, where ``tip`` is the frame of the
-sphere's centre or its centre ``[x, y, z]`` in the tool frame [m]; the old name ``contacts`` is
-still read, with a deprecation warning). Without ``placement_in_object`` a joint is built where
-the tool is at ``q0``. Without ``q0`` the arm is placed by inverse kinematics
+sphere's centre or its centre ``[x, y, z]`` in the tool frame [m], and optionally ``approach:
+[dx, dy, dz]``: the gripper starts displaced by that vector (object frame [m]) from where its
+tips touch those points, so they start apart and may touch down during the run); the old name
+``contacts`` is still read, with a deprecation warning). Without ``placement_in_object`` a
+joint is built where the tool is at ``q0``. Without ``q0`` the arm is placed by inverse kinematics
 (:mod:`multiarm_pin.model.ik`) from ``q_seed``, meeting only what the joint constrains (the
 centre of a spherical joint; centre and axis of a revolute one; axis and line of a
 cylindrical one; the full placement of weld, prismatic and universal joints; each fingertip
@@ -104,8 +106,8 @@ _OBJECT_KEYS = ("shape", "mass", "inertia", "pose", "twist", "external_wrench")
 _ARM_KEYS = ("name", "robot", "urdf", "tool_frame", "tool_offset", "base", "locked_joints",
              "q0", "q_seed", "v0", "joint")
 _JOINT_KEYS = ("type", "size", "tip_radius", "points_on", "placement_in_object",
-               "placement_in_tool", "contacts", "unilateral")
-_SIM_KEYS = ("duration", "integrator", "dt", "solver", "baumgarte")
+               "placement_in_tool", "contacts", "unilateral", "approach")
+_SIM_KEYS = ("duration", "integrator", "dt", "solver", "baumgarte", "compiled")
 
 
 def load_scenario(path) -> Scenario:
@@ -362,6 +364,11 @@ def _parse_joint(r: Reader) -> JointSpec:
         if "points_on" not in JOINT_TYPES[kind].parameters:
             raise r.get("points_on").error(f"not a parameter of {kind!r} joints")
         params["points_on"] = r.get("points_on").string(("tool", "object"))
+    if "approach" in d:
+        if not fingertips:
+            raise r.get("approach").error(f"not a parameter of {kind!r} joints (only "
+                                          "fingertips start away from the object)")
+        params["approach"] = r.get("approach").array((3,), "object frame [m]")
     if fingertips:
         for key in ("placement_in_object", "placement_in_tool", "size"):
             if key in d:
@@ -484,7 +491,10 @@ def parse_simulation(r: Reader) -> SimulationSpec:
         baum = (br.get("alpha").number(nonnegative=True), br.get("beta").number(nonnegative=True))
     if dt > duration:
         raise r.get("dt").error(f"dt = {dt} s is longer than the duration {duration} s")
-    return SimulationSpec(duration, integrator, dt, solver, baum)
+    compiled = d.get("compiled", s.compiled)
+    if not isinstance(compiled, bool):
+        raise r.get("compiled").error(f"expected true or false, got {compiled!r}")
+    return SimulationSpec(duration, integrator, dt, solver, baum, compiled)
 
 
 __all__ = ["load_scenario", "parse_ground", "parse_object", "parse_scenario", "parse_simulation",

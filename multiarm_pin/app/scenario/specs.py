@@ -174,6 +174,7 @@ class SimulationSpec:
     Attributes:
         duration: [s]. integrator: one of :data:`INTEGRATOR_NAMES`. dt: step and output sampling
         period [s]. solver: one of :data:`SOLVER_NAMES`. baumgarte: ``(α, β)`` [1/s].
+        compiled: False runs every step on the numpy reference path (``simulate(compiled=)``).
     """
 
     duration: float = 2.0
@@ -181,6 +182,7 @@ class SimulationSpec:
     dt: float = 1e-3
     solver: str = "auto"  # object-first, switching to the singular-arm variant when needed
     baumgarte: tuple[float, float] = (5.0, 5.0)
+    compiled: bool = True
 
 
 @dataclass(frozen=True)

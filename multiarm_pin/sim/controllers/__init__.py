@@ -11,6 +11,10 @@ without recomputing them (the protocol :class:`ControllerFunction`). Build one b
   not compensated);
 - ``joint_pd``: ``τ = g(q) + K_p (q_ref ⊖ q) - K_d v`` (``q_ref`` defaults to the
   configuration at the first call, i.e. ``q0``);
+- ``phased_pd``: ``object_pd`` through phases (:mod:`~multiarm_pin.sim.controllers.phased`:
+  tilt about a pivot edge, move, hold), each with the support rows that keep pressing, the
+  arms released and the arms' held-point offsets (approach, retract); the supports are in
+  its force distribution. Reference path only (no compiled kernel; a run says so once);
 - ``object_pd``: object-level computed torque. A desired object trajectory
   (:class:`~multiarm_pin.sim.trajectories.MinimumJerkTrajectory`, or ``waypoints``; default:
   hold the pose of the first call) and PD on the object pose give a desired acceleration
@@ -55,6 +59,7 @@ from multiarm_pin.sim.controllers.object_pd import (
     ObjectPDPlan,
     grasp_rank,
 )
+from multiarm_pin.sim.controllers.phased import PhasedPD
 from multiarm_pin.sim.controllers.relative_motion import tool_acceleration_from_object
 from multiarm_pin.system import MultiArmSystem
 
@@ -69,12 +74,16 @@ class ControllerType:
         follows_trajectory: it takes a desired object motion (``trajectory`` or
             ``waypoints``); the others hold or act in joint space.
         description: one line for humans.
+        kernel: the compiled controller that serves it in the compiled loops, a name of
+            :data:`CONTROLLER_KERNELS`, or None: runs with it are the reference stepper's
+            (and say so once, :func:`controller_kernel`).
     """
 
     name: str
     cls: type[Controller]
     follows_trajectory: bool
     description: str
+    kernel: str | None = None
 
     @property
     def parameters(self) -> tuple[str, ...]:
@@ -83,16 +92,55 @@ class ControllerType:
         return tuple(p for p in sig.parameters if p not in ("self", "system"))
 
 
+CONTROLLER_KERNELS: dict[str, str] = {
+    "zero_torque": "zero torque (the contact loop's control mode CONTROL_NONE)",
+    "object_pd": "ObjectPD's compiled path (multiarm_pin._compiled.controller_kernels)",
+}
+"""The compiled controllers, by name: what :attr:`ControllerType.kernel` names. Each compiled
+loop says which of them it runs (``CONTROLLER_KERNELS`` of
+:class:`~multiarm_pin.sim.compiled_loop.CompiledLoop` and
+:class:`~multiarm_pin.sim.contact_loop.ContactLoop`)."""
+
 CONTROLLERS: dict[str, ControllerType] = {e.name: e for e in (
-    ControllerType("none", ZeroTorque, False, "zero torque"),
+    ControllerType("none", ZeroTorque, False, "zero torque", kernel="zero_torque"),
     ControllerType("gravity_compensation", GravityCompensation, False,
                    "the arms' own gravity torques g(q) (not the object's weight)"),
     ControllerType("joint_pd", JointPD, False,
                    "g(q) + K_p (q_ref - q) - K_d v toward the first call's configuration"),
     ControllerType("object_pd", ObjectPD, True,
-                   "object-level computed torque with force distribution (waypoints)"),
+                   "object-level computed torque with force distribution (waypoints)",
+                   kernel="object_pd"),
+    ControllerType("phased_pd", PhasedPD, False,
+                   "object_pd through phases (tilt, move, hold) with their own contact sets, "
+                   "the supports in its force distribution (no compiled kernel)"),
 )}
 """Every controller type, by name (the names :func:`make_controller` and scenarios accept)."""
+
+
+def controller_kernel(controller) -> tuple[str | None, str]:
+    """The compiled controller that serves a run's ``controller``, read from :data:`CONTROLLERS`.
+
+    The entry is the one whose class is exactly the controller's (a subclass may change what
+    its instances compute, so it is not served by its parent's kernel).
+
+    Args:
+        controller: the run's controller, or None (zero torque).
+
+    Returns:
+        ``(kernel, why)``: a name of :data:`CONTROLLER_KERNELS` and ``""``, or None and why
+        no kernel serves it (a sentence naming the controller).
+    """
+    if controller is None:
+        return "zero_torque", ""
+    entry = next((e for e in CONTROLLERS.values() if type(controller) is e.cls), None)
+    if entry is None:
+        return None, (f"the controller {type(controller).__name__} is not a type of the "
+                      "registry (CONTROLLERS), so no compiled kernel serves it")
+    if entry.kernel is None:
+        return None, f"controller {entry.name!r} has no compiled kernel"
+    if not getattr(controller, "compiled", True):
+        return None, f"controller {entry.name!r} was built with compiled=False"
+    return entry.kernel, ""
 
 
 def make_controller(kind: str, system: MultiArmSystem, **params) -> Controller:
@@ -119,6 +167,7 @@ def make_controller(kind: str, system: MultiArmSystem, **params) -> Controller:
 
 __all__ = [
     "CONTROLLERS",
+    "CONTROLLER_KERNELS",
     "GRASP_RANK_TOLERANCE",
     "JACOBIAN_DAMPING",
     "Controller",
@@ -128,7 +177,9 @@ __all__ = [
     "JointPD",
     "ObjectPD",
     "ObjectPDPlan",
+    "PhasedPD",
     "ZeroTorque",
+    "controller_kernel",
     "grasp_rank",
     "make_controller",
     "tool_acceleration_from_object",

@@ -3,7 +3,7 @@
 See :class:`ObjectPD` (the algorithm, step by step) and the package docstring of
 :mod:`multiarm_pin.sim.controllers`. Its compiled path is
 :mod:`multiarm_pin._compiled.controller_kernels`; :meth:`ObjectPD.reference` is the numpy
-reference it mirrors. The module is close to 500 lines because the controller's two paths
+reference it mirrors. The module is long because the controller's two paths
 (compiled and reference) and its hold-still fallback share its state and belong together.
 """
 
@@ -16,7 +16,12 @@ import pinocchio as pin
 
 from multiarm_pin._compiled import controller_kernels, layout
 from multiarm_pin._compiled.controller_kernels import GRASP_RANK_TOLERANCE
-from multiarm_pin.dynamics.blocks import SystemBlocks, expand_rows, restrict_rows
+from multiarm_pin.dynamics.blocks import (
+    SystemBlocks,
+    expand_rows,
+    restrict_rows,
+    select_rows,
+)
 from multiarm_pin.dynamics.force_distribution import distribute_forces
 from multiarm_pin.dynamics.force_qp import WarmForceDistribution
 from multiarm_pin.dynamics.inverse_dynamics import InverseDynamicsResult, inverse_dynamics
@@ -496,7 +501,6 @@ class ObjectPD(Controller):
         """
         s = self.system
         b = evaluation.blocks
-        arms = evaluation.arms
         o = state.obj
         if self.q_ref is None:
             self.q_ref = np.array(state.q, dtype=float)
@@ -510,9 +514,7 @@ class ObjectPD(Controller):
         if active is not None and not np.all(np.asarray(active)[b.constraint_mask]):
             full = b
             b, index = restrict_rows(full, active)
-            unilateral = np.zeros_like(s.unilateral)
-            i, k = np.nonzero(index >= 0)
-            unilateral[i, k] = s.unilateral[i, index[i, k]]
+            unilateral = select_rows(s.unilateral, index)
             rank = grasp_rank(b)
             if rank < 6:
                 return self._hold_still(t, state, full, _rank_reason(rank))
@@ -528,6 +530,34 @@ class ObjectPD(Controller):
             self.margin_kept = False
         if self._forces is not None and index is None:  # next warm start: this active set
             self._forces.seed(fd.mu, self.margin)
+        qdd_desired = self.joint_accelerations(state, evaluation, a_d)
+        try:
+            last = inverse_dynamics(b, a_d, qdd_desired, fd.mu_I, fd.basis)
+        except DynamicsError as exc:
+            return self._hold_still(t, state, evaluation.blocks,
+                                    f"no inverse dynamics on the touching contacts ({exc})")
+        if index is not None:  # multipliers back at the rows of the full blocks
+            last = InverseDynamicsResult(last.tau, expand_rows(last.mu, index), last.qdd,
+                                         last.a_o, last.mu_I, last.basis)
+        self.last = last
+        self.holding = False
+        return s.unpad(last.tau)
+
+    def joint_accelerations(self, state: SystemState, evaluation: Evaluation,
+                            a_d: np.ndarray) -> np.ndarray:
+        """(n, nv_max) desired joint accelerations of the held points' tasks (steps 1-4).
+
+        Sets :attr:`last_point_acceleration`.
+
+        Args:
+            state: the state.
+            evaluation: its evaluation (tools' kinematics, Jacobians).
+            a_d: (6,) the object's desired acceleration, world axes at the COM.
+        """
+        s = self.system
+        arms = evaluation.arms
+        o = state.obj
+        b = evaluation.blocks
         e, u, d, r = self._hold_terms(state, evaluation)
         n, m = self.hold_mask.shape
         zero = np.zeros((n * m, 3))
@@ -556,18 +586,7 @@ class ObjectPD(Controller):
         scale = np.trace(AtA, axis1=1, axis2=2) / b.nv
         AtA += (JACOBIAN_DAMPING * scale)[:, None, None] * np.eye(AtA.shape[1])
         resid = rhs - (A @ z[:, :, None])[:, :, 0]
-        qdd_desired = z + np.linalg.solve(AtA, (At @ resid[:, :, None]))[:, :, 0]
-        try:
-            last = inverse_dynamics(b, a_d, qdd_desired, fd.mu_I, fd.basis)
-        except DynamicsError as exc:
-            return self._hold_still(t, state, evaluation.blocks,
-                                    f"no inverse dynamics on the touching contacts ({exc})")
-        if index is not None:  # multipliers back at the rows of the full blocks
-            last = InverseDynamicsResult(last.tau, expand_rows(last.mu, index), last.qdd,
-                                         last.a_o, last.mu_I, last.basis)
-        self.last = last
-        self.holding = False
-        return s.unpad(last.tau)
+        return z + np.linalg.solve(AtA, (At @ resid[:, :, None]))[:, :, 0]
 
 
 __all__ = ["GRASP_RANK_TOLERANCE", "JACOBIAN_DAMPING", "ObjectPD", "ObjectPDPlan", "grasp_rank"]

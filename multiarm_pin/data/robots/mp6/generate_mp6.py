@@ -1,7 +1,7 @@
 """Write ``mp6.urdf`` and ``mp6_4f.urdf``: a 6-joint revolute arm with a rigid gripper.
 
 A stand-alone data generator shipped beside the URDFs it writes (one file, so that the URDFs
-can be regenerated and audited from the package data alone; hence over ~500 lines).
+can be regenerated and audited from the package data alone; hence a long one).
 
 Two variants share the arm and differ only in the gripper:
 

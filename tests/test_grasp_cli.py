@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import multiarm_pin.grasp as grasp_pkg
-from multiarm_pin.grasp.cli import configure_parser, run
+from multiarm_pin.app.grasp_cli import configure_parser, run
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[1]
 GRASPS = ROOT / "scenarios" / "grasps"
 BOX = "object: {shape: {type: box, size: [2, 1, 1]}}\n"
 
@@ -121,7 +121,7 @@ def test_invalid_files_exit_2_naming_file_and_key(tmp_path, capsys, text, needle
 
 def test_module_runs_as_a_program(tmp_path):
     out = subprocess.run(
-        [sys.executable, "-m", "multiarm_pin.grasp.cli", str(GRASPS / "box_form_closure.yaml"),
+        [sys.executable, "-m", "multiarm_pin.app.grasp_cli", str(GRASPS / "box_form_closure.yaml"),
          "--json", "--picture", str(tmp_path / "x.png")],
         capture_output=True, text=True, cwd=ROOT, timeout=120,
     )  # fmt: skip
@@ -129,7 +129,7 @@ def test_module_runs_as_a_program(tmp_path):
     rep = json.loads(out.stdout)
     assert {"form_closure", "margin", "independent", "regions"} <= set(rep)
     bad = subprocess.run(
-        [sys.executable, "-m", "multiarm_pin.grasp.cli", str(tmp_path / "missing.yaml")],
+        [sys.executable, "-m", "multiarm_pin.app.grasp_cli", str(tmp_path / "missing.yaml")],
         capture_output=True, text=True, cwd=ROOT, timeout=120,
     )  # fmt: skip
     assert bad.returncode == 2 and "missing.yaml" in bad.stderr

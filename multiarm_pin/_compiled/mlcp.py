@@ -1,5 +1,9 @@
 """The mixed LCP ``φ = G μ + b`` and its exact solver (Goldfarb–Idnani, compiled with numba).
 
+Called by the unilateral solve (:mod:`multiarm_pin.dynamics.unilateral`, which turns its
+status codes into errors) and by the contact solve kernel
+(:mod:`multiarm_pin._compiled.delassus`).
+
 Problem: on ``p`` rows with a symmetric positive semi-definite ``G`` (p, p) (the Delassus
 operator of :mod:`multiarm_pin.dynamics.delassus`), find ``μ`` (p,) with::
 
@@ -18,17 +22,18 @@ with the most negative ``φ̈_p``) and raises ``|μ_p|`` along the direction tha
 ``φ̈_A = 0``: either ``φ̈_p`` reaches 0 (full step, ``p`` joins ``A``) or a unilateral
 multiplier of ``A`` reaches 0 first (partial step, that row leaves ``A``; with a row ``p``
 dependent on ``A`` only partial steps exist, which is how redundant rows are handled without
-regularisation). If neither can happen the problem is infeasible (:class:`DynamicsError`).
+regularisation). If neither can happen the problem is infeasible (status ``INFEASIBLE``;
+``INCONSISTENT`` for a bilateral row).
 
 Termination: after every full step ``(μ, A)`` is the unique solution of the equality problem
 on ``A``, and the primal objective (the dual function) strictly increases from one full step
 to the next (``φ̈_p`` was violated by more than the tolerance and ``s > 0``); so no active
 set repeats, and at most ``|A| ≤ rank`` partial steps separate two full steps: the method
 stops after finitely many pivots (a cap of ``1000 + 20 p`` pivots only guards against
-round-off pathologies and raises). At the end ``μ_A`` is recomputed from ``G_AA μ_A = -b_A``
-(a Cholesky solve), so the result is exact to round-off: the only tolerances decide whether
-``φ̈_p`` counts as violated (``VIOLATION_RTOL`` of ``max |b|``), whether a row is
-dependent (``DEPENDENCY_RTOL``) and whether a dependent bilateral row is consistent
+round-off pathologies: status ``MAX_PIVOTS``). At the end ``μ_A`` is recomputed from
+``G_AA μ_A = -b_A`` (a Cholesky solve), so the result is exact to round-off: the only
+tolerances decide whether ``φ̈_p`` counts as violated (``VIOLATION_RTOL`` of ``max |b|``),
+whether a row is dependent (``DEPENDENCY_RTOL``) and whether a dependent bilateral row is consistent
 (``CONSISTENCY_RTOL``). The returned ``μ`` is the basic solution of that final set: its
 nonzero multipliers sit on linearly independent rows (with redundant rows, not the
 minimum-norm ``μ``).
@@ -40,7 +45,6 @@ import numpy as np
 from numba import njit
 
 from multiarm_pin._compiled import linalg as _kernels
-from multiarm_pin.exceptions import DynamicsError
 
 DEPENDENCY_RTOL = 1e-10
 """A row ``p`` is linearly dependent on the active rows when its Schur complement
@@ -53,7 +57,7 @@ VIOLATION_RTOL = 1e-11
 CONSISTENCY_RTOL = 1e-8
 """A bilateral row dependent on the active rows whose ``|φ̈|`` cannot be reduced is accepted
 (multiplier 0) when ``|φ̈| ≤ CONSISTENCY_RTOL · max|b|`` (as the bilateral singular solver's
-consistency test); larger means inconsistent bilateral constraints (:class:`DynamicsError`)."""
+consistency test); larger means inconsistent bilateral constraints (status ``INCONSISTENT``)."""
 
 OK, INFEASIBLE, INCONSISTENT, MAX_PIVOTS = 0, 1, 2, 3
 """Status codes returned by :func:`mlcp`."""
@@ -237,24 +241,5 @@ def _finish(G, b, uni, act, na, GA, L, rhs, mu, phi, in_a, pivots):  # pragma: n
     return OK, pivots, -1
 
 
-
-
-def lcp_error(what: str, status: int, name: str, value: float, pivots: int) -> DynamicsError:
-    """The error of a failed :func:`mlcp` status, for the caller ``what`` and the row ``name``."""
-    if status == INFEASIBLE:
-        return DynamicsError(
-            f"{what}: the contacts cannot all hold: unilateral row ({name}) would penetrate "
-            f"({value:.3g}) and no force can prevent it; the bilateral constraints or the "
-            "other contacts forbid the motion"
-        )
-    if status == INCONSISTENT:
-        return DynamicsError(
-            f"{what}: the bilateral constraints are inconsistent: row ({name}) depends on the "
-            f"other active rows but its rate cannot be zeroed (residual {value:.3g}); check "
-            "c (velocity consistency) and W"
-        )
-    return DynamicsError(  # pragma: no cover - safety net of the finite method
-        f"{what}: the active-set method did not terminate in {pivots} pivots (last row "
-        f"{name}); round-off cycling, please report the state"
-    )
-
+__all__ = ["CONSISTENCY_RTOL", "DEPENDENCY_RTOL", "INCONSISTENT", "INFEASIBLE", "MAX_PIVOTS",
+           "OK", "VIOLATION_RTOL", "mlcp"]

@@ -1,14 +1,14 @@
 """Command line of the grasp analysis: ``multiarm-pin grasp FILE.yaml`` (or this module).
 
-One concept at several layers: each layer's ``cli.py`` (``grasp``, ``study``, ``design``)
-holds its own subcommand of ``multiarm-pin`` (``configure_parser`` and ``run``), which
-:mod:`multiarm_pin.app.cli` wires into the one command line.
-
+The subcommand's ``configure_parser`` and ``run``, which :mod:`multiarm_pin.app.cli` wires
+into the one command line (as ``study/cli.py`` and ``design/cli.py`` hold theirs). It sits in
+the application shell, not in ``grasp/``, because it reads scenario files
+(:mod:`multiarm_pin.app.grasp_input`); the analysis is :mod:`multiarm_pin.grasp`'s.
 
 FILE is a grasp file or a scenario file (its fingertip contacts, read as a study in mode
 ``grasp`` reads them: :mod:`multiarm_pin.app.grasp_input`). ``configure_parser`` adds the
 arguments to a parser given by the main command line and ``run`` executes them;
-``python -m multiarm_pin.grasp.cli FILE`` runs them stand-alone.
+``python -m multiarm_pin.app.grasp_cli FILE`` runs them stand-alone.
 """
 
 from __future__ import annotations
@@ -116,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Stand-alone entry point (``python -m multiarm_pin.grasp.cli``)."""
+    """Stand-alone entry point (``python -m multiarm_pin.app.grasp_cli``)."""
     parser = argparse.ArgumentParser(prog="multiarm-pin grasp", description=__doc__)
     configure_parser(parser)
     return run(parser.parse_args(argv))
