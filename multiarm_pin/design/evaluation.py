@@ -172,6 +172,18 @@ class DesignProblem:
                                  for t in slot.tips])
             self.tips_in_tool.append(tips)
 
+    def covered(self, f: int) -> bool:
+        """Face ``f`` rests on a support that covers it whole (no fingertip can touch it)."""
+        poly = self.poly
+        for g, lo, hi in self.rects:
+            if g != f:
+                continue
+            origin, F = poly.face_frame(f)
+            verts = (poly.vertices[list(poly.faces[f])] - origin) @ F[:, :2]
+            if np.all(verts.min(axis=0) >= lo - 1e-9) and np.all(verts.max(axis=0) <= hi + 1e-9):
+                return True
+        return False
+
     def floating_gripper(self, slot: int) -> pin.Model:
         """A free-flyer model whose frame ``tool`` is the slot's tool (for grip fits)."""
         model = self._floating.get(slot)

@@ -721,11 +721,10 @@ def impossible(spec, checked: list, excluded: list) -> DesignImpossibleError:
 def has_overhang(spec) -> bool:
     """The bottom face is not covered whole by the support (fingertips reach under it)."""
     from multiarm_pin.design.evaluation import DesignProblem
-    from multiarm_pin.design.search import _covered
 
     problem = DesignProblem(spec)
     bottom = [f for f, _, _ in problem.rects]
-    return bool(bottom) and not all(_covered(problem, f) for f in bottom)
+    return bool(bottom) and not all(problem.covered(f) for f in bottom)
 
 
 def with_box(data: dict, size, mass: float, yaw: float = 0.0,

@@ -443,7 +443,7 @@ def _unclosable(problem) -> DesignImpossibleError | None:
 
     if any(s.gripper == "weld" for s in problem.spec.arms):
         return None
-    touchable = [f for f in range(problem.poly.n_faces) if not _covered(problem, f)]
+    touchable = [f for f in range(problem.poly.n_faces) if not problem.covered(f)]
     N = -problem.poly.normals[touchable].T  # (3, F) inward normals
     eps = lp_margin(N)[0] if touchable else float("nan")
     if np.isfinite(eps) and eps > 1e-9 and np.linalg.matrix_rank(N) == 3:
@@ -455,24 +455,11 @@ def _unclosable(problem) -> DesignImpossibleError | None:
         + _closure_hint(problem))
 
 
-def _covered(problem, f: int) -> bool:
-    """Face ``f`` rests on a support that covers it whole (no fingertip can touch it)."""
-    poly = problem.poly
-    for g, lo, hi in problem.rects:
-        if g != f:
-            continue
-        origin, F = poly.face_frame(f)
-        verts = (poly.vertices[list(poly.faces[f])] - origin) @ F[:, :2]
-        if np.all(verts.min(axis=0) >= lo - 1e-9) and np.all(verts.max(axis=0) <= hi + 1e-9):
-            return True
-    return False
-
-
 def _closure_hint(problem) -> str:
     """Why fingertips may never close: a face they cannot touch because it rests on a table."""
     poly = problem.poly
     for f, _, _ in problem.rects:
-        if _covered(problem, f):
+        if problem.covered(f):
             name = poly.face_names[f] if poly.face_names else str(f)
             sp = next(s.name for s in problem.spec.supports)
             return (f"; the {name} face rests on {sp!r}, which covers it whole, and fingertips "
