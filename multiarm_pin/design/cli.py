@@ -64,11 +64,16 @@ def run(args: argparse.Namespace) -> int:
     for d in result.designs:
         s = ", ".join(f"{k} {v:.4g}" for k, v in d.scores.items() if v is not None)
         print(f"  {d.rank}. candidate {d.index}: objective {d.objective:.4g} ({s})")
+    _print_folder(out, args.simulate)
+    return 0
+
+
+def _print_folder(out, simulated: bool) -> None:
+    """Where the results folder holds the designs, the report and the best run."""
     print(f"designs: {out / 'designs'}")
     print(f"report:  {out / 'report.md'}")
-    if args.simulate:
+    if simulated:
         print(f"best run: {out / 'best_run'} (replay: {out / 'best_run' / 'replay.html'})")
-    return 0
 
 
 def _run_pick_up(spec, args: argparse.Namespace, say) -> int:
@@ -88,8 +93,5 @@ def _run_pick_up(spec, args: argparse.Namespace, say) -> int:
           f"{result.wall_time:.1f} s, {len(result.plans)} met every check")
     for k, c in enumerate(result.plans[:spec.top], start=1):
         print(f"  {k}. candidate {c.candidate.index}: {describe_plan(c)}")
-    print(f"designs: {out / 'designs'}")
-    print(f"report:  {out / 'report.md'}")
-    if args.simulate:
-        print(f"best run: {out / 'best_run'} (replay: {out / 'best_run' / 'replay.html'})")
+    _print_folder(out, args.simulate)
     return 0

@@ -278,6 +278,19 @@ def test_forces_with_the_pivot_pressing_are_the_qp_and_keep_it_on_the_table(seed
     np.testing.assert_allclose(res.mu, d.forces.mu, atol=1e-9)
 
 
+def _opposed_contacts(rng):
+    """Two arms with one contact each, on the -x face (pushing +x, high) and the +x face
+    (pushing -x, low): their wrenches ``W_c`` (6, 2), the box's ``M_o``, ``h_o`` (gravity)
+    and the blocks (random arm inertias and Jacobians)."""
+    W_c = contact_wrenches([((-0.3, 0.0, 0.05), (1, 0, 0)), ((0.3, 0.0, -0.08), (-1, 0, 0))])
+    M_o = np.diag([MASS] * 3 + [0.1, 0.2, 0.25])
+    h_o = np.r_[0.0, 0.0, -MASS * G, 0.0, 0.0, 0.0]
+    b = SystemBlocks.from_lists([random_spd(rng, 6)] * 2, [np.zeros(6)] * 2,
+                                [rng.normal(size=(6, 1))] * 2, [W_c[:, :1], W_c[:, 1:]],
+                                [np.zeros(1)] * 2, M_o, h_o)
+    return W_c, M_o, h_o, b
+
+
 def test_an_unreachable_wrench_is_left_to_the_motion_without_moving_the_pivot():
     """Two arm contacts (±x) and the pivot: rank 4. The wrench part no contact makes is
     ``M_o⁻¹``-orthogonal to every column (it changes no contact's acceleration) and the
@@ -285,12 +298,7 @@ def test_an_unreachable_wrench_is_left_to_the_motion_without_moving_the_pivot():
     from multiarm_pin.dynamics.force_distribution import distribute_with_supports
 
     rng = np.random.default_rng(5)
-    W_c = contact_wrenches([((-0.3, 0.0, 0.05), (1, 0, 0)), ((0.3, 0.0, -0.08), (-1, 0, 0))])
-    M_o = np.diag([MASS] * 3 + [0.1, 0.2, 0.25])
-    h_o = np.r_[0.0, 0.0, -MASS * G, 0.0, 0.0, 0.0]
-    b = SystemBlocks.from_lists([random_spd(rng, 6)] * 2, [np.zeros(6)] * 2,
-                                [rng.normal(size=(6, 1))] * 2, [W_c[:, :1], W_c[:, 1:]],
-                                [np.zeros(1)] * 2, M_o, h_o)
+    W_c, M_o, h_o, b = _opposed_contacts(rng)
     G_s, kappa = support_rows(np.zeros(3))
     a_d = rng.normal(size=6)
     d = distribute_with_supports(b, a_d, np.ones((2, 1), bool), 0.0, G_s, kappa,
@@ -314,12 +322,7 @@ def test_best_effort_forces_push_and_make_the_closest_wrench():
     from multiarm_pin.dynamics.force_distribution import distribute_with_supports
 
     rng = np.random.default_rng(2)
-    W_c = contact_wrenches([((-0.3, 0.0, 0.05), (1, 0, 0)), ((0.3, 0.0, -0.08), (-1, 0, 0))])
-    M_o = np.diag([MASS] * 3 + [0.1, 0.2, 0.25])
-    h_o = np.r_[0.0, 0.0, -MASS * G, 0.0, 0.0, 0.0]
-    b = SystemBlocks.from_lists([random_spd(rng, 6)] * 2, [np.zeros(6)] * 2,
-                                [rng.normal(size=(6, 1))] * 2, [W_c[:, :1], W_c[:, 1:]],
-                                [np.zeros(1)] * 2, M_o, h_o)
+    W_c, M_o, h_o, b = _opposed_contacts(rng)
     G_s, kappa = support_rows(np.zeros(3))
     a_d = np.array([0.0, 0.0, 0.0, 0.0, -100.0, 0.0])
     sm = np.array([2.0, 2.0, np.nan, np.nan])
