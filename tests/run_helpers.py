@@ -38,6 +38,26 @@ simulation: {{duration: {duration}, dt: {dt}}}
 {extra}"""
 
 
+def tilt_pick_event_times(events, insert: str = "three_finger") -> tuple[float, float, float]:
+    """``(far, bottom, pivot)`` [s] of a tilt pick-up run's events (issue 27's order).
+
+    ``far``: the later first separation of the far edge's support vertices (``table[2]``,
+    ``table[3]``), the tilt; ``bottom``: the first touchdown of the insert arm's bottom tip
+    (``<insert>:tip[2]``); ``pivot``: the earlier first separation of the pivot edge's
+    (``table[0]``, ``table[1]``), the lift. A run in order has ``far < bottom < pivot``.
+
+    Raises:
+        KeyError: one of those events never happened.
+    """
+    first = {}
+    for e in events:
+        first.setdefault((e.kind, e.label), e.t)
+    far = max(first[("separation", "table[2]")], first[("separation", "table[3]")])
+    bottom = first[("touchdown", f"{insert}:tip[2]")]
+    pivot = min(first[("separation", "table[0]")], first[("separation", "table[1]")])
+    return far, bottom, pivot
+
+
 def write(path: Path, text: str) -> Path:
     """Write ``text`` to ``path`` (UTF-8) and return the path."""
     path.write_text(text, encoding="utf-8")

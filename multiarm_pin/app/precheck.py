@@ -77,7 +77,8 @@ def effort_limits(arm) -> np.ndarray:
     return arm_limits(arm).effort
 
 
-def static_torques(system, state, supports: bool = False) -> tuple[np.ndarray, str]:
+def static_torques(system, state, supports: bool = False, engaged_arms=None,
+                   support_gap: float | None = None) -> tuple[np.ndarray, str]:
     """Joint torques that hold a state still: arms' gravity plus the object's weight.
 
     At rest (``v = 0``, no acceleration) the object needs ``W_o μ = -h_o`` (its weight and any
@@ -85,12 +86,18 @@ def static_torques(system, state, supports: bool = False) -> tuple[np.ndarray, s
     (``h_i = -g_i`` at ``v = 0``), i.e. ``g_i + J_iᵀ w_i`` with ``w_i`` the wrench arm i
     applies on the object. ``μ`` is the force distribution of
     :func:`~multiarm_pin.dynamics.force_distribution.distribute_forces` with margin 0: the
-    smallest multipliers keeping every unilateral contact pushing.
+    smallest multipliers keeping every unilateral contact pushing, on the rows that may carry
+    force (every row, unless ``engaged_arms`` or ``support_gap`` leave some out: those carry
+    zero).
 
     Args:
         system: the :class:`~multiarm_pin.system.MultiArmSystem` (with arms).
         state: the :class:`~multiarm_pin.system.SystemState` (its velocities are ignored).
         supports: also let the supports carry the weight (their rows in the distribution).
+        engaged_arms: (n_arms,) bool, the arms whose contacts carry force (None: all), e.g.
+            the ones touching the object at a phase where the others are apart.
+        support_gap: with ``supports``, the largest gap [m] of a support row that carries
+            force (a support point above its plane does not push); None: every row.
 
     Returns:
         ``(tau (nv,), how)``: the torques [N m or N] and how the weight is carried
@@ -99,6 +106,7 @@ def static_torques(system, state, supports: bool = False) -> tuple[np.ndarray, s
     Raises:
         DynamicsError: the contacts cannot hold the object at rest (no pushing distribution).
     """
+    from multiarm_pin.dynamics.blocks import expand_rows, restrict_rows, select_rows
     from multiarm_pin.dynamics.force_distribution import distribute_forces
     from multiarm_pin.model.rigid_object import ObjectState
     from multiarm_pin.system import SystemState
@@ -109,13 +117,25 @@ def static_torques(system, state, supports: bool = False) -> tuple[np.ndarray, s
                                    np.asarray(o.quaternion, float), np.zeros(6)))
     ev = system.blocks(rest)
     b = ev.blocks
-    if supports and system.supports.n_rows:
+    n = system.n_arms
+    with_supports = bool(supports and system.supports.n_rows)
+    if with_supports:
         b, _ = system.contact_blocks(rest, b, ev.constraints)  # the arms' blocks, then theirs
         mask, how = system.contact_unilateral, "by the arms and the supports"
     else:
         mask, how = system.unilateral, "by the arms alone"
-    mu = distribute_forces(b, -np.asarray(b.h_o, float), mask).mu
-    n = system.n_arms
+    active = np.array(b.constraint_mask, dtype=bool)
+    if engaged_arms is not None:
+        active[:n][~np.asarray(engaged_arms, dtype=bool)] = False
+    if with_supports and support_gap is not None:
+        phi = system.support_terms(rest).phi
+        active[n, :len(phi)] &= phi <= support_gap
+    rhs = -np.asarray(b.h_o, float)
+    if np.array_equal(active, b.constraint_mask):
+        mu = distribute_forces(b, rhs, mask).mu
+    else:  # the rows that carry force only; the others carry zero
+        r, index = restrict_rows(b, active)
+        mu = expand_rows(distribute_forces(r, rhs, select_rows(mask, index)).mu, index)
     tau = -b.h[:n] - np.einsum("nij,nj->ni", b.W[:n], mu[:n])
     return system.unpad(tau), how
 

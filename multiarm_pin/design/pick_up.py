@@ -20,7 +20,16 @@ Everything is placed in the *pivot frame* of a candidate: x toward the pivot edg
 the bottom face's four edges, ``PIVOTS``), y along it, z up; ``a``, ``b``, ``c`` the box's
 half sizes along them. The grips are the shipped grippers' (:data:`ROLE_GRIPS`: each tip's
 contact point relative to a corner or a face of the box, and the gripper's base relative to
-it), so the plan scales with the box. The tilt angle is the smallest (on a 0.01 rad grid)
+it), so the plan scales with the box. No arm passes through the table top (the collision
+scene's slab is the support's whole ``extent``): the couple's and the insert's bases stand on
+pedestals at or above the table's height (the pusher's shoulder at its hand's height, the
+stop's base just above the table top, the insert's at it), 15 cm outside the table's
+rectangle (each base's
+offset along the axes it reaches over is moved out by the table's actual margin beyond the
+box, ``RoleGrip.reach_over``), their arms reaching over the table and in; the stop's hand is
+:data:`STOP_HEIGHT` up its face so that it clears the table as the face leans; the insert's
+hand is level along the corner's diagonal (:func:`_corner_tri`), so that its back rises
+with the raised side. The tilt angle is the smallest (on a 0.01 rad grid)
 that lifts the insert gripper's bottom tip :data:`INSERT_CLEARANCE` above the table when it
 slides under (:func:`tilt_angle_range`), and at most :data:`TILT_STABILITY` of the angle at
 which the box's centre of mass would pass over the pivot edge; larger angles on the same grid
@@ -32,7 +41,8 @@ of its phases: inverse kinematics of every arm's tips within joint limits with r
 :data:`~.evaluation.MAX_JOINT_STEP` (one continuous branch), coal clearances at least
 ``search.clearance`` (:class:`~multiarm_pin.feasibility.CollisionScene`), the final grasp
 form closure (LP), and the static torques at most :data:`STATIC_TORQUE_RATIO` of the effort
-limits (at rest on the table with the couple pressing, and carried). The search tries
+limits (at rest on the table with the couple pressing, tilted with the couple alone holding
+the box against the pivot edge's vertices, and carried). The search tries
 every pivot edge and angle at the nominal bases, then ``search.candidates`` random base
 offsets (up to :data:`BASE_STEP` m and :data:`YAW_STEP` rad per arm, clipped into the spec's
 region) around the best; the best plan by (worst torque ratio, then largest clearance) is
@@ -81,6 +91,10 @@ motion (the lift's acceleration, the contacts' margins of the force distribution
 IK_RESIDUAL = 1e-6
 """Largest IK residual [m] accepted at a key pose."""
 
+TOUCHING_GAP = 1e-6
+"""Largest gap [m] of a support vertex that carries force in the tilted pose's statics (the
+pivot edge's vertices are on the table, the far edge's are lifted by ``2a sinθ``)."""
+
 BASE_STEP = 0.1
 """Largest base offset [m] of a random candidate from the nominal base."""
 
@@ -116,6 +130,7 @@ class RoleGrip:
             along (``(axis, sign, distance)``: the grip's table margin [m] from the anchor to
             the edge along ``sign`` × axis that ``base`` was placed for); the base moves out
             by the table's actual margin less that one.
+        tips: per contact, the index of the gripper's tip that makes it (None: in order).
     """
 
     faces: tuple
@@ -126,33 +141,58 @@ class RoleGrip:
     q_seed: tuple
     approach: tuple | None = None
     reach_over: tuple = ()
+    tips: tuple | None = None
+
+
+STOP_HEIGHT = 0.12
+"""Height [m] of the stop's tip triangle's centre above the bottom face: its hand (a 0.13 m
+square, 0.1 m out from the face at its back) stays 2 cm above the table while the box turns
+up to 0.3 rad, ``h cos θ - 0.065 cos θ - 0.1 sin θ >= 0.02``."""
+
+_S = 0.05 * np.sqrt(3.0)
+"""Side [m] of a mp6_3f's tip triangle (circumradius 0.05 m)."""
+
+
+def _corner_tri(a: float, b: float, c: float, r: float = 0.015) -> list:
+    """Three tips of a mp6_3f at the ``(-a, -b, -c)`` corner, its axis level (pivot frame).
+
+    Tips on the -x, -y and -z faces (in that order), their centres ``r`` off the faces, the
+    triangle in the vertical plane ``x + y = const``: the two side tips' centres at one height,
+    ``_S`` apart along that plane, the bottom tip's centre ``_S √3 / 2`` below their midpoint
+    and ``r`` under the bottom face. Its hand's axis is horizontal along ``(1, 1, 0) / √2``, so
+    that when the raised side turns up the hand's back rises too (away from the table).
+    """
+    u, z = _S / np.sqrt(2.0), -c - r + _S * np.sqrt(3.0) / 2
+    return [(-a, -b - r + u, z), (-a - r + u, -b, z),
+            (-a - r + u / 2, -b - r + u / 2, -c)]
 
 
 ROLE_GRIPS = {
     "pusher": RoleGrip(("-x", "-x", "-x"), lambda a, b, c: _tri(-a, 0.05, c - 0.08, 1.0),
-                       lambda a, b, c: (-a, 0.05, c - 0.08), (-0.65, 0.05, -0.47), 0.0,
-                       (0.0, 0.3, -1.2, 0.0, 0.9, 0.0), None, ((0, -1.0, 0.4),)),
-    "stop": RoleGrip(("+x", "+x", "+x"), lambda a, b, c: _tri(a, 0.05, -c + 0.08, -1.0),
-                     lambda a, b, c: (a, 0.05, -c + 0.08), (0.65, -0.35, -0.38), np.pi,
-                     (0.0, 0.3, -1.2, 0.0, 0.9, 0.0), None, ((0, 1.0, 0.4),)),
+                       lambda a, b, c: (-a, 0.05, c - 0.08), (-0.55, 0.0, -0.26), 0.0,
+                       (0.0, -0.9, 1.2, 0.0, -0.3, 0.0), None, ((0, -1.0, 0.4),)),
+    "stop": RoleGrip(("+x", "+x", "+x"),
+                     lambda a, b, c: _tri(a, 0.05, -c + STOP_HEIGHT, -1.0),
+                     lambda a, b, c: (a, 0.05, -c + STOP_HEIGHT), (0.55, -0.35, -0.11), np.pi,
+                     (0.0, -0.6, 1.4, 0.0, -0.8, 0.0), None, ((0, 1.0, 0.4),)),
     "top": RoleGrip(("+x", "+y", "+z", "+z"),
                     lambda a, b, c: [(a, b - 0.05, c - 0.05), (a - 0.05, b, c - 0.05),
                                      (a - 0.02, b - 0.05, c), (a - 0.17, b - 0.05, c)],
                     lambda a, b, c: (a, b, c), (0.6, 0.15, -0.6), 2.5,
                     (0.8, -1.15, 1.05, 0.6, 0.9, -0.8), (0.04, 0.04, 0.04),
                     ((0, 1.0, 0.4), (1, 1.0, 0.3))),
-    "insert": RoleGrip(("-x", "-y", "-z"),
-                       lambda a, b, c: [(-a, -b + 0.05, -c + 0.05), (-a + 0.05, -b, -c + 0.05),
-                                        (-a + 0.02, -b + 0.05, -c)],
-                       lambda a, b, c: (-a, -b, -c), (-0.4, -0.4, -0.7), 0.8,
-                       (0.0, 0.0, -1.4, 0.0, 0.7, -0.75), (-0.08, -0.04, 0.03),
-                       ((0, -1.0, 0.4), (1, -1.0, 0.3))),
+    "insert": RoleGrip(("-x", "-y", "-z"), _corner_tri,
+                       lambda a, b, c: (-a, -b, -c), (-0.4, -0.45, 0.0), 0.8,
+                       (0.16, -0.59, 2.09, 0.17, -1.5, 1.04), (-0.08, -0.04, 0.10),
+                       ((0, -1.0, 0.4), (1, -1.0, 0.3)), (2, 0, 1)),
 }
-"""The grips of the shipped grippers (mp6_3f flat on a face, mp6_4f and mp6_3f around a
-corner as in ``pick_from_table``), relative to the box's faces and corners, their bases as
-in the hand-planned ``tilt_pick`` (a 0.8 x 0.6 x 0.4 m box on a table 0.4 and 0.3 m wider
-on each side)."""
-
+"""The grips of the shipped grippers (mp6_3f flat on a face, mp6_4f around a corner as in
+``pick_from_table``, mp6_3f level at the raised bottom corner), relative to the box's faces
+and corners, their bases as in the hand-planned ``tilt_pick`` (a 0.8 x 0.6 x 0.4 m box on a
+table 0.4 and 0.3 m wider on each side): the pusher's and the stop's on pedestals just above
+the table top (the pusher's shoulder at its hand's height), the insert's at the table's
+height, each 15 cm outside the table's rectangle; the top's below the table, 20 cm outside
+it (its arm rises outside the table's edge)."""
 _AXES = {"+x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "-y": (1, -1.0), "+z": (2, 1.0),
          "-z": (2, -1.0)}
 
@@ -249,16 +289,18 @@ def tilt_angle_range(a: float, c: float, radius: float) -> tuple[float, float]:
     ``a``: the box's half size toward the pivot, ``c`` its half height, ``radius`` the
     insert gripper's tip radius [m].
 
-    Smallest: the bottom tip (its contact point 0.02 m in from the raised edge, its centre
-    :data:`INSERT_DEPTH` below the bottom face's plane while it slides, 0.004 m further out)
-    has its lowest point :data:`INSERT_CLEARANCE` above the table. A point at distance ``d``
-    from the pivot edge along the bottom face and ``h`` below its plane is at height
-    ``d sinθ - h cosθ`` after a turn ``θ``; with ``d = 2a - 0.016``, ``h = INSERT_DEPTH +
-    2 radius`` (the centre is a radius off the face, the lowest point a radius below it),
-    ``d sinθ - h cosθ = H`` gives ``θ = asin(H / √(d² + h²)) + atan2(h, d)``.
+    Smallest: the bottom tip (its contact point ``e`` in from the raised edge,
+    :func:`_corner_tri`, its centre :data:`INSERT_DEPTH` below the bottom face's plane while
+    it slides, 0.004 m further out) has its lowest point :data:`INSERT_CLEARANCE` above the
+    table. A point at distance ``d`` from the pivot edge along the bottom face and ``h``
+    below its plane is at height ``d sinθ - h cosθ`` after a turn ``θ``; with
+    ``d = 2a - e + 0.004``, ``h = INSERT_DEPTH + 2 radius`` (the centre is a radius off the
+    face, the lowest point a radius below it), ``d sinθ - h cosθ = H`` gives
+    ``θ = asin(H / √(d² + h²)) + atan2(h, d)``.
     Largest: :data:`TILT_STABILITY` of ``atan(a / c)`` (the centre of mass over the pivot).
     """
-    d = 2 * a - 0.016
+    e = _corner_tri(a, 0.0, c, radius)[2][0] + a
+    d = 2 * a - e + 0.004
     h = INSERT_DEPTH + 2 * radius
     lo = float(np.arcsin(min(INSERT_CLEARANCE / np.hypot(d, h), 1.0)) + np.arctan2(h, d))
     return lo, TILT_STABILITY * float(np.arctan2(a, c))
@@ -353,8 +395,9 @@ class PickUpPlanner:
             joint = {"type": "fingertips", "tip_radius": float(slot.tip_radius)}
             if g.approach is not None:
                 joint["approach"] = _r(P @ np.array(g.approach))
+            names = list(slot.tips) if g.tips is None else [slot.tips[k] for k in g.tips]
             joint["contacts"] = [{"tip": t, "face": f, "point": _r(p)}
-                                 for t, f, p in zip(slot.tips, faces, pts, strict=True)]
+                                 for t, f, p in zip(names, faces, pts, strict=True)]
             arms.append({"name": slot.name, "urdf": slot.urdf, "tool_frame": slot.tool_frame,
                          "base": {"position": _r(pos), "rpy": _r([0.0, 0.0, yaw])},
                          "q_seed": list(g.q_seed), "joint": joint})
@@ -468,7 +511,9 @@ class PlanCheck:
             ratio).
         detail: which arm, pose or pair.
         scenario: the scenario mapping (when built).
-        scores: ``torque_ratio``, ``clearance``, ``lp_margin``, ``ik_residual`` (a plan).
+        scores: ``torque_ratio``, ``clearance``, ``lp_margin``, ``ik_residual`` (a plan);
+            ``torque_ratios``: per statically checked key pose (``rest``, ``tilt``, the
+            last), its largest static torque over effort limit.
         key_q: per key pose, the arms' configurations (T, nq).
         labels: the key poses' labels.
     """
@@ -598,24 +643,33 @@ def check_plan(planner: PickUpPlanner, cand: Candidate) -> PlanCheck:
         return fail("collision", min_clear, f"{worst.replace('_', '-')} clearance "
                     f"{min_clear * 1e3:.3g} mm", key_q=Q, labels=labels)
     # static torques: at rest on the table (the couple pressing, the supports carrying the
-    # rest) and carried at the end (the arms alone)
+    # rest), tilted (the couple alone against the pivot edge's vertices: the other arms
+    # are apart, the far edge's vertices are off the table) and carried at the end (the arms
+    # alone)
     limits = np.concatenate([effort_limits(a) for a in arms])
-    worst_ratio, worst_at = 0.0, ""
-    for k, supports in ((1, True), (len(poses) - 1, False)):
+    couple = [role in ("pusher", "stop") for role in ROLES]  # data["arms"] in ROLES' order
+    tilted = labels.index(next(p["name"] for p in data["controller"]["phases"]
+                               if p["kind"] == "tilt"))
+    worst_ratio, worst_at, ratios = 0.0, "", {}
+    for k, supports, engaged in ((1, True, None), (tilted, True, couple),
+                                 (len(poses) - 1, False, None)):
         st = system.state(Q[k], None, pos[k], quat[k])
         try:
-            tau, _ = static_torques(system, st, supports=supports)
+            tau, _ = static_torques(system, st, supports=supports, engaged_arms=engaged,
+                                    support_gap=None if engaged is None else TOUCHING_GAP)
         except DynamicsError as exc:
             return fail("closure", 0.0, f"the contacts cannot hold the object at "
                                         f"{labels[k]}: {exc}", key_q=Q, labels=labels)
         ratio = float(np.max(np.abs(tau) / limits))
+        ratios[labels[k]] = ratio
         if ratio > worst_ratio:
             worst_ratio, worst_at = ratio, labels[k]
     if worst_ratio > STATIC_TORQUE_RATIO:
         return fail("torque", worst_ratio, f"static torque {worst_ratio:.3g} of its limit at "
                     f"{worst_at} (at most {STATIC_TORQUE_RATIO:g})", key_q=Q, labels=labels)
     scores = {"torque_ratio": worst_ratio, "clearance": float(min_clear),
-              "lp_margin": float(fc.lp_epsilon), "ik_residual": worst_res}
+              "lp_margin": float(fc.lp_epsilon), "ik_residual": worst_res,
+              "torque_ratios": ratios}
     return PlanCheck(cand, True, None, None, "", data, scores, Q, labels)
 
 

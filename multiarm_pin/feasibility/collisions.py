@@ -23,10 +23,13 @@ the convex hulls of the meshes, which are lower bounds of the meshes' distances.
 whose hull penetrates is checked again on the meshes themselves (coal BVH models); only a
 mesh collision is a collision (its depth: :meth:`CollisionScene.mesh_penetration`).
 
-Slabs: a support is an infinite plane in the dynamics; its slab is a box of thickness
-:data:`SLAB_THICKNESS` under the plane, the rectangle that bounds the object's support points
-at the scene's reference state (x axis: the world x axis projected on the plane), widened by
-:data:`SLAB_MARGIN` on each side.
+Slabs: a support's slab is a box of thickness :data:`SLAB_THICKNESS` under its plane, its
+sides along the support's axes (``x_axis``, ``n × x_axis``: the frame the dynamics measures
+a finite support's ``extent`` in, :class:`~multiarm_pin.constraints.supports.Support`). A
+finite support (an ``extent``) is exactly its rectangle about its ``point``: the whole table
+top, so a link over the table beside the object collides with it. An infinite plane (no
+``extent``) is the rectangle that bounds the object's support points at the scene's
+reference state, widened by :data:`SLAB_MARGIN` on each side (a stand under those points).
 """
 
 from __future__ import annotations
@@ -54,8 +57,9 @@ SLAB_THICKNESS = 0.05
 """Thickness [m] of a support's slab (under its plane)."""
 
 SLAB_MARGIN = 0.0
-"""Margin [m] of a support's slab beyond the object's support points (none: a support is
-where the object's support points rest, as a stand under some points of a face)."""
+"""Margin [m] of an infinite support's slab beyond the object's support points (none: such a
+support is where the object's support points rest, as a stand under some points of a face;
+a finite support's slab is its ``extent``)."""
 
 GJK_TOLERANCE = 1e-11
 """Tolerance of coal's GJK on the hulls' distances [m] (its default, 1e-6, leaves the
@@ -122,8 +126,8 @@ class CollisionScene:
 
     Args:
         system: the :class:`~multiarm_pin.system.MultiArmSystem`.
-        state: the reference state (the slabs are sized around the object's support points
-            there); None: the object at the origin.
+        state: the reference state (the slabs of infinite supports are sized around the
+            object's support points there); None: the object at the origin.
         ground: height [m] of the ground plane ``z = ground``, or None for no ground.
 
     Attributes:
@@ -212,21 +216,26 @@ class CollisionScene:
 
     # ------------------------------------------------------------------ construction
     def _slabs(self, state) -> list[tuple[np.ndarray, pin.SE3]]:
-        """Half sides (2,) [m] and placement of each support's slab (module docstring)."""
+        """Half sides (2,) [m] and placement of each support's slab (module docstring).
+
+        The slab's axes are the support's own (``x_axis``, ``y_axis = n × x_axis``, ``n``:
+        :class:`~multiarm_pin.constraints.supports.Support`, the frame the dynamics measures
+        its ``extent`` in); its top face is the support's plane.
+        """
         out = []
         pos = np.zeros(3) if state is None else np.asarray(state.obj.position)
         R_o = np.eye(3) if state is None else state.obj.rotation
         for sp in self.system.supports.supports:
             n = np.asarray(sp.normal, float)
-            x = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
-            x = np.cross(x, n)
-            x /= np.linalg.norm(x)
-            R = np.column_stack([x, np.cross(n, x), n])
-            pts = pos + np.asarray(sp.points) @ R_o.T
-            uv = (pts - sp.point) @ R[:, :2]
-            lo, hi = uv.min(axis=0), uv.max(axis=0)
-            centre = sp.point + R[:, :2] @ (0.5 * (lo + hi))
-            half = 0.5 * (hi - lo) + SLAB_MARGIN
+            R = np.column_stack([sp.x_axis, sp.y_axis, n])
+            if sp.finite:  # the table top itself: its rectangle about its point
+                centre, half = np.asarray(sp.point, float), 0.5 * np.asarray(sp.extent)
+            else:  # an infinite plane: the rectangle under the object's support points
+                pts = pos + np.asarray(sp.points) @ R_o.T
+                uv = (pts - sp.point) @ R[:, :2]
+                lo, hi = uv.min(axis=0), uv.max(axis=0)
+                centre = sp.point + R[:, :2] @ (0.5 * (lo + hi))
+                half = 0.5 * (hi - lo) + SLAB_MARGIN
             out.append((half, pin.SE3(R, centre - 0.5 * SLAB_THICKNESS * n)))
         return out
 

@@ -10,6 +10,7 @@ the issue's "done when".
 from __future__ import annotations
 
 import copy
+import itertools
 from functools import cache
 
 import numpy as np
@@ -31,10 +32,11 @@ from multiarm_pin.design.pick_up import (
 )
 from multiarm_pin.design.spec import parse_design
 from multiarm_pin.exceptions import DesignError, DesignImpossibleError
+from tests.run_helpers import tilt_pick_event_times
 
 SPEC = data_path("scenarios", "designs", "tilt_pick.yaml")
 
-SHIPPED = ("+x", 0.14)
+SHIPPED = ("+x", 0.12)
 """The shipped spec's plan checked here: its smallest tilt about +x that passes."""
 
 
@@ -68,13 +70,17 @@ def _closure(W: np.ndarray) -> bool:
 
 
 def test_the_tilt_angle_lifts_the_insert_tip_to_its_clearance():
-    """At the smallest angle, the insert tip's lowest point (contact 0.02 m in from the raised
+    """At the smallest angle, the insert tip's lowest point (contact ``e`` in from the raised
     edge, 0.004 m further out, centre a radius plus INSERT_DEPTH below the bottom plane,
     lowest point a radius lower) turned about the pivot by ``pin.exp3`` is INSERT_CLEARANCE
-    above the table; the largest is 0.6 of the tipping angle atan(a / c)."""
+    above the table; the largest is 0.6 of the tipping angle atan(a / c). ``e``: the side
+    tips' centres are a radius off the -x and -y faces and ``s`` (the tip triangle's side,
+    0.05 √3 m) apart along the diagonal plane ``x + y = const``, so ``s / √2`` apart along
+    x; the bottom tip's centre is at their midpoint, ``s / (2 √2) - r`` in from the edge."""
     a, c, r = 0.4, 0.2, 0.015
     lo, hi = tilt_angle_range(a, c, r)
-    p = np.array([-a + 0.016, 0.0, -c - INSERT_DEPTH - 2 * r])  # object frame
+    e = 0.05 * np.sqrt(3) / (2 * np.sqrt(2)) - r
+    p = np.array([-a + e - 0.004, 0.0, -c - INSERT_DEPTH - 2 * r])  # object frame
     pivot = np.array([a, 0.0, -c])
     z = (pin.exp3(np.array([0.0, lo, 0.0])) @ (p - pivot))[2]
     assert abs(z - INSERT_CLEARANCE) < 1e-12
@@ -122,6 +128,67 @@ def test_the_shipped_spec_plans_a_statically_checked_scenario():
     tilt = sc["controller"]["phases"][1]
     np.testing.assert_allclose(tilt["pivot"], [0.4, 0.0, 0.7], atol=1e-12)
     np.testing.assert_allclose(tilt["axis"], [0.0, 1.0, 0.0], atol=1e-12)
+
+
+def _min_norm_nonnegative(W: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``argmin ‖μ‖`` with ``W μ = w``, ``μ >= 0``, by enumerating supports (K <= 10).
+
+    The optimum ``μ*`` is the least-norm solution of ``W_S μ_S = w`` on its own support
+    ``S`` (strictly positive there: a local, hence global, optimum of the problem without
+    the signs); every other feasible restricted solution is no shorter.
+    """
+    best = None
+    for mask in itertools.product((False, True), repeat=W.shape[1]):
+        S = np.flatnonzero(mask)
+        if not len(S):
+            continue
+        mu_S = np.linalg.lstsq(W[:, S], w, rcond=None)[0]
+        if np.linalg.norm(W[:, S] @ mu_S - w) > 1e-9 * np.linalg.norm(w) or mu_S.min() < 0:
+            continue
+        if best is None or np.linalg.norm(mu_S) < np.linalg.norm(best):
+            best = np.zeros(W.shape[1])
+            best[S] = mu_S
+    return best
+
+
+def test_the_tilted_pose_static_torques_are_the_couples():
+    """The plan's static torque ratio at the tilted key pose: the box held by the couple's
+    six tips (the other hands apart) against the pivot edge's two vertices (the far ones
+    are 0.8 sin 0.12 m up): the least-norm pushing forces balancing the weight (solved here
+    by enumerating the supports), each arm's ``g(q) + Σ Jᵀ f`` (Pinocchio's gravity and
+    LOCAL_WORLD_ALIGNED Jacobians at the tips' centres, on the force's line), over the
+    URDF's effort limits: the largest equals the plan's to 1e-6."""
+    from multiarm_pin.app.precheck import effort_limits
+
+    planner, c = _checked()
+    sc = c.scenario
+    k = c.labels.index("tilt")
+    M = planner.key_poses(c.candidate, sc)[k][1]
+    arms = _built(sc).system.arm_set.arms
+    qs = np.split(c.key_q[k], np.cumsum([a.nq for a in arms])[:-1])
+    cols, tips = [], []
+    for p in np.asarray(sc["supports"][0]["points"], float)[:2]:  # the pivot's vertices
+        cols.append(np.r_[0.0, 0.0, 1.0, np.cross(M.act(p) - M.translation, [0, 0, 1.0])])
+    for i in (0, 1):  # pusher, stop
+        for con in sc["arms"][i]["joint"]["contacts"]:
+            n = -M.rotation @ {"-x": [-1.0, 0, 0], "+x": [1.0, 0, 0]}[con["face"]]
+            x = arms[i].frame_placement(qs[i], con["tip"]).translation
+            cols.append(np.r_[n, np.cross(x - M.translation, n)])
+            tips.append((i, con["tip"], n))
+    weight = sc["object"]["mass"] * 9.81
+    mu = _min_norm_nonnegative(np.array(cols).T, np.array([0, 0, weight, 0, 0, 0]))
+    ratio = 0.0
+    for i, a in enumerate(arms):
+        tau = pin.computeGeneralizedGravity(a.model, a.data, qs[i]).copy()
+        for j, (arm, tip, n) in enumerate(tips):
+            if arm == i:
+                J = pin.computeFrameJacobian(a.model, a.data, qs[i], a.model.getFrameId(tip),
+                                             pin.LOCAL_WORLD_ALIGNED)[:3]
+                tau += J.T @ (mu[2 + j] * n)
+        ratio = max(ratio, float(np.max(np.abs(tau) / effort_limits(a))))
+    assert mu[:2].min() > 1.0 and mu[2:].max() > 1.0  # the pivot and the couple carry it
+    assert abs(ratio - c.scores["torque_ratios"]["tilt"]) < 1e-6
+    assert set(c.scores["torque_ratios"]) == {"rest", "tilt", "carry"}
 
 
 def test_a_turned_pivot_turns_the_whole_plan():
@@ -220,11 +287,12 @@ def test_drawn_boxes_plan_or_say_why():
 
 
 def test_the_shipped_spec_simulates_the_issues_events():
-    """The first plan of the shipped spec (+x, 0.14 rad) run through (the Python stepper):
+    """The first plan of the shipped spec (+x, 0.12 rad) run through (the Python stepper):
     the far edge's vertices separate first, then the insert tip touches down on the bottom
     face, then the pivot's vertices separate; no contact force below zero; feasible; the
-    final pose on the closed form (the start turned 0.14 rad about the +x bottom edge, then
-    moved by (0.05, 0, 0.05) m) to 1e-3 m."""
+    final pose on the closed form (the start turned 0.12 rad about the +x bottom edge, then
+    moved by (0.05, 0, 0.05) m) to 1e-3 m; every arm more than 1 cm clear of the whole table
+    top."""
     from multiarm_pin.app.run_feasibility import check_initial_state
     from multiarm_pin.app.runner import scenario_controller, simulate_built
     from multiarm_pin.feasibility import feasibility_report
@@ -238,12 +306,8 @@ def test_the_shipped_spec_simulates_the_issues_events():
     run = simulate_built(built, scenario_controller(built), sim.duration, sim.dt, sim.solver)
     report = feasibility_report(built.system, run, ground=built.scenario.ground, scene=scene)
     assert report.feasible, [v.describe() for v in report.violations]
-    first = {}
-    for e in run.events:
-        first.setdefault((e.kind, e.label), e.t)
-    far = max(first[("separation", "table[2]")], first[("separation", "table[3]")])
-    bottom = first[("touchdown", "three_finger:tip[2]")]
-    pivot = min(first[("separation", "table[0]")], first[("separation", "table[1]")])
+    assert report.clearance["arm_support"] > 0.01  # the whole table top
+    far, bottom, pivot = tilt_pick_event_times(run.events)
     assert far < bottom < pivot
     assert run.mu.min() >= 0.0
     th = SHIPPED[1]
