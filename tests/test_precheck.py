@@ -182,3 +182,26 @@ def test_a_weld_alone_is_form_closure_through_its_rows_counted_both_ways(tmp_pat
     assert W.shape == (6, 12)
     assert form_closure(W).form_closure
     assert not form_closure(W[:, ::2], allow_fewer=True).form_closure  # one way only: no
+
+
+def test_static_torques_on_chosen_rows_only():
+    """``static_torques`` with rows left out: ``tilt_pick`` at its start, the box resting on
+    the table. No arm engaged, the table's vertices alone carry the weight, so each arm's
+    torque is its own gravity torque (Pinocchio's ``computeGeneralizedGravity``, to 1e-9
+    N m; with the arms' rows in, the least-norm distribution would load them too); with no
+    support row within a gap of -1 m either, nothing holds the box: a DynamicsError."""
+    from multiarm_pin.exceptions import DynamicsError
+
+    built = build_scenario(load_scenario(REPO / "scenarios" / "tilt_pick.yaml"),
+                           load_visuals=False)
+    system, st = built.system, built.initial_state
+    tau, how = precheck.static_torques(system, st, supports=True,
+                                       engaged_arms=[False] * system.n_arms, support_gap=1e-6)
+    assert how == "by the arms and the supports"
+    qs = np.split(np.asarray(st.q), np.cumsum([a.nq for a in system.arms])[:-1])
+    want = np.concatenate([pin.computeGeneralizedGravity(a.model, a.data, q)
+                           for a, q in zip(system.arms, qs, strict=True)])
+    assert np.abs(tau - want).max() < 1e-9
+    with pytest.raises(DynamicsError):
+        precheck.static_torques(system, st, supports=True,
+                                engaged_arms=[False] * system.n_arms, support_gap=-1.0)
