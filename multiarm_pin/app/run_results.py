@@ -352,6 +352,40 @@ def replay_parts(arms, obj, trajectory: dict):
     return rarms, robj, rc
 
 
+def replay_phases(scenario: Scenario, trajectory: dict) -> tuple:
+    """The phases of a ``phased_pd`` run for its replay (:class:`ReplayPhase` s), else ().
+
+    Read from the scenario's ``controller.phases`` (the results folder's ``scenario.yaml``
+    holds them as run), checked by the controller's own parser
+    (:func:`~multiarm_pin.sim.controllers.phased.parse_phases`); a phase's ``press`` (support
+    row indices; none given: every row) becomes the rows' labels, from the trajectory's
+    ``contact_labels`` (``"<support>[j]"`` in row order, after the arms' contacts).
+
+    Args:
+        scenario: the run's scenario.
+        trajectory: its ``trajectory.npz`` arrays (``contact_labels``, ``support_names``).
+
+    Raises:
+        InputError: phases the controller would refuse (names the phase and key).
+    """
+    from multiarm_pin.app.replay_scene import ReplayPhase
+    from multiarm_pin.sim.controllers.phased import parse_phases
+
+    ctrl = scenario.controller
+    if ctrl is None or ctrl.type != "phased_pd":
+        return ()
+    labels = [str(x) for x in trajectory.get("contact_labels", [])]
+    names = tuple(str(x) for x in trajectory.get("support_names", []))
+    rows = [lab for lab in labels if lab.split("[", 1)[0] in names and ":" not in lab]
+    arm_names = [a.name for a in scenario.arms]
+    raw = ctrl.params.get("phases")
+    phases = parse_phases([{"kind": "hold"}] if raw is None else raw, arm_names, len(rows),
+                          tuple(lab for lab in labels if ":" in lab))
+    return tuple(ReplayPhase(p.name, p.kind, p.t, p.duration,
+                             tuple(rows) if p.press is None else tuple(rows[i] for i in p.press),
+                             tuple(p.release)) for p in phases)
+
+
 def scenario_copy(scenario: Scenario, duration: float, solver: str) -> str:
     """The text of ``scenario.yaml`` in a results folder: the scenario as run, with a header."""
     data = dict(scenario.data)
@@ -451,6 +485,7 @@ __all__ = [
     "force_names",
     "plot_names",
     "replay_parts",
+    "replay_phases",
     "run_status",
     "scenario_copy",
     "summarize",

@@ -33,6 +33,7 @@ from multiarm_pin.app.run_results import (
     load_run,
     plot_names,
     replay_parts,
+    replay_phases,
     scenario_copy,
     summarize,
     trajectory_arrays,
@@ -510,7 +511,8 @@ def _write_plots(folder: Path, built: BuiltScenario, sc: Scenario, traj: dict) -
     part = Path(tempfile.mkdtemp(prefix=".plots-", dir=folder))
     try:
         written = write_plots(part, traj, [a.name for a in built.arms], sc.name,
-                              [sp.name for sp in built.system.supports.supports])
+                              [sp.name for sp in built.system.supports.supports],
+                              replay_phases(sc, traj))
         out = {}
         for p in written:
             os.replace(p, folder / p.name)
@@ -527,7 +529,8 @@ def _write_page(folder: Path, built: BuiltScenario, traj: dict) -> Path:
     rarms, robj, rc = replay_parts(built.arms, built.obj, traj)
     part = folder / ".replay.html.part"
     write_replay_html(part, rarms, robj, traj["t"], rc, fps=REPLAY_FPS,
-                      title=f"{built.scenario.name}: multiarm-pin replay")
+                      title=f"{built.scenario.name}: multiarm-pin replay",
+                      phases=replay_phases(built.scenario, traj))
     final = folder / "replay.html"
     os.replace(part, final)
     return final
