@@ -88,7 +88,7 @@ SUPPORT_THICKNESS = 0.01
 """Thickness [m] of the slab drawn under a support plane."""
 CONTACT_RADIUS = 0.012
 """Radius [m] of the contact-point spheres."""
-SUPPORT_MARKER_SIZE = 0.03
+SUPPORT_MARKER_SIZE = 0.04
 """Edge [m] of the cube drawn at each support point (``"<support>[j]"``) instead of a sphere."""
 FORCE_RADIUS = 0.01
 """Base radius [m] of the tapered force rods."""

@@ -204,7 +204,7 @@ OVERLAY_CSS = """
   font: 13px/1.35 system-ui, -apple-system, "Segoe UI", "Liberation Sans", sans-serif;
   border-radius: 6px; padding: 8px 10px; z-index: 10;}
 #ma-info {left: 10px; top: 10px; max-width: 420px; max-height: calc(100vh - 250px);
-  overflow-y: auto;}
+  overflow-y: auto; overflow-x: hidden;}
 #ma-title {font-weight: 600; margin-bottom: 2px;}
 #ma-time {font: 600 22px/1.2 ui-monospace, "DejaVu Sans Mono", "Liberation Mono", monospace;}
 #ma-end {color: #b8c0cc; margin-left: 6px;}
@@ -352,7 +352,7 @@ OVERLAY_JS = r"""
         parts.push('<span style="color:' + (on ? o.colors.contact : o.colors.separated) + '">' +
           esc(v.label.slice(v.support.length)) + " " + state + "</span>");
       }
-      return "support points: " + parts.join("");
+      return "support points: " + parts.join(" ");
     }
     function phaseText(t) {
       if (!np) return "";

@@ -178,3 +178,39 @@ def test_the_page_shows_the_phase_and_the_support_points(page):
 
     late = dump_dom(page_url(page, "#t=0.45"), budget_ms=3000)
     assert "phase 3/3: settle (hold)" in element_text(late, "ma-phase")
+
+
+def test_the_contact_plot_names_the_phases(tmp_path, monkeypatch):
+    """``contact_states.png``: a band per phase over its interval, named above the plot."""
+    from multiarm_pin.app import plots
+
+    _, traj, phases, _ = _run()
+    figures = []
+    monkeypatch.setattr(plots, "_save", lambda fig, path: figures.append(fig) or Path(path))
+    plots.plot_contact_states(tmp_path / "c.png", traj["t"], traj["contact_active"],
+                              traj["contact_labels"], phases=phases)
+    plots.plot_contact_states(tmp_path / "d.png", traj["t"], traj["contact_active"],
+                              traj["contact_labels"])
+    with_phases, without = (f.axes[0] for f in figures)
+    assert [x.get_text() for x in with_phases.texts] == ["rest", "tilt", "settle"]
+    # two bands per phase (its interval, its motion), spanning the YAML's intervals
+    spans = sorted((round(p.get_x(), 9), round(p.get_x() + p.get_width(), 9))
+                   for p in with_phases.patches)
+    assert spans == [(0.0, 0.1), (0.0, 0.1), (0.1, 0.4), (0.1, 0.4), (0.4, 0.5), (0.4, 0.5)]
+    assert len(without.texts) == 0 and len(without.patches) == 0
+    for f in figures:
+        plots.plt.close(f)
+
+
+def test_the_replay_command_prints_the_phases(monkeypatch, capsys):
+    """``multiarm-pin replay DIR`` (the live viewer has no overlay) lists the phase table."""
+    from multiarm_pin.app import cli, replay, runner
+
+    monkeypatch.setattr(runner, "serve_run", lambda *a, **k: ("http://127.0.0.1:7000", None))
+    monkeypatch.setattr(runner, "http_status", lambda url: 200)
+    monkeypatch.setattr(replay, "close_visualizer", lambda vis: None)
+    assert cli.main(["replay", str(RUN), "--no-block"]) == 0
+    lines = [x.split() for x in capsys.readouterr().out.splitlines() if " s  " in x]
+    assert [(x[0], x[2], x[4]) for x in lines] == [
+        ("0.000", "0.100", "rest"), ("0.100", "0.400", "tilt"), ("0.400", "0.500", "settle")]
+    assert lines[1][-2:] == ["table[0],", "table[1]"]
