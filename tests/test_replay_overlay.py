@@ -124,6 +124,8 @@ def test_time_legend_and_events_are_drawn(tmp_path):
     for words in ("contact touching", "contact separated", "support table", "force on the "
                   "object", "separation", "touchdown", "impact"):
         assert words in legend, (words, legend)
+    # a run without phases: no phase line, table or timeline row
+    assert element_text(end, "ma-phase").strip() == "" and "phases" not in legend
     mid = dump_dom(page_url(page, "#t=0.5"), budget_ms=3000)
     assert element_text(mid, "ma-time").strip() == "t = 0.500 s"
     events = element_text(mid, "ma-events")

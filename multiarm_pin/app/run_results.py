@@ -39,7 +39,8 @@ its results folder:
   (the files written, by role), ``missing_files`` (those a signal or an error left out:
   plots, ``replay.html``) and ``write_interrupted`` (the signal that came while writing,
   or null); ``feasible``, ``violations``, ``limits`` and ``clearance``
-  (:meth:`multiarm_pin.feasibility.FeasibilityReport.as_summary`).
+  (:meth:`multiarm_pin.feasibility.FeasibilityReport.as_summary`); for a ``phased_pd``
+  run, ``phases`` (:func:`phases_summary`: each phase's interval and the events in it).
 - ``object_pose.png``, ``arm_wrenches.png``, ``joint_torques.png``, ``contact_forces.png``
   (fingertips and supports), ``constraint_violation.png``.
 - ``replay.html``: a self-contained Meshcat page replaying the run offline.
@@ -386,6 +387,30 @@ def replay_phases(scenario: Scenario, trajectory: dict) -> tuple:
                              tuple(p.release)) for p in phases)
 
 
+def phases_summary(scenario: Scenario, trajectory: dict, events) -> list[dict]:
+    """``summary.json``'s ``phases`` of a ``phased_pd`` run (empty for other controllers).
+
+    Args:
+        scenario: the run's scenario.
+        trajectory: its ``trajectory.npz`` arrays.
+        events: ``summary.json``'s ``events`` (dicts with ``t``, ``kind``, ``label``).
+
+    Returns:
+        The rows of :func:`~multiarm_pin.app.replay_scene.phase_table` (``name``, ``kind``,
+        ``t``, ``end``, ``motion_end``, ``press``, ``release``), each with ``events``: the
+        contact events during the phase, as ``"<t> s <kind> <label>"``.
+    """
+    from multiarm_pin.app.replay_scene import phase_indices, phase_table
+
+    phases = replay_phases(scenario, trajectory)
+    rows = phase_table(phases, float(trajectory["t"][-1]))
+    where = phase_indices(phases, [float(e["t"]) for e in events])
+    for k, row in enumerate(rows):
+        row["events"] = [f"{float(e['t']):.6g} s {e['kind']} {e['label']}"
+                         for e, i in zip(events, where, strict=True) if i == k]
+    return rows
+
+
 def scenario_copy(scenario: Scenario, duration: float, solver: str) -> str:
     """The text of ``scenario.yaml`` in a results folder: the scenario as run, with a header."""
     data = dict(scenario.data)
@@ -483,6 +508,7 @@ __all__ = [
     "REQUIRED_ARRAYS",
     "load_run",
     "force_names",
+    "phases_summary",
     "plot_names",
     "replay_parts",
     "replay_phases",

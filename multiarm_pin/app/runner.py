@@ -31,6 +31,7 @@ from multiarm_pin.app.run_feasibility import apply_policies, check_initial_state
 from multiarm_pin.app.run_results import (
     REPLAY_FPS,
     load_run,
+    phases_summary,
     plot_names,
     replay_parts,
     replay_phases,
@@ -423,6 +424,9 @@ def _write_results(writer: ResultsWriter, signals: _RunSignals, built: BuiltScen
     summary["requested"]["duration"] = T
     summary.update(status=status, error=error, t_end=float(result.t[-1]))
     summary.update(feasibility or {})
+    phases = phases_summary(sc, traj, summary["events"])
+    if phases:
+        summary["phases"] = phases
     pending = []
     if plots:
         pending += plot_names(traj, [sp.name for sp in built.system.supports.supports],

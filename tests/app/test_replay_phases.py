@@ -26,7 +26,7 @@ from multiarm_pin.app.replay_scene import (
     phase_indices,
     phase_table,
 )
-from multiarm_pin.app.run_results import load_run, replay_parts, replay_phases
+from multiarm_pin.app.run_results import load_run, phases_summary, replay_parts, replay_phases
 from multiarm_pin.app.scenario import build_object, load_scenario
 from multiarm_pin.data import data_path
 from multiarm_pin.exceptions import InputError
@@ -114,6 +114,36 @@ def test_support_point_states_are_the_recorded_gaps_and_forces():
                                                                     vertices)]
     assert [(e["label"], data["rows"][e["row"]]["name"]) for e in data["events"]] == [
         ("table[2]", "table[2]"), ("table[3]", "table[3]")]
+
+
+def test_the_summary_lists_the_phases_and_their_events():
+    """``summary.json``'s ``phases`` (written by ``run``; the saved one is compared too)."""
+    import json
+
+    sc, traj, _, _ = _run()
+    saved = json.loads((RUN / "summary.json").read_text())
+    rows = phases_summary(sc, traj, saved["events"])
+    assert rows == saved["phases"]
+    # the far edge's points separate during the tilt (0.1-0.4 s in the YAML), nothing else
+    assert [(r["name"], r["events"]) for r in rows] == [
+        ("rest", []), ("tilt", ["0.105 s separation table[2]", "0.105 s separation table[3]"]),
+        ("settle", [])]
+    box = load_scenario(data_path("scenarios", "box_on_table.yaml"))
+    assert phases_summary(box, traj, saved["events"]) == []
+
+
+def test_the_runs_page_gets_the_phases(tmp_path):
+    """The runner's page step reads the phases from the scenario it ran."""
+    from types import SimpleNamespace
+
+    from multiarm_pin.app.runner import _write_page
+
+    sc, traj, _, _ = _run()
+    built = SimpleNamespace(arms=[], obj=build_object(sc), scenario=sc)
+    page = _write_page(tmp_path, built, traj)
+    overlay = decode_block(page.read_text())[0]["overlay"]
+    assert [(p["name"], p["t"]) for p in overlay["phases"]] == [
+        (d["name"], d["t"]) for d in _yaml_phases()]
 
 
 def test_bad_phases_are_refused():
