@@ -361,8 +361,8 @@ def configure_replay_parser(p: argparse.ArgumentParser) -> None:
 def replay_command(args: argparse.Namespace) -> int:
     """``multiarm-pin replay DIR``: serve the run and print its URL until Ctrl-C."""
     from multiarm_pin.app.replay import close_visualizer
-    from multiarm_pin.app.replay_scene import phase_table
-    from multiarm_pin.app.run_results import load_run, replay_phases, run_status
+    from multiarm_pin.app.replay_phases import phase_table, replay_phases
+    from multiarm_pin.app.run_results import load_run, run_status
     from multiarm_pin.app.runner import http_status, serve_run
 
     sc, traj, summary = load_run(args.dir)

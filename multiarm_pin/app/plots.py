@@ -17,7 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pinocchio as pin  # noqa: E402
 
-from multiarm_pin.app.replay_scene import phase_table  # noqa: E402
+from multiarm_pin.app.replay_phases import phase_table  # noqa: E402
 from multiarm_pin.exceptions import InputError  # noqa: E402
 from multiarm_pin.spatial import as_array, quaternion_to_rotation  # noqa: E402
 
@@ -161,7 +161,7 @@ def plot_contact_states(path, t, active, labels, events=(), title: str = "",
         events: ``[(t, kind, k), ...]`` events with the contact index, drawn as markers
             (red x: separation, green o: touchdown, orange x: off the edge of a support).
         title: figure title.
-        phases: the task's phases (:class:`~multiarm_pin.app.replay_scene.ReplayPhase`,
+        phases: the task's phases (:class:`~multiarm_pin.app.replay_phases.ReplayPhase`,
             a ``phased_pd`` run's): a band per phase behind the bars (darker while its
             motion runs), named above the plot.
     """
@@ -302,7 +302,7 @@ def write_plots(out_dir, trajectory: Mapping[str, np.ndarray], arm_names, title:
         title: scenario name, prefixed to the titles.
         support_names: the supports' names.
         phases: a ``phased_pd`` run's phases
-            (:func:`~multiarm_pin.app.run_results.replay_phases`): bands in
+            (:func:`~multiarm_pin.app.replay_phases.replay_phases`): bands in
             ``contact_states.png``.
 
     With ``arm_wrench`` (T, n_arms, 6) it also writes ``arm_wrenches.png``, each arm's wrench

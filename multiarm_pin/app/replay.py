@@ -30,8 +30,9 @@ time, a legend and the contacts' timeline (:mod:`multiarm_pin.app.replay_overlay
 for a phased task (:class:`ReplayPhase` s), the current phase and the phases' table and row.
 All positions are in the world frame [m]; forces [N]. The inputs (:class:`ReplayArm`,
 :class:`ReplayObject`, :class:`ReplaySupport`, :class:`ReplayContacts` with its contact labels
-and :class:`ReplayEvent` s) are defined and checked in :mod:`multiarm_pin.app.replay_scene`
-and re-exported here.
+and :class:`ReplayEvent` s) are defined and checked in :mod:`multiarm_pin.app.replay_scene`,
+a phased task's :class:`ReplayPhase` s in :mod:`multiarm_pin.app.replay_phases`, and
+re-exported here.
 """
 
 from __future__ import annotations
@@ -53,14 +54,13 @@ import umsgpack
 from multiarm_pin.app.replay_meshes import lambert_material, mesh_object, visual_mesh
 from multiarm_pin.app.replay_overlay import overlay_data
 from multiarm_pin.app.replay_page import page_visualizer
+from multiarm_pin.app.replay_phases import ReplayPhase, check_phases
 from multiarm_pin.app.replay_scene import (
     ReplayArm,
     ReplayContacts,
     ReplayEvent,
     ReplayObject,
-    ReplayPhase,
     ReplaySupport,
-    check_phases,
     check_replay_inputs,
     frame_indices,
     polyhedron_triangles,
@@ -701,7 +701,7 @@ def write_replay(result, system, path, fps: float = 30,
         fps: frames per second of the replay.
         phases: the task's phases (:class:`ReplayPhase`) to show (a ``phased_pd`` run);
             none by default (a results folder's are read by
-            :func:`~multiarm_pin.app.run_results.replay_phases`).
+            :func:`~multiarm_pin.app.replay_phases.replay_phases`).
 
     Returns:
         The path written.

@@ -15,7 +15,7 @@ panel) but shows neither the simulated time nor what the colours mean. The compa
   contact events as markers (separation, touchdown, touchdown with an impact impulse), the
   part after ``t`` dimmed and a cursor at ``t``. Clicking or dragging on it seeks (and
   pauses); the page opened as ``replay.html#t=1.25`` starts paused at 1.25 s.
-- for a phased task (``phased_pd``: :class:`~multiarm_pin.app.replay_scene.ReplayPhase`
+- for a phased task (``phased_pd``: :class:`~multiarm_pin.app.replay_phases.ReplayPhase`
   s), the current phase under the time (name, kind, moving until / holding), a table of
   the phases in the legend (the current one highlighted: interval, supports pressing,
   arms released) and a top row on the timeline (a band per phase, dark while its motion
@@ -33,13 +33,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from multiarm_pin.app.replay_scene import (
-    ReplayContacts,
-    ReplayPhase,
-    check_phases,
-    frame_indices,
-    phase_table,
-)
+from multiarm_pin.app.replay_phases import ReplayPhase, check_phases, phase_table
+from multiarm_pin.app.replay_scene import ReplayContacts, frame_indices
 
 
 def _hex(color: int) -> str:
@@ -133,7 +128,7 @@ def overlay_data(t: np.ndarray, contacts: ReplayContacts | None, *, title: str =
         given, else one per support; ``events`` (``t``, ``kind``, ``label``, ``body``,
         ``impulse`` [N s], ``impact``: a touchdown with a positive impulse, ``row``: its
         timeline row); ``phases``
-        (:func:`~multiarm_pin.app.replay_scene.phase_table`); ``fps`` and ``vertices``
+        (:func:`~multiarm_pin.app.replay_phases.phase_table`); ``fps`` and ``vertices``
         (:func:`support_vertex_data`, empty without ``fps``).
     """
     t = np.asarray(t, dtype=float)

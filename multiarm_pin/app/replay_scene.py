@@ -252,86 +252,6 @@ class ReplayContacts:
         return out
 
 
-@dataclass(frozen=True)
-class ReplayPhase:
-    """A phase of a phased task (``phased_pd``) shown on the replay's timeline.
-
-    The phase is the current one from ``t`` until the next phase's ``t`` (the controller's
-    ``phase_index``: the last one started; the first one also before its ``t``); its motion
-    (reference change) lasts ``duration``, after which it holds until the next phase.
-
-    Attributes:
-        name: the phase's name.
-        kind: ``"tilt"``, ``"move"`` or ``"hold"``.
-        t: start time [s].
-        duration: duration of its motion [s] (> 0).
-        press: labels of the support points planned to keep pressing (``"<support>[j]"``).
-        release: names of the arms released (their contacts get no planned force).
-    """
-
-    name: str
-    kind: str
-    t: float
-    duration: float
-    press: tuple[str, ...] = ()
-    release: tuple[str, ...] = ()
-
-    def __post_init__(self):
-        if not (math.isfinite(self.t) and math.isfinite(self.duration) and self.duration > 0):
-            raise InputError(f"ReplayPhase {self.name!r}: expected a finite start time and a "
-                             f"duration > 0 [s], got t={self.t!r}, duration={self.duration!r}")
-
-
-def check_phases(phases) -> tuple[ReplayPhase, ...]:
-    """The phases as a tuple, once they are :class:`ReplayPhase` s with increasing starts.
-
-    Raises:
-        InputError: another item, or a start time not after the previous one.
-    """
-    out = tuple(phases)
-    for k, p in enumerate(out):
-        if not isinstance(p, ReplayPhase):
-            raise InputError(f"phases[{k}]: expected a ReplayPhase, got {type(p).__name__}")
-        if k and not p.t > out[k - 1].t:
-            raise InputError(f"phases[{k}] {p.name!r}: starts at {p.t} s, not after "
-                             f"phases[{k - 1}] {out[k - 1].name!r} at {out[k - 1].t} s")
-    return out
-
-
-def phase_indices(phases: Sequence[ReplayPhase], t) -> np.ndarray:
-    """(T,) int: the index of the phase current at each time of ``t`` (T,) [s].
-
-    The last phase started at or before ``t`` (0 before the first start), as ``phased_pd``
-    chooses its phase; -1 everywhere without phases.
-    """
-    t = np.asarray(t, dtype=float)
-    if not len(phases):
-        return np.full(t.shape, -1, dtype=int)
-    starts = np.array([p.t for p in phases])
-    return np.maximum(np.searchsorted(starts, t, side="right") - 1, 0)
-
-
-def phase_table(phases: Sequence[ReplayPhase], t_end: float) -> list[dict]:
-    """The phases' intervals, as the replay page and the contact-state plot show them.
-
-    Args:
-        phases: the phases, in order.
-        t_end: the run's last time [s] (the last phase's end).
-
-    Returns:
-        One dict per phase: ``name``, ``kind``, ``t`` (start) and ``end`` (the next phase's
-        start; the last one's: ``t_end``) [s], ``motion_end`` (the end of its motion,
-        ``t + duration``, at most ``end``) [s], ``press`` and ``release`` (lists).
-    """
-    rows = []
-    for k, p in enumerate(phases):
-        end = phases[k + 1].t if k + 1 < len(phases) else max(float(t_end), p.t)
-        rows.append({"name": p.name, "kind": p.kind, "t": float(p.t), "end": float(end),
-                     "motion_end": float(min(p.t + p.duration, end)),
-                     "press": list(p.press), "release": list(p.release)})
-    return rows
-
-
 # ----------------------------------------------------------------------------- helpers
 def frame_indices(t: np.ndarray, fps: float) -> np.ndarray:
     """Sample index shown at each animation frame.
@@ -411,11 +331,7 @@ __all__ = [
     "ReplaySupport",
     "ReplayContacts",
     "ReplayEvent",
-    "ReplayPhase",
     "EVENT_KINDS",
-    "check_phases",
-    "phase_indices",
-    "phase_table",
     "frame_indices",
     "polyhedron_triangles",
 ]

@@ -40,7 +40,8 @@ its results folder:
   plots, ``replay.html``) and ``write_interrupted`` (the signal that came while writing,
   or null); ``feasible``, ``violations``, ``limits`` and ``clearance``
   (:meth:`multiarm_pin.feasibility.FeasibilityReport.as_summary`); for a ``phased_pd``
-  run, ``phases`` (:func:`phases_summary`: each phase's interval and the events in it).
+  run, ``phases`` (:func:`multiarm_pin.app.replay_phases.phases_summary`: each phase's
+  interval and the events in it).
 - ``object_pose.png``, ``arm_wrenches.png``, ``joint_torques.png``, ``contact_forces.png``
   (fingertips and supports), ``constraint_violation.png``.
 - ``replay.html``: a self-contained Meshcat page replaying the run offline.
@@ -353,64 +354,6 @@ def replay_parts(arms, obj, trajectory: dict):
     return rarms, robj, rc
 
 
-def replay_phases(scenario: Scenario, trajectory: dict) -> tuple:
-    """The phases of a ``phased_pd`` run for its replay (:class:`ReplayPhase` s), else ().
-
-    Read from the scenario's ``controller.phases`` (the results folder's ``scenario.yaml``
-    holds them as run), checked by the controller's own parser
-    (:func:`~multiarm_pin.sim.controllers.phased.parse_phases`); a phase's ``press`` (support
-    row indices; none given: every row) becomes the rows' labels, from the trajectory's
-    ``contact_labels`` (``"<support>[j]"`` in row order, after the arms' contacts).
-
-    Args:
-        scenario: the run's scenario.
-        trajectory: its ``trajectory.npz`` arrays (``contact_labels``, ``support_names``).
-
-    Raises:
-        InputError: phases the controller would refuse (names the phase and key).
-    """
-    from multiarm_pin.app.replay_scene import ReplayPhase
-    from multiarm_pin.sim.controllers.phased import parse_phases
-
-    ctrl = scenario.controller
-    if ctrl is None or ctrl.type != "phased_pd":
-        return ()
-    labels = [str(x) for x in trajectory.get("contact_labels", [])]
-    names = tuple(str(x) for x in trajectory.get("support_names", []))
-    rows = [lab for lab in labels if lab.split("[", 1)[0] in names and ":" not in lab]
-    arm_names = [a.name for a in scenario.arms]
-    raw = ctrl.params.get("phases")
-    phases = parse_phases([{"kind": "hold"}] if raw is None else raw, arm_names, len(rows),
-                          tuple(lab for lab in labels if ":" in lab))
-    return tuple(ReplayPhase(p.name, p.kind, p.t, p.duration,
-                             tuple(rows) if p.press is None else tuple(rows[i] for i in p.press),
-                             tuple(p.release)) for p in phases)
-
-
-def phases_summary(scenario: Scenario, trajectory: dict, events) -> list[dict]:
-    """``summary.json``'s ``phases`` of a ``phased_pd`` run (empty for other controllers).
-
-    Args:
-        scenario: the run's scenario.
-        trajectory: its ``trajectory.npz`` arrays.
-        events: ``summary.json``'s ``events`` (dicts with ``t``, ``kind``, ``label``).
-
-    Returns:
-        The rows of :func:`~multiarm_pin.app.replay_scene.phase_table` (``name``, ``kind``,
-        ``t``, ``end``, ``motion_end``, ``press``, ``release``), each with ``events``: the
-        contact events during the phase, as ``"<t> s <kind> <label>"``.
-    """
-    from multiarm_pin.app.replay_scene import phase_indices, phase_table
-
-    phases = replay_phases(scenario, trajectory)
-    rows = phase_table(phases, float(trajectory["t"][-1]))
-    where = phase_indices(phases, [float(e["t"]) for e in events])
-    for k, row in enumerate(rows):
-        row["events"] = [f"{float(e['t']):.6g} s {e['kind']} {e['label']}"
-                         for e, i in zip(events, where, strict=True) if i == k]
-    return rows
-
-
 def scenario_copy(scenario: Scenario, duration: float, solver: str) -> str:
     """The text of ``scenario.yaml`` in a results folder: the scenario as run, with a header."""
     data = dict(scenario.data)
@@ -508,10 +451,8 @@ __all__ = [
     "REQUIRED_ARRAYS",
     "load_run",
     "force_names",
-    "phases_summary",
     "plot_names",
     "replay_parts",
-    "replay_phases",
     "run_status",
     "scenario_copy",
     "summarize",

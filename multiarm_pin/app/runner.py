@@ -26,15 +26,14 @@ import numpy as np
 from multiarm_pin.app.diagnosis import describe_failure
 from multiarm_pin.app.precheck import precheck_warnings
 from multiarm_pin.app.progress import ProgressBar
+from multiarm_pin.app.replay_phases import phases_summary, replay_phases
 from multiarm_pin.app.results_io import ResultsWriter, safe_component, write_atomic
 from multiarm_pin.app.run_feasibility import apply_policies, check_initial_state, run_monitors
 from multiarm_pin.app.run_results import (
     REPLAY_FPS,
     load_run,
-    phases_summary,
     plot_names,
     replay_parts,
-    replay_phases,
     scenario_copy,
     summarize,
     trajectory_arrays,

@@ -20,13 +20,15 @@ from browser_helpers import dump_dom, element_text, needs_chromium, page_url
 from multiarm_pin.app.replay import write_replay_html
 from multiarm_pin.app.replay_overlay import overlay_data
 from multiarm_pin.app.replay_page import decode_block
-from multiarm_pin.app.replay_scene import (
+from multiarm_pin.app.replay_phases import (
     ReplayPhase,
     check_phases,
     phase_indices,
     phase_table,
+    phases_summary,
+    replay_phases,
 )
-from multiarm_pin.app.run_results import load_run, phases_summary, replay_parts, replay_phases
+from multiarm_pin.app.run_results import load_run, replay_parts
 from multiarm_pin.app.scenario import build_object, load_scenario
 from multiarm_pin.data import data_path
 from multiarm_pin.exceptions import InputError
