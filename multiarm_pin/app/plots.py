@@ -175,7 +175,8 @@ def plot_contact_states(path, t, active, labels, events=(), title: str = "",
     for i, p in enumerate(phase_table(phases, float(t[-1]))):
         color = PHASE_COLORS[i % len(PHASE_COLORS)]
         ax.axvspan(p["t"], p["end"], color=color, alpha=0.08, lw=0)
-        ax.axvspan(p["t"], p["motion_end"], color=color, alpha=0.12, lw=0)
+        if p["motion_end"] > p["t"]:
+            ax.axvspan(p["t"], p["motion_end"], color=color, alpha=0.12, lw=0)
         ax.text(0.5 * (p["t"] + p["end"]), 1.0, p["name"], transform=ax.get_xaxis_transform(),
                 ha="center", va="bottom", fontsize=6, color=color, clip_on=False)
     for k in range(K):

@@ -213,6 +213,7 @@ OVERLAY_CSS = """
 #ma-legend div {margin: 1px 0; padding-left: 20px; text-indent: -20px;}
 #ma-legend table {border-collapse: collapse; font-size: 11px; margin: 1px 0 2px 0;}
 #ma-legend td {padding: 0 5px 0 0; vertical-align: top;}
+#ma-legend td:nth-child(-n+4) {white-space: nowrap;}
 #ma-legend tr.ma-now {background: rgba(255, 255, 255, 0.2); font-weight: 600;}
 .ma-sw {display: inline-block; width: 12px; height: 12px; margin-right: 6px;
   vertical-align: -1px; border: 1px solid rgba(255,255,255,0.5);}
@@ -285,12 +286,13 @@ OVERLAY_JS = r"""
     if (o.phases.length) {
       rows.push("<div>phases (top row of the timeline; dark: moving, light: holding):</div>" +
         '<table id="ma-phases"><tr><th></th><th>phase</th><th>kind</th><th>from&ndash;to [s]' +
-        "</th><th>supports pressing</th></tr>" + o.phases.map((p, i) =>
+        "</th><th>supports pressing; arms</th></tr>" + o.phases.map((p, i) =>
           '<tr id="ma-phase-' + i + '"><td><span class="ma-sw" style="background:' +
           phaseColor(i) + '"></span></td><td>' + esc(p.name) + "</td><td>" + esc(p.kind) +
           "</td><td>" + fmt(p.t) + "&ndash;" + fmt(p.end) + "</td><td>" +
           (p.press.length ? esc(p.press.join(", ")) : "none") +
-          (p.release.length ? "; released: " + esc(p.release.join(", ")) : "") + "</td></tr>"
+          (p.release.length ? "; released: " + esc(p.release.join(", ")) : "") +
+          (p.offsets.length ? "; moving: " + esc(p.offsets.join(", ")) : "") + "</td></tr>"
         ).join("") + "</table>");
     }
     el("ma-legend").innerHTML = rows.join("");
@@ -352,9 +354,9 @@ OVERLAY_JS = r"""
     function phaseText(t) {
       if (!np) return "";
       const k = phaseAt(o, t), p = o.phases[k];
-      const motion = t < p.motion_end - 1e-9 && t >= p.t - 1e-9 ?
-        (p.kind === "hold" ? "offsets moving" : "moving") + " until " + fmt(p.motion_end) + " s" :
-        (t < p.t ? "before its start at " + fmt(p.t) + " s" : "holding");
+      const motion = t < p.t - 1e-9 ? "before its start at " + fmt(p.t) + " s" :
+        t < p.motion_end - 1e-9 ? (p.kind === "hold" ? esc(p.offsets.join(", ")) +
+          " moving" : "moving") + " until " + fmt(p.motion_end) + " s" : "holding";
       return '<span class="ma-sw" style="background:' + phaseColor(k) + '"></span>phase ' +
         (k + 1) + "/" + np + ": <b>" + esc(p.name) + "</b> (" + esc(p.kind) + "), " + motion;
     }
@@ -369,7 +371,7 @@ OVERLAY_JS = r"""
           ctx.globalAlpha = 0.45;
           ctx.fillRect(x(p.t), 0, Math.max(x(p.end) - x(p.t), 1), phH - 3);
           ctx.globalAlpha = 1.0;
-          ctx.fillRect(x(p.t), 0, Math.max(x(p.motion_end) - x(p.t), 1), phH - 3);
+          if (p.motion_end > p.t) ctx.fillRect(x(p.t), 0, x(p.motion_end) - x(p.t), phH - 3);
           const w = x(p.end) - x(p.t) - 4;
           if (w > 14) {
             ctx.fillStyle = "#ffffff";

@@ -40,6 +40,7 @@ class ReplayPhase:
         duration: duration of its motion [s] (> 0).
         press: labels of the support points planned to keep pressing (``"<support>[j]"``).
         release: names of the arms released (their contacts get no planned force).
+        offsets: names of the arms whose held points move to new offsets in this phase.
     """
 
     name: str
@@ -48,6 +49,12 @@ class ReplayPhase:
     duration: float
     press: tuple[str, ...] = ()
     release: tuple[str, ...] = ()
+    offsets: tuple[str, ...] = ()
+
+    @property
+    def moves(self) -> bool:
+        """Its reference changes: a tilt or a move, or a hold whose arms' offsets change."""
+        return self.kind != "hold" or bool(self.offsets)
 
     def __post_init__(self):
         if not (math.isfinite(self.t) and math.isfinite(self.duration) and self.duration > 0):
@@ -94,14 +101,16 @@ def phase_table(phases: Sequence[ReplayPhase], t_end: float) -> list[dict]:
     Returns:
         One dict per phase: ``name``, ``kind``, ``t`` (start) and ``end`` (the next phase's
         start; the last one's: ``t_end``) [s], ``motion_end`` (the end of its motion,
-        ``t + duration``, at most ``end``) [s], ``press`` and ``release`` (lists).
+        ``t + duration``, at most ``end``; ``t`` for a phase that does not move) [s],
+        ``press``, ``release`` and ``offsets`` (lists).
     """
     rows = []
     for k, p in enumerate(phases):
         end = phases[k + 1].t if k + 1 < len(phases) else max(float(t_end), p.t)
         rows.append({"name": p.name, "kind": p.kind, "t": float(p.t), "end": float(end),
-                     "motion_end": float(min(p.t + p.duration, end)),
-                     "press": list(p.press), "release": list(p.release)})
+                     "motion_end": float(min(p.t + p.duration, end) if p.moves else p.t),
+                     "press": list(p.press), "release": list(p.release),
+                     "offsets": list(p.offsets)})
     return rows
 
 
@@ -133,7 +142,7 @@ def replay_phases(scenario: Scenario, trajectory: dict) -> tuple[ReplayPhase, ..
                           tuple(lab for lab in labels if ":" in lab))
     return tuple(ReplayPhase(p.name, p.kind, p.t, p.duration,
                              tuple(rows) if p.press is None else tuple(rows[i] for i in p.press),
-                             tuple(p.release)) for p in phases)
+                             tuple(p.release), tuple(p.offsets)) for p in phases)
 
 
 def phases_summary(scenario: Scenario, trajectory: dict, events) -> list[dict]:
@@ -146,7 +155,8 @@ def phases_summary(scenario: Scenario, trajectory: dict, events) -> list[dict]:
 
     Returns:
         The rows of :func:`phase_table` (``name``, ``kind``,
-        ``t``, ``end``, ``motion_end``, ``press``, ``release``), each with ``events``: the
+        ``t``, ``end``, ``motion_end``, ``press``, ``release``, ``offsets``), each with
+        ``events``: the
         contact events during the phase, as ``"<t> s <kind> <label>"``.
     """
     phases = replay_phases(scenario, trajectory)

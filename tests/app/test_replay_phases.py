@@ -61,8 +61,10 @@ def test_the_phases_are_the_scenarios():
         ("table[0]", "table[1]", "table[2]", "table[3]"), ("table[0]", "table[1]"),
         ("table[0]", "table[1]")]
     table = phase_table(phases, float(traj["t"][-1]))
-    assert [(r["t"], r["end"], r["motion_end"]) for r in table] == [
-        (0.0, 0.1, 0.1), (0.1, 0.4, 0.4), (0.4, pytest.approx(0.5), pytest.approx(0.5))]
+    # rest moves the arms' offsets, tilt turns the box, settle moves nothing
+    assert [(r["t"], r["end"], r["motion_end"], r["offsets"]) for r in table] == [
+        (0.0, 0.1, 0.1, ["pusher", "stop"]), (0.1, 0.4, 0.4, []),
+        (0.4, pytest.approx(0.5), 0.4, [])]
     # a scenario of another controller has no phases
     box = load_scenario(data_path("scenarios", "box_on_table.yaml"))
     assert replay_phases(box, {}) == ()
@@ -192,7 +194,8 @@ def test_the_page_shows_the_phase_and_the_support_points(page):
     the support points' states (the pivot pressing, the raised edge separated), the legend's
     phase table with the current phase highlighted."""
     early = dump_dom(page_url(page, "#t=0.05"), budget_ms=3000)
-    assert "phase 1/3: rest (hold), offsets moving until 0.100 s" in element_text(early, "ma-phase")
+    assert "phase 1/3: rest (hold), pusher, stop moving until 0.100 s" in element_text(
+        early, "ma-phase")
     verts = element_text(early, "ma-vertices")
     assert all(f"[{j}] pressing" in verts or f"[{j}] touching" in verts for j in range(4)), verts
     legend = element_text(early, "ma-legend")
@@ -209,7 +212,7 @@ def test_the_page_shows_the_phase_and_the_support_points(page):
     assert 'id="ma-phase-1" class="ma-now"' in mid and 'id="ma-phase-0" class=""' in mid
 
     late = dump_dom(page_url(page, "#t=0.45"), budget_ms=3000)
-    assert "phase 3/3: settle (hold)" in element_text(late, "ma-phase")
+    assert "phase 3/3: settle (hold), holding" in element_text(late, "ma-phase")
 
 
 def test_the_contact_plot_names_the_phases(tmp_path, monkeypatch):
@@ -225,10 +228,10 @@ def test_the_contact_plot_names_the_phases(tmp_path, monkeypatch):
                               traj["contact_labels"])
     with_phases, without = (f.axes[0] for f in figures)
     assert [x.get_text() for x in with_phases.texts] == ["rest", "tilt", "settle"]
-    # two bands per phase (its interval, its motion), spanning the YAML's intervals
+    # two bands per phase that moves (its interval, its motion), from the YAML's intervals
     spans = sorted((round(p.get_x(), 9), round(p.get_x() + p.get_width(), 9))
                    for p in with_phases.patches)
-    assert spans == [(0.0, 0.1), (0.0, 0.1), (0.1, 0.4), (0.1, 0.4), (0.4, 0.5), (0.4, 0.5)]
+    assert spans == [(0.0, 0.1), (0.0, 0.1), (0.1, 0.4), (0.1, 0.4), (0.4, 0.5)]  # settle: still
     assert len(without.texts) == 0 and len(without.patches) == 0
     for f in figures:
         plots.plt.close(f)
