@@ -7,10 +7,12 @@ WebGL, no network services, a fresh profile per call.
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import signal
 import subprocess
 import tempfile
+from html.parser import HTMLParser
 from pathlib import Path
 
 import numpy as np
@@ -72,3 +74,32 @@ def dump_dom(url: str, size=(1280, 800), budget_ms: int = 15000) -> str:
     """The page's DOM (HTML) after its scripts ran for ``budget_ms`` of virtual time."""
     out = _run(["--dump-dom", f"--window-size={size[0]},{size[1]}"], url, budget_ms)
     return out.stdout.decode("utf-8", errors="replace")
+
+
+def element_text(dom: str, element_id: str) -> str:
+    """The text of an element of the dumped DOM (its tags made spaces)."""
+    class Grab(HTMLParser):
+        def __init__(self):
+            super().__init__()
+            self.depth, self.parts = 0, []
+
+        def handle_starttag(self, tag, attrs):
+            if tag in ("br", "hr", "img", "input"):  # no end tag
+                self.parts.append(" ")
+            elif self.depth or dict(attrs).get("id") == element_id:
+                self.depth += 1
+                self.parts.append(" ")
+
+        def handle_endtag(self, tag):
+            if self.depth:
+                self.depth -= 1
+                self.parts.append(" ")
+
+        def handle_data(self, data):
+            if self.depth:
+                self.parts.append(data)
+
+    grab = Grab()
+    grab.feed(dom)
+    assert grab.parts, f"no element #{element_id} in the DOM"
+    return re.sub(r"\s+", " ", "".join(grab.parts))

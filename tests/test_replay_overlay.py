@@ -7,7 +7,7 @@ import re
 import numpy as np
 import pinocchio as pin
 import pytest
-from browser_helpers import dump_dom, needs_chromium, page_url, screenshot
+from browser_helpers import dump_dom, element_text, needs_chromium, page_url, screenshot
 
 from multiarm_pin.app.replay import (
     ReplayArm,
@@ -68,9 +68,11 @@ def test_overlay_data_groups_contacts_by_body_and_lists_events():
     assert table["runs"] == [[0.0, 2], [pytest.approx(T_SEPARATE), 1]]
     assert data["events"] == [
         {"t": T_SEPARATE, "kind": "separation", "label": "table[0]", "body": "table",
-         "impulse": 0.0, "impact": False},
+         "impulse": 0.0, "impact": False, "row": 1},
         {"t": T_TOUCH, "kind": "touchdown", "label": "left:tip[1]", "body": "left",
-         "impulse": IMPULSE, "impact": True}]
+         "impulse": IMPULSE, "impact": True, "row": 0}]
+    # without fps (no per-frame states of the support points) one row per body
+    assert data["rows"] == data["bodies"] and data["vertices"] == [] and data["phases"] == []
     assert data["supports"][0] == {"name": "table", "color": "#6c584c",
                                    "plane": "plane through (0.5, 0, 0) m, normal (0, 0, 1)"}
     assert data["force"] == {"m_per_n": 0.01, "max_n": pytest.approx(10.0)}
@@ -104,37 +106,6 @@ def test_page_carries_the_overlay(tmp_path):
     assert [e["label"] for e in manifest["overlay"]["events"]] == ["table[0]", "left:tip[1]"]
 
 
-def _text(dom: str, element_id: str) -> str:
-    """The text of an element of the dumped DOM (its tags made spaces)."""
-    from html.parser import HTMLParser
-
-    class Grab(HTMLParser):
-        def __init__(self):
-            super().__init__()
-            self.depth, self.parts = 0, []
-
-        def handle_starttag(self, tag, attrs):
-            if tag in ("br", "hr", "img", "input"):  # no end tag
-                self.parts.append(" ")
-            elif self.depth or dict(attrs).get("id") == element_id:
-                self.depth += 1
-                self.parts.append(" ")
-
-        def handle_endtag(self, tag):
-            if self.depth:
-                self.depth -= 1
-                self.parts.append(" ")
-
-        def handle_data(self, data):
-            if self.depth:
-                self.parts.append(data)
-
-    grab = Grab()
-    grab.feed(dom)
-    assert grab.parts, f"no element #{element_id} in the DOM"
-    return re.sub(r"\s+", " ", "".join(grab.parts))
-
-
 @needs_chromium
 def test_time_legend_and_events_are_drawn(tmp_path):
     """The overlay in headless Chromium: its DOM text after the scripts ran, and its pixels.
@@ -147,15 +118,17 @@ def test_time_legend_and_events_are_drawn(tmp_path):
     arms, obj, contacts, t = _scene()
     page = write_replay_html(tmp_path / "r.html", arms, obj, t, contacts, title="box on table")
     end = dump_dom(page_url(page, "#t=1"), budget_ms=3000)
-    assert _text(end, "ma-time").strip() == "t = 1.000 s"
-    assert "2 of 2 events so far" in _text(end, "ma-events")
-    legend = _text(end, "ma-legend")
+    assert element_text(end, "ma-time").strip() == "t = 1.000 s"
+    assert "2 of 2 events so far" in element_text(end, "ma-events")
+    legend = element_text(end, "ma-legend")
     for words in ("contact touching", "contact separated", "support table", "force on the "
                   "object", "separation", "touchdown", "impact"):
         assert words in legend, (words, legend)
+    # a run without phases: no phase line, table or timeline row
+    assert element_text(end, "ma-phase").strip() == "" and "phases" not in legend
     mid = dump_dom(page_url(page, "#t=0.5"), budget_ms=3000)
-    assert _text(mid, "ma-time").strip() == "t = 0.500 s"
-    events = _text(mid, "ma-events")
+    assert element_text(mid, "ma-time").strip() == "t = 0.500 s"
+    events = element_text(mid, "ma-events")
     assert "1 of 2 events so far" in events and "0.400 s separation" in events, events
 
     img = screenshot(page_url(page, "#t=0.5"), tmp_path / "mid.png", budget_ms=3000)

@@ -361,10 +361,12 @@ def configure_replay_parser(p: argparse.ArgumentParser) -> None:
 def replay_command(args: argparse.Namespace) -> int:
     """``multiarm-pin replay DIR``: serve the run and print its URL until Ctrl-C."""
     from multiarm_pin.app.replay import close_visualizer
+    from multiarm_pin.app.replay_phases import phase_table, replay_phases
     from multiarm_pin.app.run_results import load_run, run_status
     from multiarm_pin.app.runner import http_status, serve_run
 
-    summary = load_run(args.dir)[2]
+    sc, traj, summary = load_run(args.dir)
+    phases = phase_table(replay_phases(sc, traj), float(traj["t"][-1]))
     if summary.get("status", "complete") != "complete":
         print(f"note: {Path(args.dir).resolve()} holds a {run_status(summary)}; replaying what "
               "was simulated", flush=True)
@@ -372,6 +374,13 @@ def replay_command(args: argparse.Namespace) -> int:
     try:
         print(f"replay of {Path(args.dir).resolve()} ({run_status(summary).split(':')[0]}) "
               f"served at {url}", flush=True)
+        if phases:  # the live viewer has no overlay: the phases are listed here
+            print(f"phases ({sc.controller.type}; replay.html shows them on its timeline):")
+            for p in phases:
+                press = ", ".join(p["press"]) or "none"
+                print(f"  {p['t']:8.3f} - {p['end']:8.3f} s  {p['name']} ({p['kind']}, motion "
+                      f"until {p['motion_end']:.3f} s), supports pressing: {press}"
+                      + (f", released: {', '.join(p['release'])}" if p["release"] else ""))
         if not getattr(args, "block", True):
             status = http_status(url)
             print(f"server answered HTTP {status}; stopping (--no-block)")

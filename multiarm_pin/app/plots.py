@@ -17,6 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pinocchio as pin  # noqa: E402
 
+from multiarm_pin.app.replay_phases import phase_table  # noqa: E402
 from multiarm_pin.exceptions import InputError  # noqa: E402
 from multiarm_pin.spatial import as_array, quaternion_to_rotation  # noqa: E402
 
@@ -143,7 +144,13 @@ def plot_contact_forces(path, t, mu: Mapping[str, np.ndarray], title: str = "",
     return _save(fig, path)
 
 
-def plot_contact_states(path, t, active, labels, events=(), title: str = "") -> Path:
+PHASE_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown",
+                "tab:pink", "tab:olive", "tab:cyan")
+"""Colours of the phases' bands in ``contact_states.png``, in turn."""
+
+
+def plot_contact_states(path, t, active, labels, events=(), title: str = "",
+                        phases=()) -> Path:
     """Each contact's state against time: a bar where it touches, a gap where it is separated.
 
     Args:
@@ -154,6 +161,9 @@ def plot_contact_states(path, t, active, labels, events=(), title: str = "") -> 
         events: ``[(t, kind, k), ...]`` events with the contact index, drawn as markers
             (red x: separation, green o: touchdown, orange x: off the edge of a support).
         title: figure title.
+        phases: the task's phases (:class:`~multiarm_pin.app.replay_phases.ReplayPhase`,
+            a ``phased_pd`` run's): a band per phase behind the bars (darker while its
+            motion runs), named above the plot.
     """
     t = _times(t)
     act = np.asarray(active, dtype=bool)
@@ -161,7 +171,14 @@ def plot_contact_states(path, t, active, labels, events=(), title: str = "") -> 
         raise InputError(f"plot_contact_states: active must be (T, K) = ({len(t)}, "
                          f"{len(labels)}), got {act.shape}")
     K = act.shape[1]
-    fig, ax = plt.subplots(figsize=(7, 1.6 + 0.28 * max(K, 1)))
+    fig, ax = plt.subplots(figsize=(7, 1.6 + 0.28 * max(K, 1) + (0.3 if phases else 0.0)))
+    for i, p in enumerate(phase_table(phases, float(t[-1]))):
+        color = PHASE_COLORS[i % len(PHASE_COLORS)]
+        ax.axvspan(p["t"], p["end"], color=color, alpha=0.08, lw=0)
+        if p["motion_end"] > p["t"]:
+            ax.axvspan(p["t"], p["motion_end"], color=color, alpha=0.12, lw=0)
+        ax.text(0.5 * (p["t"] + p["end"]), 1.0, p["name"], transform=ax.get_xaxis_transform(),
+                ha="center", va="bottom", fontsize=6, color=color, clip_on=False)
     for k in range(K):
         y = np.where(act[:, k], k, np.nan)
         ax.plot(t, y, lw=5, solid_capstyle="butt", color="tab:blue")
@@ -176,7 +193,7 @@ def plot_contact_states(path, t, active, labels, events=(), title: str = "") -> 
     ax.set_xlabel("time [s]")
     ax.grid(alpha=0.3, axis="x")
     ax.set_title(title or "contacts: touching (bar), separated (gap); "
-                 "x separation or off edge, o touchdown")
+                 "x separation or off edge, o touchdown", pad=14 if phases else 6)
     return _save(fig, path)
 
 
@@ -273,7 +290,7 @@ def plot_torque_ratios(path, t, tau: Mapping[str, np.ndarray],
 
 
 def write_plots(out_dir, trajectory: Mapping[str, np.ndarray], arm_names, title: str = "",
-                support_names=()) -> list[Path]:
+                support_names=(), phases=()) -> list[Path]:
     """All standard plots of a run from its ``trajectory.npz`` arrays.
 
     Args:
@@ -285,6 +302,9 @@ def write_plots(out_dir, trajectory: Mapping[str, np.ndarray], arm_names, title:
         arm_names: the arms' names.
         title: scenario name, prefixed to the titles.
         support_names: the supports' names.
+        phases: a ``phased_pd`` run's phases
+            (:func:`~multiarm_pin.app.replay_phases.replay_phases`): bands in
+            ``contact_states.png``.
 
     With ``arm_wrench`` (T, n_arms, 6) it also writes ``arm_wrenches.png``, each arm's wrench
     on the object; then ``contact_forces.png`` shows only the arms with unilateral rows
@@ -314,7 +334,7 @@ def write_plots(out_dir, trajectory: Mapping[str, np.ndarray], arm_names, title:
             out / "contact_states.png", t, trajectory["contact_active"],
             trajectory["contact_labels"],
             list(zip(ev_t.tolist(), ev_kind.tolist(), ev_k.tolist(), strict=True)),
-            pre + "contacts touching (bars); x separation or off edge, o touchdown"))
+            pre + "contacts touching (bars); x separation or off edge, o touchdown", phases))
     if "arm_wrenches.png" in wanted:
         w = np.asarray(trajectory["arm_wrench"])
         written.append(plot_arm_wrenches(

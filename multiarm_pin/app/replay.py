@@ -13,7 +13,9 @@ The scene has three parts, all animated on one Meshcat timeline:
   and a tapered rod for the force on the object, whose tip touches the contact point and
   whose length is ``force_scale * |f|``. When the contacts' states are given
   (``ReplayContacts.touching``), a touching contact's sphere is yellow and a separated
-  one's is grey (``contacts/free_<k>``; the other sphere is scaled to nothing);
+  one's is grey (``contacts/free_<k>``; the other sphere is scaled to nothing); a support's
+  point (labelled ``"<support>[j]"``: the object's point that rests on it) is a cube
+  (``SUPPORT_MARKER_SIZE``) in the same colours, so which support points touch stands out;
 - ``supports/<name>``: a thin slab on each support plane (``ReplayContacts.supports``),
   its top face on the plane, under the support's contact points (a support with an
   ``extent``: its rectangle), in the support's colour (``SUPPORT_COLORS`` in turn; the page's
@@ -24,11 +26,13 @@ size grows with the duration, not with the integrator step. Each animation track
 float32 arrays (:class:`CompactTrack`), without the keys inside a run of equal values (the
 viewer interpolates between keys, so a constant stretch plays the same from its two ends).
 The page (:func:`write_replay_html`) holds each distinct mesh once and shows the simulated
-time, a legend and the contacts' timeline (:mod:`multiarm_pin.app.replay_overlay`).
+time, a legend and the contacts' timeline (:mod:`multiarm_pin.app.replay_overlay`), and,
+for a phased task (:class:`ReplayPhase` s), the current phase and the phases' table and row.
 All positions are in the world frame [m]; forces [N]. The inputs (:class:`ReplayArm`,
 :class:`ReplayObject`, :class:`ReplaySupport`, :class:`ReplayContacts` with its contact labels
-and :class:`ReplayEvent` s) are defined and checked in :mod:`multiarm_pin.app.replay_scene`
-and re-exported here.
+and :class:`ReplayEvent` s) are defined and checked in :mod:`multiarm_pin.app.replay_scene`,
+a phased task's :class:`ReplayPhase` s in :mod:`multiarm_pin.app.replay_phases`, and
+re-exported here.
 """
 
 from __future__ import annotations
@@ -50,6 +54,7 @@ import umsgpack
 from multiarm_pin.app.replay_meshes import lambert_material, mesh_object, visual_mesh
 from multiarm_pin.app.replay_overlay import overlay_data
 from multiarm_pin.app.replay_page import page_visualizer
+from multiarm_pin.app.replay_phases import ReplayPhase, check_phases
 from multiarm_pin.app.replay_scene import (
     ReplayArm,
     ReplayContacts,
@@ -83,6 +88,8 @@ SUPPORT_THICKNESS = 0.01
 """Thickness [m] of the slab drawn under a support plane."""
 CONTACT_RADIUS = 0.012
 """Radius [m] of the contact-point spheres."""
+SUPPORT_MARKER_SIZE = 0.04
+"""Edge [m] of the cube drawn at each support point (``"<support>[j]"``) instead of a sphere."""
 FORCE_RADIUS = 0.01
 """Base radius [m] of the tapered force rods."""
 AUTO_FORCE_LENGTH = 0.25
@@ -456,12 +463,17 @@ def build_animation(
                 mg.MeshLambertMaterial(color=SUPPORT_COLORS[j % len(SUPPORT_COLORS)]))
             vis[f"supports/{sp.name}"].set_transform(
                 _pose(R, sp.center - 0.5 * SUPPORT_THICKNESS * sp.normal))
+        on_support = {k for ks in contacts.support_points().values() for k in ks}
         for k in range(n_contacts):
+            # a support point: a cube, so the object's points on a support stand apart from
+            # the arms' contacts (same colours: touching, separated)
+            marker = (mg.Box([SUPPORT_MARKER_SIZE] * 3) if k in on_support
+                      else mg.Sphere(CONTACT_RADIUS))
             vis[f"contacts/point_{k}"].set_object(
-                mg.Sphere(CONTACT_RADIUS), mg.MeshLambertMaterial(color=CONTACT_COLOR))
+                marker, mg.MeshLambertMaterial(color=CONTACT_COLOR))
             if contacts.touching is not None:
                 vis[f"contacts/free_{k}"].set_object(
-                    mg.Sphere(CONTACT_RADIUS), mg.MeshLambertMaterial(color=SEPARATED_COLOR))
+                    marker, mg.MeshLambertMaterial(color=SEPARATED_COLOR))
             # Unit-length rod along local y from -1 to 0, pointed (radius 0) at 0.
             rod = vis[f"contacts/force_{k}/rod"]
             rod.set_object(mg.Cylinder(1.0, radiusTop=0.0, radiusBottom=FORCE_RADIUS),
@@ -584,6 +596,7 @@ def write_replay_html(
     contacts: ReplayContacts | None = None,
     fps: float = 30,
     title: str = "multiarm-pin replay",
+    phases: Sequence[ReplayPhase] = (),
 ) -> Path:
     """Write a self-contained HTML page that replays the motion offline.
 
@@ -602,6 +615,9 @@ def write_replay_html(
             their states, labels, events and supports.
         fps: frames per second of the replay.
         title: the page's title and the overlay's heading.
+        phases: the task's phases (:class:`ReplayPhase`, a ``phased_pd`` run's), shown as
+            the current phase, a table in the legend and the timeline's top row; none:
+            the page has no phase parts.
 
     Returns:
         The path written.
@@ -613,6 +629,7 @@ def write_replay_html(
     if not path.parent.is_dir():
         raise InputError(f"write_replay_html: folder {path.parent} does not exist")
     t = check_replay_inputs(arms, obj, contacts, t, fps)
+    phases = check_phases(phases)
     vis = page_visualizer()
     anim = build_animation(vis, arms, obj, contacts, t, fps=fps)
     vis.set_animation(anim, play=True, repetitions=1)
@@ -622,6 +639,7 @@ def write_replay_html(
         t, contacts, title=str(title), arm_names=[a.name for a in arms],
         force_scale=None if contacts is None else _force_scale(contacts, None),
         support_colors=[SUPPORT_COLORS[j % len(SUPPORT_COLORS)] for j in range(n_supports)],
+        phases=phases, fps=fps,
         colors={"object": OBJECT_COLOR, "contact": CONTACT_COLOR,
                 "separated": SEPARATED_COLOR, "force": FORCE_COLOR,
                 **({"colliding": _rgb_int(COLLIDING_COLOR)}
@@ -666,7 +684,8 @@ def serve_replay(
     return url, vis
 
 
-def write_replay(result, system, path, fps: float = 30) -> Path:
+def write_replay(result, system, path, fps: float = 30,
+                 phases: Sequence[ReplayPhase] = ()) -> Path:
     """Write the replay page of a simulation run from Python (what ``multiarm-pin run`` writes).
 
     A self-contained HTML page (:func:`write_replay_html`): the arms (their meshes when they
@@ -680,6 +699,9 @@ def write_replay(result, system, path, fps: float = 30) -> Path:
         system: the :class:`~multiarm_pin.system.MultiArmSystem` that was simulated.
         path: the ``.html`` file to write; its folder must exist.
         fps: frames per second of the replay.
+        phases: the task's phases (:class:`ReplayPhase`) to show (a ``phased_pd`` run);
+            none by default (a results folder's are read by
+            :func:`~multiarm_pin.app.replay_phases.replay_phases`).
 
     Returns:
         The path written.
@@ -701,7 +723,7 @@ def write_replay(result, system, path, fps: float = 30) -> Path:
             + ("" if q is None or mu is None else f" with q {q.shape} and mu {mu.shape}"))
     traj = system_trajectory_arrays(system, result)
     arms, obj, contacts = replay_parts(system.arms, system.obj, traj)
-    return write_replay_html(path, arms, obj, traj["t"], contacts, fps=fps)
+    return write_replay_html(path, arms, obj, traj["t"], contacts, fps=fps, phases=phases)
 
 
 __all__ = [
@@ -710,6 +732,7 @@ __all__ = [
     "ReplayContacts",
     "ReplayEvent",
     "ReplayObject",
+    "ReplayPhase",
     "ReplaySupport",
     "build_animation",
     "close_visualizer",

@@ -235,6 +235,22 @@ class ReplayContacts:
                                  f"{K} contacts (kinds {', '.join(EVENT_KINDS)}, finite time "
                                  "and impulse)")
 
+    def support_points(self) -> dict[str, list[int]]:
+        """The contacts of each support, by name: the ``k`` labelled ``"<support>[j]"``.
+
+        Returns:
+            support name -> contact indices in label order (supports without labelled
+            contacts, or contacts without labels: left out).
+        """
+        out: dict[str, list[int]] = {}
+        if self.labels is None:
+            return out
+        for sp in self.supports:
+            ks = [k for k, lab in enumerate(self.labels) if lab.startswith(f"{sp.name}[")]
+            if ks:
+                out[sp.name] = ks
+        return out
+
 
 # ----------------------------------------------------------------------------- helpers
 def frame_indices(t: np.ndarray, fps: float) -> np.ndarray:

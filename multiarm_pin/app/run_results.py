@@ -39,7 +39,9 @@ its results folder:
   (the files written, by role), ``missing_files`` (those a signal or an error left out:
   plots, ``replay.html``) and ``write_interrupted`` (the signal that came while writing,
   or null); ``feasible``, ``violations``, ``limits`` and ``clearance``
-  (:meth:`multiarm_pin.feasibility.FeasibilityReport.as_summary`).
+  (:meth:`multiarm_pin.feasibility.FeasibilityReport.as_summary`); for a ``phased_pd``
+  run, ``phases`` (:func:`multiarm_pin.app.replay_phases.phases_summary`: each phase's
+  interval and the events in it).
 - ``object_pose.png``, ``arm_wrenches.png``, ``joint_torques.png``, ``contact_forces.png``
   (fingertips and supports), ``constraint_violation.png``.
 - ``replay.html``: a self-contained Meshcat page replaying the run offline.

@@ -26,6 +26,7 @@ import numpy as np
 from multiarm_pin.app.diagnosis import describe_failure
 from multiarm_pin.app.precheck import precheck_warnings
 from multiarm_pin.app.progress import ProgressBar
+from multiarm_pin.app.replay_phases import phases_summary, replay_phases
 from multiarm_pin.app.results_io import ResultsWriter, safe_component, write_atomic
 from multiarm_pin.app.run_feasibility import apply_policies, check_initial_state, run_monitors
 from multiarm_pin.app.run_results import (
@@ -422,6 +423,9 @@ def _write_results(writer: ResultsWriter, signals: _RunSignals, built: BuiltScen
     summary["requested"]["duration"] = T
     summary.update(status=status, error=error, t_end=float(result.t[-1]))
     summary.update(feasibility or {})
+    phases = phases_summary(sc, traj, summary["events"])
+    if phases:
+        summary["phases"] = phases
     pending = []
     if plots:
         pending += plot_names(traj, [sp.name for sp in built.system.supports.supports],
@@ -510,7 +514,8 @@ def _write_plots(folder: Path, built: BuiltScenario, sc: Scenario, traj: dict) -
     part = Path(tempfile.mkdtemp(prefix=".plots-", dir=folder))
     try:
         written = write_plots(part, traj, [a.name for a in built.arms], sc.name,
-                              [sp.name for sp in built.system.supports.supports])
+                              [sp.name for sp in built.system.supports.supports],
+                              replay_phases(sc, traj))
         out = {}
         for p in written:
             os.replace(p, folder / p.name)
@@ -527,7 +532,8 @@ def _write_page(folder: Path, built: BuiltScenario, traj: dict) -> Path:
     rarms, robj, rc = replay_parts(built.arms, built.obj, traj)
     part = folder / ".replay.html.part"
     write_replay_html(part, rarms, robj, traj["t"], rc, fps=REPLAY_FPS,
-                      title=f"{built.scenario.name}: multiarm-pin replay")
+                      title=f"{built.scenario.name}: multiarm-pin replay",
+                      phases=replay_phases(built.scenario, traj))
     final = folder / "replay.html"
     os.replace(part, final)
     return final
