@@ -11,7 +11,10 @@ position, collision: stop}``. The medians of the per-round ratios, so that the m
 load changes hit the parts of a round alike. Also the scene's construction (once per run),
 the real-time factor of the run with its checks (simulated time / its median wall time;
 target: at least 10), and the checks' extra CPU time (of all threads, over the bare run's):
-what they cost where no core is free, whatever the machine's load. Prints a Markdown table;
+what they cost where no core is free, whatever the machine's load; and the CPU time of the
+collision scan itself in that run (``RunScan.extend`` on the worker thread and
+``RunScan.result`` after the run, each timed with its own thread's clock) over the bare
+run's CPU time: the least load-sensitive figure. Prints a Markdown table;
 the target columns say met / NOT met. The checks beside the simulation need a free core: on
 a machine whose cores are all busy they cost what the checks after the run cost, or more.
 
@@ -34,6 +37,7 @@ from multiarm_pin.app.scenario import build_scenario, load_scenario
 from multiarm_pin.data import data_path
 from multiarm_pin.exceptions import RunStoppedError
 from multiarm_pin.feasibility import CollisionScene, feasibility_report
+from multiarm_pin.feasibility.scan import RunScan
 from multiarm_pin.sim.simulation import partial_result
 
 TARGET = 0.20
@@ -80,6 +84,18 @@ def measure(name: str, repeat: int, duration: float | None = None) -> dict:
         feasibility_report(built.system, watched, ground=built.scenario.ground, scene=scene,
                            scan=scans[0] if scans else None)  # the monitor's scan reused
 
+    scan_cpu = [0.0]  # thread CPU seconds of the scan's calls (worker thread and after)
+
+    def timed(method):
+        def wrapper(*args, **kwargs):
+            c = time.thread_time()
+            try:
+                return method(*args, **kwargs)
+            finally:
+                scan_cpu[0] += time.thread_time() - c
+        return wrapper
+
+    scan_runs = []
     for _ in range(repeat):
         controller = scenario_controller(built)
         c0, t0 = time.process_time(), time.perf_counter()
@@ -87,8 +103,15 @@ def measure(name: str, repeat: int, duration: float | None = None) -> dict:
         c1, t1 = time.process_time(), time.perf_counter()
         feasibility_report(built.system, result, ground=built.scenario.ground, scene=scene)
         c2, t2 = time.process_time(), time.perf_counter()
-        watched_run(built)  # what `multiarm-pin run` does: the scan beside the simulation
+        scan_cpu[0] = 0.0
+        extend, result_of = RunScan.extend, RunScan.result
+        RunScan.extend, RunScan.result = timed(extend), timed(result_of)
+        try:
+            watched_run(built)  # what `multiarm-pin run` does: the scan beside the simulation
+        finally:
+            RunScan.extend, RunScan.result = extend, result_of
         c3, t3 = time.process_time(), time.perf_counter()
+        scan_runs.append(scan_cpu[0])
         cpu_sims.append(c1 - c0)
         cpu_runs.append(c3 - c2)
         watched_run(stops)
@@ -105,22 +128,26 @@ def measure(name: str, repeat: int, duration: float | None = None) -> dict:
             "monitored": float(np.median(monitored)),
             "monitored_ratio": float(np.median(monitored / sims - 1.0)), "scene": scene_s,
             "rtf": float(result.t[-1] / np.median(runs)),
-            "run_cpu_ratio": float(np.median(np.array(cpu_runs) / np.array(cpu_sims) - 1.0))}
+            "run_cpu_ratio": float(np.median(np.array(cpu_runs) / np.array(cpu_sims) - 1.0)),
+            "scan_cpu": float(np.median(scan_runs)),
+            "scan_cpu_ratio": float(np.median(np.array(scan_runs) / np.array(cpu_sims))),
+            "simulate_cpu": float(np.median(cpu_sims))}
 
 
 def table(rows: list[dict]) -> list[str]:
     """The Markdown table of :func:`measure`'s rows (the target is judged on the run's)."""
     out = ["| scenario | samples | simulate [s] | checks after [s] | checks / simulate | "
            "run with its checks [s] | its extra time | target 20 % | its extra CPU | "
-           "every stop + report [s] | "
+           "scan thread CPU [s] | scan CPU / bare run CPU | every stop + report [s] | "
            "its extra time | scene [s] | RTF with its checks | target 10x |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         verdict = "met" if r["run_ratio"] <= TARGET else "NOT met"
         out.append(f"| {r['scenario']} | {r['samples']} | {r['simulate']:.3f} | "
                    f"{r['check']:.3f} | {100 * r['ratio']:.0f} % | {r['run']:.3f} | "
                    f"{100 * r['run_ratio']:+.0f} % | {verdict} | "
                    f"{100 * r['run_cpu_ratio']:+.0f} % | "
+                   f"{r['scan_cpu']:.4f} | {100 * r['scan_cpu_ratio']:.0f} % | "
                    f"{r['monitored']:.3f} | {100 * r['monitored_ratio']:+.0f} % | "
                    f"{r['scene']:.3f} | {r['rtf']:.1f} | "
                    f"{'met' if r['rtf'] >= RTF_TARGET else 'NOT met'} |")

@@ -8,9 +8,10 @@ module per reference: :mod:`.linalg` (Cholesky, LAPACK), :mod:`.arm_terms`
 :mod:`.rigid_body` (Pinocchio's pass of ``ArmSet.pinocchio_pass``: ``J``, ``dJ``, ``M``,
 ``nle``, tool placements; ``integrate``, ``difference``), :mod:`.trajectory`
 (``MinimumJerkTrajectory.motion``), :mod:`.closed_loop` (the closed-loop evaluation and
-RK4 steps of ``simulate``) and :mod:`.contact_loop` (RK4 with contact events). The loops call
-their stages through function pointers (:mod:`.function_pointers`), so that each stage is
-compiled once.
+RK4 steps of ``simulate``), :mod:`.contact_loop` (RK4 with contact events) and :mod:`.scan`
+(the collision scan's placements, path lengths and bounds: ``RunScan``'s numpy; ``nogil``).
+The loops call their stages through function pointers (:mod:`.function_pointers`), so that
+each stage is compiled once.
 The layout of every array they exchange with Python is defined once in :mod:`.layout`.
 The kernels' on-disk cache is stamped with the contents of all kernel sources
 (:mod:`.cache`), so that editing a kernel recompiles the kernels that call it.

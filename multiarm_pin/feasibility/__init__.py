@@ -4,7 +4,7 @@
   recorded samples use them.
 - :mod:`.arm_geometry`: each arm's collision geometry (convex hulls of its URDF's meshes) and
   the self-collision pairs its SRDF leaves.
-- :mod:`.batch_kinematics`: joint placements at every recorded sample at once.
+- :mod:`.batch_kinematics`: joint placements at every recorded sample at once (compiled, or numpy).
 - :mod:`.collisions`: every body of a system (arms, object, supports' slabs, ground) in one
   Pinocchio geometry model; collisions and clearances at a state.
 - :mod:`.scan`: collisions and clearances along a run, stretch by stretch (:class:`RunScan`).

@@ -28,6 +28,13 @@ its pair at the other samples by the gap of the two bodies along the measured cl
 carried with the second body (a separating-axis bound from their support functions), which
 holds a pair at nearly constant distance (two links turning about each other) with a few
 measurements.
+
+The numeric work of a stretch (joint placements, path lengths, the searches for the next
+sample due, the ground heights, the grasp zones, and the clearances' per-sample bounds and
+support functions) runs in the ``nogil`` kernels of :mod:`multiarm_pin._compiled.scan`, so
+that the scan's worker thread holds the interpreter only for coal's distances and the
+bookkeeping between them; ``RunScan(..., compiled=False)`` runs the numpy references
+instead (the same samples measured, the same report).
 """
 
 from __future__ import annotations
@@ -37,6 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from multiarm_pin._compiled import scan as kernels
 from multiarm_pin.feasibility.batch_kinematics import joint_placements, placement_plan
 
 CATEGORIES = ("arm_self", "arm_arm", "arm_object", "arm_support", "arm_ground")
@@ -157,16 +165,38 @@ class _ScanGeometry:
                 continue
             self.ground[k] = True
         self.boxed_ground = np.array(sorted(self.vertices), dtype=int)
+        self.ground_columns = np.flatnonzero(self.ground)
+        self.other_columns = np.flatnonzero(~self.ground)
         self.corners = (np.array([self.vertices[k] for k in self.boxed_ground])
                         if self.vertices else np.zeros((0, 8, 3)))
+        # the same bodies' vertices, one array for the compiled ground heights
+        boxed_vertices = [self.hull_vertices[int(pairs[k, 0])] for k in self.boxed_ground]
+        self.boxed_starts = np.cumsum([0] + [len(v) for v in boxed_vertices]).astype(np.int64)
+        self.boxed_vertices = (np.ascontiguousarray(np.concatenate(boxed_vertices))
+                               if boxed_vertices else np.zeros((0, 3)))
+        self.boxed_joints = self.joint[pairs[self.boxed_ground, 0]].astype(np.int64)
+        # the round shapes' ground pairs, all at once: joint, shape placement, sizes, kind
+        rk = [k for k in np.flatnonzero(self.ground) if int(k) not in self.vertices]
+        rnd = [self.round[int(pairs[k, 0])] for k in rk]
+        self.round_ground = np.array(rk, dtype=int)
+        self.round_joints = self.joint[pairs[self.round_ground, 0]].astype(np.int64)
+        self.round_R = np.array([r[0] for r in rnd]).reshape(-1, 3, 3)
+        self.round_t = np.array([r[1] for r in rnd]).reshape(-1, 3)
+        self.round_size = np.array([(r[2], r[3]) for r in rnd]).reshape(-1, 2)
+        self.round_cylinder = np.array([r[4] == "Cylinder" for r in rnd], dtype=bool)
 
-    def support(self, g: int, u: np.ndarray) -> np.ndarray | None:
+    def support(self, g: int, u: np.ndarray, compiled: bool = False) -> np.ndarray | None:
         """``max u·x`` over geometry ``g`` (x in its joint's frame) for directions u (m, 3).
 
-        A polytope's vertices; a sphere, cylinder (axis z of its frame) or capsule in closed
-        form. None for another shape.
+        A polytope's vertices (``compiled``: by :func:`multiarm_pin._compiled.scan.support_max`);
+        a sphere, cylinder (axis z of its frame) or capsule in closed form. None for another
+        shape.
         """
         V = self.hull_vertices[g]
+        if V is not None and compiled:
+            out = np.empty(len(u))
+            kernels.support_max(np.ascontiguousarray(u, dtype=float), V, out)
+            return out
         if V is not None:  # sums of products, not a BLAS call (an inner dimension of 3)
             return (u[:, 0, None] * V[:, 0] + u[:, 1, None] * V[:, 1]
                     + u[:, 2, None] * V[:, 2]).max(axis=1)
@@ -195,14 +225,19 @@ class RunScan:
     Args:
         scene: the :class:`~multiarm_pin.feasibility.CollisionScene` of the run's system.
         capacity: the run's number of samples T (at most this many are extended).
+        compiled: the placements, path lengths, searches and ground heights of each stretch
+            by the ``nogil`` kernels of :mod:`multiarm_pin._compiled.scan` (False: by their
+            numpy references here; the placements stay numpy for a model the kernel does not
+            handle, :func:`~.batch_kinematics.placement_plan`).
 
     Attributes:
         n: samples scanned so far.
         hits: per pair index, its collisions ``(sample, depth [m], point (3,))``.
     """
 
-    def __init__(self, scene, capacity: int):
+    def __init__(self, scene, capacity: int, compiled: bool = True):
         self.scene = scene
+        self.compiled = bool(compiled)
         self.geo = scan_geometry(scene)
         self.tol = PENETRATION_TOLERANCE
         T, P, U = int(capacity), len(scene.pairs), len(self.geo.ua)
@@ -264,7 +299,7 @@ class RunScan:
         scene = self.scene
         configs = self.configs
         configs[n0:n1] = np.concatenate([q, object_position, object_quaternion], axis=1)
-        R, p = joint_placements(scene.model, configs[n0:n1], self.geo.plan)
+        R, p = joint_placements(scene.model, configs[n0:n1], self.geo.plan, self.compiled)
         geo = self.geo
         centres = p[:, geo.joint].copy()  # (m, G, 3) bounding spheres': sums of products
         Rg = R[:, geo.joint]
@@ -291,7 +326,21 @@ class RunScan:
         return self._check_hits(contact_points, n0, n1)
 
     def _paths(self, R, p, n0: int, n1: int) -> None:
-        """:meth:`_block_paths` in blocks of :data:`PATH_BLOCK` samples (in cache)."""
+        """:meth:`_block_paths` in blocks of :data:`PATH_BLOCK` samples (in cache).
+
+        Compiled: :func:`multiarm_pin._compiled.scan.path_lengths` on the whole stretch.
+        """
+        if self.compiled:
+            R, p = np.ascontiguousarray(R), np.ascontiguousarray(p)
+            last_R, last_p = self._last_rel if self._last_rel is not None else (R[0], p[0])
+            zero = np.zeros(len(self.geo.ua))
+            kernels.path_lengths(R, p, np.ascontiguousarray(last_R), np.ascontiguousarray(last_p),
+                                 self.geo.ua, self.geo.ub,
+                                 self.path_shift[n0 - 1] if n0 else zero,
+                                 self.path_turn[n0 - 1] if n0 else zero,
+                                 self.path_shift[n0:n1], self.path_turn[n0:n1])
+            self._last_rel = (R[-1].copy(), p[-1].copy())
+            return
         for b0 in range(n0, n1, PATH_BLOCK):
             b1 = min(n1, b0 + PATH_BLOCK)
             self._block_paths(R[b0 - n0:b1 - n0], p[b0 - n0:b1 - n0], b0, b1)
@@ -361,6 +410,10 @@ class RunScan:
         u, rho = geo.joint_pair[ks], geo.rho[ks]
         last = self.last[ks]
         thr = self.path_shift[last, u] + rho * self.path_turn[last, u] + self.budget[ks]
+        if self.compiled:
+            at = np.empty(len(ks), dtype=np.int64)
+            kernels.first_exceeding(self.path_shift, self.path_turn, u, rho, thr, lo, hi, at)
+            return at, at < hi
         b1 = min(hi, lo + max(8, FIRST_BLOCK // max(len(ks), 1)))
         over = (self.path_shift[lo:b1, u] + rho * self.path_turn[lo:b1, u] > thr)  # (b, K)
         hit = over.any(axis=0)
@@ -404,6 +457,11 @@ class RunScan:
             if not cps.shape[1]:
                 continue
             g = scene.pairs[ks, 0]
+            if self.compiled:
+                kernels.grasp_openings(np.ascontiguousarray(centres), g, geo.radius[g],
+                                       np.ascontiguousarray(cps, dtype=float),
+                                       JOINT_ZONE_RADIUS, n0, ks, opens)
+                continue
             gap = cps[:, None] - centres[:, g, None]  # (m, K, N, 3)
             near = np.sqrt(np.einsum("mkni,mkni->mkn", gap, gap)).min(axis=2) + geo.radius[g]
             nxt = np.where(near <= JOINT_ZONE_RADIUS, n1, np.arange(n0, n1)[:, None])
@@ -432,11 +490,23 @@ class RunScan:
             return p[rows, j, 2] - geo.support(g, -R[rows, j, 2, :]) - self.scene.ground
 
         every = np.arange(n1 - n0)
-        for k in ks:
+        if self.compiled and len(geo.round_ground):  # the round shapes, exactly
+            R, p = np.ascontiguousarray(R), np.ascontiguousarray(p)
+            self.ground_best = min(self.ground_best, kernels.round_heights(
+                R, p, geo.round_joints, geo.round_R, geo.round_t, geo.round_size,
+                geo.round_cylinder, self.scene.ground, n0, geo.round_ground, self.ground_lower,
+                self.exact))
+        for k in ks if not self.compiled else ():
             if k not in geo.vertices:
                 self.exact[n0:n1, k] = low[:, k] = lowest(k, every)
                 self.ground_best = min(self.ground_best, float(low[:, k].min()))
         boxed = geo.boxed_ground  # the polytopes' pairs, all at once
+        if len(boxed) and self.compiled:
+            self.ground_best = kernels.ground_heights(
+                np.ascontiguousarray(R), np.ascontiguousarray(p), geo.boxed_joints, geo.corners,
+                geo.boxed_vertices, geo.boxed_starts, self.scene.ground, self.ground_best,
+                self.tol, n0, boxed, self.ground_lower, self.exact)
+            return
         if len(boxed):
             j = joint[pairs[boxed, 0]]
             low[:, boxed] = self._lowest(geo.corners, R[:, j, 2, :], p[:, j, 2])
@@ -534,6 +604,18 @@ class RunScan:
         """(n, K) :meth:`column_bound` of the pairs ``ks`` (K,), all at once [m]."""
         n, geo = self.n, self.geo
         ks = np.asarray(ks, dtype=int)
+        if self.compiled:
+            a, b = self.scene.pairs[ks, 0], self.scene.pairs[ks, 1]
+            ground = geo.ground[ks]
+            kept = self._centres is not None
+            spheres = kept & ~ground & (geo.radius[a] != 0) & (geo.radius[b] != 0)
+            out = np.empty((n, len(ks)))
+            kernels.pair_bounds(self.exact, self.path_shift, self.path_turn, ks,
+                                geo.joint_pair[ks], geo.rho[ks],
+                                self._centres if kept else np.zeros((1, 1, 3)), a, b,
+                                geo.radius[a], geo.radius[b], spheres, ground,
+                                self.ground_lower, out)
+            return out
         d = self.exact[:n, ks]
         u, rho = geo.joint_pair[ks], geo.rho[ks]
         C = self.path_shift[:n, u] + rho * self.path_turn[:n, u]
@@ -577,7 +659,13 @@ class RunScan:
         if n0 >= n:
             return
         geo = self.geo
-        s, k = np.nonzero(~np.isnan(self.exact[n0:n]))
+        block = self.exact[n0:n]
+        g = geo.ground_columns  # their smallest only: their bounds are ground_lower's
+        if len(g):
+            near = np.where(np.isnan(block[:, g]), np.inf, block[:, g]).min(axis=0)
+            self._smallest[g] = np.minimum(self._smallest[g], near)
+        s, k = np.nonzero(~np.isnan(block[:, geo.other_columns]))
+        k = geo.other_columns[k]
         by_pair = np.argsort(k, kind="stable")  # by pair, then by sample
         k, s = k[by_pair], s[by_pair]
         self._summed = n
@@ -644,7 +732,8 @@ class RunScan:
         if self._R is not None:
             return (self._R[samples[:, None], joints[None, :]],
                     self._p[samples[:, None], joints[None, :]])
-        R, p = joint_placements(self.scene.model, self.configs[samples], self.geo.plan)
+        R, p = joint_placements(self.scene.model, self.configs[samples], self.geo.plan,
+                                self.compiled)
         return R[:, joints], p[:, joints]
 
     def _separation(self, k: int, normal: np.ndarray, s: int, samples: np.ndarray
@@ -665,7 +754,7 @@ class RunScan:
         low_b = -float(geo.support(b, -n_b[None])[0])  # min n·y over the second body
         nw = R[1:, 1] @ n_b  # (m, 3) the axis at each sample, world
         u = np.einsum("mji,mj->mi", R[1:, 0], nw)  # in the first body's joint frame
-        high_a = geo.support(a, u)
+        high_a = geo.support(a, u, self.compiled)
         return low_b + np.einsum("mi,mi->m", nw, p[1:, 1] - p[1:, 0]) - high_a
 
     def _category_minimum(self, cols: np.ndarray, minima: np.ndarray) -> float:

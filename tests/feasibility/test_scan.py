@@ -108,3 +108,40 @@ def test_clearances_equal_every_pair_at_every_sample_of_the_demo():
     scan = scene.scan(result.q, result.object_position, result.object_quaternion, None)
     brute = assert_clearances_are_brute_force(scene, result, scan)
     assert scan.measured < brute.size / 4
+
+
+@pytest.mark.parametrize("name", ["wrists_to_the_floor", "fingertip_into_the_table"])
+def test_the_compiled_stretches_equal_their_numpy_references(name):
+    # the nogil kernels of _compiled/scan.py (placements, path lengths, searches, ground
+    # heights of hulls and of round fingertips, grasp zones, bounds, support functions)
+    # against the numpy of the same scan, run side by side in the same stretches: the same
+    # path lengths, the same samples measured with the same distances, the same report
+    built, scene, result = _run(ALONG_A_RUN[name][0])
+    N = built.system.constraint_set.N
+    cps = [result.contact_points[:, i, :int(N[i])] for i in range(built.system.n_arms)]
+    runs = [RunScan(scene, len(result.t), compiled=c) for c in (True, False)]
+    edges = [0, 1, 40, 41, 200, len(result.t)]
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        firsts = [run.extend(result.q[a:b], result.object_position[a:b],
+                             result.object_quaternion[a:b], [c[a:b] for c in cps])
+                  for run in runs]
+        assert firsts[0] == firsts[1]
+    fast, ref = runs
+    assert len(fast.geo.round_ground) or name != "fingertip_into_the_table"  # spheres
+    for key in ("path_shift", "path_turn", "ground_lower"):
+        np.testing.assert_allclose(getattr(fast, key), getattr(ref, key), rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(np.isnan(fast.exact), np.isnan(ref.exact))
+    # coal's distances themselves (one geometry data, warm-started GJK) agree to its
+    # tolerance, GJK_TOLERANCE = 1e-11 m
+    np.testing.assert_allclose(fast.exact, ref.exact, rtol=0, atol=1e-10)
+    np.testing.assert_array_equal(fast.due, ref.due)
+    ks = np.arange(len(scene.pairs))
+    np.testing.assert_allclose(fast.column_bounds(ks), ref.column_bounds(ks), rtol=0,
+                               atol=1e-10)
+    a, b = fast.result(), ref.result()
+    assert a.hits.keys() == b.hits.keys() and a.measured == b.measured
+    for k in a.hits:
+        assert [h[0] for h in a.hits[k]] == [h[0] for h in b.hits[k]]
+    for cat, value in b.clearance.items():
+        assert a.clearance[cat] == pytest.approx(value, abs=1e-10) if value is not None \
+            else a.clearance[cat] is None
