@@ -19,11 +19,12 @@ arrays read here). :func:`phased_torques` computes, from the flat buffer of one 
    (:func:`~multiarm_pin._compiled.controller_kernels.planned_torques`).
 
 When no forces meet the margins (decided by the reference's own test on the least-distance
-problem) the forces are planned again with zero margins, as the reference falls back.
+problem) the forces are planned again with zero margins and, if no pushing forces make the
+wrench, with the reference's best effort (its bounded least squares, ``lsq_linear``, here
+NNLS on the shifted forces: every multiplier is unilateral then, or the kernel declines).
 Whatever this kernel cannot decide as the reference does is reported, and the caller runs the
-reference: no pushing forces at all (the reference's best effort: a bounded least squares,
-``scipy.optimize.lsq_linear``, not compiled), NNLS not converged, an arm whose rows are rank
-deficient (the reference's inverse dynamics decides, or holds the arms
+reference: a bilateral multiplier in the best effort, NNLS not converged, an arm whose rows
+are rank deficient (the reference's inverse dynamics decides, or holds the arms
 still), NaN, an orientation error near π. Conventions as in ``docs/ARCHITECTURE.md``.
 """
 
@@ -198,6 +199,76 @@ def phase_offsets(t, phases, named, offs, offset_start, out):  # pragma: no cove
 
 
 @njit(cache=True, error_model="numpy")
+def column_least_squares(E, cols, n, f, out):  # pragma: no cover - compiled
+    """``out[:n] = argmin ‖E[:, cols[:n]] x - f‖`` by Householder QR (no allocation by LAPACK).
+
+    For the passive columns of :func:`nnls` (linearly independent by construction); when a
+    column is dependent on the ones before it (``|R_jj|`` at round-off of the largest), the
+    minimum-norm solution of ``np.linalg.lstsq`` decides instead.
+
+    Args:
+        E: (p, q) matrix.
+        cols: (>= n,) int, the columns used, in order.
+        n: how many.
+        f: (p,) right-hand side.
+        out: output (>= n,).
+    """
+    p = E.shape[0]
+    A = np.empty((p, n))
+    for c in range(n):
+        for a in range(p):
+            A[a, c] = E[a, cols[c]]
+    b = f.copy()
+    rmax = 0.0
+    eps = np.finfo(np.float64).eps
+    ok = n <= p
+    for j in range(min(n, p)):
+        norm = 0.0
+        for a in range(j, p):
+            norm += A[a, j] * A[a, j]
+        norm = math.sqrt(norm)
+        alpha = -norm if A[j, j] >= 0.0 else norm
+        v0 = A[j, j] - alpha
+        vn = v0 * v0
+        for a in range(j + 1, p):
+            vn += A[a, j] * A[a, j]
+        A[j, j] = v0
+        beta = 2.0 / vn if vn > 0.0 else 0.0
+        for c in range(j + 1, n):
+            dot = 0.0
+            for a in range(j, p):
+                dot += A[a, j] * A[a, c]
+            dot *= beta
+            for a in range(j, p):
+                A[a, c] -= dot * A[a, j]
+        dot = 0.0
+        for a in range(j, p):
+            dot += A[a, j] * b[a]
+        dot *= beta
+        for a in range(j, p):
+            b[a] -= dot * A[a, j]
+        A[j, j] = alpha  # R's diagonal (the reflector is no longer needed)
+        rmax = max(rmax, abs(alpha))
+    for j in range(min(n, p)):
+        if not abs(A[j, j]) > 10.0 * eps * max(p, n) * rmax:
+            ok = False
+    if not ok:
+        Ep = np.empty((p, n))
+        for c in range(n):
+            for a in range(p):
+                Ep[a, c] = E[a, cols[c]]
+        x = np.linalg.lstsq(Ep, f, eps * max(p, n))[0]
+        for c in range(n):
+            out[c] = x[c]
+        return
+    for j in range(n - 1, -1, -1):
+        acc = b[j]
+        for c in range(j + 1, n):
+            acc -= A[j, c] * out[c]
+        out[j] = acc / A[j, j]
+
+
+@njit(cache=True, error_model="numpy")
 def nnls(E, f, max_iter, u):  # pragma: no cover - compiled
     """``u = argmin_{u >= 0} ‖E u - f‖`` (Lawson & Hanson's active-set method) into ``u``.
 
@@ -216,12 +287,13 @@ def nnls(E, f, max_iter, u):  # pragma: no cover - compiled
         for j in range(q):
             enorm = max(enorm, abs(E[a, j]))
     tol = 10.0 * max(p, q) * np.finfo(np.float64).eps * max(enorm, 1e-300)
-    eps = np.finfo(np.float64).eps
     passive = np.zeros(q, dtype=np.bool_)
     for j in range(q):
         u[j] = 0.0
     resid = f.copy()
     s = np.zeros(q)
+    cols = np.empty(q, dtype=np.int64)
+    sp = np.empty(q)
     for _ in range(max_iter):
         best, jb = tol, -1
         for j in range(q):
@@ -239,17 +311,9 @@ def nnls(E, f, max_iter, u):  # pragma: no cover - compiled
             npass = 0
             for j in range(q):
                 if passive[j]:
+                    cols[npass] = j
                     npass += 1
-            Ep = np.empty((p, npass))
-            cols = np.empty(npass, dtype=np.int64)
-            c = 0
-            for j in range(q):
-                if passive[j]:
-                    cols[c] = j
-                    for a in range(p):
-                        Ep[a, c] = E[a, j]
-                    c += 1
-            sp = np.linalg.lstsq(Ep, f, eps * max(p, npass))[0]
+            column_least_squares(E, cols, npass, f, sp)
             for j in range(q):
                 s[j] = 0.0
             low = False
@@ -405,12 +469,35 @@ def polish(W, w, unilateral, margins, mu):  # pragma: no cover - compiled
             for a in range(6):
                 Wf[a, c] = W[a, j]
             c += 1
-    eps = np.finfo(np.float64).eps
-    y, _, rank, _ = np.linalg.lstsq(Wf, rhs, eps * max(6, nf))
-    if rank < 6:
+    if nf < 6:
         return
-    Wft = np.ascontiguousarray(Wf.T)
-    lam = np.linalg.lstsq(Wft, y, eps * max(6, nf))[0]
+    # lstsq's minimum-norm solution and rank (rcond eps max(6, nf)) by one thin SVD:
+    # y = V Σ⁻¹ Uᵀ rhs; λ = lstsq(W_Fᵀ, y) = U Σ⁻¹ Vᵀ y (rank 6)
+    U, sv, Vt = np.linalg.svd(Wf, full_matrices=False)
+    eps = np.finfo(np.float64).eps
+    for a in range(6):
+        if not sv[a] > eps * max(6, nf) * sv[0]:
+            return
+    g = np.empty(6)
+    for a in range(6):
+        acc = 0.0
+        for c in range(6):
+            acc += U[c, a] * rhs[c]
+        g[a] = acc / sv[a]
+    y = np.zeros(nf)
+    for j in range(nf):
+        acc = 0.0
+        for a in range(6):
+            acc += Vt[a, j] * g[a]
+        y[j] = acc
+    lam = np.zeros(6)
+    for a in range(6):
+        acc = 0.0
+        for j in range(nf):
+            acc += Vt[a, j] * y[j]
+        acc /= sv[a]
+        for c in range(6):
+            lam[c] += U[c, a] * acc
     out = np.empty(C)
     c = 0
     for j in range(C):
@@ -439,9 +526,9 @@ def polish(W, w, unilateral, margins, mu):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins, mu,
-                           a_o):  # pragma: no cover - compiled
-    """``distribute_with_supports`` without its fallback: ``a_o`` and the multipliers.
+def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins, mu, a_o,
+                           best_effort):  # pragma: no cover - compiled
+    """``distribute_with_supports``: ``a_o`` and the multipliers.
 
     Args:
         M_o: (6, 6) object inertia at the COM, world axes.
@@ -456,9 +543,15 @@ def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins
         margins: (C,) least pushes [N].
         mu: output (C,) multipliers [N] (arms' then supports').
         a_o: output (6,) the object acceleration these forces give.
+        best_effort: when no forces meet the margins, the reference's ``best_effort``: the
+            forces ``x >= margins`` whose wrench is closest to ``w`` in the ``M_o⁻¹`` metric
+            (a bounded least squares: NNLS on ``x - margins``, every multiplier being
+            unilateral here; with a bilateral one it returns False), then the smallest
+            forces making that wrench; the rest of ``w`` is left to the motion.
 
     Returns:
-        True, or False when the least-norm QP fails (the caller uses the reference).
+        True, or False when no forces meet the margins (without ``best_effort``) or the
+        solve failed (the caller uses the reference).
     """
     P = G.shape[0]
     a = a_d.copy()
@@ -467,32 +560,89 @@ def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins
         Minv_Gt = np.linalg.solve(M_o, Gt)
         GMG = np.ascontiguousarray(G @ Minv_Gt)
         rhs = G @ a_d + kappa
-        lam = np.linalg.pinv(GMG, PINV_RCOND) @ rhs
+        # (G M_o⁻¹ Gᵀ)⁺ rhs: the pseudo-inverse of the symmetric positive semi-definite
+        # matrix by its eigenvalues (its singular values), those above PINV_RCOND of the
+        # largest kept, as np.linalg.pinv decides
+        lev, LV = np.linalg.eigh(GMG)
+        top = 0.0
+        for p in range(P):
+            top = max(top, abs(lev[p]))
+        lam = np.zeros(P)
+        for p in range(P):
+            if abs(lev[p]) > PINV_RCOND * top:
+                acc = 0.0
+                for q in range(P):
+                    acc += LV[q, p] * rhs[q]
+                acc /= lev[p]
+                for q in range(P):
+                    lam[q] += LV[q, p] * acc
         a = a_d - Minv_Gt @ lam
     w = M_o @ a - h_o
     wr = np.zeros(6)
+    Wc = np.ascontiguousarray(W[:, :cols])
+    ev, V = np.linalg.eigh(M_o)
+    S = np.empty((6, 6))
+    for i in range(6):
+        for j in range(6):
+            acc = 0.0
+            for p in range(6):
+                acc += V[i, p] * V[j, p] / math.sqrt(ev[p])
+            S[i, j] = acc
+    SW = np.ascontiguousarray(S @ Wc)
+    Sw = S @ w
     if cols:
-        Wc = np.ascontiguousarray(W[:, :cols])
-        ev, V = np.linalg.eigh(M_o)
-        S = np.empty((6, 6))
-        for i in range(6):
-            for j in range(6):
-                acc = 0.0
-                for p in range(6):
-                    acc += V[i, p] * V[j, p] / math.sqrt(ev[p])
-                S[i, j] = acc
-        SW = np.ascontiguousarray(S @ Wc)
-        Sw = np.ascontiguousarray(S @ w)
+        # lstsq's W x = M_o^{1/2} P S w, P the projector on the range of S W at lstsq's
+        # rank (singular values above eps max(6, C) of the largest): one thin SVD
+        U, sv, _ = np.linalg.svd(SW, full_matrices=False)
         eps = np.finfo(np.float64).eps
-        x = np.linalg.lstsq(SW, Sw, eps * max(6, cols))[0]
-        wr = Wc @ x
+        Pw = np.zeros(6)
+        for p in range(sv.shape[0]):
+            if sv[p] > eps * max(6, cols) * sv[0]:
+                acc = 0.0
+                for i in range(6):
+                    acc += U[i, p] * Sw[i]
+                for i in range(6):
+                    Pw[i] += acc * U[i, p]
+        for i in range(6):  # M_o^{1/2} = V diag(√ev) Vᵀ
+            acc = 0.0
+            for j in range(6):
+                root = 0.0
+                for p in range(6):
+                    root += V[i, p] * V[j, p] * math.sqrt(ev[p])
+                acc += root * Pw[j]
+            wr[i] = acc
     unreached = w - wr
     step = np.linalg.solve(M_o, unreached)
     for i in range(6):
         a_o[i] = a[i] - step[i]
     if not cols:
         return True
-    return min_norm_forces(Wc, wr, unilateral[:cols], margins[:cols], mu[:cols])
+    uni, marg, x = unilateral[:cols], margins[:cols], mu[:cols]
+    if min_norm_forces(Wc, wr, uni, marg, x):
+        return True
+    if not best_effort:
+        return False
+    for j in range(cols):
+        if not uni[j]:
+            return False  # a bilateral multiplier: not a shifted NNLS (the reference decides)
+    # lsq_linear(S W, S w, bounds=(margins, inf)): y = x - margins >= 0 minimises
+    # ‖S W y - (S w - S W margins)‖
+    f = Sw - SW @ marg
+    y = np.empty(cols)
+    if not nnls(SW, f, 50 * (6 + cols), y):
+        return False
+    for j in range(cols):
+        y[j] += marg[j]
+    wx = Wc @ y
+    # the smallest such forces making that wrench (the bounded least squares leaves the
+    # internal forces arbitrary); y itself where that solve fails at the cone's boundary
+    if not min_norm_forces(Wc, wx, uni, marg, x):
+        x[:] = y
+    unreached = w - Wc @ x
+    step = np.linalg.solve(M_o, unreached)
+    for i in range(6):
+        a_o[i] = a[i] - step[i]
+    return True
 
 
 @njit(cache=True, error_model="numpy")
@@ -608,14 +758,16 @@ def phased_torques(t, buf, dims, N, nv_arm, unilateral, active, obj, G_sup, kapp
         marg[cols] = phases[ph, PH_SUPPORT_MARGIN]
         cols += 1
     mu_all = np.zeros(max(C, 1))
-    kept = supported_distribution(M_o, h_o, a_d, Wall, cols, G, kap, uni, marg, mu_all, a_o)
+    kept = supported_distribution(M_o, h_o, a_d, Wall, cols, G, kap, uni, marg, mu_all, a_o,
+                                  False)
     if not kept:
-        # no forces keep the margins: pushing forces (margins 0), as the reference falls back
+        # no forces keep the margins: pushing forces (margins 0), the closest wrench they
+        # make if none makes the whole, as the reference falls back
         for j in range(cols):
             marg[j] = 0.0
         if not supported_distribution(M_o, h_o, a_d, Wall, cols, G, kap, uni, marg, mu_all,
-                                      a_o):
-            return PD_FORCES_FAILED, False  # the reference's bounded least squares decides
+                                      a_o, True):
+            return PD_FORCES_FAILED, False
     mu_r = np.zeros((n, m))
     col = 0
     for i in range(n):
@@ -639,5 +791,6 @@ def phased_torques(t, buf, dims, N, nv_arm, unilateral, active, obj, G_sup, kapp
 
 
 __all__ = ["PD_ARM_RANK", "PD_FORCES_FAILED", "PD_NOT_FINITE", "PINV_RCOND", "PRESSING_GAP",
-           "RANK_TOL", "min_norm_forces", "minimum_jerk", "nnls", "phase_index", "phase_offsets",
-           "phase_reference", "phased_torques", "polish", "supported_distribution"]
+           "RANK_TOL", "column_least_squares", "min_norm_forces", "minimum_jerk", "nnls",
+           "phase_index", "phase_offsets", "phase_reference", "phased_torques", "polish",
+           "supported_distribution"]
