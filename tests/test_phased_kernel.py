@@ -108,3 +108,14 @@ def test_the_kernel_equals_the_reference_in_every_phase(monkeypatch):
     assert all(not kept for (_, kept), b in zip(cases, least_squares, strict=True) if b)
     assert sum(not kept for _, kept in cases) > sum(least_squares)  # "hard": zero margins
     assert max(e for e, _ in cases) < 1e-9
+
+
+def test_the_kernel_reads_the_references_constants():
+    """The kernel's copies of the reference's thresholds (the compiled layer imports nothing
+    above it) are the reference's values."""
+    from multiarm_pin._compiled import phased as kernel
+    from multiarm_pin.dynamics import inverse_dynamics
+    from multiarm_pin.sim.controllers import phased
+
+    assert kernel.PRESSING_GAP == phased.PRESSING_GAP
+    assert kernel.RANK_TOL == inverse_dynamics.RANK_TOL

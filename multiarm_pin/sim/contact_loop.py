@@ -12,8 +12,8 @@ become the stepper's :class:`~multiarm_pin.sim.contact_events.ContactEvent` reco
 controller's hold-still onsets its warnings.
 
 What the kernel cannot decide as the Python path would (a doubtful controller or solver case,
-NaN, too many events in one step, a sample with a support point off its rectangle or a row
-fallen past an edge) it hands back with the sample whose step the stepper then
+NaN, too many events in one step, a step that starts or ends with a support point off its
+rectangle, a row fallen past an edge) it hands back with the sample whose step the stepper then
 takes in Python (which raises, falls back or decides exactly as before); the next stretch goes
 to the kernel again.
 """
@@ -48,10 +48,11 @@ HOLD_REASON = ("the touching contacts cannot make every object wrench (rank {ran
                "holding the arms still (gravity compensation and joint PD)")
 """``ObjectPD``'s warning at a hold-still onset, after ``t = ... s: object_pd: ``."""
 
-FINITE_SUPPORTS_NOTE = ("supports with an extent (finite rectangles): the samples at which a "
-                        "support point is off its rectangle are taken by the Python stepper, "
-                        "not the compiled contact loop (which locates no off-edge event)")
-"""The note of an RK4 run with a finite support (the kernel hands such samples back)."""
+FINITE_SUPPORTS_NOTE = ("supports with an extent (finite rectangles): the steps that start or "
+                        "end with a support point off its rectangle are taken by the Python "
+                        "stepper, not the compiled contact loop (which locates no off-edge "
+                        "event)")
+"""The note of an RK4 run with a finite support (the kernel hands such steps back)."""
 
 
 def rules_vector() -> np.ndarray:
@@ -191,9 +192,10 @@ class ContactLoop:
         :class:`~multiarm_pin.sim.disturbances.WrenchSchedule` itself (its intervals are the
         kernel's table; a subclass with its own ``__call__`` is not), and no torque
         saturation. Supports with an ``extent`` are served while every support point is
-        inside its rectangle (the kernel hands back the other samples: the note
-        :data:`FINITE_SUPPORTS_NOTE`); fingertips that start beside their face are kept out
-        of the recorded penetration as the stepper does (:attr:`Stepper.beside_start`).
+        inside its rectangle at a step's start and end (the kernel hands back the other
+        steps: the note :data:`FINITE_SUPPORTS_NOTE`); fingertips that start beside their
+        face are kept out of the recorded penetration as the stepper does
+        (:attr:`Stepper.beside_start`).
         """
         from multiarm_pin.sim.controllers import controller_kernel
 
