@@ -114,8 +114,8 @@ def test_the_kernel_reads_the_references_constants():
     """The kernel's copies of the reference's thresholds (the compiled layer imports nothing
     above it) are the reference's values."""
     from multiarm_pin._compiled import phased as kernel
-    from multiarm_pin.dynamics import inverse_dynamics
+    from multiarm_pin.dynamics.inverse_dynamics import RANK_TOL
     from multiarm_pin.sim.controllers import phased
 
     assert kernel.PRESSING_GAP == phased.PRESSING_GAP
-    assert kernel.RANK_TOL == inverse_dynamics.RANK_TOL
+    assert kernel.RANK_TOL == RANK_TOL
