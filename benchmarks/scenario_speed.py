@@ -167,7 +167,7 @@ def main(argv=None) -> int:
         notes.append(f"- {name} ({sim.duration:g} s simulated, dt {sim.dt:g} s): "
                      f"{_agreement(a, b, sim.dt)}. Warnings of the compiled run: "
                      f"{a.warnings}; of the reference: {b.warnings}.")
-    lines += ["", "Agreement of the last pair:", "", *notes, "",
+    lines += ["", "Notes (compile of the new kernel; agreement of the last pair):", "", *notes, "",
               f"CPU time of this process's children (cold runs): "
               f"{resource.getrusage(resource.RUSAGE_CHILDREN).ru_utime:.1f} s."]
     tmp = out / "scenario_speed.md.tmp"
