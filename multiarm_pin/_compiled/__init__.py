@@ -5,6 +5,7 @@ module per reference: :mod:`.linalg` (Cholesky, LAPACK), :mod:`.arm_terms`
 (``ArmSet.evaluate``), :mod:`.constraint_rows` (``ConstraintSet.evaluate``), :mod:`.assembly`
 (the reference blocks), :mod:`.object_first` (``solve_object_first_numpy``), :mod:`.evaluate`
 (all of them fused on one buffer), :mod:`.controller_kernels` (``ObjectPD.reference``),
+:mod:`.phased` (``PhasedPD.reference``),
 :mod:`.rigid_body` (Pinocchio's pass of ``ArmSet.pinocchio_pass``: ``J``, ``dJ``, ``M``,
 ``nle``, tool placements; ``integrate``, ``difference``), :mod:`.trajectory`
 (``MinimumJerkTrajectory.motion``), :mod:`.closed_loop` (the closed-loop evaluation and

@@ -12,8 +12,18 @@ stretch of samples instead of thousands of Python evaluations. It takes:
 - zero torque, or ``object_pd`` on its compiled path: every contact touching
   (:func:`~multiarm_pin._compiled.controller_kernels.object_pd_step`), some separated
   (:func:`~multiarm_pin._compiled.controller_kernels.touching_torques`), and its hold-still
-  fallback when the touching contacts cannot make every object wrench;
-- an external wrench schedule.
+  fallback when the touching contacts cannot make every object wrench; or ``phased_pd``
+  (:func:`~multiarm_pin._compiled.phased.phased_torques`, the supports in its forces);
+- an external wrench schedule;
+- supports of finite extent while every support point is inside its rectangle at a step's
+  start and end (then the rectangles change nothing the stepper decides: no off-edge event,
+  no fallen row, every row watched as on a whole plane); a step with some point outside at
+  either end is handed back (:data:`STAGE_OFF_RECTANGLE`). A point that leaves its rectangle
+  and comes back within one step, or is outside only at an event located inside a step, is
+  not seen (the stepper checks the same two ends for off-edge events, but also the state at a
+  located touchdown);
+- fingertips that start beside their face (``Stepper.beside_start``): kept out of the
+  recorded penetration until they are above their face's plane or touch, as the stepper does.
 
 One evaluation (:func:`contact_stage`): the arms' terms
 (:func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass`) and blocks at zero torque
@@ -90,6 +100,10 @@ from multiarm_pin._compiled.layout import (
     P_MASS,
     P_OBJECT_RCOND_TOL,
     P_RCOND_TOL,
+    PLANE_HALF_EXTENT,
+    PLANE_POINT,
+    PLANE_X_AXIS,
+    PLANE_Y_AXIS,
     ROW_NORMAL,
     ROW_PHI,
     ROW_PHI_DOT,
@@ -101,6 +115,7 @@ from multiarm_pin._compiled.layout import (
 )
 from multiarm_pin._compiled.mlcp import OK as LCP_OK
 from multiarm_pin._compiled.object_first import SOLVE_OK, object_first
+from multiarm_pin._compiled.phased import phased_torques
 from multiarm_pin._compiled.rigid_body import difference, rigid_body_pass
 from multiarm_pin._compiled.trajectory import reference_motion
 
@@ -109,11 +124,16 @@ STAGE_TOO_MANY_EVENTS = 7
 STAGE_EVENTS_FULL = 8
 """Status: the event table is nearly full; the caller takes the events and calls again (no
 step to take in Python)."""
+STAGE_OFF_RECTANGLE = 9
+"""Status: at this sample some point of a finite support's row is not inside its rectangle
+(the stepper takes the step: off-edge events, fallen rows, rows not watched)."""
 
 CONTROL_NONE = 0
 """``control[CTL_MODE]``: zero torque."""
 CONTROL_OBJECT_PD = 1
 """``control[CTL_MODE]``: ``object_pd`` on its compiled path."""
+CONTROL_PHASED = 2
+"""``control[CTL_MODE]``: ``phased_pd`` (:func:`~multiarm_pin._compiled.phased.phased_torques`)."""
 CTL_MODE = 0
 """``control`` (int64 array): the controller mode."""
 CTL_HOLDING = 1
@@ -296,7 +316,7 @@ def _torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compiled
      sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
     (control, traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, qp_active,
      unilateral, q_ref, q_hold, onsets, n_onsets, qp_active_r, touching, no_uni,
-     gains_free) = ctl
+     gains_free, _) = ctl
     buf = wk[6]
     (a_o, qdd_c, mu, phi_dd, Av, tau, err, z, ref, E, mu_p, qdd_p, a_pts, a_d) = out
     k, n = dims[DIMS_K], dims[DIMS_N]
@@ -361,6 +381,88 @@ def _torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compiled
     joint_pd(err, x, v_starts, nv_arm, kp, kd, z)
     hold_still_torques(buf, dims, nv_arm, z, tau)
     return STAGE_OK
+
+
+@njit(cache=True, error_model="numpy")
+def _phased_torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compiled
+    """``phased_pd``'s torques ``out.tau`` (the arguments as :func:`_torques`'s).
+
+    :func:`~multiarm_pin._compiled.phased.phased_torques` on the buffer and the support
+    block's rows (``κ`` from ``c = -κ - 2α φ̇ - β² φ``); ``STAGE_CONTROLLER`` when it reports a
+    case the reference decides (the stepper then takes the step).
+    """
+    (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
+     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
+    (control, traj, pd_gains, null_gains, hold_tool, grasp_obj, hold_n, gains, qp_active,
+     unilateral, q_ref, q_hold, onsets, n_onsets, qp_active_r, touching, no_uni,
+     gains_free, ph) = ctl
+    (phases, press, release, named, offs, margins, offset_start, lam, a_plan) = ph
+    buf, W_oc, cc, phi, phi_dot = wk[6], wk[10], wk[11], wk[14], wk[15]
+    (a_o, qdd_c, mu, phi_dd, Av, tau, err, z, ref, E, mu_p, qdd_p, a_pts, a_d) = out
+    m, n = dims[DIMS_M], dims[DIMS_N]
+    K = sp_p.shape[0]
+    q0 = OBJECT_STATE_SIZE
+    nq = q_ref.shape[0]
+    difference(model_ints, x[q0:q0 + nq], q_ref, err)
+    joint_pd(err, x, v_starts, nv_arm, null_gains[NULL_KP], null_gains[NULL_KD], z)
+    G = np.empty((K, 6))
+    kappa = np.empty(K)
+    gaps = np.empty(K)
+    on = params[P_BAUMGARTE_ON] != 0.0
+    al, be = params[P_BAUMGARTE_ALPHA], params[P_BAUMGARTE_BETA]
+    for j in range(K):
+        for a in range(6):
+            G[j, a] = W_oc[n, a, j]
+        gaps[j] = phi[n, j]
+        kap = -cc[n, j]
+        if on:
+            kap = kap - 2.0 * al * phi_dot[n, j] - be * be * phi[n, j]
+        kappa[j] = kap
+    for i in range(n):
+        for r in range(m):
+            touching[i, r] = active[i, r]
+    status, kept = phased_torques(t, buf, dims, N, nv_arm, unilateral, touching,
+                                  x[:OBJECT_STATE_SIZE], G, kappa, gaps, phases, press, release,
+                                  named, offs, margins, offset_start, pd_gains, z, hold_tool,
+                                  grasp_obj, hold_n, gains, tau, mu_p, lam, qdd_p, a_pts, a_d,
+                                  a_plan)
+    if status != PD_OK:
+        return STAGE_CONTROLLER
+    control[CTL_HOLDING] = 0
+    control[CTL_MARGIN_KEPT] = 1 if kept else 0
+    return STAGE_OK
+
+
+@njit(cache=True, error_model="numpy")
+def off_rectangles(x, sp_p, planes):  # pragma: no cover - compiled
+    """True when some support row's point at ``x`` is not inside its support's rectangle.
+
+    ``SupportSet.edge_margins`` ``<= 0`` (``min(lx/2 - |u|, ly/2 - |v|)``, ``(u, v)`` the
+    point's in-plane coordinates from the rectangle's centre); rows of whole planes (infinite
+    half extents) never are.
+
+    Args:
+        x: the state vector.
+        sp_p: (K, 3) the rows' object-frame points [m].
+        planes: (K, SUPPORT_PLANE_SIZE) their supports' planes (``SUPPORT_PLANE_FIELDS``).
+    """
+    R = np.empty((3, 3))
+    quaternion_rotation(x[X_QUATERNION:X_QUATERNION + 4], R)
+    for j in range(sp_p.shape[0]):
+        hx, hy = planes[j, PLANE_HALF_EXTENT], planes[j, PLANE_HALF_EXTENT + 1]
+        if math.isinf(hx) and math.isinf(hy):
+            continue
+        u = 0.0
+        v = 0.0
+        for a in range(3):
+            p = x[X_POSITION + a] + (R[a, 0] * sp_p[j, 0] + R[a, 1] * sp_p[j, 1]
+                                     + R[a, 2] * sp_p[j, 2])
+            d = p - planes[j, PLANE_POINT + a]
+            u += d * planes[j, PLANE_X_AXIS + a]
+            v += d * planes[j, PLANE_Y_AXIS + a]
+        if not (min(hx - abs(u), hy - abs(v)) > 0.0):
+            return True
+    return False
 
 
 @njit(cache=True, error_model="numpy")
@@ -468,8 +570,9 @@ def stage_functions(x, active, sy, ctl, wk, out, d):
         return found
     int64 = numba.types.int64
     rules = sy[19]
-    torques = pointer(_torques if mode == CONTROL_OBJECT_PD else _zero_torques,
-                      (0.0, x, active, sy, ctl, wk, out), int64)
+    kernel = (_torques if mode == CONTROL_OBJECT_PD
+              else _phased_torques if mode == CONTROL_PHASED else _zero_torques)
+    torques = pointer(kernel, (0.0, x, active, sy, ctl, wk, out), int64)
     a_o, qdd_c, mu, Av = out[0], out[1], out[2], out[4]
     lcp = pointer(contact_kernel,
                   (wk[7], wk[8], wk[9], wk[10], wk[11], wk[12], a_o, sy[15], sy[16], sy[13],
@@ -919,7 +1022,8 @@ def _record_sample(s, t, x, active, sy, wk, out, solver, Rec):  # pragma: no cov
     a_o, qdd_c, mu, tau = out[0], out[1], out[2], out[5]
     (r_q, r_v, r_p, r_quat, r_tw, r_tau, r_mu, r_phi, r_phi_dot, r_points, r_normals, r_a_o,
      r_qdd, r_violation, r_wrench, r_kinetic, r_potential, r_momentum, r_active,
-     r_solver) = Rec
+     r_solver, beside) = Rec
+    tol = rules[R_GAP]
     nv, n = dims[DIMS_NV], dims[DIMS_N]
     nq = x.shape[0] - OBJECT_STATE_SIZE - 2 * nv
     record_state(s, t, x, nq, nv, nv_arm, v_starts, tau, qdd_c, a_o, wrenches, r_q, r_v, r_p,
@@ -935,11 +1039,15 @@ def _record_sample(s, t, x, active, sy, wk, out, solver, Rec):  # pragma: no cov
             for a in range(3):
                 r_points[s, b, r, a] = pts[b, r, a]
                 r_normals[s, b, r, a] = nrm[b, r, a]
+            # a fingertip that started beside its face: out of the penetration until it is
+            # above its face's plane or touches (``Stepper.update_beside_start``)
+            if beside[b, r] and not (phi[b, r] < -tol and not active[b, r]):
+                beside[b, r] = False
             if not mask_c[b, r]:
                 continue
             if active[b, r] or not uni_c[b, r]:
                 viol = max(viol, abs(phi[b, r]))
-            else:
+            elif not beside[b, r]:
                 viol = max(viol, -phi[b, r])
     r_violation[s] = viol
     r_solver[s] = solver
@@ -975,7 +1083,9 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         ev: (E, EVENT_WIDTH) the event table (appended to).
         n_ev: (1,) int the events in it.
         reserve: rows of ``ev`` to keep free before a step (more than one step can add).
-        Rec: the record arrays (``Recorder``'s, and the active set and solver codes).
+        Rec: the record arrays (``Recorder``'s, and the active set and solver codes), then
+            the (B, R) bool rows kept out of the recorded penetration (``beside_start``: in
+            and out).
         fn: ``(contact_stage, _rows_and_blocks, torques, lcp)`` as :func:`stage_functions`
             makes them (compiled once, called through their addresses).
         advance: :func:`_advance_with_events`, likewise (:func:`advance_function`).
@@ -985,7 +1095,9 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         Python stepper takes (``x``, ``active``, the events and the controller's hold state
         are as they were right after that sample's separations; the sample is recorded when
         the step failed, not when its evaluation did). ``STAGE_EVENTS_FULL``: take the events
-        and call again from ``k``.
+        and call again from ``k``. ``STAGE_OFF_RECTANGLE``: sample ``k`` or the step's end
+        has a support point off its rectangle (at the sample: checked before its
+        evaluation, nothing of it done).
     """
     control, q_hold, n_onsets = ctl[0], ctl[11], ctl[13]
     nx = x.shape[0]
@@ -995,6 +1107,9 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
     for s in range(k0, k1):
         if n_ev[0] + reserve > ev.shape[0]:
             return STAGE_EVENTS_FULL, s
+        if off_rectangles(x, sy[10], sy[12]):
+            st0[4][0] = 0  # the stepper takes this sample: nothing of it to reuse
+            return STAGE_OFF_RECTANGLE, s
         t = times[s]
         reuse = st0[4][0] == 1 and s > k0
         if reuse:
@@ -1012,6 +1127,8 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         n0, holding0, onsets0 = n_ev[0], control[CTL_HOLDING], n_onsets[0]
         st = advance(t, x, times[s + 1], active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev,
                      fn)
+        if st == STAGE_OK and off_rectangles(x, sy[10], sy[12]):
+            st = STAGE_OFF_RECTANGLE  # the step ends off a rectangle: the stepper's (off edge)
         if st != STAGE_OK:
             x[:] = x0
             active[:] = active0

@@ -181,8 +181,6 @@ def _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilater
     for this one costs more than compiling it separately.
     """
     n, k, m = W.shape
-    hold_kp, hold_kd = gains[GAIN_HOLD_KP], gains[GAIN_HOLD_KD]
-    damping, margin = gains[GAIN_DAMPING], gains[GAIN_MARGIN]
     # 1. internal forces: the least-norm QP, warm-started
     wrench = np.empty(6)
     for a in range(6):
@@ -190,10 +188,31 @@ def _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilater
         for b in range(6):
             acc += M_o[a, b] * a_d[b]
         wrench[a] = acc
-    status, _ = least_norm_forces(W_o, N, unilateral, wrench, margin, active, mu,
+    status, _ = least_norm_forces(W_o, N, unilateral, wrench, gains[GAIN_MARGIN], active, mu,
                                   20 + 2 * n * m)
     if status != QP_OK:
         return PD_FORCES_FAILED
+    return planned_torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, N, nv_arm, obj_x, a_d, z,
+                           hold_tool, hold_obj, hold_n, gains, tau, mu, qdd, a_pts)
+
+
+@njit(cache=True, error_model="numpy")
+def planned_torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, N, nv_arm, obj_x, a_d, z, hold_tool,
+                    hold_obj, hold_n, gains, tau, mu, qdd, a_pts):  # pragma: no cover - compiled
+    """Steps 2-5 of :func:`_torques` with the multipliers ``mu`` planned already.
+
+    The held points' tasks at the object acceleration ``a_d``, their joint accelerations and
+    the inverse dynamics on the rows ``W``, ``W_o``, ``c`` (``N[i]`` per arm) with the
+    object's acceleration ``a_d`` and the multipliers ``mu`` (n, m): ``τ_i = M_i q̈_i - h_i -
+    W_i μ_i``. Also the torques of ``phased_pd``
+    (:func:`multiarm_pin._compiled.phased.phased_torques`), whose forces include the supports'.
+
+    Returns:
+        :data:`PD_OK`, :data:`PD_ARM_RANK` or :data:`PD_NOT_FINITE`.
+    """
+    n, k, m = W.shape
+    hold_kp, hold_kd = gains[GAIN_HOLD_KP], gains[GAIN_HOLD_KD]
+    damping = gains[GAIN_DAMPING]
     # 2. held points' desired accelerations, per arm
     op = obj_x[OX_POSITION:OX_POSITION + 3]
     oR = obj_x[OX_ROTATION:OX_ROTATION + 9].reshape((3, 3))
@@ -698,5 +717,5 @@ def solve_with_torques(buf, dims, N, params, tau):  # pragma: no cover - compile
 
 __all__ = ["GRASP_RANK_TOLERANCE", "NO_WRENCH", "PD_ARM_RANK", "PD_FORCES_FAILED", "PD_HOLD",
            "PD_LARGE_ROTATION", "PD_NOT_FINITE", "PD_OK", "desired_acceleration",
-           "hold_still_torques", "log3", "min_norm_rows", "object_pd_step",
+           "hold_still_torques", "log3", "min_norm_rows", "object_pd_step", "planned_torques",
            "object_pd_torques", "solve_with_torques", "touching_rank", "touching_torques"]

@@ -357,6 +357,40 @@ TR_LOG = _TR["log"]
 TR_AXIS = _TR["axis"]
 
 
+SUPPORT_PLANE_FIELDS = (("point", 3), ("x_axis", 3), ("y_axis", 3), ("half_extent", 2))
+"""The plane of each support row's support: its point [m] (the rectangle's centre), its unit
+in-plane axes and the rectangle's half extents along them [m] (``inf`` for a whole plane)."""
+_PL, SUPPORT_PLANE_SIZE = _starts(SUPPORT_PLANE_FIELDS)
+PLANE_POINT = _PL["point"]
+PLANE_X_AXIS = _PL["x_axis"]
+PLANE_Y_AXIS = _PL["y_axis"]
+PLANE_HALF_EXTENT = _PL["half_extent"]
+
+
+PHASE_FIELDS = (("t", 1), ("duration", 1), ("kind", 1), ("pivot", 3), ("axis", 3),
+                ("angle", 1), ("displacement", 3), ("start_position", 3),
+                ("start_rotation", 9), ("support_margin", 1))
+"""One phase of ``phased_pd`` (:class:`~multiarm_pin.sim.controllers.phased.Phase`) per row
+of its table: start time and duration [s], kind (:data:`PHASE_HOLD`, :data:`PHASE_TILT`,
+:data:`PHASE_MOVE`), the tilt's world pivot [m], unit axis and angle [rad], the move's world
+displacement [m], the reference pose at the phase's start (position [m], rotation row-major)
+and the least push of the support rows planned to press [N]. The phases' contact sets are
+arrays beside the table (see :func:`multiarm_pin._compiled.phased.phased_torques`)."""
+_PH, PHASE_SIZE = _starts(PHASE_FIELDS)
+PH_T = _PH["t"]
+PH_DURATION = _PH["duration"]
+PH_KIND = _PH["kind"]
+PH_PIVOT = _PH["pivot"]
+PH_AXIS = _PH["axis"]
+PH_ANGLE = _PH["angle"]
+PH_DISPLACEMENT = _PH["displacement"]
+PH_START_POSITION = _PH["start_position"]
+PH_START_ROTATION = _PH["start_rotation"]
+PH_SUPPORT_MARGIN = _PH["support_margin"]
+PHASE_HOLD, PHASE_TILT, PHASE_MOVE = 0, 1, 2
+"""Codes of the phase kinds ``hold``, ``tilt``, ``move`` (``PH_KIND``)."""
+
+
 WRENCH_FIELDS = (("from", 1), ("to", 1), ("wrench", 6))
 """One external wrench interval of a :class:`~multiarm_pin.sim.disturbances.WrenchSchedule`:
 it acts for ``from <= t < to`` [s], ``[f; m]`` at the object's COM, world axes [N, N m]."""

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from multiarm_pin._compiled import layout
 from multiarm_pin.exceptions import ConstraintError
 
 PARALLEL_SINE = 1e-6
@@ -254,13 +255,24 @@ class SupportSet:
         return np.minimum(self._half[:, 0] - np.abs(u), self._half[:, 1] - np.abs(v))
 
     def tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(points, normals, plane points)``, each (K, 3), new C-contiguous arrays.
+        """``(points (K, 3), normals (K, 3), planes (K, SUPPORT_PLANE_SIZE))``, new arrays.
 
-        Every row's object-frame point [m], its plane's unit normal and a point of its plane
-        [m] (the compiled contact loop's inputs).
+        Every row's object-frame point [m], its plane's unit normal, and its support's plane:
+        its point [m] (the rectangle's centre), in-plane unit axes and half extents [m]
+        (``inf`` for a whole plane), as ``multiarm_pin._compiled.layout.SUPPORT_PLANE_FIELDS``
+        lays them out (the compiled contact loop's inputs).
         """
+        planes = np.zeros((self.n_rows, layout.SUPPORT_PLANE_SIZE))
+        point, x_axis = layout.PLANE_POINT, layout.PLANE_X_AXIS
+        y_axis, half = layout.PLANE_Y_AXIS, layout.PLANE_HALF_EXTENT
+        planes[:, point:point + 3] = self._a
+        planes[:, half:half + 2] = np.inf
+        if self.finite:
+            planes[:, x_axis:x_axis + 3] = self._ex
+            planes[:, y_axis:y_axis + 3] = self._ey
+            planes[:, half:half + 2] = self._half
         return (np.array(self._p, dtype=float), np.array(self._n, dtype=float),
-                np.array(self._a, dtype=float))
+                np.ascontiguousarray(planes))
 
     def __len__(self) -> int:
         """Number of supports (not rows)."""

@@ -1,8 +1,9 @@
 """The compiled contact loop of :func:`~multiarm_pin.sim.simulation.simulate`: RK4 with events.
 
 When a run has unilateral rows (fingertips or supports), RK4, arms the compiled rigid-body pass
-supports (or no arms), and zero torque or an :class:`~multiarm_pin.sim.controllers.ObjectPD`
-on its compiled path, :class:`ContactLoop` runs stretches of samples, separations, touchdowns
+supports (or no arms), and zero torque, an :class:`~multiarm_pin.sim.controllers.ObjectPD` on
+its compiled path or a :class:`~multiarm_pin.sim.controllers.PhasedPD`, :class:`ContactLoop`
+runs stretches of samples, separations, touchdowns
 and impacts included, in one call of
 :func:`multiarm_pin._compiled.contact_loop.run_contact_rk4`, which mirrors the
 :class:`~multiarm_pin.sim.stepper.Stepper` and :mod:`multiarm_pin.sim.event_location` step for
@@ -11,7 +12,8 @@ become the stepper's :class:`~multiarm_pin.sim.contact_events.ContactEvent` reco
 controller's hold-still onsets its warnings.
 
 What the kernel cannot decide as the Python path would (a doubtful controller or solver case,
-NaN, too many events in one step) it hands back with the sample whose step the stepper then
+NaN, too many events in one step, a step that starts or ends with a support point off its
+rectangle, a row fallen past an edge) it hands back with the sample whose step the stepper then
 takes in Python (which raises, falls back or decides exactly as before); the next stretch goes
 to the kernel again.
 """
@@ -46,10 +48,11 @@ HOLD_REASON = ("the touching contacts cannot make every object wrench (rank {ran
                "holding the arms still (gravity compensation and joint PD)")
 """``ObjectPD``'s warning at a hold-still onset, after ``t = ... s: object_pd: ``."""
 
-FINITE_SUPPORTS_NOTE = ("supports with an extent (finite rectangles): the run is taken by "
-                        "the Python stepper, not the compiled contact loop (whose supports "
-                        "are whole planes), so it is slower")
-"""The note of an RK4 run with a finite support (:meth:`ContactLoop.for_run` declines it)."""
+FINITE_SUPPORTS_NOTE = ("supports with an extent (finite rectangles): the steps that start or "
+                        "end with a support point off its rectangle are taken by the Python "
+                        "stepper, not the compiled contact loop (which locates no off-edge "
+                        "event)")
+"""The note of an RK4 run with a finite support (the kernel hands such steps back)."""
 
 
 def rules_vector() -> np.ndarray:
@@ -98,7 +101,8 @@ class ContactLoop:
         self.stepper = stepper
         self.system = s
         # the controller whose compiled inputs the kernel reads; None: zero torque
-        zero = controller_kernel(stepper.controller)[0] == "zero_torque"
+        self.kernel_name = controller_kernel(stepper.controller)[0]
+        zero = self.kernel_name == "zero_torque"
         self.controller = None if zero else stepper.controller
         n, B, R = s.n_arms, s.n_blocks, s.rows_max
         nq, nv = s.nq, s.nv
@@ -171,8 +175,9 @@ class ContactLoop:
         self._kernel = None  # (self._fn, the kernel's entry point for these types)
         self._kept_controller = None  # (controller inputs, the kernel's controller tuple)
         self._zero_x = np.zeros(nv)
+        self.beside = np.zeros((B, R), dtype=bool)  # the stepper's beside_start, in and out
 
-    CONTROLLER_KERNELS = ("zero_torque", "object_pd")
+    CONTROLLER_KERNELS = ("zero_torque", "object_pd", "phased_pd")
     """The compiled controllers the kernel runs (names of
     :data:`~multiarm_pin.sim.controllers.CONTROLLER_KERNELS`)."""
 
@@ -185,11 +190,12 @@ class ContactLoop:
         kernel (:func:`~multiarm_pin.sim.controllers.controller_kernel`) is one of
         :data:`CONTROLLER_KERNELS`, and no external wrench or a
         :class:`~multiarm_pin.sim.disturbances.WrenchSchedule` itself (its intervals are the
-        kernel's table; a subclass with its own ``__call__`` is not), no torque saturation,
-        no support with an ``extent`` (the kernel's supports are whole planes: such runs
-        are the stepper's, with the note :data:`FINITE_SUPPORTS_NOTE`), and no fingertip
-        that starts beside its face (:attr:`Stepper.beside_start`: the stepper keeps it out
-        of the recorded penetration).
+        kernel's table; a subclass with its own ``__call__`` is not), and no torque
+        saturation. Supports with an ``extent`` are served while every support point is
+        inside its rectangle at a step's start and end (the kernel hands back the other
+        steps: the note :data:`FINITE_SUPPORTS_NOTE`); fingertips that start beside their
+        face are kept out of the recorded penetration as the stepper does
+        (:attr:`Stepper.beside_start`).
         """
         from multiarm_pin.sim.controllers import controller_kernel
 
@@ -202,11 +208,6 @@ class ContactLoop:
             return "torque saturation"  # the kernel adds the controller's torque as it is
         if stepper.wrench is not None and type(stepper.wrench) is not WrenchSchedule:
             return f"the external wrench is a {type(stepper.wrench).__name__}"
-        if s.supports.finite:
-            return FINITE_SUPPORTS_NOTE  # off-edge events, which the kernel does not locate
-        if stepper.beside_start.any():
-            return ("a fingertip starts beside its face (the stepper keeps it out of the "
-                    "recorded penetration)")
         if s.n_arms and (s.compiled is None or s.arm_set.compiled_model is None):
             return unsupported_joints_note(s)
         kernel, why = controller_kernel(stepper.controller)
@@ -226,8 +227,11 @@ class ContactLoop:
         """True when the kernel can take the steps from ``state``.
 
         The first time, an ``object_pd`` controller fixes its state from a reference (numpy)
-        evaluation of ``state`` (:meth:`ObjectPD.prepare`).
+        evaluation of ``state`` (:meth:`ObjectPD.prepare`). Not while a row of a finite
+        support is fallen past its edge (:attr:`Stepper.fallen`): the stepper's.
         """
+        if self.stepper.fallen.any():
+            return False
         ctrl = self.controller
         if ctrl is None:
             return True
@@ -257,6 +261,7 @@ class ContactLoop:
         kept = self._kept_controller
         if kept is not None and kept[0] is inputs:
             return kept[1]
+        K = s.supports.n_rows
         if inputs is None:
             self.control[kernels.CTL_MODE] = kernels.CONTROL_NONE
             values = (np.zeros((1, layout.TRAJECTORY_WIDTH)), np.zeros(layout.PD_GAINS_SIZE),
@@ -266,6 +271,16 @@ class ContactLoop:
         else:
             self.control[kernels.CTL_MODE] = kernels.CONTROL_OBJECT_PD
             values = inputs
+        if self.kernel_name == "phased_pd":
+            self.control[kernels.CTL_MODE] = kernels.CONTROL_PHASED
+            arrays = (*ctrl.phase_arrays(), ctrl.offset_start)
+        else:  # placeholders of the same types
+            arrays = (np.zeros((1, layout.PHASE_SIZE)), np.zeros((1, K), bool),
+                      np.zeros((1, n), bool), np.zeros((1, n), bool), np.zeros((1, n, 3)),
+                      np.zeros((1, n, m)), np.zeros((n, 3)))
+        # the phased controller's tables (read only: one type for every run), then its
+        # planned support forces and object acceleration
+        phased = (*(_read_only(a) for a in arrays), np.zeros(K), np.zeros(6))
         (traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, qp_active,
          unilateral, q_ref) = values
         traj, unilateral = _read_only(traj), _read_only(unilateral)  # one type for every run
@@ -277,7 +292,7 @@ class ContactLoop:
         C = (self.control, traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains,
              qp_active, unilateral, q_ref, self.q_hold, self.onsets, self.n_onsets,
              np.zeros((n, m), np.uint8), np.zeros((n, m), bool), np.zeros((n, m), bool),
-             self._free_gains(gains))
+             self._free_gains(gains), phased)
         self._kept_controller = (inputs, C)
         return C
 
@@ -296,7 +311,7 @@ class ContactLoop:
         self.Z[4][0] = 0  # no evaluation to reuse at the first sample
         Rec = (rec.q, rec.v, rec.p, rec.quat, rec.twist, rec.tau, rec.mu, rec.phi,
                rec.phi_dot, rec.points, rec.normals, rec.a_o, rec.qdd, rec.violation,
-               rec.wrench, rec.ke, rec.pe, rec.momentum, rec.active, codes)
+               rec.wrench, rec.ke, rec.pe, rec.momentum, rec.active, codes, self.beside)
         if self._fn is None or self._fn[0] is not C:  # the stages, for these types
             fn = kernels.stage_functions(x, active, self.S, C, self.W, self._O, self.K[0])
             self._fn = (C, fn, kernels.advance_function(
@@ -342,6 +357,7 @@ class ContactLoop:
                                 self._zero_x)
         C = self._controller()
         active = np.array(stepper.active, dtype=bool)
+        self.beside[:] = stepper.beside_start
         codes = np.zeros(len(times), np.int64)
         args = self._arguments(rec, x, times, k0, k1, C, active, codes)
         if self._kernel is None or self._kernel[0] is not self._fn:
@@ -365,6 +381,7 @@ class ContactLoop:
             stepper._event(t, EVENT_KINDS[int(kind)], int(b), int(r), phi_dot=before,
                            phi_dot_after=after, impulse=impulse, rebound=bool(rebound))
         stepper.active = active & s.contact_mask
+        stepper.beside_start = self.beside.copy()
         ctrl = self.controller
         if ctrl is not None:
             for t, rank in self.onsets[:int(self.n_onsets[0])].tolist():

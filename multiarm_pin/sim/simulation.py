@@ -33,8 +33,9 @@ With RK4, runs of the kinds they take go to the compiled loops, which record the
 samples and events: :class:`~multiarm_pin.sim.compiled_loop.CompiledLoop` while every contact
 touches (arms, no supports), :class:`~multiarm_pin.sim.contact_loop.ContactLoop` otherwise
 (separations, touchdowns and impacts in the kernel); a step either hands back is taken by the
-stepper. Runs with a support of finite ``extent`` (off-edge events) are the stepper's
-throughout, and say so in their warnings (``FINITE_SUPPORTS_NOTE``).
+stepper. With a support of finite ``extent`` the steps with a support point off its
+rectangle at either end (off-edge events) are the stepper's; such runs say so in their
+warnings (``FINITE_SUPPORTS_NOTE``).
 
 This module holds :func:`simulate` (input checks, the time grid, the rk45 driver); the
 evaluations, fixed steps and events are :class:`~multiarm_pin.sim.stepper.Stepper`'s, the

@@ -14,7 +14,7 @@ without recomputing them (the protocol :class:`ControllerFunction`). Build one b
 - ``phased_pd``: ``object_pd`` through phases (:mod:`~multiarm_pin.sim.controllers.phased`:
   tilt about a pivot edge, move, hold), each with the support rows that keep pressing, the
   arms released and the arms' held-point offsets (approach, retract); the supports are in
-  its force distribution. Reference path only (no compiled kernel; a run says so once);
+  its force distribution (compiled: :mod:`multiarm_pin._compiled.phased`);
 - ``object_pd``: object-level computed torque. A desired object trajectory
   (:class:`~multiarm_pin.sim.trajectories.MinimumJerkTrajectory`, or ``waypoints``; default:
   hold the pose of the first call) and PD on the object pose give a desired acceleration
@@ -95,6 +95,7 @@ class ControllerType:
 CONTROLLER_KERNELS: dict[str, str] = {
     "zero_torque": "zero torque (the contact loop's control mode CONTROL_NONE)",
     "object_pd": "ObjectPD's compiled path (multiarm_pin._compiled.controller_kernels)",
+    "phased_pd": "PhasedPD's compiled path (multiarm_pin._compiled.phased)",
 }
 """The compiled controllers, by name: what :attr:`ControllerType.kernel` names. Each compiled
 loop says which of them it runs (``CONTROLLER_KERNELS`` of
@@ -112,7 +113,7 @@ CONTROLLERS: dict[str, ControllerType] = {e.name: e for e in (
                    kernel="object_pd"),
     ControllerType("phased_pd", PhasedPD, False,
                    "object_pd through phases (tilt, move, hold) with their own contact sets, "
-                   "the supports in its force distribution (no compiled kernel)"),
+                   "the supports in its force distribution", kernel="phased_pd"),
 )}
 """Every controller type, by name (the names :func:`make_controller` and scenarios accept)."""
 

@@ -19,9 +19,15 @@ starts apart (``joint.approach``) starts at its approach offset).
 The force distribution knows the supports
 (:func:`~multiarm_pin.dynamics.force_distribution.distribute_with_supports`): the pressing
 rows push with at least ``support_margin`` and the object's desired acceleration keeps them
-on their plane, so no arm contact is asked to pull and the pivot keeps pressing. The
-controller has no compiled kernel (its registry entry names none): runs take the Python
-stepper and say so once (:data:`~multiarm_pin.sim.simulation.REFERENCE_NOTE`).
+on their plane, so no arm contact is asked to pull and the pivot keeps pressing.
+
+Compiled path: on an evaluation of the compiled path (:meth:`MultiArmSystem.blocks`) the
+torques come from :func:`multiarm_pin._compiled.phased.phased_torques`, on the phases packed
+as arrays here (:meth:`PhasedPD.phase_arrays`); whenever it reports a case it cannot decide
+as :meth:`PhasedPD.reference` does (the margins cannot be kept, a rank-deficient arm, NaN),
+the reference decides. The compiled contact loop runs the same kernel inside its steps
+(:class:`~multiarm_pin.sim.contact_loop.ContactLoop`; the registry entry's kernel
+``phased_pd``) and hands such steps back to the stepper.
 """
 
 from __future__ import annotations
@@ -31,11 +37,14 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from multiarm_pin._compiled import layout
+from multiarm_pin._compiled.controller_kernels import PD_OK
+from multiarm_pin._compiled.phased import phased_torques
 from multiarm_pin.dynamics.blocks import expand_rows, restrict_rows, select_rows
 from multiarm_pin.dynamics.force_distribution import distribute_with_supports
 from multiarm_pin.dynamics.inverse_dynamics import InverseDynamicsResult, inverse_dynamics
 from multiarm_pin.exceptions import DynamicsError, InputError
-from multiarm_pin.sim.controllers.object_pd import ObjectPD
+from multiarm_pin.sim.controllers.object_pd import ObjectPD, ObjectPDPlan
 from multiarm_pin.sim.trajectories import PoseSample, minimum_jerk, pose_error
 from multiarm_pin.system import Evaluation, MultiArmSystem, SystemState
 
@@ -44,6 +53,9 @@ PRESSING_GAP = 1e-6
 stepper's ``SEPARATION_GAP``): a row that is off its plane has nothing to press on."""
 
 PHASE_KINDS = ("tilt", "move", "hold")
+
+PHASE_CODES = {"hold": layout.PHASE_HOLD, "tilt": layout.PHASE_TILT, "move": layout.PHASE_MOVE}
+"""The compiled kernel's code of each phase kind (``PH_KIND`` of the phase table)."""
 
 
 @dataclass(frozen=True)
@@ -191,7 +203,7 @@ class PhasedPD(ObjectPD):
                  kp=100.0, kd=20.0, margin: float = 1.0, null_kp: float = 25.0,
                  null_kd: float = 10.0, hold_kp: float = 100.0, hold_kd: float = 20.0):
         super().__init__(system, kp=kp, kd=kd, margin=margin, null_kp=null_kp,
-                         null_kd=null_kd, hold_kp=hold_kp, hold_kd=hold_kd, compiled=False)
+                         null_kd=null_kd, hold_kp=hold_kp, hold_kd=hold_kd)
         if not (np.isfinite(support_margin) and support_margin >= 0):
             raise InputError(f"phased_pd support_margin: expected a force >= 0 [N], got "
                              f"{support_margin!r}")
@@ -207,6 +219,8 @@ class PhasedPD(ObjectPD):
         self._grasp_points: np.ndarray | None = None
         self._offset_start = np.zeros((system.n_arms, 3))
         self.last_support_mu = np.zeros(system.supports.n_rows)
+        self._phase_arrays: tuple | None = None
+        self._phased_inputs: tuple | None = None  # (ObjectPD's inputs, kernel_inputs())
 
     # ------------------------------------------------------------------ reference
     def phase_index(self, t: float) -> int:
@@ -249,15 +263,19 @@ class PhasedPD(ObjectPD):
         x, R, tw, acc = self._phase_pose(p, pos, rot, s, ds, dds)
         return PoseSample(x, pin.Quaternion(R).coeffs().copy(), R, tw, acc)
 
-    def desired_acceleration(self, t: float, state: SystemState) -> np.ndarray:
-        """(6,) ``a_d = a_ref + K_d (v_ref - v_o) + K_p e`` on the phases' reference."""
-        o = state.obj
+    def _fix_starts(self, o) -> None:
+        """The phases' start poses from the object's pose ``o`` at the first call (once)."""
         if self._starts is None:
             self._starts = []
             pos, rot = np.array(o.position, dtype=float), np.array(o.rotation, dtype=float)
             for p in self.phases:
                 self._starts.append((pos, rot))
                 pos, rot = self._phase_pose(p, pos, rot, 1.0, 0.0, 0.0)[:2]
+
+    def desired_acceleration(self, t: float, state: SystemState) -> np.ndarray:
+        """(6,) ``a_d = a_ref + K_d (v_ref - v_o) + K_p e`` on the phases' reference."""
+        o = state.obj
+        self._fix_starts(o)
         ref = self.reference_pose(t)
         e = pose_error(ref.position, ref.rotation, o.position, o.rotation)
         return ref.acceleration + self.kd * (ref.twist - o.twist) + self.kp * e
@@ -291,9 +309,144 @@ class PhasedPD(ObjectPD):
             self._offset_start[i] = p_t - grasp.translation
         self._grasp_points = self.hold_points_in_object - self._offset_start[:, None, :]
 
+    def phase_arrays(self) -> tuple:
+        """The phases as the compiled kernel reads them (after the first call fixed the starts).
+
+        Returns:
+            ``(phases (P, PHASE_SIZE), press (P, K) bool, release (P, n) bool, named (P, n)
+            bool, offsets (P, n, 3) [m], margins (P, n, m) [N])``: the phase table
+            (:data:`~multiarm_pin._compiled.layout.PHASE_FIELDS`), the support rows each
+            phase keeps pressing, the arms it releases, the arms whose offsets it sets and
+            those offsets (object frame), and each arm row's least push in it (0 on its
+            ``loose`` rows); see :func:`~multiarm_pin._compiled.phased.phased_torques`.
+        """
+        if self._phase_arrays is not None:
+            return self._phase_arrays
+        s = self.system
+        P, K, n = len(self.phases), s.supports.n_rows, s.n_arms
+        table = np.zeros((P, layout.PHASE_SIZE))
+        press = np.zeros((P, K), dtype=bool)
+        release = np.zeros((P, n), dtype=bool)
+        named = np.zeros((P, n), dtype=bool)
+        offs = np.zeros((P, n, 3))
+        margins = np.zeros((P, *s.unilateral.shape))
+        for k, p in enumerate(self.phases):
+            row = table[k]
+            row[layout.PH_T], row[layout.PH_DURATION] = p.t, p.duration
+            row[layout.PH_KIND] = PHASE_CODES[p.kind]
+            row[layout.PH_PIVOT:layout.PH_PIVOT + 3] = p.pivot
+            row[layout.PH_AXIS:layout.PH_AXIS + 3] = p.axis
+            row[layout.PH_ANGLE] = p.angle
+            row[layout.PH_DISPLACEMENT:layout.PH_DISPLACEMENT + 3] = p.displacement
+            pos, rot = self._starts[k]
+            row[layout.PH_START_POSITION:layout.PH_START_POSITION + 3] = pos
+            row[layout.PH_START_ROTATION:layout.PH_START_ROTATION + 9] = np.ravel(rot)
+            row[layout.PH_SUPPORT_MARGIN] = self.support_margin
+            press[k, list(range(K)) if p.press is None else list(p.press)] = True
+            for name in p.release:
+                release[k, self.arm_names.index(name)] = True
+            for name, v in p.offsets.items():
+                i = self.arm_names.index(name)
+                named[k, i] = True
+                offs[k, i] = v
+            margins[k] = self.margin if p.margin is None else p.margin
+            for label in p.loose:
+                margins[k][self.rows_by_label[label]] = 0.0
+        arrays = tuple(np.ascontiguousarray(a) for a in
+                       (table, press, release, named, offs, margins))
+        for a in arrays:  # fixed once: read only (one kernel type for every caller)
+            a.setflags(write=False)
+        self._phase_arrays = arrays
+        return arrays
+
+    @property
+    def offset_start(self) -> np.ndarray:
+        """(n, 3) object-frame offsets [m] of the held points before the first phase.
+
+        Read only; nonzero for the arms that start apart.
+        """
+        view = self._offset_start.view()
+        view.setflags(write=False)
+        return view
+
+    def prepare(self, state: SystemState, evaluation: Evaluation) -> None:
+        """:meth:`ObjectPD.prepare`, and the phases' start poses from the object's pose."""
+        super().prepare(state, evaluation)
+        self._fix_starts(state.obj)
+
+    def kernel_inputs(self) -> tuple | None:
+        """:meth:`ObjectPD.kernel_inputs` with the held points' grasp places (offsets not added).
+
+        The compiled contact loop's inputs of this controller, with :meth:`phase_arrays` and
+        :attr:`offset_start`; None before :meth:`prepare`.
+        """
+        base = super().kernel_inputs()
+        if base is None or self._starts is None:
+            return None
+        kept = self._phased_inputs
+        if kept is None or kept[0] is not base:
+            kept = self._phased_inputs = (base, (*base[:4], self._grasp_points, *base[5:]))
+        return kept[1]
+
     def __call__(self, t, state, evaluation) -> np.ndarray:
-        """(nv,) torques [N m] (the reference path: no compiled kernel)."""
-        return self.reference(t, state, evaluation)
+        """(nv,) torques [N m]: the compiled kernel's on a compiled evaluation, else the reference.
+
+        Both give the same torques (to round-off); the reference decides whenever the kernel
+        reports a case it cannot (see the module).
+        """
+        out = self.compiled_torques(t, state, evaluation)
+        return self.reference(t, state, evaluation) if out is None else out
+
+    def compiled_torques(self, t: float, state: SystemState, evaluation: Evaluation
+                         ) -> np.ndarray | None:
+        """(nv,) torques [N m] by :func:`~multiarm_pin._compiled.phased.phased_torques`.
+
+        Sets :attr:`last` (an :class:`~multiarm_pin.sim.controllers.object_pd.ObjectPDPlan`
+        whose ``a_o`` is the planned object acceleration), :attr:`last_support_mu`,
+        :attr:`last_point_acceleration`, :attr:`margin_kept` and :attr:`holding` as
+        :meth:`reference` does (not :attr:`hold_points_in_object`: the kernel adds the
+        offsets itself).
+
+        Returns:
+            The torques, or None when the evaluation is not of the compiled path or the
+            kernel reported a case the reference must decide.
+        """
+        buffer = getattr(evaluation, "buffer", None) if self.compiled else None
+        if buffer is None:
+            return None
+        s = self.system
+        self.prepare(state, evaluation)
+        o = state.obj
+        self._fix_starts(o)
+        phases, press, release, named, offs, margins = self.phase_arrays()
+        path = s.compiled
+        active = getattr(evaluation, "active", None)
+        active = (np.ascontiguousarray(evaluation.blocks.constraint_mask) if active is None
+                  else np.ascontiguousarray(active, dtype=bool))
+        st = s.support_terms(state)
+        err = pin.difference(s.arm_set.model, state.q, self.q_ref)
+        z = s.pad(self.null_kp * err - self.null_kd * state.v)
+        kshape, mshape = self._shapes
+        tau, qdd = np.empty(kshape), np.empty(kshape)
+        mu = np.empty(mshape)
+        lam = np.empty(s.supports.n_rows)
+        a_pts = np.zeros(self.hold_points_in_tool.shape)
+        a_d, a_o = np.empty(6), np.empty(6)
+        obj = layout.object_state_vector(o.position, o.quaternion, o.twist)
+        status, kept = phased_torques(
+            float(t), buffer, path.dims, path.N, path.nv_arm, self._unilateral, active, obj,
+            np.ascontiguousarray(st.G_object, dtype=float), np.ascontiguousarray(st.kappa),
+            np.ascontiguousarray(st.phi), phases, press, release, named, offs, margins,
+            self.offset_start, self._pd_gains, z, self.hold_points_in_tool,
+            self._grasp_points, self._hold_n, self._gains, tau, mu, lam, qdd, a_pts, a_d, a_o)
+        if status != PD_OK:
+            return None
+        self.last_point_acceleration = a_pts
+        self.last = ObjectPDPlan(tau, mu, qdd, a_o)
+        self.last_support_mu = lam
+        self.margin_kept = bool(kept)
+        self.holding = False
+        return s.unpad(tau)
 
     def reference(self, t: float, state: SystemState, evaluation: Evaluation) -> np.ndarray:
         """(nv,) torques [N m] of the current phase (see the class)."""
@@ -360,4 +513,4 @@ class PhasedPD(ObjectPD):
         return s.unpad(last.tau)
 
 
-__all__ = ["PHASE_KINDS", "Phase", "PhasedPD", "parse_phases"]
+__all__ = ["PHASE_CODES", "PHASE_KINDS", "Phase", "PhasedPD", "parse_phases"]
