@@ -102,9 +102,13 @@ def test_second_sigint_while_writing_keeps_the_partial_trajectory(tmp_path):
     assert p.returncode == 0 and "HTTP 200" in p.stdout, p.stderr
 
 
-def test_a_second_run_into_the_same_folder_is_refused_naming_the_first(tmp_path):
+def test_a_second_run_into_the_same_folder_is_refused_naming_the_first(tmp_path, capsys):
     # the first run lasts minutes (60 s simulated), the refusals a few seconds: it is still
-    # running when they come, and is interrupted after them
+    # running when they come, and is interrupted after them. The refused runs go through
+    # main in-process (refused before any signal handler is installed): the first run's
+    # simulation then goes on for less time and its partial results are written sooner
+    from multiarm_pin.app.cli import main
+
     a = write(tmp_path / "a.yaml", one_arm_scenario("first", duration=60.0))
     b = write(tmp_path / "b.yaml", one_arm_scenario("second", mass=3.0))
     out = tmp_path / "out"
@@ -112,11 +116,11 @@ def test_a_second_run_into_the_same_folder_is_refused_naming_the_first(tmp_path)
     try:
         assert run.wait_for("elapsed"), "the first run ended before its first progress line"
         for other in (b, a):  # another scenario, or the same one: refused all the same
-            p = run_cli("run", other, "--out", out, "--no-html", "--quiet")
-            assert p.returncode == 2, p.stderr
-            assert "another run is writing into this folder" in p.stderr, p.stderr
-            assert f"pid {run.proc.pid}, scenario {a}" in p.stderr, p.stderr
-            assert "Traceback" not in p.stderr
+            code = main(["run", str(other), "--out", str(out), "--no-html", "--quiet"])
+            err = capsys.readouterr().err
+            assert code == 2, err
+            assert "another run is writing into this folder" in err, err
+            assert f"pid {run.proc.pid}, scenario {a}" in err, err
     finally:
         run.proc.send_signal(signal.SIGINT)
         code, _, stderr = run.finish()
@@ -125,7 +129,9 @@ def test_a_second_run_into_the_same_folder_is_refused_naming_the_first(tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.yaml", "b.yaml", "out"]  # no lock
 
 
-def test_out_on_a_mount_point_is_written_in_place(tmp_path):
+def test_out_on_a_mount_point_is_written_in_place(tmp_path, capsys):
+    from multiarm_pin.app.cli import main
+
     sc = write(tmp_path / "s.yaml", one_arm_scenario())
     other = write(tmp_path / "o.yaml", one_arm_scenario("other", mass=3.0))
     src, vol = tmp_path / "src", tmp_path / "vol"
@@ -143,8 +149,10 @@ def test_out_on_a_mount_point_is_written_in_place(tmp_path):
         assert _summary(vol)["requested"]["duration"] == 0.01
         assert not (vol / "replay.html").exists()  # replaced whole, file by file
         assert sorted(os.listdir(vol)) == sorted([MARKER, *_summary(vol)["files"].values()])
-        p = run_cli("run", other, "--out", vol, "--no-html", "--quiet")
-        assert p.returncode == 2 and "holds the results of another run" in p.stderr, p.stderr
+        # refused before simulating (and before any signal handler): through main in-process
+        code = main(["run", str(other), "--out", str(vol), "--no-html", "--quiet"])
+        err = capsys.readouterr().err
+        assert code == 2 and "holds the results of another run" in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["o.yaml", "s.yaml", "src", "vol"]
 
 
@@ -206,9 +214,15 @@ def _numbers(line: str) -> np.ndarray:
     return np.array(line[line.rindex("[") + 1:line.rindex("]")].split(), dtype=float)
 
 
-def test_info_of_a_scenario_file():
-    """Issue 25: `info` accepts a scenario: its arms, tool frames, joints, object, supports."""
+def test_info_of_a_scenario_file(capsys):
+    """Issue 25: `info` accepts a scenario: its arms, tool frames, joints, object, supports.
+
+    The scenario's report through the command; the default pair and the missing file through
+    ``main`` in-process (the command's entry point; numpy's print options, which ``info``
+    sets, put back after)."""
     from run_helpers import REPO
+
+    from multiarm_pin.app.cli import main
 
     p = run_cli("info", REPO / "scenarios" / "pick_from_table.yaml")
     assert p.returncode == 0, p.stderr
@@ -231,11 +245,12 @@ def test_info_of_a_scenario_file():
     h_o = next(ln for ln in lines if ln.startswith("  h_o"))
     np.testing.assert_allclose(_numbers(h_o), [0, 0, -m * 9.81, 0, 0, 0], atol=1e-4)
     # without an argument: today's two arms and a box
-    p = run_cli("info")
-    assert p.returncode == 0, p.stderr
-    assert "arm left (" in p.stdout and "object: box 0.8 x 0.4 x 0.3 m, 4 kg" in p.stdout
-    p = run_cli("info", REPO / "missing.yaml")
-    assert p.returncode == 2 and "missing.yaml: file not found" in p.stderr
+    with np.printoptions():
+        assert main(["info"]) == 0
+        assert main(["info", str(REPO / "missing.yaml")]) == 2
+    p = capsys.readouterr()
+    assert "arm left (" in p.out and "object: box 0.8 x 0.4 x 0.3 m, 4 kg" in p.out
+    assert "missing.yaml: file not found" in p.err and "Traceback" not in p.err
 
 
 def _imported_after(code: str) -> set[str]:

@@ -162,9 +162,12 @@ def _reordered(tmp_path, order, extra="", name="reordered"):
     return f
 
 
-def test_region_does_not_depend_on_the_order_of_the_file(tmp_path):
+def test_region_does_not_depend_on_the_order_of_the_file(tmp_path, capsys):
     """Issue 25: with the -x contact listed last, the report said "form closure: yes" and
-    "empty: no point of this face completes form closure"; another order gave a region."""
+    "empty: no point of this face completes form closure"; another order gave a region.
+
+    The first report through the command line as a user runs it (``multiarm-pin grasp``),
+    the others through the subcommand's own handler (the same ``grasp_cli.run``) in-process."""
     from run_helpers import run_cli
 
     order = [0, 1, 2, 4, 5, 6, 3]  # the -x contact last
@@ -178,17 +181,16 @@ def test_region_does_not_depend_on_the_order_of_the_file(tmp_path):
     for e in rep["regions"]:
         assert e["computed"] and not e["empty"] and e["contact_inside"] is True
         assert e["fixed_contacts"] == [i for i in range(1, 8) if i != e["contact"]]
-    ref = json.loads(run_cli("grasp", _reordered(tmp_path, range(7), name="file_order"), "--json",
-                             "--no-picture").stdout)
+    ref = _json(capsys, _reordered(tmp_path, range(7), name="file_order"), "--no-picture")
     areas = {order[e["contact"] - 1]: e["area"] for e in rep["regions"]}
     assert areas == pytest.approx({e["contact"] - 1: e["area"] for e in ref["regions"]},
                                   rel=1e-9)
-    text = run_cli("grasp", f, "--no-picture", "--seventh", "7")
-    assert text.returncode == 0, text.stderr
-    assert "contact 7 on face -x, fixed 1, 2, 3, 4, 5, 6: area" in text.stdout
-    assert "empty" not in text.stdout and "contact 7 inside it: yes" in text.stdout
-    bad = run_cli("grasp", f, "--no-picture", "--seventh", "8")
-    assert bad.returncode == 2 and "--seventh 8: expected a contact number in 1..7" in bad.stderr
+    assert run(_args(f, "--no-picture", "--seventh", "7")) == 0
+    text = capsys.readouterr().out
+    assert "contact 7 on face -x, fixed 1, 2, 3, 4, 5, 6: area" in text
+    assert "empty" not in text and "contact 7 inside it: yes" in text
+    assert run(_args(f, "--no-picture", "--seventh", "8")) == 2
+    assert "--seventh 8: expected a contact number in 1..7" in capsys.readouterr().err
 
 
 def test_seventh_contact_key(tmp_path, capsys):
@@ -205,8 +207,11 @@ def test_seventh_contact_key(tmp_path, capsys):
 SCENARIOS = ROOT / "scenarios"
 
 
-def test_grasp_of_a_scenario_with_supports_through_the_cli():
-    """Issue 25: `grasp` refused a scenario with supports that `sweep` in grasp mode read."""
+def test_grasp_of_a_scenario_with_supports_through_the_cli(capsys):
+    """Issue 25: `grasp` refused a scenario with supports that `sweep` in grasp mode read.
+
+    The JSON report through the command line, the text report through the subcommand's
+    handler (``grasp_cli.run``) in-process."""
     import yaml
     from run_helpers import run_cli
 
@@ -226,10 +231,10 @@ def test_grasp_of_a_scenario_with_supports_through_the_cli():
     grasp, L = grasp_of(yaml.safe_load(f.read_text()), str(f))
     m = grasp_metrics(grasp, L)
     assert rep["margin"] == pytest.approx(m["margin"], abs=1e-12)
-    text = run_cli("grasp", f, "--no-picture", "--seventh", "4")
-    assert text.returncode == 0, text.stderr
-    assert text.stdout.startswith("scenario file: ") and "4 four_finger:fingertip_4" in text.stdout
-    assert "contact 4 on face +z, fixed 1, 2, 3, 5, 6, 7: area" in text.stdout
+    assert run(_args(f, "--no-picture", "--seventh", "4")) == 0
+    text = capsys.readouterr().out
+    assert text.startswith("scenario file: ") and "4 four_finger:fingertip_4" in text
+    assert "contact 4 on face +z, fixed 1, 2, 3, 5, 6, 7: area" in text
 
 
 @pytest.mark.parametrize("name, needle", [

@@ -15,14 +15,21 @@ from tests.study.helpers import REPO, rows_by_case, tiny_grasp_study, tiny_simul
 pytestmark = pytest.mark.timeout(900)
 
 
-def test_unreachable_scheduler_is_a_clear_error_and_writes_nothing(tmp_path, capsys):
+def test_unreachable_scheduler_is_a_clear_error_and_writes_nothing(tmp_path, capsys,
+                                                                  monkeypatch):
+    import multiarm_pin.study.execution as execution
+
+    # Dask retries a refused connection until the timeout: 1 s instead of the default 10 s
+    # (the same connect, with its own timeout parameter)
+    real_connect = execution.connect
+    monkeypatch.setattr(execution, "connect", lambda s: real_connect(s, timeout=1.0))
     study = tiny_grasp_study(tmp_path)
     out = tmp_path / "out"
     # port 9 (discard) on the loopback: nothing listens there
     code = main(["sweep", str(study), "--out", str(out), "--scheduler", "tcp://127.0.0.1:9"])
     err = capsys.readouterr().err
     assert code == 2
-    assert "cannot reach the Dask scheduler at 'tcp://127.0.0.1:9'" in err, err
+    assert "cannot reach the Dask scheduler at 'tcp://127.0.0.1:9' within 1 s" in err, err
     assert "Traceback" not in err
     assert not out.exists()
 
