@@ -128,7 +128,7 @@ def test_the_arms_a_polishing_round_moves_are_those_that_set_the_scores(searched
 
 
 def test_same_seed_same_designs_on_one_and_two_workers():
-    spec = small(load_design(TWO_UR5_SPEC), candidates=16, refine=1)
+    spec = small(load_design(TWO_UR5_SPEC), candidates=8, refine=1, polish=1)
     one = run_design(spec, workers=1)
     two = run_design(spec, workers=2)
     assert [d.index for d in one.designs] == [d.index for d in two.designs]
@@ -183,6 +183,15 @@ def test_the_branch_round_tries_every_other_branch_of_each_arm(searched):
             own = branch_of(problem, arm, a.base, g, parent.q0[arm])
             tried = sorted(x[5] for x in recipes if x[1].index == parent.index and x[4] == arm)
             assert tried == [b for b in range(BRANCHES) if b != own]
+    # a limit keeps whole parents, in order, the first one always
+    def keys(rs):
+        return [(r[1].index, *r[3:]) for r in rs]
+
+    first = [r for r in recipes if r[1].index == recipes[0][1].index]
+    assert len(parents) > 1 and len(first) == 14
+    assert keys(_branch_round(problem, evals, 10_000, len(first) + 13)) == keys(first)
+    assert keys(_branch_round(problem, evals, 10_000, 0)) == keys(first)
+
     def indices(es):
         return [e.index for e in es]
 
