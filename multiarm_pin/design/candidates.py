@@ -572,6 +572,29 @@ def turn(problem, parent: Candidate, q0s: list[np.ndarray], index: int, arm: int
     return Candidate(index, tuple(arms), parent.index)
 
 
+def slide(problem, parent: Candidate, q0s: list[np.ndarray], index: int, arm: int,
+          step: float) -> Candidate:
+    """The same design with arm ``arm``'s weld point moved on its face.
+
+    By a step drawn uniformly in the face's plane within ``step`` m in each of its two axes,
+    kept inside the face by the margin (:func:`project_to_face`); every arm seeded with its
+    configuration found for the parent. Where an arm holds the object sets the levers of
+    the object's weight about its joints. A fingertip arm (a rigid grip) is unchanged.
+    """
+    rng = candidate_rng(problem.spec.search.seed, index)
+    d = rng.uniform(-step, step, 2)
+    margin = problem.spec.search.face_margin
+    arms = []
+    for i, a in enumerate(parent.arms):
+        points = a.points
+        if i == arm and problem.spec.arms[i].gripper == "weld":
+            _, F = problem.poly.face_frame(a.faces[0])
+            points = project_to_face(problem.poly, a.faces[0], a.points[0] + F[:, :2] @ d,
+                                     margin)[None]
+        arms.append(replace(a, points=points, q_seed=np.asarray(q0s[i], float).copy()))
+    return Candidate(index, tuple(arms), parent.index)
+
+
 def arm_pool(problem, evaluations) -> dict:
     """Per kind of arm, the arm choices of evaluated candidates whose start pose was found.
 
@@ -626,5 +649,5 @@ def recombine(problem, pool: dict, index: int) -> Candidate | None:
 __all__ = ["BRANCHES", "ArmChoice", "Candidate", "approach", "arm_pool", "branch_of",
            "candidate_rng", "face_edge_margin", "fingertip_faces", "n_branches", "perturb",
            "point_allowed", "project_to_face", "random_seed_configuration", "recombine", "reseed",
-           "sample_base", "sample_candidate", "sample_face_point",
+           "sample_base", "sample_candidate", "sample_face_point", "slide",
            "supported_rectangles", "turn", "weld_faces"]

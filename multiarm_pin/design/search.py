@@ -46,6 +46,7 @@ from multiarm_pin.design.candidates import (
     recombine,
     reseed,
     sample_candidate,
+    slide,
     turn,
 )
 from multiarm_pin.design.evaluation import CONDITIONS, DesignProblem, Evaluation, evaluate
@@ -70,7 +71,10 @@ APPROACH_STEP = 0.05
 TURN_STEP = 0.5
 """Largest turn [rad] of a polishing round's weld about its face normal."""
 
-MOVES = 7
+SLIDE_STEP = 0.03
+"""Largest step [m] along each axis of its face of a polishing round's weld point."""
+
+MOVES = 8
 """Recipes per parent of a polishing round (:func:`_polish`)."""
 
 PARENT_DISTANCE = 0.15
@@ -145,7 +149,8 @@ def make_and_evaluate(problem: DesignProblem, recipe: tuple) -> Evaluation:
     parent, q0s, index, scale)`` (:func:`~.candidates.perturb`), ``("reseed", parent, q0s,
     index, arm[, branch])`` (:func:`~.candidates.reseed`), ``("approach", parent, q0s, index, arm,
     step)`` (:func:`~.candidates.approach`), ``("turn", parent, q0s, index, arm, step)``
-    (:func:`~.candidates.turn`), ``("ready", candidate)``.
+    (:func:`~.candidates.turn`), ``("slide", parent, q0s, index, arm, step)``
+    (:func:`~.candidates.slide`), ``("ready", candidate)``.
     Making the candidate in the task spreads the fingertip grips' fits over the workers too.
     """
     kind = recipe[0]
@@ -159,6 +164,8 @@ def make_and_evaluate(problem: DesignProblem, recipe: tuple) -> Evaluation:
         cand = approach(problem, *recipe[1:])
     elif kind == "turn":
         cand = turn(problem, *recipe[1:])
+    elif kind == "slide":
+        cand = slide(problem, *recipe[1:])
     else:
         cand = recipe[1]
     return evaluate(problem, cand)
@@ -325,8 +332,10 @@ def _polish(ranked: list, n: int, first: int, scale: float) -> list:
     in another recipe, away from its grasp together (along the trade-off of torque and
     manipulability), the worst-torque arm's weld turned about its face normal
     (:func:`~.candidates.turn`, up to :data:`TURN_STEP`: the torques change, the
-    manipulability not; a small step of its bases and grasps for a fingertip arm), and a
-    small step of its bases and grasps (:func:`~.candidates.perturb` at ``scale``). A
+    manipulability not), its weld point moved on its face (:func:`~.candidates.slide`, up
+    to :data:`SLIDE_STEP`; for a fingertip arm, these two are small steps of its bases and
+    grasps), and a small step of its bases and grasps (:func:`~.candidates.perturb` at
+    ``scale``). A
     neighbour better on one score and no worse on the others displaces its parent from the
     front, so that the front moves outward where the random rounds left it; candidates
     indexed from ``first``.
@@ -357,6 +366,8 @@ def _polish(ranked: list, n: int, first: int, scale: float) -> list:
                         APPROACH_STEP if move == 3 else -APPROACH_STEP))
         elif move == 5 and len(p.candidate.arms[a].points) == 1:  # a weld
             out.append(("turn", p.candidate, p.q0, first + j, a, TURN_STEP))
+        elif move == 6 and len(p.candidate.arms[a].points) == 1:
+            out.append(("slide", p.candidate, p.q0, first + j, a, SLIDE_STEP))
         else:
             out.append(("perturb", p.candidate, p.q0, first + j, scale))
     return out

@@ -19,6 +19,7 @@ from multiarm_pin.design.candidates import (
     reseed,
     sample_candidate,
     sample_face_point,
+    slide,
     turn,
     weld_faces,
 )
@@ -130,13 +131,15 @@ def test_polishing_moves_change_one_arm_only():
     assert moved > 0
 
 
-def test_moving_every_base_and_turning_a_weld():
+def test_moving_every_base_turning_and_sliding_a_weld():
     """``approach`` with no arm moves every base along its own horizontal line to its grasp by
     the same distance; ``turn`` turns one weld's tool about its face normal (the same point,
-    the tool's z axis kept) by at most the step, and changes nothing else."""
+    the tool's z axis kept) by at most the step, ``slide`` moves one weld's point on its face
+    (inside it by the margin); each changes nothing else."""
     import pinocchio as pin
 
     problem = DesignProblem(load_design(TWO_UR5_SPEC))
+    spec_margin = problem.spec.search.face_margin
     oMo = problem.object_placement
     together = 0
     for i in range(6):
@@ -168,6 +171,17 @@ def test_moving_every_base_and_turning_a_weld():
                 np.testing.assert_allclose(R[:, 2], [0.0, 0.0, 1.0], atol=1e-12)
                 angle = float(np.linalg.norm(pin.log3(R)))
                 assert (0.0 < angle <= 0.5 + 1e-12) if k == arm else angle < 1e-12
+            sl = slide(problem, c, q0s, 600 + i, arm, 0.03)
+            for k, (x, y) in enumerate(zip(c.arms, sl.arms, strict=True)):
+                np.testing.assert_array_equal(y.base, x.base)
+                np.testing.assert_array_equal(y.q_seed, q0s[k])
+                assert y.roll == x.roll and y.faces == x.faces
+                d = y.points[0] - x.points[0]
+                n = problem.poly.normals[x.faces[0]]
+                assert abs(d @ n) < 1e-12  # on the face's plane
+                assert face_edge_margin(problem.poly, y.faces[0], y.points[0]) >= \
+                    spec_margin - 1e-12
+                assert np.any(d != 0.0) == (k == arm)
     assert together > 0
 
 
