@@ -333,9 +333,9 @@ def _polish(ranked: list, n: int, first: int, scale: float) -> list:
     manipulability), the worst-torque arm's weld turned about its face normal
     (:func:`~.candidates.turn`, up to :data:`TURN_STEP`: the torques change, the
     manipulability not), its weld point moved on its face (:func:`~.candidates.slide`, up
-    to :data:`SLIDE_STEP`; for a fingertip arm, these two are small steps of its bases and
-    grasps), and a small step of its bases and grasps (:func:`~.candidates.perturb` at
-    ``scale``). A
+    to :data:`SLIDE_STEP`; a rigid fingertip grip has neither: another re-seed and another
+    step toward its grasp instead), and a small step of its bases and grasps
+    (:func:`~.candidates.perturb` at ``scale``). A
     neighbour better on one score and no worse on the others displaces its parent from the
     front, so that the front moves outward where the random rounds left it; candidates
     indexed from ``first``.
@@ -364,9 +364,12 @@ def _polish(ranked: list, n: int, first: int, scale: float) -> list:
         elif move in (3, 4):
             out.append(("approach", p.candidate, p.q0, first + j, None,
                         APPROACH_STEP if move == 3 else -APPROACH_STEP))
-        elif move == 5 and len(p.candidate.arms[a].points) == 1:  # a weld
+        elif move in (5, 6) and len(p.candidate.arms[a].points) > 1:  # a rigid grip
+            out.append(("reseed", p.candidate, p.q0, first + j, a) if move == 5 else
+                       ("approach", p.candidate, p.q0, first + j, a, APPROACH_STEP))
+        elif move == 5:
             out.append(("turn", p.candidate, p.q0, first + j, a, TURN_STEP))
-        elif move == 6 and len(p.candidate.arms[a].points) == 1:
+        elif move == 6:
             out.append(("slide", p.candidate, p.q0, first + j, a, SLIDE_STEP))
         else:
             out.append(("perturb", p.candidate, p.q0, first + j, scale))
