@@ -519,32 +519,79 @@ def reseed(problem, parent: Candidate, q0s: list[np.ndarray], index: int,
     return Candidate(index, tuple(arms), parent.index)
 
 
-def approach(problem, parent: Candidate, q0s: list[np.ndarray], index: int, arm: int,
+def approach(problem, parent: Candidate, q0s: list[np.ndarray], index: int, arm: int | None,
              step: float) -> Candidate:
-    """The same design with arm ``arm``'s base moved horizontally toward its grasp.
+    """The same design with arm ``arm``'s base (None: every arm's) moved toward its grasp.
 
-    By a uniform ``[0, step]`` m (away from it for a negative ``step``; unmoved where that
-    leaves the region or comes within :data:`MIN_BASE_DISTANCE` of the object's footprint);
-    every arm seeded with its configuration found for the parent. The object's weight and
-    the arm's own act on its shoulder over the horizontal distance to the grasp: a nearer
-    base lowers the static torques, until the links meet the object; the distance also sets
-    how far the arm is stretched (its manipulability).
+    Horizontally, by a uniform ``[0, step]`` m (away from it for a negative ``step``; one
+    draw for every moved arm; an arm stays where the move leaves the region or comes within
+    :data:`MIN_BASE_DISTANCE` of the object's footprint); every arm seeded with its
+    configuration found for the parent. The object's weight and the arm's own act on its
+    shoulder over the horizontal distance to the grasp: a nearer base lowers the static
+    torques, until the links meet the object; the distance also sets how far the arm is
+    stretched (its manipulability). Moving every arm at once follows the trade-off between
+    the two, which moving one arm (then another one sets the worst score) cannot.
     """
     rng = candidate_rng(problem.spec.search.seed, index)
     b = problem.spec.bases
+    frac = rng.uniform(0.0, 1.0)
     arms = []
     for i, a in enumerate(parent.arms):
         base = a.base.copy()
-        if i == arm and b.fixed is None:
+        if (arm is None or i == arm) and b.fixed is None:
             d = problem.object_placement.act(a.points.mean(axis=0))[:2] - base[:2]
             n = float(np.linalg.norm(d))
             if n > 1e-9:
                 moved = base.copy()
-                moved[:2] += step * rng.uniform(0.0, 1.0) * d / n
+                moved[:2] += step * frac * d / n
                 inside = np.all(moved[:3] >= b.lower) and np.all(moved[:3] <= b.upper)
                 if inside and problem.footprint_distance(moved[:3]) >= MIN_BASE_DISTANCE:
                     base = moved
         arms.append(replace(a, base=base, q_seed=np.asarray(q0s[i], float).copy()))
+    return Candidate(index, tuple(arms), parent.index)
+
+
+def turn(problem, parent: Candidate, q0s: list[np.ndarray], index: int, arm: int,
+         step: float) -> Candidate:
+    """The same design with arm ``arm``'s weld turned about its face normal (its roll).
+
+    By a uniform ``[-step, step]`` rad; every arm seeded with its configuration found for the
+    parent (inverse kinematics turns arm ``arm``'s wrist after the tool). Bases, points and
+    the postures up to the wrist stay, and so the manipulability; the static torques the
+    force distribution asks of the arms can change. A fingertip arm (no roll) is unchanged.
+    """
+    rng = candidate_rng(problem.spec.search.seed, index)
+    d = float(rng.uniform(-step, step))
+    arms = []
+    for i, a in enumerate(parent.arms):
+        q = np.asarray(q0s[i], float).copy()
+        roll = a.roll
+        if i == arm and problem.spec.arms[i].gripper == "weld":
+            roll = float(np.angle(np.exp(1j * (a.roll + d))))
+        arms.append(replace(a, roll=roll, q_seed=q))
+    return Candidate(index, tuple(arms), parent.index)
+
+
+def slide(problem, parent: Candidate, q0s: list[np.ndarray], index: int, arm: int,
+          step: float) -> Candidate:
+    """The same design with arm ``arm``'s weld point moved on its face.
+
+    By a step drawn uniformly in the face's plane within ``step`` m in each of its two axes,
+    kept inside the face by the margin (:func:`project_to_face`); every arm seeded with its
+    configuration found for the parent. Where an arm holds the object sets the levers of
+    the object's weight about its joints. A fingertip arm (a rigid grip) is unchanged.
+    """
+    rng = candidate_rng(problem.spec.search.seed, index)
+    d = rng.uniform(-step, step, 2)
+    margin = problem.spec.search.face_margin
+    arms = []
+    for i, a in enumerate(parent.arms):
+        points = a.points
+        if i == arm and problem.spec.arms[i].gripper == "weld":
+            _, F = problem.poly.face_frame(a.faces[0])
+            points = project_to_face(problem.poly, a.faces[0], a.points[0] + F[:, :2] @ d,
+                                     margin)[None]
+        arms.append(replace(a, points=points, q_seed=np.asarray(q0s[i], float).copy()))
     return Candidate(index, tuple(arms), parent.index)
 
 
@@ -602,5 +649,5 @@ def recombine(problem, pool: dict, index: int) -> Candidate | None:
 __all__ = ["BRANCHES", "ArmChoice", "Candidate", "approach", "arm_pool", "branch_of",
            "candidate_rng", "face_edge_margin", "fingertip_faces", "n_branches", "perturb",
            "point_allowed", "project_to_face", "random_seed_configuration", "recombine", "reseed",
-           "sample_base", "sample_candidate", "sample_face_point",
-           "supported_rectangles", "weld_faces"]
+           "sample_base", "sample_candidate", "sample_face_point", "slide",
+           "supported_rectangles", "turn", "weld_faces"]

@@ -97,10 +97,32 @@ def pareto_front(score_list: list[dict]) -> list[int]:
             if not any(dominates(b, a) for j, b in enumerate(score_list) if j != i)]
 
 
+def crowding_distance(score_list: list[dict]) -> list[float]:
+    """Per design, the crowding distance of NSGA-II in the scores' space (larger: lonelier).
+
+    For each score that varies over the list: the designs sorted by it (ties by position),
+    the two ends get infinity, every other design the difference of its two neighbours'
+    values over the score's range; a design's distance is the sum over the scores.
+    """
+    out = [0.0] * len(score_list)
+    for name in SCORES:
+        vals = [s.get(name) for s in score_list]
+        if any(v is None for v in vals) or len(vals) < 2:
+            continue
+        order = sorted(range(len(vals)), key=lambda i: (vals[i], i))
+        span = vals[order[-1]] - vals[order[0]]
+        if span <= 0.0:
+            continue
+        out[order[0]] = out[order[-1]] = np.inf
+        for a, i, b in zip(order[:-2], order[1:-1], order[2:], strict=True):
+            out[i] += (vals[b] - vals[a]) / span
+    return out
+
+
 def rank_key(objective_value: float, index: int) -> tuple[float, int]:
     """The total order of designs: objective descending, then candidate index."""
     return (-round(float(objective_value), 12), int(index))
 
 
-__all__ = ["SCORES", "Score", "at_least_as_good", "dominates", "objective", "pareto_front",
-           "rank_key"]
+__all__ = ["SCORES", "Score", "at_least_as_good", "crowding_distance", "dominates", "objective",
+           "pareto_front", "rank_key"]

@@ -9,9 +9,11 @@ furthest: the latest condition, the best value there); the other half recombinat
 (:func:`~.candidates.recombine`) of arms that reached their grasps in any candidate so far
 (with one arm, fresh random candidates). Then a branch round tries every other IK branch
 of each arm of the best designs (:func:`_branch_round`: not only the branches their random
-seeds fell into). After them, :data:`POLISH_ROUNDS` rounds of a
-quarter as many candidates refine the Pareto front (:func:`_polish`: other IK branches of
-the arm with the worst torque, bases toward or away from their grasps, small steps). A
+seeds fell into; at most ``search.candidates`` candidates, whole designs). After them,
+``search.polish`` rounds of a quarter as many candidates refine the Pareto front
+(:func:`_polish`: its best designs by the objective and those beside its widest gaps; other
+IK branches of the arm with the worst torque, bases toward or away from their grasps, one
+or all together, welds turned about their faces, small steps). A
 design found twice is ranked once (:func:`_distinct`). Candidates are evaluated
 (:func:`~.evaluation.evaluate`) in parallel on Dask (a ``LocalCluster`` of ``workers``
 processes or the scheduler at ``scheduler``, as ``multiarm-pin sweep``), or in this process
@@ -44,22 +46,36 @@ from multiarm_pin.design.candidates import (
     recombine,
     reseed,
     sample_candidate,
+    slide,
+    turn,
 )
 from multiarm_pin.design.evaluation import CONDITIONS, DesignProblem, Evaluation, evaluate
-from multiarm_pin.design.scoring import SCORES, objective, pareto_front, rank_key
+from multiarm_pin.design.scoring import (
+    SCORES,
+    crowding_distance,
+    objective,
+    pareto_front,
+    rank_key,
+)
 from multiarm_pin.exceptions import DesignImpossibleError
 
 PARENTS = 4
 """Candidates refined in each refinement round."""
 
-POLISH_ROUNDS = 6
-"""Rounds of local refinement of the Pareto front after the refinement rounds, each of a
-quarter of ``search.candidates`` candidates (at least :data:`POLISH_MIN`)."""
-
 POLISH_MIN = 8
+"""Fewest candidates of a polishing round (each of a quarter of ``search.candidates``)."""
 
 APPROACH_STEP = 0.05
 """Largest horizontal step [m] of a polishing round's base toward its grasp."""
+
+TURN_STEP = 0.5
+"""Largest turn [rad] of a polishing round's weld about its face normal."""
+
+SLIDE_STEP = 0.03
+"""Largest step [m] along each axis of its face of a polishing round's weld point."""
+
+MOVES = 8
+"""Recipes per parent of a polishing round (:func:`_polish`)."""
 
 PARENT_DISTANCE = 0.15
 """The parents of a round differ pairwise by this much [m] in some arm's base position."""
@@ -132,7 +148,9 @@ def make_and_evaluate(problem: DesignProblem, recipe: tuple) -> Evaluation:
     Recipes: ``("sample", index)`` (:func:`~.candidates.sample_candidate`), ``("perturb",
     parent, q0s, index, scale)`` (:func:`~.candidates.perturb`), ``("reseed", parent, q0s,
     index, arm[, branch])`` (:func:`~.candidates.reseed`), ``("approach", parent, q0s, index, arm,
-    step)`` (:func:`~.candidates.approach`), ``("ready", candidate)``.
+    step)`` (:func:`~.candidates.approach`), ``("turn", parent, q0s, index, arm, step)``
+    (:func:`~.candidates.turn`), ``("slide", parent, q0s, index, arm, step)``
+    (:func:`~.candidates.slide`), ``("ready", candidate)``.
     Making the candidate in the task spreads the fingertip grips' fits over the workers too.
     """
     kind = recipe[0]
@@ -144,6 +162,10 @@ def make_and_evaluate(problem: DesignProblem, recipe: tuple) -> Evaluation:
         cand = reseed(problem, *recipe[1:])
     elif kind == "approach":
         cand = approach(problem, *recipe[1:])
+    elif kind == "turn":
+        cand = turn(problem, *recipe[1:])
+    elif kind == "slide":
+        cand = slide(problem, *recipe[1:])
     else:
         cand = recipe[1]
     return evaluate(problem, cand)
@@ -248,10 +270,10 @@ def run_design(spec, workers: int = 1, scheduler: str | None = None, client=None
             nxt += per_round
             new = runner.map(problem, cands)
             evals += new
-        cands = _branch_round(problem, sorted(evals, key=key), nxt)
+        cands = _branch_round(problem, sorted(evals, key=key), nxt, s.candidates)
         nxt += len(cands)
         evals += runner.map(problem, cands)
-        for r in range(1, POLISH_ROUNDS + 1):
+        for r in range(1, s.polish + 1):
             if progress is not None:
                 progress(_round_line(s.refine + r - 1, evals))
             cands = _polish(sorted(evals, key=key), max(s.candidates // 4, POLISH_MIN), nxt,
@@ -261,7 +283,7 @@ def run_design(spec, workers: int = 1, scheduler: str | None = None, client=None
     finally:
         runner.close()
     if progress is not None:
-        progress(_round_line(s.refine + POLISH_ROUNDS, evals))
+        progress(_round_line(s.refine + s.polish, evals))
     ok = _distinct(sorted((e for e in evals if e.ok), key=key))
     failures = {c: sum(1 for e in evals if e.condition == c) for c in CONDITIONS}
     if not ok:
@@ -299,13 +321,21 @@ def _parents(ranked: list) -> list:
 def _polish(ranked: list, n: int, first: int, scale: float) -> list:
     """A polishing round's ``n`` recipes: neighbours of designs of the Pareto front.
 
-    Up to ``n // 4`` designs of the front (half of them its best by the objective, the other
-    half evenly along the rest of its ranking) each get, in turn, a re-seed of the arm with
-    the worst torque ratio (another IK branch of the same bases and grasps:
+    Up to ``n // MOVES`` designs of the front: a third of them its best by the objective,
+    the others those of the largest crowding distance (:func:`~.scoring.crowding_distance`:
+    the ends of the front and the designs beside its widest gaps, where the objective's
+    ranking sends no parent). Each gets, in turn (:data:`MOVES` recipes), a re-seed of the
+    arm with the worst torque ratio (another IK branch of the same bases and grasps:
     :func:`~.candidates.reseed`), that arm's base moved toward its grasp
     (:func:`~.candidates.approach`, up to :data:`APPROACH_STEP`), the base of the arm with
-    the smallest manipulability moved toward or (every other parent) away from its grasp,
-    and a small step of its bases and grasps (:func:`~.candidates.perturb` at ``scale``). A
+    the smallest manipulability moved away from its grasp, every base moved toward and,
+    in another recipe, away from its grasp together (along the trade-off of torque and
+    manipulability), the worst-torque arm's weld turned about its face normal
+    (:func:`~.candidates.turn`, up to :data:`TURN_STEP`: the torques change, the
+    manipulability not), its weld point moved on its face (:func:`~.candidates.slide`, up
+    to :data:`SLIDE_STEP`; a rigid fingertip grip has neither: another re-seed and another
+    step toward its grasp instead), and a small step of its bases and grasps
+    (:func:`~.candidates.perturb` at ``scale``). A
     neighbour better on one score and no worse on the others displaces its parent from the
     front, so that the front moves outward where the random rounds left it; candidates
     indexed from ``first``.
@@ -314,28 +344,39 @@ def _polish(ranked: list, n: int, first: int, scale: float) -> list:
     if not ok:
         return []
     front = [ok[i] for i in pareto_front([_all_scores(e) for e in ok])]
-    m = max(min(len(front), n // 4), 1)
-    top = (m + 1) // 2
-    rest = front[top:]
-    spread = np.unique(np.round(np.linspace(0, len(rest) - 1, m - top))) if rest else []
-    parents = front[:top] + [rest[int(i)] for i in spread]
+    m = max(min(len(front), n // MOVES), 1)
+    top = (m + 2) // 3
+    crowd = crowding_distance([_all_scores(e) for e in front])
+    spread = sorted(range(top, len(front)), key=lambda i: (-crowd[i], i))[:m - top]
+    parents = front[:top] + [front[i] for i in sorted(spread)]
     out = []
     for j in range(n):
-        p = parents[(j // 4) % len(parents)]
-        if j % 4 == 0:
-            out.append(("reseed", p.candidate, p.q0, first + j, p.torque_arm))
-        elif j % 4 == 1:
-            out.append(("approach", p.candidate, p.q0, first + j, p.torque_arm, APPROACH_STEP))
-        elif j % 4 == 2:
-            sign = 1.0 if (j // 4) % 2 == 0 else -1.0
+        k, move = divmod(j, MOVES)
+        p = parents[k % len(parents)]
+        a = p.torque_arm
+        if move == 0:
+            out.append(("reseed", p.candidate, p.q0, first + j, a))
+        elif move == 1:
+            out.append(("approach", p.candidate, p.q0, first + j, a, APPROACH_STEP))
+        elif move == 2:
             out.append(("approach", p.candidate, p.q0, first + j, p.manipulability_arm,
-                        sign * APPROACH_STEP))
+                        -APPROACH_STEP))
+        elif move in (3, 4):
+            out.append(("approach", p.candidate, p.q0, first + j, None,
+                        APPROACH_STEP if move == 3 else -APPROACH_STEP))
+        elif move in (5, 6) and len(p.candidate.arms[a].points) > 1:  # a rigid grip
+            out.append(("reseed", p.candidate, p.q0, first + j, a) if move == 5 else
+                       ("approach", p.candidate, p.q0, first + j, a, APPROACH_STEP))
+        elif move == 5:
+            out.append(("turn", p.candidate, p.q0, first + j, a, TURN_STEP))
+        elif move == 6:
+            out.append(("slide", p.candidate, p.q0, first + j, a, SLIDE_STEP))
         else:
             out.append(("perturb", p.candidate, p.q0, first + j, scale))
     return out
 
 
-def _branch_round(problem, ranked: list, first: int) -> list:
+def _branch_round(problem, ranked: list, first: int, limit: int | None = None) -> list:
     """Every other IK branch of every arm of the best designs: the branch round's recipes.
 
     For each parent (:func:`_parents`: the :data:`PARENTS` best designs whose bases differ
@@ -345,19 +386,25 @@ def _branch_round(problem, ranked: list, first: int) -> list:
     configuration is on (:func:`~.candidates.branch_of`): the design with that arm seeded on
     that branch (:func:`~.candidates.reseed`; the other arms keep their configurations).
     Seeds that converge to a configuration already found give the same design, which the
-    ranking keeps once (:func:`_distinct`). Candidates indexed from ``first``.
+    ranking keeps once (:func:`_distinct`). Candidates indexed from ``first``. With ``limit``
+    (the search passes ``search.candidates``), the parents after the first whose recipes
+    would bring the round beyond ``limit`` are left out (each parent's branches whole).
     """
     ok = [e for e in ranked if e.ok]
     out = []
     for p in (_parents(ranked) if ok else _diverse([e for e in ranked if e.q0 is not None],
                                                    PARENTS)):
+        mine = []
         for i, a in enumerate(p.candidate.arms):
             if n_branches(problem, i) == 1:
                 continue
             target = problem.object_placement.act(a.points.mean(axis=0))
             own = branch_of(problem, i, a.base, target, p.q0[i])
-            out += [("reseed", p.candidate, p.q0, first + len(out) + k, i, b)
-                    for k, b in enumerate(b for b in range(BRANCHES) if b != own)]
+            mine += [(i, b) for b in range(BRANCHES) if b != own]
+        if out and limit is not None and len(out) + len(mine) > limit:
+            break
+        out += [("reseed", p.candidate, p.q0, first + len(out) + k, i, b)
+                for k, (i, b) in enumerate(mine)]
     return out
 
 

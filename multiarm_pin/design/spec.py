@@ -18,7 +18,7 @@ A design spec is a YAML file (format in the README's "Designing a system")::
       region: {x: [-0.2, 1.2], y: [-0.9, 0.9], z: 0.0}
       yaw: free                              # or a number [rad], or [lo, hi]
       # or fixed: [{position: [..], rpy: [..]}, ...] (one per arm)
-    search: {candidates: 96, refine: 2, seed: 0, clearance: 0.01, face_margin: 0.03}
+    search: {candidates: 96, refine: 2, polish: 6, seed: 0, clearance: 0.01, face_margin: 0.03}
     weights: {torque_ratio: 1.0, clearance: 1.0, manipulability: 1.0}   # see scoring.SCORES
     top: 3
     controller: {kp: 100.0, kd: 20.0, margin: 5.0}   # object_pd gains of the output scenarios
@@ -44,7 +44,8 @@ from multiarm_pin.yaml_reader import Reader, describe, load_yaml_file
 _TOP_KEYS = ("name", "description", "gravity", "object", "supports", "task", "arms", "bases",
              "search", "weights", "top", "controller", "simulation", "ground")
 _ARM_KEYS = ("robot", "urdf", "tool_frame", "count", "gripper", "name")
-_SEARCH_KEYS = ("candidates", "refine", "seed", "clearance", "face_margin", "path_samples")
+_SEARCH_KEYS = ("candidates", "refine", "polish", "seed", "clearance", "face_margin",
+                "path_samples")
 
 
 @dataclass(frozen=True)
@@ -122,6 +123,7 @@ class SearchSettings:
     Attributes:
         candidates: random candidates of the first round.
         refine: rounds of local refinement around the best candidates.
+        polish: rounds of refinement of the Pareto front after them (:func:`~.search._polish`).
         seed: the random seed (every candidate's own seed derives from it and its index).
         clearance: smallest distance [m] accepted between bodies that must not touch.
         face_margin: smallest distance [m] from a contact to its face's edges.
@@ -130,6 +132,7 @@ class SearchSettings:
 
     candidates: int = 64
     refine: int = 2
+    polish: int = 6
     seed: int = 0
     clearance: float = 0.01
     face_margin: float = 0.03
@@ -457,7 +460,7 @@ def _parse_search(r: Reader) -> SearchSettings:
     for k in ("candidates", "path_samples"):
         if k in d:
             vals[k] = int(r.get(k).number(positive=True))
-    for k in ("refine", "seed"):
+    for k in ("refine", "polish", "seed"):
         if k in d:
             vals[k] = int(r.get(k).number(nonnegative=True))
     for k in ("clearance", "face_margin"):

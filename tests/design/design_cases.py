@@ -38,7 +38,7 @@ def ur5_tips_spec_data() -> dict:
         "arms": [{"robot": "ur5", "count": 2,
                   "gripper": {"fingertips": UR5_TIPS, "tip_radius": 0.015}}],
         "bases": {"region": {"x": [-0.9, 0.9], "y": [-0.9, 0.9], "z": 0.0}, "yaw": "free"},
-        "search": {"candidates": 12, "refine": 0, "seed": 0, "clearance": 0.01,
+        "search": {"candidates": 12, "refine": 0, "polish": 1, "seed": 0, "clearance": 0.01,
                    "face_margin": 0.015},
         "top": 2,
         "simulation": {"duration": 1.2, "dt": 0.002},
@@ -50,10 +50,10 @@ def spec_data(path=TWO_UR5_SPEC) -> dict:
     return copy.deepcopy(yaml.safe_load(path.read_text(encoding="utf-8")))
 
 
-def small(spec, candidates: int = 24, refine: int = 1):
+def small(spec, candidates: int = 24, refine: int = 1, polish: int = 1):
     """The spec with a small search budget."""
     return dataclasses.replace(spec, search=dataclasses.replace(
-        spec.search, candidates=candidates, refine=refine))
+        spec.search, candidates=candidates, refine=refine, polish=polish))
 
 
 def tool_pose_errors(system, q: np.ndarray, oMo: pin.SE3, tools_in_object) -> np.ndarray:

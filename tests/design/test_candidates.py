@@ -19,6 +19,8 @@ from multiarm_pin.design.candidates import (
     reseed,
     sample_candidate,
     sample_face_point,
+    slide,
+    turn,
     weld_faces,
 )
 from multiarm_pin.design.evaluation import DesignProblem, candidate_from_scenario, weld_placement
@@ -127,6 +129,60 @@ def test_polishing_moves_change_one_arm_only():
                 np.testing.assert_array_equal(y.points, x.points)
                 assert np.array_equal(y.q_seed, q0s[k]) == (k != arm)
     assert moved > 0
+
+
+def test_moving_every_base_turning_and_sliding_a_weld():
+    """``approach`` with no arm moves every base along its own horizontal line to its grasp by
+    the same distance; ``turn`` turns one weld's tool about its face normal (the same point,
+    the tool's z axis kept) by at most the step, ``slide`` moves one weld's point on its face
+    (inside it by the margin); each changes nothing else."""
+    import pinocchio as pin
+
+    problem = DesignProblem(load_design(TWO_UR5_SPEC))
+    spec_margin = problem.spec.search.face_margin
+    oMo = problem.object_placement
+    together = 0
+    for i in range(6):
+        c = sample_candidate(problem, i)
+        q0s = [x.q_seed + 0.01 for x in c.arms]
+        n = approach(problem, c, q0s, 400 + i, None, 0.05)
+        moved = []
+        for a, b in zip(c.arms, n.arms, strict=True):
+            g = oMo.act(a.points.mean(axis=0))
+            delta = b.base - a.base
+            u = g[:2] - a.base[:2]
+            assert delta[2] == delta[3] == 0.0
+            assert abs(delta[0] * u[1] - delta[1] * u[0]) < 1e-9 and delta[:2] @ u >= 0.0
+            if np.any(delta):
+                moved.append(float(np.linalg.norm(delta[:2])))
+        assert all(0.0 < d <= 0.05 for d in moved)
+        if len(moved) == len(c.arms):
+            together += 1
+            assert np.ptp(moved) < 1e-12
+        for arm in range(len(c.arms)):
+            t = turn(problem, c, q0s, 500 + i, arm, 0.5)
+            for k, (x, y) in enumerate(zip(c.arms, t.arms, strict=True)):
+                np.testing.assert_array_equal(y.base, x.base)
+                np.testing.assert_array_equal(y.q_seed, q0s[k])
+                M0 = weld_placement(problem.poly, x.faces[0], x.points[0], x.roll)
+                M1 = weld_placement(problem.poly, y.faces[0], y.points[0], y.roll)
+                np.testing.assert_allclose(M1.translation, M0.translation, atol=1e-15)
+                R = M0.rotation.T @ M1.rotation  # a rotation about the tool's z axis
+                np.testing.assert_allclose(R[:, 2], [0.0, 0.0, 1.0], atol=1e-12)
+                angle = float(np.linalg.norm(pin.log3(R)))
+                assert (0.0 < angle <= 0.5 + 1e-12) if k == arm else angle < 1e-12
+            sl = slide(problem, c, q0s, 600 + i, arm, 0.03)
+            for k, (x, y) in enumerate(zip(c.arms, sl.arms, strict=True)):
+                np.testing.assert_array_equal(y.base, x.base)
+                np.testing.assert_array_equal(y.q_seed, q0s[k])
+                assert y.roll == x.roll and y.faces == x.faces
+                d = y.points[0] - x.points[0]
+                n = problem.poly.normals[x.faces[0]]
+                assert abs(d @ n) < 1e-12  # on the face's plane
+                assert face_edge_margin(problem.poly, y.faces[0], y.points[0]) >= \
+                    spec_margin - 1e-12
+                assert np.any(d != 0.0) == (k == arm)
+    assert together > 0
 
 
 def test_weld_tool_points_into_its_face():

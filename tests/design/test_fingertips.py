@@ -24,7 +24,7 @@ SPEC = data_path("scenarios", "designs", "two_gripper_form_closure.yaml")
 
 @pytest.fixture(scope="module")
 def searched():
-    spec = small(load_design(SPEC), candidates=24, refine=1)
+    spec = small(load_design(SPEC), candidates=12, refine=1, polish=1)
     return spec, run_design(spec)
 
 

@@ -14,7 +14,7 @@ from tests.design.design_cases import spec_data
 def designed(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("design")
     d = spec_data()
-    d["search"] = {"candidates": 24, "refine": 1, "seed": 0}
+    d["search"] = {"candidates": 12, "refine": 1, "polish": 1, "seed": 0}
     d["top"] = 2
     spec = tmp / "spec.yaml"
     spec.write_text(yaml.safe_dump(d), encoding="utf-8")

@@ -5,6 +5,7 @@ import pytest
 from multiarm_pin.design.scoring import (
     SCORES,
     at_least_as_good,
+    crowding_distance,
     dominates,
     objective,
     pareto_front,
@@ -33,3 +34,15 @@ def test_dominance_and_the_pareto_front():
 def test_the_ranking_is_a_total_order():
     keys = [rank_key(1.0, 5), rank_key(1.0, 3), rank_key(2.0, 9)]
     assert sorted(keys) == [rank_key(2.0, 9), rank_key(1.0, 3), rank_key(1.0, 5)]
+
+
+def test_crowding_distance_is_nsga2s_sum_of_neighbour_gaps():
+    """Ends infinite; inside, per varying score, the gap between the two neighbours over the
+    score's range (clearance is equal everywhere and lp_margin does not apply: no term)."""
+    front = [{"torque_ratio": t, "manipulability": m, "clearance": 0.02, "lp_margin": None}
+             for t, m in ((0.1, 0.01), (0.2, 0.05), (0.25, 0.06), (0.4, 0.09))]
+    d = crowding_distance(front)
+    assert d[0] == d[3] == float("inf")
+    assert d[1] == pytest.approx((0.25 - 0.1) / 0.3 + (0.06 - 0.01) / 0.08)
+    assert d[2] == pytest.approx((0.4 - 0.2) / 0.3 + (0.09 - 0.05) / 0.08)
+    assert crowding_distance(front[:1]) == [0.0]
