@@ -106,18 +106,19 @@ def test_the_compiled_run_equals_the_reference_stepper():
         np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=0, atol=1e-9,
                                    err_msg=name)
     tol = 1e-9 * np.abs(b.mu).max()
-    arms = len(built.system.arms)
-    np.testing.assert_allclose(a.mu[:, :arms], b.mu[:, :arms], rtol=0, atol=tol)
+    n_arms = len(built.system.arms)  # mu's blocks: the arms', then the table's
+    np.testing.assert_allclose(a.mu[:, :n_arms], b.mu[:, :n_arms], rtol=0, atol=tol)
     # The table's four points are the corners of a face: their rows have a null direction
     # (λ_k ∝ sign(x_k) sign(y_k)), so the split among them while all four press depends on
-    # rounding (the CPU's and the solver's pivots); what the dynamics sees is their resultant: Σλ_k and Σλ_k p_k
-    # (object frame; the object's pose is the same in both runs, checked above).
+    # rounding (the CPU's and the solver's pivots); what the dynamics sees is their
+    # resultant: Σλ_k and Σλ_k p_k (object frame; the object's pose is the same in both
+    # runs, checked above).
     points = np.asarray(built.system.supports.supports[0].points)
-    resultants = [np.concatenate([r.mu[:, arms, :len(points)].sum(axis=1, keepdims=True),
-                                  r.mu[:, arms, :len(points)] @ points], axis=1)
-                  for r in runs]
+    table = [r.mu[:, n_arms, :len(points)] for r in runs]
+    resultants = [np.concatenate([lam.sum(axis=1, keepdims=True), lam @ points], axis=1)
+                  for lam in table]
     np.testing.assert_allclose(resultants[0], resultants[1], rtol=0, atol=4 * tol)
-    assert np.all(a.mu[:, arms, len(points):] == 0.0)
+    assert np.all(a.mu[:, n_arms, len(points):] == 0.0)
     assert not any("numpy) stepper" in w for w in a.warnings)
     assert [w for w in b.warnings if "numpy) stepper" in w] == [
         "the run is taken by the reference (numpy) stepper, not a compiled loop: controller "
