@@ -22,7 +22,7 @@ import numpy as np
 
 from multiarm_pin.app.scenario import Scenario
 from multiarm_pin.exceptions import InputError
-from multiarm_pin.sim.controllers.phased import parse_phases
+from multiarm_pin.sim.controllers.phased import current_phase, parse_phases
 
 
 @dataclass(frozen=True)
@@ -81,14 +81,14 @@ def check_phases(phases) -> tuple[ReplayPhase, ...]:
 def phase_indices(phases: Sequence[ReplayPhase], t) -> np.ndarray:
     """(T,) int: the index of the phase current at each time of ``t`` (T,) [s].
 
-    The last phase started at or before ``t`` (0 before the first start), as ``phased_pd``
-    chooses its phase; -1 everywhere without phases.
+    The last phase started at or before ``t`` (0 before the first start): ``phased_pd``'s
+    own rule (:func:`~multiarm_pin.sim.controllers.phased.current_phase`); -1 everywhere
+    without phases.
     """
     t = np.asarray(t, dtype=float)
     if not len(phases):
         return np.full(t.shape, -1, dtype=int)
-    starts = np.array([p.t for p in phases])
-    return np.maximum(np.searchsorted(starts, t, side="right") - 1, 0)
+    return current_phase([p.t for p in phases], t)
 
 
 def phase_table(phases: Sequence[ReplayPhase], t_end: float) -> list[dict]:

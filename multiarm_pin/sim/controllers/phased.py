@@ -58,6 +58,15 @@ PHASE_CODES = {"hold": layout.PHASE_HOLD, "tilt": layout.PHASE_TILT, "move": lay
 """The compiled kernel's code of each phase kind (``PH_KIND`` of the phase table)."""
 
 
+def current_phase(starts, t):
+    """Index of the phase current at ``t`` [s] (a scalar, or (T,) at each time of ``t``).
+
+    The last phase started at or before ``t``, 0 before the first start (``starts``: the
+    phases' start times [s], increasing, as :func:`parse_phases` makes them).
+    """
+    return np.maximum(np.searchsorted(np.asarray(starts, float), t, side="right") - 1, 0)
+
+
 @dataclass(frozen=True)
 class Phase:
     """One phase of :class:`PhasedPD` (see the module).
@@ -225,11 +234,7 @@ class PhasedPD(ObjectPD):
     # ------------------------------------------------------------------ reference
     def phase_index(self, t: float) -> int:
         """Index of the phase at ``t``: the last one started (0 before the first)."""
-        k = 0
-        for i, p in enumerate(self.phases):
-            if t >= p.t:
-                k = i
-        return k
+        return int(current_phase([p.t for p in self.phases], t))
 
     def _phase_pose(self, p, position, rotation, s, ds, dds):
         """Pose, twist and acceleration of phase ``p`` at profile ``(s, ṡ, s̈)`` from a start."""
@@ -513,4 +518,4 @@ class PhasedPD(ObjectPD):
         return s.unpad(last.tau)
 
 
-__all__ = ["PHASE_CODES", "PHASE_KINDS", "Phase", "PhasedPD", "parse_phases"]
+__all__ = ["PHASE_CODES", "PHASE_KINDS", "Phase", "PhasedPD", "current_phase", "parse_phases"]
