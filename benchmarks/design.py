@@ -28,8 +28,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -38,6 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from benchmarks._machine import run_line  # noqa: E402
 from multiarm_pin.data import data_path, shipped_files  # noqa: E402
 from multiarm_pin.design import SCORES, load_design, run_design  # noqa: E402
 from multiarm_pin.design.evaluation import (  # noqa: E402
@@ -49,24 +48,6 @@ from multiarm_pin.design.scoring import at_least_as_good, objective  # noqa: E40
 
 TARGETS = {2: 60.0, 3: 180.0}
 """Issue 26's targets [s] by number of arms."""
-
-
-def _cpu() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
-
-
-def _commit() -> str:
-    try:
-        return subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
-                              capture_output=True, text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def main(argv=None) -> int:
@@ -110,9 +91,7 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     lines = [
         "# Design search wall time (`benchmarks/design.py`)", "",
-        f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, commit {_commit()}, "
-        f"{_cpu()} ({os.cpu_count()} CPUs), {platform.node()}, Python "
-        f"{platform.python_version()}.", "",
+        f"{run_line()}.", "",
         f"Command: `.venv/bin/python benchmarks/design.py --out {args.out}"
         f"{' --loop' if args.loop else ''}` (the search of `multiarm-pin design`, cluster "
         "start-up included; the best design's run and the results folder not included).",

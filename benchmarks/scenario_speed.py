@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import resource
 import subprocess
 import sys
@@ -41,6 +40,8 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
+
+from benchmarks._machine import run_line  # noqa: E402
 
 KERNEL = """
 import time
@@ -68,21 +69,6 @@ sim = built.scenario.simulation
 res = simulate_built(built, scenario_controller(built), sim.duration, sim.dt, sim.solver)
 print(time.perf_counter() - t0, resource.getrusage(resource.RUSAGE_SELF).ru_utime)
 """
-
-
-def _commit() -> str:
-    try:
-        return subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
-                              capture_output=True, text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-
-
-def _cpu() -> str:
-    for line in Path("/proc/cpuinfo").read_text().splitlines():
-        if line.startswith("model name"):
-            return line.split(":", 1)[1].strip()
-    return platform.processor() or "unknown"
 
 
 def _run(built, compiled: bool):
@@ -123,9 +109,7 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     lines = ["# Shipped scenarios: compiled contact loop against the Python stepper", "",
              f"Command: `python benchmarks/scenario_speed.py {' '.join(argv or sys.argv[1:])}`;"
-             f" {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, commit {_commit()}, "
-             f"{_cpu()} ({os.cpu_count()} CPUs), {platform.node()}, Python "
-             f"{platform.python_version()}; load average at the start "
+             f" {run_line()}; load average at the start "
              f"{os.getloadavg()[0]:.1f} (a shared machine: wall times include others' work).",
              "", "| scenario | path | run | wall [s] | CPU [s] | real-time factor | load |",
              "|---|---|---|---|---|---|---|"]

@@ -25,9 +25,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -40,14 +38,11 @@ import numpy as np  # noqa: E402
 import pinocchio as pin  # noqa: E402
 import yaml  # noqa: E402
 
+from benchmarks._machine import run_line  # noqa: E402
 from multiarm_pin.data import data_path  # noqa: E402
 from multiarm_pin.design.pick_up import describe_plan, plan_pick_up, with_box  # noqa: E402
 from multiarm_pin.design.spec import parse_design  # noqa: E402
 from multiarm_pin.exceptions import DesignImpossibleError, MultiArmError  # noqa: E402
-
-_spec = importlib.util.spec_from_file_location("_design_bench", ROOT / "benchmarks" / "design.py")
-_bench = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_bench)
 
 
 def judge(plan, run, report) -> tuple[bool, str]:
@@ -100,11 +95,8 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     head = ["# Pick-up planner on drawn boxes (issue 27)", "",
             f"Command: `python benchmarks/tilt_pick.py {' '.join(argv or sys.argv[1:])}`; "
-            f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, commit "
-            f"{_bench._commit()}, {_bench._cpu()} ({os.cpu_count()} CPUs), "
-            f"{platform.node()}, Python {platform.python_version()}; load average at the "
-            f"start {os.getloadavg()[0]:.1f} (a shared machine: wall times include others' "
-            "work).", "",
+            f"{run_line()}; load average at the start {os.getloadavg()[0]:.1f} (a shared "
+            "machine: wall times include others' work).", "",
             "Boxes: edges uniform in 0.4-1.0 m, mass uniform in 1-8 kg, along the table's axes "
             "(table 0.4 / 0.3 m wider each side), the shipped spec's arms, bases in x, y "
             "[-2, 2] m, z [0, 1.4] m. Each planned box is simulated and judged against the "
