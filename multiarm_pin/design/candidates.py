@@ -256,6 +256,7 @@ def _aim(problem, slot: int, base: np.ndarray, target: np.ndarray) -> float:
 
 
 def _wrap(a):
+    """Angles [rad] wrapped to (-π, π]."""
     return np.angle(np.exp(1j * np.asarray(a, float)))
 
 
@@ -472,7 +473,7 @@ def perturb(problem, parent: Candidate, q0s: list[np.ndarray], index: int,
             if b.yaw[1] > b.yaw[0]:
                 yaw = base[3] + rng.normal(0.0, 0.3 * scale)
                 base[3] = float(np.clip(yaw, *b.yaw)) if b.yaw != (-np.pi, np.pi) else \
-                    float(np.angle(np.exp(1j * yaw)))
+                    float(_wrap(yaw))
         slot = spec.arms[i]
         points = a.points
         if slot.gripper == "weld":
@@ -567,7 +568,7 @@ def turn(problem, parent: Candidate, q0s: list[np.ndarray], index: int, arm: int
         q = np.asarray(q0s[i], float).copy()
         roll = a.roll
         if i == arm and problem.spec.arms[i].gripper == "weld":
-            roll = float(np.angle(np.exp(1j * (a.roll + d))))
+            roll = float(_wrap(a.roll + d))
         arms.append(replace(a, roll=roll, q_seed=q))
     return Candidate(index, tuple(arms), parent.index)
 
