@@ -19,7 +19,7 @@ import pytest
 from dynamics.synthetic import random_system
 from system_builders import JOINT_KINDS, build_system, joint_spec, moving_state
 
-from multiarm_pin._compiled import evaluate, layout, linalg
+from multiarm_pin._compiled import controller_kernels, evaluate, layout, linalg, phased
 from multiarm_pin._compiled.object_first import (
     SOLVE_ARM_SINGULAR,
     SOLVE_OBJECT_SINGULAR,
@@ -343,6 +343,90 @@ def test_cholesky_solve_and_inverse_diagonal(size):
     assert not linalg.cholesky(indefinite, L, size)
     A[0, 0] = np.nan
     assert not linalg.cholesky(A, L, size)
+
+
+def _qr_factors(A):
+    """``householder_qr`` of ``A`` (rows, cols) inside a larger array: ``(Q, R, untouched)``.
+
+    ``Q`` (rows, rows) is rebuilt by ``householder_reflect`` from the identity's columns;
+    ``untouched``: the entries outside the leading block kept their values.
+    """
+    rows, cols = A.shape
+    r = min(rows, cols)
+    big = np.full((rows + 2, cols + 1), 7.0)
+    big[:rows, :cols] = A
+    beta, diag = np.full(r + 1, 7.0), np.full(r + 1, 7.0)
+    linalg.householder_qr(big, np.int64(rows), np.int64(cols), beta, diag)
+    untouched = (np.all(big[rows:] == 7.0) and np.all(big[:, cols:] == 7.0)
+                 and beta[r] == 7.0 and diag[r] == 7.0)
+    R = np.triu(big[:rows, :cols], 1)
+    R[np.arange(r), np.arange(r)] = diag[:r]
+    Q = np.eye(rows)
+    for i in range(rows):
+        for j in range(r - 1, -1, -1):
+            linalg.householder_reflect(big, np.int64(rows), np.int64(j), beta, Q[:, i])
+    return Q, R, untouched
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (6, 3), (7, 7), (8, 5), (4, 6), (6, 12)])
+def test_householder_qr_equals_numpy(shape):
+    """``linalg.householder_qr`` (the QR of ``min_norm_rows`` and ``column_least_squares``)
+    against LAPACK on random full-rank matrices: ``Q R = A``, ``Q`` orthogonal, ``R`` that of
+    ``np.linalg.qr`` (same sign rule but on a square or wide block's last row), and least
+    squares / minimum-norm solutions equal to ``np.linalg.lstsq``'s."""
+    rows, cols = shape
+    rng = np.random.default_rng(rows * 31 + cols)
+    A = rng.normal(size=shape) * 10.0 ** rng.uniform(-2, 2)
+    Q, R, untouched = _qr_factors(A)
+    scale = np.abs(A).max()
+    assert untouched
+    assert np.abs(Q @ R - A).max() <= 1e-14 * 10 * scale
+    assert np.abs(Q.T @ Q - np.eye(rows)).max() <= 1e-14 * 10
+    r = min(shape)
+    sign = np.ones((r, 1))
+    if rows <= cols:  # LAPACK leaves the last row's one-entry column as it is
+        sign[-1] = -1.0
+    np.testing.assert_allclose(R[:r], sign * np.linalg.qr(A, mode="r"), rtol=0,
+                               atol=1e-12 * scale * np.linalg.cond(A))
+    f = rng.normal(size=rows)
+    if cols <= rows:  # the least squares of column_least_squares
+        out = np.empty(cols)
+        phased.column_least_squares(A, np.arange(cols), np.int64(cols), f, out)
+        want = np.linalg.lstsq(A, f, rcond=None)[0]
+        assert np.abs(out - want).max() <= 1e-12 * np.linalg.cond(A) * np.abs(want).max()
+    if cols <= rows:  # the minimum-norm x of Aᵀ x = g (min_norm_rows)
+        g = rng.normal(size=cols)
+        x = np.empty(rows)
+        assert controller_kernels.min_norm_rows(A, np.int64(cols), np.int64(rows), g, x,
+                                                np.empty(shape), np.empty(cols))
+        want = np.linalg.lstsq(A.T, g, rcond=None)[0]
+        assert np.abs(x - want).max() <= 1e-12 * np.linalg.cond(A) * np.abs(want).max()
+
+
+@pytest.mark.parametrize("shape, rank", [((6, 3), 2), ((7, 7), 4), ((8, 5), 1), ((4, 6), 3)])
+def test_householder_qr_shows_rank_deficiency_with_margin(shape, rank):
+    """Rank deficient by construction (``A = B C``, inner size ``rank``, columns in general
+    position): ``R``'s first ``rank`` pivots stay above 1e-3 of the largest, the rest and
+    ``R``'s trailing rows fall to round-off (below 1e-12: five orders under
+    ``RANK_MARGIN``, which ``min_norm_rows`` then refuses); ``Q R = A`` still, and ``R``'s
+    leading rows are ``np.linalg.qr``'s."""
+    rows, cols = shape
+    rng = np.random.default_rng(rows * 31 + cols + 1000 * rank)
+    A = rng.normal(size=(rows, rank)) @ rng.normal(size=(rank, cols))
+    assert np.linalg.matrix_rank(A) == rank
+    Q, R, untouched = _qr_factors(A)
+    scale = np.abs(A).max()
+    assert untouched
+    assert np.abs(Q @ R - A).max() <= 1e-14 * 10 * scale
+    pivots = np.abs(np.diag(R))
+    assert pivots[:rank].min() >= 1e-3 * pivots.max()
+    assert np.abs(R[rank:]).max() <= 1e-12 * pivots.max()
+    np.testing.assert_allclose(R[:rank], np.linalg.qr(A, mode="r")[:rank], rtol=0,
+                               atol=1e-10 * scale)
+    if cols <= rows:
+        assert not controller_kernels.min_norm_rows(A, np.int64(cols), np.int64(rows),
+                                                    np.ones(cols), np.empty(rows),
+                                                    np.empty(shape), np.empty(cols))
 
 
 # ------------------------------------------------------------------ errors

@@ -1,11 +1,11 @@
 """Compiled (numba) kernels of the fast path.
 
 Each kernel mirrors a numpy reference in the thesis layers and is tested against it; one
-module per reference: :mod:`.linalg` (Cholesky, LAPACK), :mod:`.arm_terms`
-(``ArmSet.evaluate``), :mod:`.constraint_rows` (``ConstraintSet.evaluate``), :mod:`.assembly`
-(the reference blocks), :mod:`.object_first` (``solve_object_first_numpy``), :mod:`.evaluate`
-(all of them fused on one buffer), :mod:`.controller_kernels` (``ObjectPD.reference``),
-:mod:`.phased` (``PhasedPD.reference``),
+module per reference: :mod:`.linalg` (Cholesky, Householder QR, singular values: LAPACK's),
+:mod:`.arm_terms` (``ArmSet.evaluate``), :mod:`.constraint_rows` (``ConstraintSet.evaluate``),
+:mod:`.assembly` (the reference blocks), :mod:`.object_first` (``solve_object_first_numpy``),
+:mod:`.evaluate` (all of them fused on one buffer), :mod:`.controller_kernels`
+(``ObjectPD.reference``), :mod:`.phased` (``PhasedPD.reference``),
 :mod:`.rigid_body` (Pinocchio's pass of ``ArmSet.pinocchio_pass``: ``J``, ``dJ``, ``M``,
 ``nle``, tool placements; ``integrate``, ``difference``), :mod:`.trajectory`
 (``MinimumJerkTrajectory.motion``), :mod:`.closed_loop` (the closed-loop evaluation and

@@ -61,7 +61,13 @@ from multiarm_pin._compiled.layout import (
     X_TWIST,
     offsets,
 )
-from multiarm_pin._compiled.linalg import cholesky, cholesky_solve, singular_values
+from multiarm_pin._compiled.linalg import (
+    cholesky,
+    cholesky_solve,
+    householder_qr,
+    householder_reflect,
+    singular_values,
+)
 from multiarm_pin._compiled.object_first import object_first
 
 NO_WRENCH = np.zeros(6)
@@ -107,7 +113,8 @@ def min_norm_rows(W, ncols, nrows, g, x, Q, beta):  # pragma: no cover - compile
         nrows: joints ``k`` (rows).
         g: (ncols,) right-hand side.
         x: output (nrows,) (also the scratch of the factorisation: nothing is allocated).
-        Q: scratch (k, m) (the Householder vectors and ``R``).
+        Q: scratch (k, m) (the Householder vectors and ``R`` of
+            :func:`~multiarm_pin._compiled.linalg.householder_qr`).
         beta: scratch (m,).
 
     Returns:
@@ -115,34 +122,17 @@ def min_norm_rows(W, ncols, nrows, g, x, Q, beta):  # pragma: no cover - compile
         (``x`` then meaningless). With ``ncols == nrows`` the solution is the only one,
         ``W⁻ᵀ g``.
     """
+    if ncols > nrows:
+        return False  # more columns than rows: not of full column rank
     for a in range(nrows):
         for s in range(ncols):
             Q[a, s] = W[a, s]
+    householder_qr(Q, nrows, ncols, beta, x)  # R's diagonal in x for now
     rmax = 0.0
     rmin = np.inf
     for j in range(ncols):
-        norm = 0.0
-        for a in range(j, nrows):
-            norm += Q[a, j] * Q[a, j]
-        norm = math.sqrt(norm)
-        alpha = -norm if Q[j, j] >= 0.0 else norm
-        v0 = Q[j, j] - alpha
-        vnorm2 = v0 * v0
-        for a in range(j + 1, nrows):
-            vnorm2 += Q[a, j] * Q[a, j]
-        Q[j, j] = v0
-        beta[j] = 2.0 / vnorm2 if vnorm2 > 0.0 else 0.0
-        for t in range(j + 1, ncols):  # apply H_j = I - β v vᵀ to the columns on the right
-            dot = 0.0
-            for a in range(j, nrows):
-                dot += Q[a, j] * Q[a, t]
-            dot *= beta[j]
-            for a in range(j, nrows):
-                Q[a, t] -= dot * Q[a, j]
-        # R[j, j] = alpha; keep v in Q[j:, j], R's diagonal in x for now
-        x[j] = alpha
-        rmax = max(rmax, abs(alpha))
-        rmin = min(rmin, abs(alpha))
+        rmax = max(rmax, abs(x[j]))
+        rmin = min(rmin, abs(x[j]))
     if not (ncols == 0 or rmin > RANK_MARGIN * rmax):
         return False
     # Wᵀ x = Rᵀ Qᵀ x = g: y = R⁻ᵀ g (forward substitution, y[j] over R[j, j] in x[j]),
@@ -155,12 +145,7 @@ def min_norm_rows(W, ncols, nrows, g, x, Q, beta):  # pragma: no cover - compile
     for a in range(ncols, nrows):
         x[a] = 0.0
     for j in range(ncols - 1, -1, -1):
-        dot = 0.0
-        for a in range(j, nrows):
-            dot += Q[a, j] * x[a]
-        dot *= beta[j]
-        for a in range(j, nrows):
-            x[a] -= dot * Q[a, j]
+        householder_reflect(Q, nrows, j, beta, x)
     return True
 
 

@@ -1,4 +1,4 @@
-"""Compiled small dense linear algebra: Cholesky factor, solve, inverse diagonal, batched solve.
+"""Compiled small dense linear algebra: Cholesky factor and solves, Householder QR, SVD values.
 
 Mirrors the LAPACK calls of the numpy references (``dpotrf`` / ``dpotrs`` through
 ``numpy.linalg.solve`` and :mod:`scipy.linalg.lapack` in
@@ -87,6 +87,73 @@ def inverse_diagonal(L, size, out, col):  # pragma: no cover - compiled
         out[j] = acc
 
 
+@njit(cache=True, error_model="numpy")
+def householder_qr(A, nrows, ncols, beta, diag):  # pragma: no cover - compiled
+    """Householder QR of the leading ``nrows`` x ``ncols`` block of ``A``, in place.
+
+    ``A[:nrows, :ncols] = H_0 H_1 ... H_{r-1} R`` with ``r = min(nrows, ncols)`` reflectors
+    ``H_j = I - beta[j] v_j v_jᵀ`` (``v_j`` zero above row ``j``) and ``R`` (nrows, ncols)
+    upper triangular; ``R[j, j] = -sign(A_jj) ‖A[j:, j]‖`` after the reflectors before it
+    (``+`` for a negative entry: no cancellation in ``v_j``'s first entry), LAPACK's
+    ``dgeqrf`` sign rule (``np.linalg.qr``'s ``R``), except that ``dgeqrf`` leaves a column
+    already zero below the diagonal as it is (the last one of a square or wide block: its row
+    of ``R`` has the opposite sign here). A zero column gives ``beta[j] = 0``
+    (``H_j = I``) and ``R[j, j] = 0``. Nothing is allocated. The kernel of
+    ``controller_kernels.min_norm_rows`` and ``phased.column_least_squares``.
+
+    Args:
+        A: (>= nrows, >= ncols) matrix, overwritten in its leading block: ``A[j:nrows, j]``
+            holds ``v_j`` (``v_j[j]`` at ``A[j, j]``), ``A[p, t]`` for ``p < t`` holds
+            ``R[p, t]``; the rest of ``A`` is not touched.
+        nrows: rows of the block (int64).
+        ncols: columns of the block (int64); more columns than rows is allowed
+            (``r = nrows`` reflectors then).
+        beta: output (>= r,) the reflectors' ``2 / ‖v_j‖²``.
+        diag: output (>= r,) ``R``'s diagonal.
+    """
+    for j in range(min(nrows, ncols)):
+        norm = 0.0
+        for a in range(j, nrows):
+            norm += A[a, j] * A[a, j]
+        norm = math.sqrt(norm)
+        alpha = -norm if A[j, j] >= 0.0 else norm
+        v0 = A[j, j] - alpha
+        vnorm2 = v0 * v0
+        for a in range(j + 1, nrows):
+            vnorm2 += A[a, j] * A[a, j]
+        A[j, j] = v0
+        beta[j] = 2.0 / vnorm2 if vnorm2 > 0.0 else 0.0
+        for t in range(j + 1, ncols):  # apply H_j to the columns on the right
+            dot = 0.0
+            for a in range(j, nrows):
+                dot += A[a, j] * A[a, t]
+            dot *= beta[j]
+            for a in range(j, nrows):
+                A[a, t] -= dot * A[a, j]
+        diag[j] = alpha
+
+
+@njit(cache=True, error_model="numpy")
+def householder_reflect(A, nrows, j, beta, x):  # pragma: no cover - compiled
+    """``x[:nrows] ← H_j x[:nrows]``, ``H_j = I - beta[j] v_j v_jᵀ`` of :func:`householder_qr`.
+
+    ``Qᵀ b`` is ``H_{r-1} ... H_0 b`` (``j`` ascending), ``Q y`` is ``H_0 ... H_{r-1} y``
+    (``j`` descending); only ``x[j:nrows]`` changes.
+
+    Args:
+        A: the factored matrix of :func:`householder_qr` (``v_j`` in ``A[j:nrows, j]``).
+        nrows: its block's rows (int64).
+        j: the reflector.
+        beta: (> j,) the reflectors' ``beta``.
+        x: (>= nrows,) vector, overwritten.
+    """
+    dot = 0.0
+    for a in range(j, nrows):
+        dot += A[a, j] * x[a]
+    dot *= beta[j]
+    for a in range(j, nrows):
+        x[a] -= dot * A[a, j]
+
 
 @njit(cache=True, error_model="numpy")
 def batched_spd_solve(A, B):  # pragma: no cover - compiled
@@ -165,5 +232,5 @@ def singular_values(A, out):  # pragma: no cover - compiled
         out[j] = math.sqrt(acc)
 
 
-__all__ = ["batched_spd_solve", "cholesky", "cholesky_solve", "inverse_diagonal",
-           "singular_values"]
+__all__ = ["batched_spd_solve", "cholesky", "cholesky_solve", "householder_qr",
+           "householder_reflect", "inverse_diagonal", "singular_values"]

@@ -69,6 +69,7 @@ from multiarm_pin._compiled.layout import (
     REFERENCE_SIZE,
     offsets,
 )
+from multiarm_pin._compiled.linalg import householder_qr, householder_reflect
 from multiarm_pin._compiled.trajectory import exp3
 
 PRESSING_GAP = 1e-6
@@ -204,7 +205,8 @@ def column_least_squares(E, cols, n, f, out):  # pragma: no cover - compiled
 
     For the passive columns of :func:`nnls` (linearly independent by construction); when a
     column is dependent on the ones before it (``|R_jj|`` at round-off of the largest), the
-    minimum-norm solution of ``np.linalg.lstsq`` decides instead.
+    minimum-norm solution of ``np.linalg.lstsq`` decides instead. The QR is
+    :func:`~multiarm_pin._compiled.linalg.householder_qr` on a copy of the columns.
 
     Args:
         E: (p, q) matrix.
@@ -219,38 +221,19 @@ def column_least_squares(E, cols, n, f, out):  # pragma: no cover - compiled
         for a in range(p):
             A[a, c] = E[a, cols[c]]
     b = f.copy()
+    r = min(n, p)
+    beta = np.empty(r)
+    diag = np.empty(r)
+    householder_qr(A, p, n, beta, diag)
+    for j in range(r):  # b ← Qᵀ b
+        householder_reflect(A, p, j, beta, b)
     rmax = 0.0
+    for j in range(r):
+        rmax = max(rmax, abs(diag[j]))
     eps = np.finfo(np.float64).eps
     ok = n <= p
-    for j in range(min(n, p)):
-        norm = 0.0
-        for a in range(j, p):
-            norm += A[a, j] * A[a, j]
-        norm = math.sqrt(norm)
-        alpha = -norm if A[j, j] >= 0.0 else norm
-        v0 = A[j, j] - alpha
-        vn = v0 * v0
-        for a in range(j + 1, p):
-            vn += A[a, j] * A[a, j]
-        A[j, j] = v0
-        beta = 2.0 / vn if vn > 0.0 else 0.0
-        for c in range(j + 1, n):
-            dot = 0.0
-            for a in range(j, p):
-                dot += A[a, j] * A[a, c]
-            dot *= beta
-            for a in range(j, p):
-                A[a, c] -= dot * A[a, j]
-        dot = 0.0
-        for a in range(j, p):
-            dot += A[a, j] * b[a]
-        dot *= beta
-        for a in range(j, p):
-            b[a] -= dot * A[a, j]
-        A[j, j] = alpha  # R's diagonal (the reflector is no longer needed)
-        rmax = max(rmax, abs(alpha))
-    for j in range(min(n, p)):
-        if not abs(A[j, j]) > 10.0 * eps * max(p, n) * rmax:
+    for j in range(r):
+        if not abs(diag[j]) > 10.0 * eps * max(p, n) * rmax:
             ok = False
     if not ok:
         Ep = np.empty((p, n))
@@ -264,8 +247,8 @@ def column_least_squares(E, cols, n, f, out):  # pragma: no cover - compiled
     for j in range(n - 1, -1, -1):
         acc = b[j]
         for c in range(j + 1, n):
-            acc -= A[j, c] * out[c]
-        out[j] = acc / A[j, j]
+            acc -= A[j, c] * out[c]  # R[j, c] (j < c) is stored above the diagonal
+        out[j] = acc / diag[j]
 
 
 @njit(cache=True, error_model="numpy")

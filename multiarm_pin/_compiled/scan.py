@@ -177,6 +177,19 @@ def first_exceeding(shift, turn, u, rho, thr, lo, hi, at):  # pragma: no cover -
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def _write_height(d, row, col, low, exact, best):  # pragma: no cover - compiled
+    """An exact height ``d`` [m] into ``low[row, col]`` and ``exact[row, col]``; the new best.
+
+    The tail of :func:`ground_heights` and :func:`round_heights`: ``d`` is the body's origin
+    height minus its support function along ``-z`` minus the ground's height; returns
+    ``min(best, d)``.
+    """
+    low[row, col] = d
+    exact[row, col] = d
+    return min(best, d)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def ground_heights(R, p, joints, corners, vertices, starts, height, best, tol, n0, pairs,
                    low, exact):  # pragma: no cover - compiled
     """The polytopes' ground pairs at ``m`` samples: bounds, and exact where they matter.
@@ -231,10 +244,7 @@ def ground_heights(R, p, joints, corners, vertices, starts, height, best, tol, n
             for v in range(starts[k], starts[k + 1]):
                 top = max(top, -R[s, j, 2, 0] * vertices[v, 0] - R[s, j, 2, 1] * vertices[v, 1]
                           - R[s, j, 2, 2] * vertices[v, 2])
-            d = p[s, j, 2] - top - height
-            low[n0 + s, col] = d
-            exact[n0 + s, col] = d
-            best = min(best, d)
+            best = _write_height(p[s, j, 2] - top - height, n0 + s, col, low, exact, best)
     return best
 
 
@@ -366,10 +376,7 @@ def round_heights(R, p, joints, rotations, offsets, sizes, cylinder, height, n0,
                       else math.sqrt(u0 * u0 + u1 * u1 + u2 * u2))
             top = (u0 * offsets[k, 0] + u1 * offsets[k, 1] + u2 * offsets[k, 2]
                    + sizes[k, 1] * abs(g2) + sizes[k, 0] * radial)
-            d = p[s, j, 2] - top - height
-            low[n0 + s, col] = d
-            exact[n0 + s, col] = d
-            best = min(best, d)
+            best = _write_height(p[s, j, 2] - top - height, n0 + s, col, low, exact, best)
     return best
 
 
