@@ -68,15 +68,21 @@ def test_the_final_grasp_is_form_closure_and_needs_every_gripper_tip():
     assert not closure([k for k in every if k != 12])  # three_finger:tip[2]
 
 
+@cache
+def _onset():
+    """The first 0.2 s of the run (the tilt's onset)."""
+    built = _built()
+    sc = built.scenario
+    return simulate_built(built, scenario_controller(built), 0.2, sc.simulation.dt,
+                          sc.simulation.solver)
+
+
 def test_the_tilt_starts_on_the_pivot_edge():
     """The first 0.2 s: the -x edge's vertices (rows 2, 3) separate first, at the tilt's
     start; the pivot (rows 0, 1) presses with at least the support margin; no contact
     force is negative; the compiled contact loop takes it (no note that the reference
     stepper does)."""
-    built = _built()
-    sc = built.scenario
-    res = simulate_built(built, scenario_controller(built), 0.2, sc.simulation.dt,
-                         sc.simulation.solver)
+    res = _onset()
     assert [(e.kind, e.label) for e in res.events] == [("separation", "table[2]"),
                                                        ("separation", "table[3]")]
     assert 0.1 <= res.events[0].t < 0.11
@@ -85,6 +91,23 @@ def test_the_tilt_starts_on_the_pivot_edge():
     assert res.mu.min() >= 0.0
     assert res.constraint_violation.max() < 1e-6
     assert not any("numpy) stepper" in w for w in res.warnings)
+
+
+def test_the_onset_stays_on_the_table_and_has_no_finite_support_note():
+    """The table is a 1.6 x 1.2 m rectangle about the origin, the box's support points at
+    x = ±0.4, y = ±0.3 m: in the first 0.2 s they stay over 0.25 m inside it at every
+    sample, so no step is handed to the Python stepper for a point off its rectangle and
+    the run's warnings have no ``FINITE_SUPPORTS_NOTE``."""
+    from multiarm_pin.sim.contact_loop import FINITE_SUPPORTS_NOTE
+
+    built, res = _built(), _onset()
+    table = built.system.supports.supports[0]
+    assert table.extent is not None
+    half = np.asarray(table.extent) / 2
+    n_arms = len(built.system.arms)
+    points = res.contact_points[:, n_arms, :len(table.points), :2]  # world x, y
+    assert (half - np.abs(points)).min() > 0.25
+    assert FINITE_SUPPORTS_NOTE not in res.warnings
 
 
 def test_the_compiled_run_equals_the_reference_stepper():

@@ -52,7 +52,9 @@ FINITE_SUPPORTS_NOTE = ("supports with an extent (finite rectangles): the steps 
                         "end with a support point off its rectangle are taken by the Python "
                         "stepper, not the compiled contact loop (which locates no off-edge "
                         "event)")
-"""The note of an RK4 run with a finite support (the kernel hands such steps back)."""
+"""The note, once in a run's warnings, of a run that had such a step: the kernel handed it
+back (``STAGE_OFF_RECTANGLE``) or was not called while a row was fallen past its support's
+edge. A run whose support points all stay on their rectangles has no such note."""
 
 
 def rules_vector() -> np.ndarray:
@@ -193,8 +195,8 @@ class ContactLoop:
         kernel's table; a subclass with its own ``__call__`` is not), and no torque
         saturation. Supports with an ``extent`` are served while every support point is
         inside its rectangle at a step's start and end (the kernel hands back the other
-        steps: the note :data:`FINITE_SUPPORTS_NOTE`); fingertips that start beside their
-        face are kept out of the recorded penetration as the stepper does
+        steps, and the run then notes it: :data:`FINITE_SUPPORTS_NOTE`); fingertips that
+        start beside their face are kept out of the recorded penetration as the stepper does
         (:attr:`Stepper.beside_start`).
         """
         from multiarm_pin.sim.controllers import controller_kernel

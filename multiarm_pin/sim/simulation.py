@@ -34,8 +34,9 @@ samples and events: :class:`~multiarm_pin.sim.compiled_loop.CompiledLoop` while 
 touches (arms, no supports), :class:`~multiarm_pin.sim.contact_loop.ContactLoop` otherwise
 (separations, touchdowns and impacts in the kernel); a step either hands back is taken by the
 stepper. With a support of finite ``extent`` the steps with a support point off its
-rectangle at either end (off-edge events) are the stepper's; such runs say so in their
-warnings (``FINITE_SUPPORTS_NOTE``).
+rectangle at either end (off-edge events) are the stepper's; a run with such a step says so
+once in its warnings (``FINITE_SUPPORTS_NOTE``), a run whose points all stay on their
+rectangles does not.
 
 This module holds :func:`simulate` (input checks, the time grid, the rk45 driver); the
 evaluations, fixed steps and events are :class:`~multiarm_pin.sim.stepper.Stepper`'s, the
@@ -55,7 +56,7 @@ from typing import Protocol
 import numpy as np
 
 from multiarm_pin._compiled.closed_loop import STAGE_OK, STAGE_RELEASE
-from multiarm_pin._compiled.contact_loop import STAGE_EVENTS_FULL
+from multiarm_pin._compiled.contact_loop import STAGE_EVENTS_FULL, STAGE_OFF_RECTANGLE
 from multiarm_pin._registry import lookup
 from multiarm_pin.constraints.joint import INITIAL_GAP_TOLERANCE
 from multiarm_pin.dynamics.solve import solver_for_rows
@@ -297,8 +298,7 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
         every = max(1, n_steps // 100)
         loop = CompiledLoop.for_run(stepper, integrator) if compiled else None
         events = ContactLoop.for_run(stepper, integrator) if compiled else None
-        if integrator == "rk4" and stepper.edges:
-            stepper.notes.append(FINITE_SUPPORTS_NOTE)
+        off_rectangle = False  # a step was the stepper's for a support point off its rectangle
         stretch = _Stretch(every, n_steps, tapered=bool(watch.monitors))
         watch.longest_stretch(stretch.top)
         k, retaken = 0, -1  # the sample whose step the stepper took last
@@ -329,6 +329,12 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
                     break
                 if events.last_status in (STAGE_OK, STAGE_EVENTS_FULL):
                     continue
+                handed_back = events.last_status == STAGE_OFF_RECTANGLE
+            else:  # not ready: a row fallen past its support's edge, or no contact loop
+                handed_back = events is not None and bool(stepper.fallen.any())
+            if handed_back and not off_rectangle:
+                off_rectangle = True
+                stepper.notes.append(FINITE_SUPPORTS_NOTE)
             t = times[k]
             sol, ev, tau, rows = stepper.evaluate(t, state)
             if stepper.separations(t, sol, rows):
@@ -353,12 +359,11 @@ def reference_note(stepper: Stepper, integrator: str) -> str | None:
 
     The loop of its kind is :class:`ContactLoop` with unilateral rows, :class:`CompiledLoop`
     without; its ``declines`` gives the reason (the integrator, the solver, the controller's
-    registry entry, a joint kind...). Torque saturation and finite supports have notes of
-    their own.
+    registry entry, a joint kind...). Torque saturation has a warning of its own.
     """
     loop = ContactLoop if stepper.unilateral else CompiledLoop
     why = loop.declines(stepper, integrator)
-    if why is None or why == FINITE_SUPPORTS_NOTE or stepper.torque_limit is not None:
+    if why is None or stepper.torque_limit is not None:
         return None
     return REFERENCE_NOTE.format(why=why)
 
