@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+import multiarm_pin.dynamics.force_distribution as fd
 from multiarm_pin.app.scenario import build_scenario, load_scenario
 from multiarm_pin.sim.controllers import make_controller
 
@@ -80,7 +81,6 @@ def test_the_kernel_equals_the_reference_in_every_phase(monkeypatch):
     (the pusher released, the stop alone) the reference's bounded least squares
     (``lsq_linear``) and the kernel's (NNLS on the shifted forces) give the same forces.
     """
-    import multiarm_pin.dynamics.force_distribution as fd
     from multiarm_pin.sim.stepper import Stepper
 
     bounded = []
@@ -119,3 +119,36 @@ def test_the_kernel_reads_the_references_constants():
 
     assert kernel.PRESSING_GAP == phased.PRESSING_GAP
     assert kernel.RANK_TOL == RANK_TOL
+    assert kernel.BEST_EFFORT_SLACK == fd.BEST_EFFORT_SLACK
+
+
+def test_best_effort_forces_are_the_least_norm_ones_at_the_cones_boundary():
+    """A wrench that pushing forces make only with some of them at exactly 0 (the best-effort
+    case): the smallest forces are found, not an arbitrary split, in the reference and the
+    kernel alike. A box on four coplanar table corners under its weight: only the resultant
+    (m g up through the centre) is decided; the smallest forces are m g / 4 each, and the
+    lone side contact, asked for nothing, carries 0."""
+    from multiarm_pin._compiled import phased as kernel
+
+    mg = 4.0 * 9.81
+    corners = np.array([[0.2, 0.15], [-0.2, 0.15], [-0.2, -0.15], [0.2, -0.15]])
+    G = np.zeros((4, 6))  # unit normal forces up at the corners, about the COM (z = -0.1)
+    for j, (x, y) in enumerate(corners):
+        n, r = np.array([0.0, 0.0, 1.0]), np.array([x, y, -0.1])
+        G[j] = np.concatenate([n, np.cross(r, n)])
+    side = np.array([[1.0], [0.0], [0.0], [0.0], [0.1], [0.0]])  # a contact pushing +x
+    W = np.hstack([side, G.T])
+    unilateral = np.ones(5, dtype=bool)
+    margins = np.zeros(5)
+    y = np.array([0.0, 0.5 * mg, 0.0, 0.5 * mg, 0.0])  # diagonal corners: others at 0
+    w = W @ y
+    expected = np.array([0.0] + [mg / 4] * 4)
+    slack = fd.BEST_EFFORT_SLACK * np.abs(w).max()
+    ref = fd._min_norm_forces(W, w, unilateral, np.where(unilateral, margins - slack, 0.0),
+                              1e-9, fd.internal_force_basis(W, "svd"))
+    ref = np.maximum(ref, margins)
+    out = np.empty(5)
+    assert kernel.min_norm_forces(W, w, unilateral, margins - slack, out)
+    out = np.maximum(out, margins)
+    np.testing.assert_allclose(ref, expected, rtol=0, atol=1e-9 * mg)
+    np.testing.assert_allclose(out, expected, rtol=0, atol=1e-9 * mg)

@@ -80,6 +80,9 @@ RANK_TOL = 1e-10
 """Relative singular value below which ``W`` has no range (the value of
 ``multiarm_pin.dynamics.inverse_dynamics.RANK_TOL``, the reference's rank of ``W``)."""
 
+BEST_EFFORT_SLACK = 1e-7
+"""``dynamics.force_distribution.BEST_EFFORT_SLACK``: the relative relaxation of the margins in
+the best-effort distribution's minimum-norm step."""
 PINV_RCOND = 1e-12
 """``rcond`` of the pseudo-inverse of ``G M_o⁻¹ Gᵀ`` (the reference's ``np.linalg.pinv``)."""
 
@@ -618,9 +621,22 @@ def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins
         y[j] += marg[j]
     wx = Wc @ y
     # the smallest such forces making that wrench (the bounded least squares leaves the
-    # internal forces arbitrary); y itself where that solve fails at the cone's boundary
-    if not min_norm_forces(Wc, wx, uni, marg, x):
+    # internal forces arbitrary), the margins relaxed by BEST_EFFORT_SLACK of the wrench's scale
+    # as the reference does (y is strictly feasible then); y itself where that solve fails
+    scale = 1e-12  # of the wrench, which is unique (y is not)
+    for i in range(6):
+        scale = max(scale, abs(wx[i]))
+    for j in range(cols):
+        scale = max(scale, marg[j])
+    relaxed = np.zeros(cols)
+    for j in range(cols):
+        if uni[j]:
+            relaxed[j] = marg[j] - BEST_EFFORT_SLACK * scale
+    if not min_norm_forces(Wc, wx, uni, relaxed, x):
         x[:] = y
+    for j in range(cols):  # back onto the margins (the reference's clip)
+        if uni[j] and x[j] < marg[j]:
+            x[j] = marg[j]
     unreached = w - Wc @ x
     step = np.linalg.solve(M_o, unreached)
     for i in range(6):

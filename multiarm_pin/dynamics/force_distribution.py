@@ -89,13 +89,28 @@ def min_norm_forces(
     if m_vec.shape != (K,) or not (np.all(np.isfinite(m_vec)) and np.all(m_vec >= 0.0)):
         raise InputError(f"margin: expected a finite number >= 0 [N] or {K} of them, got "
                          f"{margin!r}")
-    m_max = float(m_vec.max(initial=0.0))
     if svd_basis is None:
         basis = internal_force_basis(W, "svd")
     elif svd_basis.method != "svd" or svd_basis.A_o.shape[0] != K:
         raise InputError(f"svd_basis: expected the 'svd' basis of a 6 x {K} W_o")
     else:
         basis = svd_basis
+    return _min_norm_forces(W, w, U, np.array(m_vec, dtype=float), tol, basis)
+
+
+BEST_EFFORT_SLACK = 1e-7
+"""Relative relaxation of the margins [N per unit of the wrench's largest entry] in the best-effort
+distribution's minimum-norm step (:func:`distribute_with_supports`): its bounded least
+squares solution meets the margins, some of them exactly (a force at 0), so the least-norm
+problem's feasibility would rest on round-off; with the margins relaxed it is strictly
+feasible, by 1e-7 of the wrench's scale, far above round-off (1e-15) and above the polish's
+active-set tolerance (1e-9). The forces are clipped back onto the margins afterwards."""
+
+
+def _min_norm_forces(W: np.ndarray, w: np.ndarray, U: np.ndarray, m_vec: np.ndarray,
+                     tol: float, basis: InternalForceBasis) -> np.ndarray:
+    """:func:`min_norm_forces` on checked inputs: ``m_vec`` (K,) any finite margins [N]."""
+    m_max = float(m_vec.max(initial=0.0))
     mu_p = basis.W_o_pinv @ w
     miss = np.linalg.norm(W @ mu_p - w)
     if miss > tol * max(np.linalg.norm(w), 1e-12):
@@ -320,10 +335,20 @@ def distribute_with_supports(
         lb = np.where(U, margins, -np.inf)
         x = lsq_linear(S @ W, S @ w, bounds=(lb, np.inf), method="bvls", tol=1e-12).x
         # that wrench by the smallest such forces (the bounded least squares leaves the
-        # internal forces arbitrary; x itself shows they exist)
+        # internal forces arbitrary; x itself shows they exist). x lies on the margins'
+        # boundary where it is bounded, so the margins are relaxed by BEST_EFFORT_SLACK of
+        # the wrench's scale: x is then strictly feasible and the least-distance problem's
+        # verdict does not rest on round-off
+        wx = W @ x  # unique, unlike x (the slack's scale: the same whatever x the LSQ chose)
+        slack = BEST_EFFORT_SLACK * max(float(np.abs(wx).max(initial=0.0)),
+                                        float(margins.max(initial=0.0)), 1e-12)
         try:
-            mu_all = min_norm_forces(W, W @ x, U, margins)
-        except DynamicsError:  # pragma: no cover - round-off at the cone's boundary
+            mu_all = _min_norm_forces(W, wx, U, np.where(U, margins - slack, 0.0),
+                                      1e-9, internal_force_basis(W, "svd"))
+            # back onto the margins (a change of at most the slack; the motion takes the
+            # wrench it changes, below)
+            mu_all = np.where(U, np.maximum(mu_all, margins), mu_all)
+        except DynamicsError:  # pragma: no cover - x is strictly feasible: not reached
             mu_all = x
         unreached = w - W @ mu_all
         a_o = a - np.linalg.solve(b.M_o, unreached)
