@@ -293,20 +293,23 @@ class Study:
         if bar is not None:
             bar.draw()
         last_flush = time.perf_counter()
+        latch = SigintLatch()
         try:
-            for result in runner.results([self.task(c) for c in todo]):
-                row = result["row"]
-                if folder is not None:
-                    folder.write_case(row, result.get("summary"))
-                rows[row["case_id"]] = row
-                if bar is not None:
-                    bar.update(failed=row["status"] != "ok")
-                if on_case is not None:
-                    on_case(row)
-                if folder is not None and \
-                        time.perf_counter() - last_flush > TABLE_FLUSH_INTERVAL:
-                    folder.write_table(rows.values())
-                    last_flush = time.perf_counter()
+            with latch.installed():
+                for result in runner.results([self.task(c) for c in todo]):
+                    row = result["row"]
+                    if folder is not None:
+                        folder.write_case(row, result.get("summary"))
+                    rows[row["case_id"]] = row
+                    if bar is not None:
+                        bar.update(failed=row["status"] != "ok")
+                    if on_case is not None:
+                        on_case(row)
+                    if folder is not None and \
+                            time.perf_counter() - last_flush > TABLE_FLUSH_INTERVAL:
+                        folder.write_table(rows.values())
+                        last_flush = time.perf_counter()
+                    latch.check()  # a Ctrl-C lost on its way (see SigintLatch)
         finally:
             runner.stop()
             if bar is not None:
@@ -314,6 +317,48 @@ class Study:
             if folder is not None and rows:
                 folder.write_table(rows.values())
         return rows_to_table(rows.values())
+
+
+class SigintLatch:
+    """A Ctrl-C remembered until the driver looks (:meth:`check`), even when it was lost.
+
+    Python raises ``KeyboardInterrupt`` wherever the main thread is when SIGINT arrives; in a
+    garbage-collector callback (distributed installs one) the exception is printed as
+    "ignored" and dropped, and the study would run on to its end. The latch's handler notes
+    the signal before raising, so the driver's loop stops at its next result anyway.
+
+    Attributes:
+        hit: a SIGINT arrived while the latch was installed.
+    """
+
+    def __init__(self):
+        self.hit = False
+
+    def check(self) -> None:
+        """Raise ``KeyboardInterrupt`` if a SIGINT arrived (and was lost on its way)."""
+        if self.hit:
+            raise KeyboardInterrupt
+
+    def _handler(self, signum, frame) -> None:
+        self.hit = True
+        raise KeyboardInterrupt
+
+    @contextlib.contextmanager
+    def installed(self):
+        """The latch's SIGINT handler inside the block.
+
+        Only over Python's default handler, in the main thread: a caller's own handler, or an
+        ignored SIGINT, is kept.
+        """
+        if threading.current_thread() is not threading.main_thread() or \
+                signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+            yield self
+            return
+        signal.signal(signal.SIGINT, self._handler)
+        try:
+            yield self
+        finally:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 class _LoopRunner:

@@ -171,3 +171,29 @@ def test_killed_worker_tasks_rerun_elsewhere(client, tmp_path):
     ignored = client.run(lambda: (os.getpid(), signal.getsignal(signal.SIGINT) == signal.SIG_IGN))
     assert len(ignored) == 2 and killed["pid"] not in {pid for pid, _ in ignored.values()}
     assert all(ign for _, ign in ignored.values()), ignored
+
+
+def test_a_ctrl_c_swallowed_on_its_way_still_stops_the_driver():
+    """A SIGINT whose KeyboardInterrupt is dropped where it was raised (as in a garbage
+    collector callback, which Python reports as "ignored") is remembered: the driver's next
+    check raises it. Outside the block, SIGINT has Python's default handler again."""
+    from multiarm_pin.study.execution import SigintLatch
+
+    latch = SigintLatch()
+    with latch.installed():
+        latch.check()  # nothing yet
+        try:  # the swallowing callback
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(1.0)  # the handler runs at the next bytecode boundary
+        except KeyboardInterrupt:
+            pass
+        with pytest.raises(KeyboardInterrupt):
+            latch.check()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    latch2 = SigintLatch()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # a caller's choice is kept
+    try:
+        with latch2.installed():
+            assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
