@@ -118,3 +118,26 @@ def test_zero_torque_with_arms_runs_on_the_contact_loop_as_on_the_stepper(monkey
     fast, ref = runs
     assert fast.events and not [w for w in fast.warnings if "reference" in w]
     assert_same_contact_run(fast, ref, 1e-9)
+
+
+@pytest.mark.parametrize(("name", "duration", "tol", "support_block"), [
+    ("box_on_table", 0.4, 1e-9, 0),
+    # to 0.2 s: the first separation (0.15 s); later, first-order steps make its tips chatter
+    # past MAX_EVENTS_PER_STEP at 0.254 s, on the stepper as in the kernel
+    ("grasp_failure", 0.2, 1e-7, None),
+])
+def test_semi_implicit_runs_with_events_equal_the_python_stepper(name, duration, tol,
+                                                                 support_block, monkeypatch):
+    """Semi-implicit Euler in the contact loop (``Stepper.step``'s other branch, its events
+    located with the same steps): the stepper's events and samples; and a first-order run,
+    far from RK4's."""
+    fast, calls = run_scenario(name, duration, "contact", monkeypatch,
+                               integrator="semi_implicit")
+    ref, _ = run_scenario(name, duration, False, monkeypatch, integrator="semi_implicit")
+    rk4, _ = run_scenario(name, duration, True, monkeypatch)
+    assert calls, "the contact loop did not run"
+    assert fast.integrator == "semi_implicit" and ref.events, "the run should have events"
+    assert_same_contact_run(fast, ref, tol, support_block=support_block)
+    assert fast.warnings == ref.warnings
+    assert not [w for w in fast.warnings if "reference (numpy) stepper" in w]
+    assert rel_err(fast.object_position, rk4.object_position) > 1e-7

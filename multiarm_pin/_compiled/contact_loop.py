@@ -1,9 +1,9 @@
-"""Compiled event-driven RK4 with unilateral contacts: the stepper's events in one call.
+"""Compiled event-driven steps with unilateral contacts: the stepper's events in one call.
 
-Mirrors, for RK4, :class:`multiarm_pin.sim.stepper.Stepper` (``evaluate`` on the active set,
-``separations``, ``advance_with_events``, ``_impact``, ``_separate``) and
-:mod:`multiarm_pin.sim.event_location` (``illinois``, ``release``, ``locate_separation``,
-``locate_touchdown``), with the rules and tolerances of
+Mirrors, for RK4 and semi-implicit Euler, :class:`multiarm_pin.sim.stepper.Stepper`
+(``evaluate`` on the active set, ``separations``, ``advance_with_events``, ``_impact``,
+``_separate``) and :mod:`multiarm_pin.sim.event_location` (``illinois``, ``release``,
+``locate_separation``, ``locate_touchdown``), with the rules and tolerances of
 :mod:`multiarm_pin.sim.contact_events` passed in :data:`EVENT_CONSTANTS` order, so that a run
 with fingertips or supports, separations, touchdowns and impacts is one compiled call per
 stretch of samples instead of thousands of Python evaluations. It takes:
@@ -63,6 +63,7 @@ from multiarm_pin._compiled.closed_loop import (
     STAGE_OK,
     STAGE_SOLVE,
     _advance,
+    _advance_semi_implicit,
     joint_pd,
     record_energy,
     record_state,
@@ -100,6 +101,7 @@ from multiarm_pin._compiled.layout import (
     P_MASS,
     P_OBJECT_RCOND_TOL,
     P_RCOND_TOL,
+    P_SEMI_IMPLICIT,
     PLANE_HALF_EXTENT,
     PLANE_POINT,
     PLANE_X_AXIS,
@@ -292,6 +294,24 @@ def _rows_and_blocks(x, sy, wk):  # pragma: no cover - compiled
             if not math.isfinite(phi[b, r] + phi_dot[b, r] + cc[b, r]):
                 return False
     return True
+
+
+@njit(cache=True, error_model="numpy")
+def _copy1(dst, src):  # pragma: no cover - compiled
+    """``dst[:] = src`` for two vectors of one length, element by element.
+
+    numba's slice assignment compiles its shape checks and their messages at every type.
+    """
+    for i in range(src.shape[0]):
+        dst[i] = src[i]
+
+
+@njit(cache=True, error_model="numpy")
+def _copy2(dst, src):  # pragma: no cover - compiled
+    """``dst[:] = src`` for two matrices of one shape, element by element."""
+    for i in range(src.shape[0]):
+        for j in range(src.shape[1]):
+            dst[i, j] = src[i, j]
 
 
 @njit(cache=True, error_model="numpy")
@@ -617,9 +637,16 @@ def _illinois(theta, value, lo, f_lo, hi, f_hi, side):  # pragma: no cover - com
     return lo, f_lo, theta, value, -1
 @njit(cache=True, error_model="numpy")
 def _step(t, x, d1, h, active, sy, ctl, wk, out, rk, x_new, fn):  # pragma: no cover - compiled
-    """RK4 from ``x`` (tangent ``d1`` there) with step ``h`` into ``x_new`` (``Stepper.step``)."""
+    """One step ``h`` [s] from ``x`` (tangent ``d1`` there) into ``x_new`` (``Stepper.step``).
+
+    RK4, or semi-implicit Euler when ``params[P_SEMI_IMPLICIT]`` is 1 (the step from ``d1``
+    alone: :func:`~multiarm_pin._compiled.closed_loop._advance_semi_implicit`).
+    """
     model_ints = sy[0]
-    d2, d3, d4, hd, xs, dsum = rk
+    d2, d3, d4, hd, xs, dsum, rot = rk
+    if sy[6][P_SEMI_IMPLICIT] == 1.0:
+        _advance_semi_implicit(model_ints, x, d1, h, hd[:sy[7][DIMS_NV]], rot, x_new)
+        return STAGE_OK
     for stage in range(3):  # one call site of the stage: t + h/2, t + h/2, t + h
         hs = h if stage == 2 else 0.5 * h
         _advance(model_ints, x, d1 if stage == 0 else (d2 if stage == 1 else d3), hs, hd, xs)
@@ -724,9 +751,9 @@ def _evaluate_start(t, x, active, sy, ctl, wk, out, st0, keep, use_keep, ev, n_e
         if attempt == 1 or not _separations(t, active, out[2], out[3], wk[14], wk[15], keep,
                                             use_keep, uni_c, rules, ev, n_ev):
             break
-    phi0[:] = wk[14]
-    mu0[:] = out[2]
-    phi_dd0[:] = out[3]
+    _copy2(phi0, wk[14])
+    _copy2(mu0, out[2])
+    _copy2(phi_dd0, out[3])
     return STAGE_OK, solver
 
 
@@ -805,7 +832,7 @@ def _impact(t, x, watch, active, sy, wk, imp, ev, n_ev, joined, fn):  # pragma: 
 @njit(cache=True, error_model="numpy")
 def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev, fn
                          ):  # pragma: no cover - compiled
-    """``Stepper.advance_with_events`` (RK4): ``x`` to ``t_end`` with its events, in place.
+    """``Stepper.advance_with_events``: ``x`` to ``t_end`` with its events, in place.
 
     ``st0`` holds the start of the step (``d1``, ``mu0``, ``phi_dd0`` of the evaluation at
     ``(t, x)``), ``loc`` the location workspace.
@@ -837,8 +864,8 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
             if st != STAGE_OK:
                 return st
             end_eval = True
-            mu_end[:] = out[2]
-            phi_dd_end[:] = out[3]
+            _copy2(mu_end, out[2])
+            _copy2(phi_dd_end, out[3])
             both = False
             for b in range(B):
                 for r in range(R):
@@ -853,8 +880,8 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
                     end_eval = False  # new moves to the separation
                     # illinois(band=None, bisect_every=3) from [0, 1], payload (state, μ)
                     lo, hi = 0.0, 1.0
-                    s_hi[:] = new
-                    mu_hi[:] = mu_end
+                    _copy1(s_hi, new)
+                    _copy2(mu_hi, mu_end)
                     side = 0
                     for it in range(int(rules[R_MAX_ITER])):
                         if (hi - lo) * h < rules[R_SEP_TIME]:
@@ -874,12 +901,12 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
                         lo, f_lo, hi, f_hi, side = _illinois(theta, value, lo, f_lo, hi, f_hi,
                                                              side)
                         if side == -1:  # the iterate is the new upper end: its payload
-                            s_hi[:] = s_e
-                            mu_hi[:] = out[2]
+                            _copy1(s_hi, s_e)
+                            _copy2(mu_hi, out[2])
                     for b in range(B):
                         for r in range(R):
                             leaving[b, r] = rows_sep[b, r] and mu_hi[b, r] <= 0.0
-                    new[:] = s_hi
+                    _copy1(new, s_hi)
                     h = hi * h
                     sep = True
         # touchdowns: watched rows (not far below the band at the step's start)
@@ -908,12 +935,12 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
                     return STAGE_NOT_FINITE
         if g_hi >= -tol:
             if not sep:
-                x[:] = new
+                _copy1(x, new)
                 # the end's evaluation is the next sample's (the stepper's cache)
                 memo[0] = 1 if end_eval else 0
                 return STAGE_OK
             t = t + h
-            x[:] = new
+            _copy1(x, new)
             # Stepper._separate: the leaving rows' events with their rates at (t, x)
             if not fn[1](x, sy, wk):
                 return STAGE_NOT_FINITE
@@ -937,7 +964,7 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
             return st
         t = t + theta * h
         if theta > 0.0:
-            x[:] = s_e
+            _copy1(x, s_e)
         st = _impact(t, x, watch, active, sy, wk, imp, ev, n_ev, joined, fn)
         if st != STAGE_OK:
             return st
@@ -1075,7 +1102,7 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
             configuration and onsets, scratch).
         wk: the workspace of one evaluation (arm terms, buffer, stacked blocks, rows).
         out: the outputs of one evaluation (solution, torques, plan).
-        rk: the RK4 workspace.
+        rk: the step's workspace (RK4 stages, the semi-implicit step's rotation).
         st0: the start of a step (tangent, multipliers, rates, gaps, reuse memo).
         loc: the event-location workspace.
         imp: the impact workspace.
@@ -1113,7 +1140,7 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         t = times[s]
         reuse = st0[4][0] == 1 and s > k0
         if reuse:
-            st0[0][:] = loc[10]  # the end's tangent
+            _copy1(st0[0], loc[10])  # the end's tangent
         st, solver = _evaluate_start(t, x, active, sy, ctl, wk, out, st0, loc[9],
                                      np.bool_(False), ev, n_ev, reuse, fn)
         if st != STAGE_OK:
@@ -1121,18 +1148,18 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         _record_sample(s, t, x, active, sy, wk, out, solver, Rec)
         if s == times.shape[0] - 1:
             return STAGE_OK, s + 1
-        x0[:] = x
-        active0[:] = active
-        q_hold0[:] = q_hold
+        _copy1(x0, x)
+        _copy2(active0, active)
+        _copy1(q_hold0, q_hold)
         n0, holding0, onsets0 = n_ev[0], control[CTL_HOLDING], n_onsets[0]
         st = advance(t, x, times[s + 1], active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev,
                      fn)
         if st == STAGE_OK and off_rectangles(x, sy[10], sy[12]):
             st = STAGE_OFF_RECTANGLE  # the step ends off a rectangle: the stepper's (off edge)
         if st != STAGE_OK:
-            x[:] = x0
-            active[:] = active0
-            q_hold[:] = q_hold0
+            _copy1(x, x0)
+            _copy2(active, active0)
+            _copy1(q_hold, q_hold0)
             n_ev[0], control[CTL_HOLDING], n_onsets[0] = n0, holding0, onsets0
             return st, s
     return STAGE_OK, k1

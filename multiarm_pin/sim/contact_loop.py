@@ -1,8 +1,9 @@
-"""The compiled contact loop of :func:`~multiarm_pin.sim.simulation.simulate`: RK4 with events.
+"""The compiled contact loop of :func:`~multiarm_pin.sim.simulation.simulate`: steps with events.
 
-When a run has unilateral rows (fingertips or supports), RK4, arms the compiled rigid-body pass
-supports (or no arms), and zero torque, an :class:`~multiarm_pin.sim.controllers.ObjectPD` on
-its compiled path or a :class:`~multiarm_pin.sim.controllers.PhasedPD`, :class:`ContactLoop`
+When a run has unilateral rows (fingertips or supports), RK4 or semi-implicit Euler, arms the
+compiled rigid-body pass supports (or no arms), and zero torque, an
+:class:`~multiarm_pin.sim.controllers.ObjectPD` on its compiled path or a
+:class:`~multiarm_pin.sim.controllers.PhasedPD`, :class:`ContactLoop`
 runs stretches of samples, separations, touchdowns
 and impacts included, in one call of
 :func:`multiarm_pin._compiled.contact_loop.run_contact_rk4`, which mirrors the
@@ -86,16 +87,17 @@ def _read_only(a: np.ndarray) -> np.ndarray:
 
 
 class ContactLoop:
-    """Stretches of RK4 steps with contact events in single compiled calls (see the module).
+    """Stretches of steps with contact events in single compiled calls (see the module).
 
     Use :meth:`for_run`, which returns None when the run is not of the kind the kernel does.
 
     Args:
         stepper: the run's stepper (its system, controller, Baumgarte gains, wrench, active
             set and events).
+        integrator: ``"rk4"`` or ``"semi_implicit"`` (``Stepper.step``'s two branches).
     """
 
-    def __init__(self, stepper):
+    def __init__(self, stepper, integrator: str = "rk4"):
         from multiarm_pin.dynamics.object_first import DEFAULT_RCOND_TOL, OBJECT_RCOND_TOL
         from multiarm_pin.sim.controllers import controller_kernel
 
@@ -130,6 +132,7 @@ class ContactLoop:
             dims = _i64(layout.dims_vector(1, 0, 0, 0))
             N, nv_arm = np.zeros(0, np.int64), np.zeros(0, np.int64)
             buf = np.zeros(0)
+        params = layout.with_integrator(params, integrator)
         if stepper.baumgarte is not None:
             params = layout.with_baumgarte(params, *stepper.baumgarte)
         kc = k if n else table.nv_max_blocks
@@ -150,7 +153,7 @@ class ContactLoop:
                   np.zeros((B, R)), np.zeros((B, R)), np.zeros((B, R, 3)),
                   np.zeros((B, R, 3)))
         self.K = (np.zeros(nd), np.zeros(nd), np.zeros(nd), np.zeros(nd), np.zeros(nx),
-                  np.zeros(nd))
+                  np.zeros(nd), np.zeros((3, 3)))
         self.Z = (np.zeros(nd), np.zeros((B, R)), np.zeros((B, R)), np.zeros((B, R)),
                   np.zeros(2, np.int64))
         boolean = np.zeros((B, R), dtype=bool)
@@ -187,8 +190,9 @@ class ContactLoop:
     def declines(cls, stepper, integrator: str) -> str | None:
         """Why a run is not of the kind the kernel does, or None when it is.
 
-        It does: RK4, unilateral rows (fingertips or supports), arms whose every joint the
-        compiled rigid-body pass supports (or none), a controller whose registry entry's
+        It does: RK4 or semi-implicit Euler, unilateral rows (fingertips or supports), arms
+        whose every joint the compiled rigid-body pass supports (or none), a controller whose
+        registry entry's
         kernel (:func:`~multiarm_pin.sim.controllers.controller_kernel`) is one of
         :data:`CONTROLLER_KERNELS`, and no external wrench or a
         :class:`~multiarm_pin.sim.disturbances.WrenchSchedule` itself (its intervals are the
@@ -202,8 +206,9 @@ class ContactLoop:
         from multiarm_pin.sim.controllers import controller_kernel
 
         s = stepper.system
-        if integrator != "rk4":
-            return f"integrator {integrator!r} has no compiled loop (RK4 only)"
+        if integrator not in ("rk4", "semi_implicit"):
+            return (f"integrator {integrator!r} has no compiled loop (RK4 and semi-implicit "
+                    "Euler only)")
         if not stepper.unilateral:
             return "a system without unilateral rows is the closed loop's"
         if stepper.torque_limit is not None:
@@ -223,7 +228,7 @@ class ContactLoop:
     @classmethod
     def for_run(cls, stepper, integrator: str) -> ContactLoop | None:
         """The contact loop of a run, or None when :meth:`declines` gives a reason."""
-        return None if cls.declines(stepper, integrator) else cls(stepper)
+        return None if cls.declines(stepper, integrator) else cls(stepper, integrator)
 
     def ready(self, state: SystemState) -> bool:
         """True when the kernel can take the steps from ``state``.

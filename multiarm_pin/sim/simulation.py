@@ -29,14 +29,14 @@ event is in :attr:`SimulationResult.events`. ``rk45`` (adaptive, not event-aware
 systems without unilateral rows. Systems without unilateral rows use the bilateral solvers as
 before.
 
-With RK4, runs of the kinds they take go to the compiled loops, which record the same
-samples and events: :class:`~multiarm_pin.sim.compiled_loop.CompiledLoop` while every contact
-touches (arms, no supports), :class:`~multiarm_pin.sim.contact_loop.ContactLoop` otherwise
-(separations, touchdowns and impacts in the kernel); a step either hands back is taken by the
-stepper. With a support of finite ``extent`` the steps with a support point off its
-rectangle at either end (off-edge events) are the stepper's; a run with such a step says so
-once in its warnings (``FINITE_SUPPORTS_NOTE``), a run whose points all stay on their
-rectangles does not.
+With RK4 or semi-implicit Euler, runs of the kinds they take go to the compiled loops, which
+record the same samples and events: :class:`~multiarm_pin.sim.compiled_loop.CompiledLoop` while
+every contact touches (arms, no supports), :class:`~multiarm_pin.sim.contact_loop.ContactLoop`
+otherwise (separations, touchdowns and impacts in the kernel); a step either hands back is taken
+by the stepper. With a support of finite ``extent`` the steps with a support point off its
+rectangle at either end (off-edge events) are the stepper's; a run with such a step says so once
+in its warnings (``FINITE_SUPPORTS_NOTE``), a run whose points all stay on their rectangles does
+not.
 
 This module holds :func:`simulate` (input checks, the time grid, the rk45 driver); the
 evaluations, fixed steps and events are :class:`~multiarm_pin.sim.stepper.Stepper`'s, the
