@@ -36,11 +36,13 @@ KERNEL_TESTS := tests/test_kernels.py tests/test_arm_set_fast_path.py tests/test
 	tests/model/test_rigid_body.py tests/test_compiled_loop.py tests/test_object_pd_touching.py \
 	tests/test_contact_loop_kernel.py
 
-## The whole test suite (installs headless Chromium for the browser test when it can),
-## then the compiled kernels' tests again without compilation (bounds-checked). The first
-## pass lists its 25 slowest tests, so that a CI log shows where the suite's time goes.
+## The whole test suite (installs headless Chromium for the browser test when it can), on two
+## worker processes (pytest-xdist, a test file per worker at a time: numba compiles each
+## kernel on one core, so two processes use both), then the compiled kernels' tests again
+## without compilation (bounds-checked). The first pass lists its 25 slowest tests, so that a
+## CI log shows where the suite's time goes.
 test: $(STAMP) browser
-	$(VENV)/bin/python -m pytest -q --durations=25
+	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile --durations=25
 	NUMBA_DISABLE_JIT=1 $(VENV)/bin/python -m pytest -q -p no:cacheprovider $(KERNEL_TESTS)
 
 ## The round-off-sensitive tests (grasp, solvers, unilateral contacts, events) under other
