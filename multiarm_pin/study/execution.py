@@ -129,9 +129,12 @@ def local_cluster(workers: int):
         with dask.config.set(LOCAL_CLUSTER_CONFIG), _workers_ignore_sigint(), \
                 deferred_signals((signal.SIGINT,)):
             # the scheduler's HTTP server (no dashboard) on a free local port: no warning
-            # when another cluster holds Dask's default port
+            # when another cluster holds Dask's default port. Its processes log only
+            # CRITICAL: at a Ctrl-C the scheduler closes while a worker may be sending its
+            # heartbeat, which distributed logs as an ERROR with two tracebacks; a case that
+            # fails or a worker that dies is the study's own row (status and error)
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=logging.ERROR,
+                                   dashboard_address=None, silence_logs=logging.CRITICAL,
                                    scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
     except BaseException:  # a Ctrl-C held during the start arrives as it ends
         if cluster is not None:
