@@ -50,12 +50,16 @@ class ForceDistribution:
     min_unilateral: float
 
 
+MIN_NORM_TOL = 1e-9
+"""Relative tolerance of :func:`min_norm_forces` (reachability of the wrench, feasibility)."""
+
+
 def min_norm_forces(
     W_o,
     wrench,
     unilateral,
     margin: float | np.ndarray = 0.0,
-    tol: float = 1e-9,
+    tol: float = MIN_NORM_TOL,
     svd_basis: InternalForceBasis | None = None,
 ) -> np.ndarray:
     """Smallest multipliers producing ``wrench`` with every unilateral one >= ``margin``.
@@ -325,8 +329,10 @@ def distribute_with_supports(
     m_arm = (np.full(len(U_arm), float(margin)) if np.ndim(margin) == 0
              else b.flatten_mu(np.asarray(margin, dtype=float)))
     margins = np.concatenate([np.where(U_arm, m_arm, 0.0), sm[P]])
+    w_basis = internal_force_basis(W, "svd") if W.shape[1] else None  # for both solves
     try:
-        mu_all = min_norm_forces(W, w_r, U, margins) if W.shape[1] else np.zeros(0)
+        mu_all = (min_norm_forces(W, w_r, U, margins, svd_basis=w_basis) if W.shape[1]
+                  else np.zeros(0))
     except DynamicsError:
         if not best_effort:
             raise
@@ -344,7 +350,7 @@ def distribute_with_supports(
                                         float(margins.max(initial=0.0)), 1e-12)
         try:
             mu_all = _min_norm_forces(W, wx, U, np.where(U, margins - slack, 0.0),
-                                      1e-9, internal_force_basis(W, "svd"))
+                                      MIN_NORM_TOL, w_basis)
             # back onto the margins (a change of at most the slack; the motion takes the
             # wrench it changes, below)
             mu_all = np.where(U, np.maximum(mu_all, margins), mu_all)

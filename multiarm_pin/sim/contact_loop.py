@@ -192,8 +192,7 @@ class ContactLoop:
 
         It does: RK4 or semi-implicit Euler, unilateral rows (fingertips or supports), arms
         whose every joint the compiled rigid-body pass supports (or none), a controller whose
-        registry entry's
-        kernel (:func:`~multiarm_pin.sim.controllers.controller_kernel`) is one of
+        registry entry's kernel (:func:`~multiarm_pin.sim.controllers.controller_kernel`) is one of
         :data:`CONTROLLER_KERNELS`, and no external wrench or a
         :class:`~multiarm_pin.sim.disturbances.WrenchSchedule` itself (its intervals are the
         kernel's table; a subclass with its own ``__call__`` is not), and no torque
