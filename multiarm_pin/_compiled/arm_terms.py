@@ -10,10 +10,11 @@ placement and twist, written into the arm segments of the flat buffer
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from multiarm_pin._compiled.jit import kernel
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def arm_terms(J_world, dJ_world, M_full, nle_full, v, H, idx, nv_arm, support,
               M, nle, J, Jdq, p, R, twist, vp):  # pragma: no cover - compiled
     """Stacked, padded arm terms from the combined Pinocchio model's arrays (``ArmSet.evaluate``).

@@ -9,8 +9,8 @@ vector, all laid out in :mod:`multiarm_pin._compiled.layout`.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.layout import (
     P_BAUMGARTE_ALPHA,
     P_BAUMGARTE_BETA,
@@ -26,7 +26,7 @@ from multiarm_pin._compiled.layout import (
 )
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def assemble(J, Jdq, nle, tau_padded, rows, params, obj_R, obj_twist, h, W, W_o, c, M_o,
              h_o):  # pragma: no cover - compiled
     """The padded blocks (``MultiArmSystem.blocks``) from arm terms and constraint rows.
@@ -81,7 +81,7 @@ def assemble(J, Jdq, nle, tau_padded, rows, params, obj_R, obj_twist, h, W, W_o,
     object_terms(mass, inertia_body, gravity, obj_R, obj_twist, M_o, h_o)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def object_terms(mass, inertia_body, gravity, obj_R, obj_twist, M_o, h_o
                  ):  # pragma: no cover - compiled
     """The object's ``M_o = diag(m I, R I_c Rᵀ)`` and ``h_o = [m g; -ω × I_w ω]``.

@@ -33,11 +33,11 @@ import math
 
 import numba
 import numpy as np
-from numba import njit
 
 from multiarm_pin._compiled.controller_kernels import PD_OK, object_pd_step
 from multiarm_pin._compiled.evaluate import evaluate_system, quaternion_rotation
 from multiarm_pin._compiled.function_pointers import pointer
+from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.layout import (
     DIMS_K,
     DIMS_M,
@@ -98,7 +98,7 @@ NULL_KD = 1
 """``null_gains[NULL_KD]``: its damping ``null_kd`` [1/s]."""
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def wrench_at(t, wrenches, a):  # pragma: no cover - compiled
     """Component ``a`` of the external wrench at ``t`` [s] (``WrenchSchedule.__call__``).
 
@@ -111,7 +111,7 @@ def wrench_at(t, wrenches, a):  # pragma: no cover - compiled
     return out
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def joint_pd(err, x, v_starts, nv_arm, kp, kd, z):  # pragma: no cover - compiled
     """``object_pd``'s joint-space PD ``z = pad(kp err - kd v)`` (n, k) into ``z``.
 
@@ -135,7 +135,7 @@ def joint_pd(err, x, v_starts, nv_arm, kp, kd, z):  # pragma: no cover - compile
                 z[i, a] = 0.0
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def tangent(x, nv, nv_arm, v_starts, qdd, a_o, d):  # pragma: no cover - compiled
     """The tangent ``d`` (2 nv + 13,) ``[q̇; v̇; ṗ; q̇uat; ȧ]`` of ``x`` (``Stepper.derivative``).
 
@@ -167,7 +167,7 @@ def tangent(x, nv, nv_arm, v_starts, qdd, a_o, d):  # pragma: no cover - compile
         d[b + 7 + a] = a_o[a]
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def closed_loop_stage(t, x, arm_pass, model_ints, model_floats, q_ref, err, J, dJ, M, nle, H,
                       energy, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
                       unilateral, traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains,
@@ -286,7 +286,7 @@ def stage_function(x, model_ints, model_floats, q_ref, arm_ints, v_starts, ints,
     return pointer(closed_loop_stage, example, numba.types.int64)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _advance(model_ints, x, d, h, hd, out):  # pragma: no cover - compiled
     """The state ``h`` [s] along the tangent ``d`` into ``out`` (``Stepper.advance``)."""
     nv = (d.shape[0] - OBJECT_STATE_SIZE) // 2
@@ -314,7 +314,7 @@ def _advance(model_ints, x, d, h, hd, out):  # pragma: no cover - compiled
         out[X_TWIST + a] = x[X_TWIST + a] + hd[b + 7 + a]
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _advance_semi_implicit(model_ints, x, d, h, v_new, R, out):  # pragma: no cover - compiled
     """One semi-implicit Euler step ``h`` [s] of ``x`` with the tangent ``d`` into ``out``.
 
@@ -389,7 +389,7 @@ def _advance_semi_implicit(model_ints, x, d, h, v_new, R, out):  # pragma: no co
             out[o + a] = -out[o + a]
 
 
-@njit(cache=True, error_model="numpy", nogil=True)  # monitors check beside it
+@kernel(nogil=True)  # monitors check beside it
 def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_starts, ints,
             floats, params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
             hold_obj, hold_n, gains, active, wrenches, separation, work_J, work_dJ, work_M,
@@ -531,7 +531,7 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
     return STAGE_OK, k1
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _record(s, t, x, nq, nv, N, nv_arm, v_starts, unilateral, wrenches, separation, params,
             buf, tau, energy, r_q, r_v, r_p, r_quat, r_tw, r_tau, r_mu, r_phi, r_phi_dot,
             r_points, r_normals, r_a_o, r_qdd, r_violation, r_wrench, r_kinetic, r_potential,
@@ -570,7 +570,7 @@ def _record(s, t, x, nq, nv, N, nv_arm, v_starts, unilateral, wrenches, separati
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def record_state(s, t, x, nq, nv, nv_arm, v_starts, tau, qdd, a_o, wrenches, r_q, r_v, r_p,
                  r_quat, r_tw, r_tau, r_qdd, r_a_o, r_wrench):  # pragma: no cover - compiled
     """Record sample ``s``'s state ``x``, torques, accelerations and external wrench.
@@ -599,7 +599,7 @@ def record_state(s, t, x, nq, nv, nv_arm, v_starts, tau, qdd, a_o, wrenches, r_q
             r_qdd[s, j] = qdd[i, a]
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def record_energy(s, x, params, energy, arms, r_kinetic, r_potential, r_momentum
                   ):  # pragma: no cover - compiled
     """Record sample ``s``'s kinetic and potential energy and momentum.

@@ -12,8 +12,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.layout import (
     CF_CURVATURE_RADIUS,
     CF_CURVATURE_SIGN,
@@ -37,7 +37,7 @@ from multiarm_pin._compiled.layout import (
 )
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def constraint_rows(tool_p, tool_R, tool_twist, obj_p, obj_R, obj_twist, ints, floats,
                     rows):  # pragma: no cover - compiled
     """Every contact's row (``ConstraintSet.evaluate``), packed into ``rows`` (n, m, ROW_WIDTH).

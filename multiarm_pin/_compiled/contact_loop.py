@@ -52,7 +52,6 @@ import math
 
 import numba
 import numpy as np
-from numba import njit
 
 from multiarm_pin._compiled.assembly import object_terms
 from multiarm_pin._compiled.closed_loop import (
@@ -87,6 +86,7 @@ from multiarm_pin._compiled.evaluate import (
     quaternion_rotation,
 )
 from multiarm_pin._compiled.function_pointers import pointer, type_key
+from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.layout import (
     DIMS_K,
     DIMS_M,
@@ -172,7 +172,7 @@ the mixed LCP's tolerances)."""
 
 
 # ------------------------------------------------------------------ one evaluation
-@njit(cache=True, error_model="numpy")
+@kernel
 def _support_rows(x, sp_p, sp_n, sp_a, params, b, rows_phi, rows_phi_dot, pts, nrm, W_o,
                   c):  # pragma: no cover - compiled
     """The support rows of block ``b`` at ``x`` (``SupportSet.evaluate`` and the stacking).
@@ -213,7 +213,7 @@ def _support_rows(x, sp_p, sp_n, sp_a, params, b, rows_phi, rows_phi_dot, pts, n
         c[b, j] = cs
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _object_terms(x, params, M_o, h_o):  # pragma: no cover - compiled
     """``M_o``, ``h_o`` of the object alone at ``x`` (:func:`~.assembly.object_terms`)."""
     R = np.empty((3, 3))
@@ -222,7 +222,7 @@ def _object_terms(x, params, M_o, h_o):  # pragma: no cover - compiled
                  params[P_GRAVITY:P_GRAVITY + 3], R, x[X_TWIST:X_TWIST + 6], M_o, h_o)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _rows_and_blocks(x, sy, wk):  # pragma: no cover - compiled
     """Every row and the stacked blocks at ``x``, at zero torque (no controller call).
 
@@ -296,7 +296,7 @@ def _rows_and_blocks(x, sy, wk):  # pragma: no cover - compiled
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _copy1(dst, src):  # pragma: no cover - compiled
     """``dst[:] = src`` for two vectors of one length, element by element.
 
@@ -306,7 +306,7 @@ def _copy1(dst, src):  # pragma: no cover - compiled
         dst[i] = src[i]
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _copy2(dst, src):  # pragma: no cover - compiled
     """``dst[:] = src`` for two matrices of one shape, element by element."""
     for i in range(src.shape[0]):
@@ -314,7 +314,7 @@ def _copy2(dst, src):  # pragma: no cover - compiled
             dst[i, j] = src[i, j]
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _all_touching(active, N):  # pragma: no cover - compiled
     """True when every arm row (``r < N[i]``) is active."""
     for i in range(N.shape[0]):
@@ -324,7 +324,7 @@ def _all_touching(active, N):  # pragma: no cover - compiled
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compiled
     """The controller's torques ``out.tau`` (n, k) at ``(t, x)`` on the buffer at zero torque.
 
@@ -403,7 +403,7 @@ def _torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compiled
     return STAGE_OK
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _phased_torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compiled
     """``phased_pd``'s torques ``out.tau`` (the arguments as :func:`_torques`'s).
 
@@ -453,7 +453,7 @@ def _phased_torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compi
     return STAGE_OK
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def off_rectangles(x, sp_p, planes):  # pragma: no cover - compiled
     """True when some support row's point at ``x`` is not inside its support's rectangle.
 
@@ -485,7 +485,7 @@ def off_rectangles(x, sp_p, planes):  # pragma: no cover - compiled
     return False
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _zero_torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compiled
     """No controller: zero torques ``out.tau`` (the arguments as :func:`_torques`'s)."""
     tau = out[5]
@@ -495,7 +495,7 @@ def _zero_torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compile
     return STAGE_OK
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def contact_stage(t, x, active, sy, ctl, wk, out, d, torques, lcp
                   ):  # pragma: no cover - compiled
     """One evaluation at ``(t, x)`` on the active set, and its tangent ``d``.
@@ -590,9 +590,9 @@ def stage_functions(x, active, sy, ctl, wk, out, d):
         return found
     int64 = numba.types.int64
     rules = sy[19]
-    kernel = (_torques if mode == CONTROL_OBJECT_PD
-              else _phased_torques if mode == CONTROL_PHASED else _zero_torques)
-    torques = pointer(kernel, (0.0, x, active, sy, ctl, wk, out), int64)
+    torque_kernel = (_torques if mode == CONTROL_OBJECT_PD
+                     else _phased_torques if mode == CONTROL_PHASED else _zero_torques)
+    torques = pointer(torque_kernel, (0.0, x, active, sy, ctl, wk, out), int64)
     a_o, qdd_c, mu, Av = out[0], out[1], out[2], out[4]
     lcp = pointer(contact_kernel,
                   (wk[7], wk[8], wk[9], wk[10], wk[11], wk[12], a_o, sy[15], sy[16], sy[13],
@@ -621,7 +621,7 @@ def advance_function(x, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev, f
 
 
 # ------------------------------------------------------------------ steps and events
-@njit(cache=True, error_model="numpy")
+@kernel
 def _illinois(theta, value, lo, f_lo, hi, f_hi, side):  # pragma: no cover - compiled
     """One update of ``event_location.illinois``'s bracket with the iterate ``(θ, value)``.
 
@@ -635,7 +635,7 @@ def _illinois(theta, value, lo, f_lo, hi, f_hi, side):  # pragma: no cover - com
     if side == -1:
         f_lo *= 0.5
     return lo, f_lo, theta, value, -1
-@njit(cache=True, error_model="numpy")
+@kernel
 def _step(t, x, d1, h, active, sy, ctl, wk, out, rk, x_new, fn):  # pragma: no cover - compiled
     """One step ``h`` [s] from ``x`` (tangent ``d1`` there) into ``x_new`` (``Stepper.step``).
 
@@ -660,7 +660,7 @@ def _step(t, x, d1, h, active, sy, ctl, wk, out, rk, x_new, fn):  # pragma: no c
     return STAGE_OK
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _min_gap(x, watch, sy, wk, fn):  # pragma: no cover - compiled
     """The smallest gap [m] of the ``watch`` rows at ``x`` (``Stepper.gaps``), NaN if not finite."""
     if not fn[1](x, sy, wk):
@@ -674,7 +674,7 @@ def _min_gap(x, watch, sy, wk, fn):  # pragma: no cover - compiled
     return g
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _release(mu, phi_dd, rows, rules):  # pragma: no cover - compiled
     """``event_location.release``: ``-max φ̈`` of the force-free lifting rows, else Σ μ."""
     lift = False
@@ -693,7 +693,7 @@ def _release(mu, phi_dd, rows, rules):  # pragma: no cover - compiled
     return max(total, rules[R_RESTING_RELEASE])
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _event(ev, n_ev, t, kind, b, r, before, after, impulse, rebound):  # pragma: no cover
     """Append one event to the table (``Stepper._event``)."""
     j = n_ev[0]
@@ -708,7 +708,7 @@ def _event(ev, n_ev, t, kind, b, r, before, after, impulse, rebound):  # pragma:
     n_ev[0] = j + 1
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _separations(t, active, mu, phi_dd, phi, phi_dot, keep, use_keep, uni_c, rules, ev,
                  n_ev):  # pragma: no cover - compiled
     """``Stepper.separations``: drop active unilateral rows that let go; True if any did."""
@@ -726,7 +726,7 @@ def _separations(t, active, mu, phi_dd, phi, phi_dot, keep, use_keep, uni_c, rul
     return out
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _evaluate_start(t, x, active, sy, ctl, wk, out, st0, keep, use_keep, ev, n_ev, reuse, fn
                     ):  # pragma: no cover - compiled
     """Evaluate at ``(t, x)``, drop separating rows and re-evaluate (``Stepper`` after an event).
@@ -757,7 +757,7 @@ def _evaluate_start(t, x, active, sy, ctl, wk, out, st0, keep, use_keep, ev, n_e
     return STAGE_OK, solver
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _impact(t, x, watch, active, sy, wk, imp, ev, n_ev, joined, fn):  # pragma: no cover - compiled
     """``Stepper._impact``: the impact law at a touchdown, into ``x``; the active set updated."""
     (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
@@ -829,7 +829,7 @@ def _impact(t, x, watch, active, sy, wk, imp, ev, n_ev, joined, fn):  # pragma: 
     return STAGE_OK
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev, fn
                          ):  # pragma: no cover - compiled
     """``Stepper.advance_with_events``: ``x`` to ``t_end`` with its events, in place.
@@ -977,7 +977,7 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
     return STAGE_TOO_MANY_EVENTS
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _locate_touchdown(t, x, d1, h, watch, g_hi, active, sy, ctl, wk, out, rk, loc, fn
                       ):  # pragma: no cover - compiled
     """``event_location.locate_touchdown``: ``(status, θ)``, the state at ``θ`` in ``loc[1]``.
@@ -1040,7 +1040,7 @@ def _locate_touchdown(t, x, d1, h, watch, g_hi, active, sy, ctl, wk, out, rk, lo
     return STAGE_OK, theta
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _record_sample(s, t, x, active, sy, wk, out, solver, Rec):  # pragma: no cover - compiled
     """Record sample ``s`` from its evaluation (``Recorder.record``)."""
     (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
@@ -1081,7 +1081,7 @@ def _record_sample(s, t, x, active, sy, wk, out, solver, Rec):  # pragma: no cov
     record_energy(s, x, params, energy, n > 0, r_kinetic, r_potential, r_momentum)
 
 
-@njit(cache=True, error_model="numpy", nogil=True)  # monitors check beside it
+@kernel(nogil=True)  # monitors check beside it
 def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev,
                     reserve, Rec, fn, advance):  # pragma: no cover - compiled
     """RK4 with contact events from sample ``k0``, recording samples ``k0 .. k1 - 1``.

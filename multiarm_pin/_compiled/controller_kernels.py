@@ -28,7 +28,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from multiarm_pin._compiled.evaluate import (
     _arm_segments,
@@ -37,6 +36,7 @@ from multiarm_pin._compiled.evaluate import (
     quaternion_rotation,
 )
 from multiarm_pin._compiled.force_qp import QP_OK, least_norm_forces
+from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.layout import (
     DIMS_K,
     DIMS_M,
@@ -103,7 +103,7 @@ largest: three orders of magnitude above the reference's singular-value threshol
 values for the at most 6-7 columns of an arm's rows."""
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def min_norm_rows(W, ncols, nrows, g, x, Q, beta):  # pragma: no cover - compiled
     """Minimum-norm ``x`` with ``W[:nrows, :ncols]ᵀ x = g`` by Householder QR of ``W``.
 
@@ -149,7 +149,7 @@ def min_norm_rows(W, ncols, nrows, g, x, Q, beta):  # pragma: no cover - compile
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilateral, obj_x,
              a_d, z, hold_tool, hold_obj, hold_n, gains, active, tau, mu, qdd,
              a_pts):  # pragma: no cover - compiled
@@ -181,7 +181,7 @@ def _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilater
                            hold_tool, hold_obj, hold_n, gains, tau, mu, qdd, a_pts)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def planned_torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, N, nv_arm, obj_x, a_d, z, hold_tool,
                     hold_obj, hold_n, gains, tau, mu, qdd, a_pts):  # pragma: no cover - compiled
     """Steps 2-5 of :func:`_torques` with the multipliers ``mu`` planned already.
@@ -336,7 +336,7 @@ def planned_torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, N, nv_arm, obj_x, a_d,
     return PD_OK
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def object_pd_torques(buf, dims, N, nv_arm, unilateral, obj_x, a_d, z, hold_tool, hold_obj,
                       hold_n, gains, active, tau, mu, qdd, a_pts):  # pragma: no cover - compiled
     """``ObjectPD`` torques from the flat buffer of the compiled path (see the module docstring).
@@ -375,7 +375,7 @@ def object_pd_torques(buf, dims, N, nv_arm, unilateral, obj_x, a_d, z, hold_tool
                     a_pts)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def log3(R, out):  # pragma: no cover - compiled
     """Rotation vector ``θ u`` (3,) of a rotation matrix into ``out`` (``pin.log3``).
 
@@ -397,7 +397,7 @@ def log3(R, out):  # pragma: no cover - compiled
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def desired_acceleration(obj, ref, pd_gains, obj_x, a_d):  # pragma: no cover - compiled
     """The PD on the object pose, ``a_d = a_ref + K_d (v_ref - v_o) + K_p e``.
 
@@ -445,7 +445,7 @@ def desired_acceleration(obj, ref, pd_gains, obj_x, a_d):  # pragma: no cover - 
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold_tool,
                    hold_obj, hold_n, gains, params, active, tau, mu, qdd, a_pts, a_d, solve,
                    wrench):  # pragma: no cover - compiled
@@ -508,7 +508,7 @@ def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold
                                 mu_s)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def touching_rank(W_o, N):  # pragma: no cover - compiled
     """Rank of the stacked ``W_o`` of the first ``N[i]`` rows of each arm (``grasp_rank``).
 
@@ -551,7 +551,7 @@ def touching_rank(W_o, N):  # pragma: no cover - compiled
     return min(rank, 6)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def touching_torques(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_gains, z,
                      hold_tool, hold_obj, hold_n, gains, active_r, tau, mu, qdd, a_pts,
                      a_d):  # pragma: no cover - compiled
@@ -644,7 +644,7 @@ def touching_torques(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_ga
     return PD_OK, rank
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def hold_still_torques(buf, dims, nv_arm, z, tau):  # pragma: no cover - compiled
     """Torques holding the arms still: ``τ_i = M_i z_i - h_i`` (``ObjectPD._hold_still``).
 
@@ -674,7 +674,7 @@ def hold_still_torques(buf, dims, nv_arm, z, tau):  # pragma: no cover - compile
             tau[i, j] = acc - h[i, j]
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def solve_with_torques(buf, dims, N, params, tau):  # pragma: no cover - compiled
     """Object-first forward dynamics of the buffer's blocks with torques ``tau`` added to ``h``.
 

@@ -14,16 +14,16 @@ errors; the compiled contact loop calls it directly.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from multiarm_pin._compiled import linalg as _kernels
+from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.mlcp import OK, mlcp
 
 BAD_MASS, NOT_FINITE, UNI_PADDING, ACT_PADDING = 4, 5, 6, 7
 """Status codes of :func:`contact_kernel` beyond :func:`~multiarm_pin._compiled.mlcp.mlcp`'s."""
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def contact_kernel(M, h, W, W_o, c, M_o, h_o, nv, N, uni, act, guess, use_guess, dep_rtol,
                    viol_rtol, cons_rtol, a_o, qdd, mu, Av):  # pragma: no cover - compiled
     """The whole unilateral solve, compiled: object-first Delassus, :func:`mlcp`, motion.

@@ -30,11 +30,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from multiarm_pin._compiled.arm_terms import arm_terms
 from multiarm_pin._compiled.assembly import assemble
 from multiarm_pin._compiled.constraint_rows import constraint_rows
+from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.layout import (
     ARM_JOINTS,
     ARM_NV,
@@ -92,7 +92,7 @@ SOLVE_BAD_LENGTH = 4
 (nothing computed; the caller's checks then name it)."""
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def quaternion_rotation(quat, R):  # pragma: no cover - compiled
     """Rotation matrix (3, 3) of a unit quaternion ``[x, y, z, w]`` into ``R``."""
     x, y, z, w = quat[0], quat[1], quat[2], quat[3]
@@ -112,7 +112,7 @@ def quaternion_rotation(quat, R):  # pragma: no cover - compiled
 # compiled function, or a call to a jitted helper, on the path of a kernel is one more
 # numba compile and one more LLVM optimisation of everything it calls (issue 14), so the
 # kernels take their views and call the leaf kernels themselves, with no glue in between.
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline="always")
 def _arm_segments(buf, off, n, k, m):  # pragma: no cover - compiled
     """Views of the arm segments (inlined): M, nle, J, Jdot_qdot, position, rotation, twist, v."""
     three, six = np.int64(3), np.int64(6)
@@ -126,7 +126,7 @@ def _arm_segments(buf, off, n, k, m):  # pragma: no cover - compiled
             buf[off[SEG_V]:off[SEG_V + 1]].reshape((n, k)))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline="always")
 def _block_segments(buf, off, n, k, m):  # pragma: no cover - compiled
     """Views of the rows and block segments (inlined): rows, h, W, W_o, c, M_o, h_o."""
     six = np.int64(6)
@@ -139,7 +139,7 @@ def _block_segments(buf, off, n, k, m):  # pragma: no cover - compiled
             buf[off[SEG_H_O]:off[SEG_H_O + 1]])
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline="always")
 def _solution_segments(buf, off, n, k, m):  # pragma: no cover - compiled
     """Views of the solution segments (inlined): a_o, qdd, mu."""
     return (buf[off[SEG_A_O]:off[SEG_A_O + 1]],
@@ -147,25 +147,25 @@ def _solution_segments(buf, off, n, k, m):  # pragma: no cover - compiled
             buf[off[SEG_MU]:off[SEG_MU + 1]].reshape((n, m)))
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def arm_views(buf, off, n, k, m):  # pragma: no cover - compiled
     """Views of the arm segments: M, nle, J, Jdot_qdot, position, rotation, twist, v."""
     return _arm_segments(buf, off, n, k, m)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def block_views(buf, off, n, k, m):  # pragma: no cover - compiled
     """Views of the constraint rows and block segments: rows, h, W, W_o, c, M_o, h_o."""
     return _block_segments(buf, off, n, k, m)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def solution_views(buf, off, n, k, m):  # pragma: no cover - compiled
     """Views of the solution segments: a_o, qdd, mu."""
     return _solution_segments(buf, off, n, k, m)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline="always")
 def _group_arms_into(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_offset, lo,
                      M, nle, J, Jdq, p, R, tw, vp):  # pragma: no cover - compiled
     """:func:`_group_arms` on the arm views themselves (inlined)."""
@@ -178,7 +178,7 @@ def _group_arms_into(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_
               nle[lo:hi], J[lo:hi], Jdq[lo:hi], p[lo:hi], R[lo:hi], tw[lo:hi], vp[lo:hi])
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _group_arms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_offset, lo, arms
                 ):  # pragma: no cover - compiled
     """:func:`arm_terms` of the group of arms ``lo..lo + len(H)`` into the arm views."""
@@ -187,7 +187,7 @@ def _group_arms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_offse
                      M, nle, J, Jdq, p, R, tw, vp)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline="always")
 def _finish_into(x, arm_ints, v_starts, ints, floats, params, nv, nle, J, Jdq, p, R, tw,
                  rows, h, W, W_o, c, M_o, h_o):  # pragma: no cover - compiled
     """:func:`_finish` on the views themselves (inlined)."""
@@ -208,7 +208,7 @@ def _finish_into(x, arm_ints, v_starts, ints, floats, params, nv, nle, J, Jdq, p
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _finish(x, arm_ints, v_starts, ints, floats, params, nv, arms,
             blocks):  # pragma: no cover - compiled
     """Constraint rows and blocks from the arm views; False if ``x`` is not finite."""
@@ -218,7 +218,7 @@ def _finish(x, arm_ints, v_starts, ints, floats, params, nv, arms,
                         rows, h, W, W_o, c, M_o, h_o)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def solve_views(N, params, M, h, blocks, solution):  # pragma: no cover - compiled
     """:func:`object_first` on ``M``, ``h`` and the other block views into the solution views."""
     rows, _, W, W_o, c, M_o, h_o = blocks
@@ -227,7 +227,7 @@ def solve_views(N, params, M, h, blocks, solution):  # pragma: no cover - compil
                         params[P_OBJECT_RCOND_TOL], a_o, qdd, mu)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def group_arm_terms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, dims, v_offset,
                     first_arm, buf):  # pragma: no cover - compiled
     """:func:`arm_terms` of one group of consecutive arms into their rows of the buffer.
@@ -252,7 +252,7 @@ def group_arm_terms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, dims, v
                      first_arm, M, nle, J, Jdq, p, R, tw, vp)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def finish_system(x, arm_ints, v_starts, ints, floats, params, dims,
                   buf):  # pragma: no cover - compiled
     """Constraint rows and blocks from the arm terms already in ``buf``.
@@ -279,7 +279,7 @@ def finish_system(x, arm_ints, v_starts, ints, floats, params, dims,
                         rows, h, W, W_o, c, M_o, h_o)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def solve_buffer(N, params, dims, buf):  # pragma: no cover - compiled
     """:func:`object_first` on the blocks of the buffer, solution into its last segments.
 
@@ -301,7 +301,7 @@ def solve_buffer(N, params, dims, buf):  # pragma: no cover - compiled
                         params[P_OBJECT_RCOND_TOL], a_o, qdd, mu)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def evaluate_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, ints,
                     floats, params, dims, buf):  # pragma: no cover - compiled
     """Arm terms, constraint rows and blocks of one state into the flat buffer ``buf``.
@@ -343,7 +343,7 @@ def evaluate_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_start
                         rows, h, W, W_o, c, M_o, h_o)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def step_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, ints, floats,
                 params, dims, N, buf):  # pragma: no cover - compiled
     """:func:`evaluate_system` then :func:`object_first` on the buffer (one full step).
@@ -414,7 +414,7 @@ def state_tables(model_ints, model_floats, arm_ints, v_starts, ints, floats, dim
     return ro, rw, fl
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def evaluate_state(tables_ro, tables, floats_ro, M_full, position, quaternion, twist, q, v,
                    tau, params, step, buf):  # pragma: no cover - compiled
     """:func:`evaluate_system` (``step``: :func:`step_system`) with the arm terms computed here.

@@ -12,8 +12,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.linalg import cholesky, cholesky_solve, inverse_diagonal
 
 KKT_TOL = 1e-11
@@ -30,7 +30,7 @@ QP_FAILED = 1
 """Status: degenerate free set, ill-conditioned ``W_F W_Fᵀ`` or no convergence (cold solve)."""
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def least_norm_forces(W_o, N, unilateral, wrench, margin, active, mu,
                       max_iter):  # pragma: no cover - compiled
     """Least-norm multipliers with unilateral margins, warm-started from ``active``.

@@ -42,7 +42,7 @@ def pointer(kernel, args: Sequence, result_type):
     """``kernel`` as a first-class function for the types of ``args`` (made once per process).
 
     Args:
-        kernel: a ``@njit`` kernel (``error_model="numpy"``).
+        kernel: a kernel (``multiarm_pin._compiled.jit.kernel``).
         args: example arguments: their numba types are the signature.
         result_type: the numba type it returns.
 

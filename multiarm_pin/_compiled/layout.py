@@ -43,7 +43,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+
+from multiarm_pin._compiled.jit import kernel
 
 
 def _starts(fields: Sequence[tuple[str, int]]) -> tuple[dict[str, int], int]:
@@ -475,7 +476,7 @@ SEGMENT_NDIM = np.array([len(shape) for _, shape in SEGMENT_TABLE], dtype=np.int
 """(N_SEGMENTS,) number of axes of each segment."""
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _dim(code, n, k, m):  # pragma: no cover - compiled
     """A dimension of :data:`SHAPE_CODES` for ``n`` arms, ``k = nv_max``, ``m = N_max``."""
     if code == -1:
@@ -487,7 +488,7 @@ def _dim(code, n, k, m):  # pragma: no cover - compiled
     return code
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def offsets(n, k, m):  # pragma: no cover - compiled
     """Start offsets (N_SEGMENTS + 1,) int64 of the segments; the last entry is the total size."""
     off = np.empty(N_SEGMENTS + 1, dtype=np.int64)
@@ -500,20 +501,20 @@ def offsets(n, k, m):  # pragma: no cover - compiled
     return off
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline="always")
 def view1(buf, off, seg):  # pragma: no cover - compiled
     """The one-axis segment ``seg`` of ``buf`` (offsets ``off``)."""
     return buf[off[seg]:off[seg + 1]]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline="always")
 def view2(buf, off, seg, n, k, m):  # pragma: no cover - compiled
     """The two-axis segment ``seg`` of ``buf``, shaped as :data:`SEGMENT_TABLE` says."""
     return buf[off[seg]:off[seg + 1]].reshape((_dim(SHAPE_CODES[seg, 0], n, k, m),
                                                _dim(SHAPE_CODES[seg, 1], n, k, m)))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline="always")
 def view3(buf, off, seg, n, k, m):  # pragma: no cover - compiled
     """The three-axis segment ``seg`` of ``buf``, shaped as :data:`SEGMENT_TABLE` says."""
     return buf[off[seg]:off[seg + 1]].reshape((_dim(SHAPE_CODES[seg, 0], n, k, m),

@@ -17,10 +17,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from multiarm_pin._compiled.jit import kernel
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def cholesky(A, L, size):  # pragma: no cover - compiled
     """Lower Cholesky factor of the leading ``size`` x ``size`` block of ``A`` into ``L``.
 
@@ -42,7 +43,7 @@ def cholesky(A, L, size):  # pragma: no cover - compiled
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def cholesky_solve(L, B, size, ncols):  # pragma: no cover - compiled
     """``B[:size, :ncols] ← A⁻¹ B`` in place, ``A = L Lᵀ`` (L from :func:`cholesky`).
 
@@ -67,7 +68,7 @@ def cholesky_solve(L, B, size, ncols):  # pragma: no cover - compiled
             B[i, col] *= d
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def inverse_diagonal(L, size, out, col):  # pragma: no cover - compiled
     """``out[j] = (A⁻¹)_jj`` for ``A = L Lᵀ``: squared column norms of ``L⁻¹``.
 
@@ -87,7 +88,7 @@ def inverse_diagonal(L, size, out, col):  # pragma: no cover - compiled
         out[j] = acc
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def householder_qr(A, nrows, ncols, beta, diag):  # pragma: no cover - compiled
     """Householder QR of the leading ``nrows`` x ``ncols`` block of ``A``, in place.
 
@@ -133,7 +134,7 @@ def householder_qr(A, nrows, ncols, beta, diag):  # pragma: no cover - compiled
         diag[j] = alpha
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def householder_reflect(A, nrows, j, beta, x):  # pragma: no cover - compiled
     """``x[:nrows] ← H_j x[:nrows]``, ``H_j = I - beta[j] v_j v_jᵀ`` of :func:`householder_qr`.
 
@@ -155,7 +156,7 @@ def householder_reflect(A, nrows, j, beta, x):  # pragma: no cover - compiled
         x[a] -= dot * A[a, j]
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def batched_spd_solve(A, B):  # pragma: no cover - compiled
     """``A_i⁻¹ B_i`` for a stack of symmetric positive definite ``A`` (n, k, k), ``B`` (n, k, p).
 
@@ -184,7 +185,7 @@ JACOBI_SWEEPS = 60
 """Sweeps of :func:`singular_values` at the most (a safety cap: about six suffice)."""
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def singular_values(A, out):  # pragma: no cover - compiled
     """The singular values of ``A`` (r, c) into ``out`` (c,), by one-sided Jacobi.
 

@@ -42,9 +42,9 @@ minimum-norm ``μ``).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from multiarm_pin._compiled import linalg as _kernels
+from multiarm_pin._compiled.jit import kernel
 
 DEPENDENCY_RTOL = 1e-10
 """A row ``p`` is linearly dependent on the active rows when its Schur complement
@@ -63,7 +63,7 @@ OK, INFEASIBLE, INCONSISTENT, MAX_PIVOTS = 0, 1, 2, 3
 """Status codes returned by :func:`mlcp`."""
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _factor_active(G, act, na, GA, L):  # pragma: no cover - compiled
     """Cholesky factor of ``G[act[:na], act[:na]]`` into ``L``; False if not positive definite."""
     for a in range(na):
@@ -72,7 +72,7 @@ def _factor_active(G, act, na, GA, L):  # pragma: no cover - compiled
     return _kernels.cholesky(GA, L, na)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def mlcp(G, b, uni, dep_rtol, viol_tol, cons_tol, max_pivots, start,
          mu, phi, in_a):  # pragma: no cover - compiled
     """Mixed LCP ``φ = G μ + b``: bilateral ``φ = 0``; unilateral ``0 ≤ μ ⟂ φ ≥ 0``.
@@ -219,7 +219,7 @@ def mlcp(G, b, uni, dep_rtol, viol_tol, cons_tol, max_pivots, start,
     return _finish(G, b, uni, act, na, GA, L, rhs, mu, phi, in_a, pivots)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _finish(G, b, uni, act, na, GA, L, rhs, mu, phi, in_a, pivots):  # pragma: no cover
     """Exact multipliers of the final active set (``L`` holds its Cholesky factor)."""
     p = b.shape[0]

@@ -11,8 +11,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.linalg import cholesky, cholesky_solve, inverse_diagonal
 
 SOLVE_OK = 0
@@ -23,7 +23,7 @@ SOLVE_OBJECT_SINGULAR = 2
 """Status: the reduced object matrix is badly conditioned or the result is not finite."""
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def object_first(M, h, W, W_o, c, M_o, h_o, N, rcond_tol, object_rcond_tol,
                  a_o, qdd, mu):  # pragma: no cover - compiled
     """Object-first forward dynamics (``solve_object_first_numpy``) with per-arm Cholesky.

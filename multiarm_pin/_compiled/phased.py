@@ -33,7 +33,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from multiarm_pin._compiled.controller_kernels import (
     PD_ARM_RANK,
@@ -45,6 +44,7 @@ from multiarm_pin._compiled.controller_kernels import (
     planned_torques,
 )
 from multiarm_pin._compiled.evaluate import _arm_segments, _block_segments
+from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.layout import (
     DIMS_K,
     DIMS_M,
@@ -87,7 +87,7 @@ PINV_RCOND = 1e-12
 """``rcond`` of the pseudo-inverse of ``G M_o⁻¹ Gᵀ`` (the reference's ``np.linalg.pinv``)."""
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def minimum_jerk(tau):  # pragma: no cover - compiled
     """``(s, ds/dτ, d²s/dτ²)`` of the minimum-jerk profile at ``τ`` clipped to [0, 1]."""
     t = min(max(tau, 0.0), 1.0)
@@ -96,7 +96,7 @@ def minimum_jerk(tau):  # pragma: no cover - compiled
             60.0 * t * (1.0 - 3.0 * t + 2.0 * t2))
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def phase_index(t, phases):  # pragma: no cover - compiled
     """Index of the phase at ``t``: the last one started (0 before the first)."""
     k = 0
@@ -106,7 +106,7 @@ def phase_index(t, phases):  # pragma: no cover - compiled
     return k
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def phase_reference(t, phases, ref):  # pragma: no cover - compiled
     """The reference pose, twist and acceleration at ``t`` into ``ref`` (REFERENCE_FIELDS).
 
@@ -173,7 +173,7 @@ def phase_reference(t, phases, ref):  # pragma: no cover - compiled
             ref[REF_ACCELERATION + a] = dds * d[a]
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def phase_offsets(t, phases, named, offs, offset_start, out):  # pragma: no cover - compiled
     """(n, 3) object-frame offsets [m] of each arm's held points at ``t`` into ``out``.
 
@@ -202,7 +202,7 @@ def phase_offsets(t, phases, named, offs, offset_start, out):  # pragma: no cove
                     out[i, a] = out[i, a] + s * (offs[p, i, a] - out[i, a])
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def column_least_squares(E, cols, n, f, out):  # pragma: no cover - compiled
     """``out[:n] = argmin ‖E[:, cols[:n]] x - f‖`` by Householder QR (no allocation by LAPACK).
 
@@ -254,7 +254,7 @@ def column_least_squares(E, cols, n, f, out):  # pragma: no cover - compiled
         out[j] = acc / diag[j]
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def nnls(E, f, max_iter, u):  # pragma: no cover - compiled
     """``u = argmin_{u >= 0} ‖E u - f‖`` (Lawson & Hanson's active-set method) into ``u``.
 
@@ -329,7 +329,7 @@ def nnls(E, f, max_iter, u):  # pragma: no cover - compiled
     return False
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def min_norm_forces(W, w, unilateral, margins, mu):  # pragma: no cover - compiled
     """``dynamics.force_distribution.min_norm_forces`` (per-multiplier margins) into ``mu``.
 
@@ -426,7 +426,7 @@ def min_norm_forces(W, w, unilateral, margins, mu):  # pragma: no cover - compil
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def polish(W, w, unilateral, margins, mu):  # pragma: no cover - compiled
     """The reference's ``_polish``: the exact minimiser on the active set of ``mu``, if optimal.
 
@@ -511,7 +511,7 @@ def polish(W, w, unilateral, margins, mu):  # pragma: no cover - compiled
     mu[:] = out
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins, mu, a_o,
                            best_effort):  # pragma: no cover - compiled
     """``distribute_with_supports``: ``a_o`` and the multipliers.
@@ -644,7 +644,7 @@ def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def phased_torques(t, buf, dims, N, nv_arm, unilateral, active, obj, G_sup, kappa_sup, phi_sup,
                    phases, press, release, named, offs, margins, offset_start, pd_gains, z,
                    hold_tool, grasp_obj, hold_n, gains, tau, mu, lam, qdd, a_pts,

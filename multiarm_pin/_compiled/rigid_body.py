@@ -27,8 +27,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.layout import (
     EN_KINETIC,
     EN_MOMENTUM,
@@ -73,7 +73,7 @@ _CX = 15
 _RI = 24
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def rigid_body_pass(model_ints, model_floats, q, v, J, dJ, M, nle, H,
                     energy):  # pragma: no cover - compiled
     """Joint Jacobians and their derivative, mass matrix, nonlinear effects, tool placements.
@@ -270,7 +270,7 @@ def rigid_body_pass(model_ints, model_floats, q, v, J, dJ, M, nle, H,
                 W[par, a] += W[i, a]
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def integrate(model_ints, q, dv, out):  # pragma: no cover - compiled
     """``out = q ⊕ dv``, equal to ``pin.integrate(model, q, dv)`` for the supported joints.
 
@@ -299,7 +299,7 @@ def integrate(model_ints, q, dv, out):  # pragma: no cover - compiled
             out[iq + 1] = s1 * scale
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def difference(model_ints, q0, q1, out):  # pragma: no cover - compiled
     """``out = q1 ⊖ q0``, equal to ``pin.difference(model, q0, q1)`` for the supported joints.
 

@@ -21,8 +21,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.layout import (
     KIND_PRISMATIC,
     KIND_REVOLUTE_UNBOUNDED,
@@ -34,7 +34,7 @@ from multiarm_pin._compiled.layout import (
 )
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True)
 def joint_placements(model_ints, model_floats, q, R, p):  # pragma: no cover - compiled
     """World placements of every joint at ``m`` configurations.
 
@@ -105,7 +105,7 @@ def joint_placements(model_ints, model_floats, q, R, p):  # pragma: no cover - c
                 p[s, nj, r] = q[s, i + r]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True)
 def path_lengths(R, p, R_last, p_last, ua, ub, base_shift, base_turn, shift,
                  turn):  # pragma: no cover - compiled
     """The joint pairs' path lengths at ``m`` consecutive samples (``RunScan._block_paths``).
@@ -156,7 +156,7 @@ def path_lengths(R, p, R_last, p_last, ua, ub, base_shift, base_turn, shift,
             turn[s, u] = prev_t + math.sqrt(0.5 * d2)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True)
 def first_exceeding(shift, turn, u, rho, thr, lo, hi, at):  # pragma: no cover - compiled
     """First sample in ``[lo, hi)`` where ``shift[s, u_k] + rho_k turn[s, u_k] > thr_k``.
 
@@ -176,7 +176,7 @@ def first_exceeding(shift, turn, u, rho, thr, lo, hi, at):  # pragma: no cover -
         at[k] = a
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True)
 def _write_height(d, row, col, low, exact, best):  # pragma: no cover - compiled
     """An exact height ``d`` [m] into ``low[row, col]`` and ``exact[row, col]``; the new best.
 
@@ -189,7 +189,7 @@ def _write_height(d, row, col, low, exact, best):  # pragma: no cover - compiled
     return min(best, d)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True)
 def ground_heights(R, p, joints, corners, vertices, starts, height, best, tol, n0, pairs,
                    low, exact):  # pragma: no cover - compiled
     """The polytopes' ground pairs at ``m`` samples: bounds, and exact where they matter.
@@ -248,7 +248,7 @@ def ground_heights(R, p, joints, corners, vertices, starts, height, best, tol, n
     return best
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True)
 def grasp_openings(centres, bodies, radius, points, zone, n0, columns,
                    opens):  # pragma: no cover - compiled
     """From each sample on, the first where an arm's carrying link may collide with the object.
@@ -282,7 +282,7 @@ def grasp_openings(centres, bodies, radius, points, zone, n0, columns,
             opens[s, col] = nxt
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True)
 def pair_bounds(exact, shift, turn, ks, u, rho, centres, a, b, ra, rb, spheres, ground,
                 ground_lower, out):  # pragma: no cover - compiled
     """Lower bounds of pairs' hull distances at every sample scanned (``column_bounds``).
@@ -339,7 +339,7 @@ def pair_bounds(exact, shift, turn, ks, u, rho, centres, a, b, ra, rb, spheres, 
             out[s, k] = bound
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True)
 def round_heights(R, p, joints, rotations, offsets, sizes, cylinder, height, n0, pairs, low,
                   exact):  # pragma: no cover - compiled
     """Heights above the ground ``z = height`` of round bodies' lowest points, exactly.
@@ -380,7 +380,7 @@ def round_heights(R, p, joints, rotations, offsets, sizes, cylinder, height, n0,
     return best
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True)
 def support_max(u, vertices, out):  # pragma: no cover - compiled
     """A polytope's support function ``max_v u·v`` along ``m`` directions.
 

@@ -75,6 +75,11 @@ def _f64(a) -> np.ndarray:
     return np.array(a, dtype=float, order="C")
 
 
+def _same(a: np.ndarray, dtype) -> np.ndarray:
+    """``a`` itself when it is C-contiguous of ``dtype`` (its flags kept), else such a copy."""
+    return np.ascontiguousarray(a, dtype=dtype)
+
+
 def _read_only(a: np.ndarray) -> np.ndarray:
     """A read-only view of ``a``.
 
@@ -116,10 +121,14 @@ class ContactLoop:
             model = s.arm_set.compiled_model
             params = path.params
             k, m = int(path.dims[layout.DIMS_K]), int(path.dims[layout.DIMS_M])
-            arm = (_i64(model.ints), _f64(model.floats), _i64(path.arm_table),
-                   _i64(path.v_starts), _i64(path.contact_tables.ints),
-                   _f64(path.contact_tables.floats))
-            dims, N, nv_arm = _i64(path.dims), _i64(path.N), _i64(path.nv_arm)
+            # the compiled path's own tables (not copies): the kernels they share with it are
+            # compiled for one set of argument types (their read-only flags included)
+            arm = (_same(model.ints, np.int64), _same(model.floats, float),
+                   _same(path.arm_table, np.int64), _same(path.v_starts, np.int64),
+                   _same(path.contact_tables.ints, np.int64),
+                   _same(path.contact_tables.floats, float))
+            dims, N = _i64(path.dims), _same(path.N, np.int64)
+            nv_arm = _i64(path.nv_arm)
             buf = np.zeros(path.layout.size)
         else:
             params = layout.parameter_vector(s.obj.mass, s.obj.inertia, s.gravity,
@@ -141,7 +150,8 @@ class ContactLoop:
                     else _f64(stepper.wrench.table()))
         self.S = (*arm, _f64(params), dims, N, nv_arm, sp_p, sp_n, sp_a,
                   np.array(s.contact_unilateral), np.array(s.contact_mask),
-                  _i64(table.nv_blocks), _i64(table.N_blocks), _f64(s.contact_restitution),
+                  _i64(table.nv_blocks), _read_only(_i64(table.N_blocks)),
+                  _f64(s.contact_restitution),
                   wrenches, rules_vector())
         nd = 2 * nv + layout.OBJECT_STATE_SIZE
         nx = layout.state_size(nq, nv)

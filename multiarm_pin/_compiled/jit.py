@@ -1,0 +1,58 @@
+"""The one decorator of every compiled kernel: :func:`kernel`.
+
+``@kernel`` is ``numba.njit(cache=True, error_model="numpy")`` (cached on disk, numpy's
+floating-point semantics: a division by zero gives inf or NaN, never an exception), with one
+difference in how a kernel called from another kernel is specialised: by the types of its
+arguments, never by their literal values.
+
+numba types a constant argument (``f(x, 0)``, ``f(x, True)``) and, during type inference, a
+variable not yet unified with its later values (``n = 0`` before ``n += 1`` in a loop) as a
+*literal* type (``Literal[int](0)``), and compiles the callee once for that literal and again
+for ``int64``. Each such specialisation is a full compile of the callee and of everything it
+calls. The kernels never branch on an argument's literal value, so here a call's argument
+types are made non-literal before the callee is looked up: one specialisation per
+argument types.
+"""
+
+from __future__ import annotations
+
+from numba import njit, types
+
+OPTIONS = {"cache": True, "error_model": "numpy"}
+"""The options every kernel is compiled with (:func:`kernel` adds ``inline``, ``nogil``)."""
+
+
+def _typed_by_types(dispatcher):
+    """``dispatcher`` with its calls from compiled code typed by non-literal argument types.
+
+    Without the JIT (``NUMBA_DISABLE_JIT``) ``njit`` returns the Python function: returned as is.
+    """
+    find = getattr(dispatcher, "get_call_template", None)
+    if find is None:
+        return dispatcher
+
+    def get_call_template(args, kws):
+        return find(tuple(types.unliteral(a) for a in args),
+                    {k: types.unliteral(v) for k, v in kws.items()})
+
+    dispatcher.get_call_template = get_call_template
+    return dispatcher
+
+
+def kernel(function=None, **options):
+    """Compile ``function`` as a kernel (``@kernel`` or ``@kernel(inline="always")``).
+
+    Args:
+        function: the Python function (numba's ``nopython`` subset).
+        **options: further ``numba.njit`` options (``inline``, ``nogil``).
+
+    Returns:
+        Its numba dispatcher (``OPTIONS`` and ``options``), specialised by argument types only
+        when called from another kernel (see the module).
+    """
+    if function is None:
+        return lambda f: kernel(f, **options)
+    return _typed_by_types(njit(**OPTIONS, **options)(function))
+
+
+__all__ = ["OPTIONS", "kernel"]

@@ -1,0 +1,69 @@
+"""The kernels' decorator: one specialisation per argument types, never per literal value."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numba import njit, types
+from numba.core import config
+
+from multiarm_pin._compiled import jit
+
+PACKAGE = Path(jit.__file__).resolve().parent
+
+needs_jit = pytest.mark.skipif(config.DISABLE_JIT, reason="specialisations need the JIT")
+
+
+@needs_jit
+def test_a_callee_is_compiled_once_for_literal_and_variable_arguments():
+    callee = jit._typed_by_types(njit(lambda a, n, flag: a + n if flag else a))
+
+    @njit
+    def caller(a):
+        n = 0
+        s = callee(a, n, True)  # n is Literal[int](0) in the first pass of type inference
+        for _ in range(3):
+            n += 1
+        return s + callee(a, 0, False) + callee(a, n, np.True_)
+
+    assert caller(1.0) == 1.0 + 1.0 + 4.0
+    assert len(callee.signatures) == 1
+    assert not any(isinstance(t, types.Literal) for t in callee.signatures[0])
+
+
+@needs_jit
+def test_without_the_hook_numba_compiles_a_literal_specialisation():
+    """The case the hook exists for (if numba stops doing this, the hook can go)."""
+    callee = njit(lambda a, n: a + n)
+
+    @njit
+    def caller(a):
+        return callee(a, 0) + callee(a, np.int64(0))
+
+    caller(1.0)
+    assert len(callee.signatures) == 2
+
+
+def test_every_kernel_is_compiled_by_the_one_decorator():
+    """No ``numba.njit`` outside :mod:`multiarm_pin._compiled.jit`: one set of options."""
+    bare = []
+    for path in sorted(PACKAGE.glob("*.py")):
+        if path.name == "jit.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Name) and node.id == "njit":
+                bare.append(f"{path.name}:{node.lineno}")
+            if isinstance(node, ast.Attribute) and node.attr == "njit":
+                bare.append(f"{path.name}:{node.lineno}")
+    assert bare == []
+
+
+def test_the_decorator_keeps_numbas_options():
+    assert jit.OPTIONS == {"cache": True, "error_model": "numpy"}
+    if not config.DISABLE_JIT:
+        k = jit.kernel(inline="always")(lambda a: a)
+        assert k.targetoptions["inline"] == "always"
+        assert k.targetoptions["error_model"] == "numpy"
