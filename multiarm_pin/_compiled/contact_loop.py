@@ -228,6 +228,8 @@ def _rows_and_blocks(x, sy, wk):  # pragma: no cover - compiled
 
     ``sy``: the system tuple (see :func:`run_contact_rk4`); ``wk``: the workspace tuple. Fills
     the stacked ``M, h, W, W_o, c, M_o, h_o`` (no wrench) and the rows; returns False on NaN.
+    For a system with arms; without arms :func:`_object_rows_and_blocks` (the loops call the
+    one :func:`stage_functions` picked, through its address: the other is not compiled).
     """
     (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
      sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
@@ -269,6 +271,25 @@ def _rows_and_blocks(x, sy, wk):  # pragma: no cover - compiled
                 M_o[a, b] = Mo[a, b]
     else:
         _object_terms(x, params, M_o, h_o)
+    return _supports_and_check(x, sy, wk)
+
+
+@kernel
+def _object_rows_and_blocks(x, sy, wk):  # pragma: no cover - compiled
+    """:func:`_rows_and_blocks` of a system without arms: the object's terms and the supports."""
+    _object_terms(x, sy[6], wk[12], wk[13])
+    return _supports_and_check(x, sy, wk)
+
+
+@kernel
+def _supports_and_check(x, sy, wk):  # pragma: no cover - compiled
+    """The supports' block and rows after the arms' (:func:`_rows_and_blocks`); False on NaN."""
+    (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
+     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
+    (J, dJ, Mq, nle, H, energy, buf, Mc, hc, Wc, W_oc, cc, M_o, h_o, phi, phi_dot, pts,
+     nrm) = wk
+    n = dims[DIMS_N]
+    B, kc, R = Wc.shape
     if B > n:  # the supports' zero-dof block: M = I, h = 0, W = 0
         for a in range(kc):
             hc[n, a] = 0.0
@@ -496,11 +517,12 @@ def _zero_torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compile
 
 
 @kernel
-def contact_stage(t, x, active, sy, ctl, wk, out, d, torques, lcp
+def contact_stage(t, x, active, sy, ctl, wk, out, d, rows, torques, lcp
                   ):  # pragma: no cover - compiled
     """One evaluation at ``(t, x)`` on the active set, and its tangent ``d``.
 
-    The rows and blocks (:func:`_rows_and_blocks`), the controller (``torques``:
+    The rows and blocks (``rows``: :func:`_rows_and_blocks` or :func:`_object_rows_and_blocks`),
+    the controller (``torques``:
     :func:`_torques` or :func:`_zero_torques`), the external wrench on ``h_o``, then the
     mixed LCP as ``solve_unilateral`` (see the module docstring; ``lcp``:
     :func:`~multiarm_pin._compiled.delassus.contact_kernel`). Outputs in ``out``: ``a_o``
@@ -514,7 +536,7 @@ def contact_stage(t, x, active, sy, ctl, wk, out, d, torques, lcp
     (J, dJ, Mq, nle, H, energy, buf, Mc, hc, Wc, W_oc, cc, M_o, h_o, phi, phi_dot, pts,
      nrm) = wk
     (a_o, qdd_c, mu, phi_dd, Av, tau, err, z, ref, E, mu_p, qdd_p, a_pts, a_d) = out
-    if not _rows_and_blocks(x, sy, wk):
+    if not rows(x, sy, wk):
         return STAGE_NOT_FINITE, 0
     st = torques(t, x, active, sy, ctl, wk, out)
     if st != STAGE_OK:
@@ -576,15 +598,17 @@ def contact_stage(t, x, active, sy, ctl, wk, out, d, torques, lcp
 def stage_functions(x, active, sy, ctl, wk, out, d):
     """The ``fn`` argument of :func:`run_contact_rk4`, for the types of these arguments.
 
-    ``(contact_stage, _rows_and_blocks, torques, lcp)``: the controller's torques
+    ``(contact_stage, rows, torques, lcp)``: the rows and blocks (:func:`_rows_and_blocks`,
+    or :func:`_object_rows_and_blocks` for a system without arms), the controller's torques
     (:func:`_torques` for ``object_pd``, :func:`_zero_torques` without a controller: only the
-    one a run uses is compiled) and the active-set kernel
+    ones a run uses are compiled) and the active-set kernel
     (:func:`~multiarm_pin._compiled.delassus.contact_kernel`). Each is compiled once and
     called through its address (:mod:`~multiarm_pin._compiled.function_pointers`): the
     loop's module, and the stage's, do not compile them again.
     """
     mode = int(ctl[0][CTL_MODE])
-    key = (mode, type_key((x, active, sy, ctl, wk, out, d)))
+    arms = int(sy[7][DIMS_N]) > 0
+    key = (mode, arms, type_key((x, active, sy, ctl, wk, out, d)))
     found = _stages.get(key)  # the same tuple for the same types: a stable argument type key
     if found is not None:
         return found
@@ -599,14 +623,15 @@ def stage_functions(x, active, sy, ctl, wk, out, d):
                    active, active, False, rules[R_DEP], rules[R_VIOL], rules[R_CONS], a_o,
                    qdd_c, mu, Av),
                   numba.types.Tuple((int64, int64, int64, int64, numba.types.float64)))
-    stage = pointer(contact_stage, (0.0, x, active, sy, ctl, wk, out, d, torques, lcp),
+    rows = pointer(_rows_and_blocks if arms else _object_rows_and_blocks, (x, sy, wk),
+                   numba.types.boolean)
+    stage = pointer(contact_stage, (0.0, x, active, sy, ctl, wk, out, d, rows, torques, lcp),
                     numba.types.UniTuple(int64, 2))
-    rows = pointer(_rows_and_blocks, (x, sy, wk), numba.types.boolean)
     found = _stages[key] = (stage, rows, torques, lcp)
     return found
 
 
-_stages: dict = {}  # (controller mode, type_key of the arguments) -> stage_functions' tuple
+_stages: dict = {}  # (controller mode, arms?, type_key of the arguments) -> stage_functions' tuple
 
 
 def advance_function(x, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev, fn):
@@ -651,7 +676,7 @@ def _step(t, x, d1, h, active, sy, ctl, wk, out, rk, x_new, fn):  # pragma: no c
         hs = h if stage == 2 else 0.5 * h
         _advance(model_ints, x, d1 if stage == 0 else (d2 if stage == 1 else d3), hs, hd, xs)
         st = fn[0](t + hs, xs, active, sy, ctl, wk, out,
-                   d2 if stage == 0 else (d3 if stage == 1 else d4), fn[2], fn[3])[0]
+                   d2 if stage == 0 else (d3 if stage == 1 else d4), fn[1], fn[2], fn[3])[0]
         if st != STAGE_OK:
             return st
     for a in range(d1.shape[0]):  # (d1 + 2 d2 + 2 d3 + d4) / 6, numpy's order of operations
@@ -745,7 +770,7 @@ def _evaluate_start(t, x, active, sy, ctl, wk, out, st0, keep, use_keep, ev, n_e
     solver = memo[1]
     for attempt in range(2):  # one call site of the stage
         if attempt > 0 or not reuse:
-            st, solver = fn[0](t, x, active, sy, ctl, wk, out, d1, fn[2], fn[3])
+            st, solver = fn[0](t, x, active, sy, ctl, wk, out, d1, fn[1], fn[2], fn[3])
             if st != STAGE_OK:
                 return st, solver
         if attempt == 1 or not _separations(t, active, out[2], out[3], wk[14], wk[15], keep,
@@ -860,7 +885,8 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
                     any_push = True
         end_eval = False  # wk and out hold the evaluation at (t_end, new)
         if any_push:
-            st, memo[1] = fn[0](t_end, new, active, sy, ctl, wk, out, dtmp, fn[2], fn[3])
+            st, memo[1] = fn[0](t_end, new, active, sy, ctl, wk, out, dtmp, fn[1], fn[2],
+                                fn[3])
             if st != STAGE_OK:
                 return st
             end_eval = True
@@ -893,8 +919,8 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
                                    fn)
                         if st != STAGE_OK:
                             return st
-                        st = fn[0](t + theta * h, s_e, active, sy, ctl, wk, out, dtmp, fn[2],
-                                   fn[3])[0]
+                        st = fn[0](t + theta * h, s_e, active, sy, ctl, wk, out, dtmp, fn[1],
+                                   fn[2], fn[3])[0]
                         if st != STAGE_OK:
                             return st
                         value = _release(out[2], out[3], rows_sep, rules)
@@ -1113,7 +1139,7 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         Rec: the record arrays (``Recorder``'s, and the active set and solver codes), then
             the (B, R) bool rows kept out of the recorded penetration (``beside_start``: in
             and out).
-        fn: ``(contact_stage, _rows_and_blocks, torques, lcp)`` as :func:`stage_functions`
+        fn: ``(contact_stage, rows, torques, lcp)`` as :func:`stage_functions`
             makes them (compiled once, called through their addresses).
         advance: :func:`_advance_with_events`, likewise (:func:`advance_function`).
 
