@@ -11,8 +11,9 @@ module per reference: :mod:`.linalg` (Cholesky, Householder QR, singular values:
 (``MinimumJerkTrajectory.motion``), :mod:`.closed_loop` (the closed-loop evaluation and
 RK4 steps of ``simulate``), :mod:`.contact_loop` (RK4 with contact events) and :mod:`.scan`
 (the collision scan's placements, path lengths and bounds: ``RunScan``'s numpy; ``nogil``).
-The loops call their stages through function pointers (:mod:`.function_pointers`), so that
-each stage is compiled once.
+Every kernel is compiled by one decorator, :func:`.jit.kernel` (specialised by argument
+types, never by literal values). The loops call their stages through function pointers
+(:mod:`.function_pointers`), so that each stage is compiled once.
 The layout of every array they exchange with Python is defined once in :mod:`.layout`.
 The kernels' on-disk cache is stamped with the contents of all kernel sources
 (:mod:`.cache`), so that editing a kernel recompiles the kernels that call it.
