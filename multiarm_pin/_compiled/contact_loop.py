@@ -115,6 +115,7 @@ from multiarm_pin._compiled.layout import (
     X_TWIST,
     offsets,
 )
+from multiarm_pin._compiled.linalg import copy1, copy2
 from multiarm_pin._compiled.mlcp import OK as LCP_OK
 from multiarm_pin._compiled.object_first import SOLVE_OK, object_first
 from multiarm_pin._compiled.phased import phased_torques
@@ -315,24 +316,6 @@ def _supports_and_check(x, sy, wk):  # pragma: no cover - compiled
             if not math.isfinite(phi[b, r] + phi_dot[b, r] + cc[b, r]):
                 return False
     return True
-
-
-@kernel
-def _copy1(dst, src):  # pragma: no cover - compiled
-    """``dst[:] = src`` for two vectors of one length, element by element.
-
-    numba's slice assignment compiles its shape checks and their messages at every type.
-    """
-    for i in range(src.shape[0]):
-        dst[i] = src[i]
-
-
-@kernel
-def _copy2(dst, src):  # pragma: no cover - compiled
-    """``dst[:] = src`` for two matrices of one shape, element by element."""
-    for i in range(src.shape[0]):
-        for j in range(src.shape[1]):
-            dst[i, j] = src[i, j]
 
 
 @kernel
@@ -776,9 +759,9 @@ def _evaluate_start(t, x, active, sy, ctl, wk, out, st0, keep, use_keep, ev, n_e
         if attempt == 1 or not _separations(t, active, out[2], out[3], wk[14], wk[15], keep,
                                             use_keep, uni_c, rules, ev, n_ev):
             break
-    _copy2(phi0, wk[14])
-    _copy2(mu0, out[2])
-    _copy2(phi_dd0, out[3])
+    copy2(phi0, wk[14])
+    copy2(mu0, out[2])
+    copy2(phi_dd0, out[3])
     return STAGE_OK, solver
 
 
@@ -890,8 +873,8 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
             if st != STAGE_OK:
                 return st
             end_eval = True
-            _copy2(mu_end, out[2])
-            _copy2(phi_dd_end, out[3])
+            copy2(mu_end, out[2])
+            copy2(phi_dd_end, out[3])
             both = False
             for b in range(B):
                 for r in range(R):
@@ -906,8 +889,8 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
                     end_eval = False  # new moves to the separation
                     # illinois(band=None, bisect_every=3) from [0, 1], payload (state, μ)
                     lo, hi = 0.0, 1.0
-                    _copy1(s_hi, new)
-                    _copy2(mu_hi, mu_end)
+                    copy1(s_hi, new)
+                    copy2(mu_hi, mu_end)
                     side = 0
                     for it in range(int(rules[R_MAX_ITER])):
                         if (hi - lo) * h < rules[R_SEP_TIME]:
@@ -927,12 +910,12 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
                         lo, f_lo, hi, f_hi, side = _illinois(theta, value, lo, f_lo, hi, f_hi,
                                                              side)
                         if side == -1:  # the iterate is the new upper end: its payload
-                            _copy1(s_hi, s_e)
-                            _copy2(mu_hi, out[2])
+                            copy1(s_hi, s_e)
+                            copy2(mu_hi, out[2])
                     for b in range(B):
                         for r in range(R):
                             leaving[b, r] = rows_sep[b, r] and mu_hi[b, r] <= 0.0
-                    _copy1(new, s_hi)
+                    copy1(new, s_hi)
                     h = hi * h
                     sep = True
         # touchdowns: watched rows (not far below the band at the step's start)
@@ -961,12 +944,12 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
                     return STAGE_NOT_FINITE
         if g_hi >= -tol:
             if not sep:
-                _copy1(x, new)
+                copy1(x, new)
                 # the end's evaluation is the next sample's (the stepper's cache)
                 memo[0] = 1 if end_eval else 0
                 return STAGE_OK
             t = t + h
-            _copy1(x, new)
+            copy1(x, new)
             # Stepper._separate: the leaving rows' events with their rates at (t, x)
             if not fn[1](x, sy, wk):
                 return STAGE_NOT_FINITE
@@ -990,7 +973,7 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
             return st
         t = t + theta * h
         if theta > 0.0:
-            _copy1(x, s_e)
+            copy1(x, s_e)
         st = _impact(t, x, watch, active, sy, wk, imp, ev, n_ev, joined, fn)
         if st != STAGE_OK:
             return st
@@ -1166,7 +1149,7 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         t = times[s]
         reuse = st0[4][0] == 1 and s > k0
         if reuse:
-            _copy1(st0[0], loc[10])  # the end's tangent
+            copy1(st0[0], loc[10])  # the end's tangent
         st, solver = _evaluate_start(t, x, active, sy, ctl, wk, out, st0, loc[9],
                                      np.bool_(False), ev, n_ev, reuse, fn)
         if st != STAGE_OK:
@@ -1174,18 +1157,18 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         _record_sample(s, t, x, active, sy, wk, out, solver, Rec)
         if s == times.shape[0] - 1:
             return STAGE_OK, s + 1
-        _copy1(x0, x)
-        _copy2(active0, active)
-        _copy1(q_hold0, q_hold)
+        copy1(x0, x)
+        copy2(active0, active)
+        copy1(q_hold0, q_hold)
         n0, holding0, onsets0 = n_ev[0], control[CTL_HOLDING], n_onsets[0]
         st = advance(t, x, times[s + 1], active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev,
                      fn)
         if st == STAGE_OK and off_rectangles(x, sy[10], sy[12]):
             st = STAGE_OFF_RECTANGLE  # the step ends off a rectangle: the stepper's (off edge)
         if st != STAGE_OK:
-            _copy1(x, x0)
-            _copy2(active, active0)
-            _copy1(q_hold, q_hold0)
+            copy1(x, x0)
+            copy2(active, active0)
+            copy1(q_hold, q_hold0)
             n_ev[0], control[CTL_HOLDING], n_onsets[0] = n0, holding0, onsets0
             return st, s
     return STAGE_OK, k1

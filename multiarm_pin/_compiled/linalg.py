@@ -233,5 +233,23 @@ def singular_values(A, out):  # pragma: no cover - compiled
         out[j] = math.sqrt(acc)
 
 
-__all__ = ["batched_spd_solve", "cholesky", "cholesky_solve", "householder_qr",
-           "householder_reflect", "inverse_diagonal", "singular_values"]
+@kernel
+def copy1(dst, src):  # pragma: no cover - compiled
+    """``dst[:] = src`` for two vectors of one length, element by element.
+
+    numba's slice assignment compiles its shape checks and their messages at every type.
+    """
+    for i in range(src.shape[0]):
+        dst[i] = src[i]
+
+
+@kernel
+def copy2(dst, src):  # pragma: no cover - compiled
+    """``dst[:] = src`` for two matrices of one shape, element by element."""
+    for i in range(src.shape[0]):
+        for j in range(src.shape[1]):
+            dst[i, j] = src[i, j]
+
+
+__all__ = ["batched_spd_solve", "cholesky", "cholesky_solve", "copy1", "copy2",
+           "householder_qr", "householder_reflect", "inverse_diagonal", "singular_values"]

@@ -69,7 +69,7 @@ from multiarm_pin._compiled.layout import (
     REFERENCE_SIZE,
     offsets,
 )
-from multiarm_pin._compiled.linalg import householder_qr, householder_reflect
+from multiarm_pin._compiled.linalg import copy1, householder_qr, householder_reflect
 from multiarm_pin._compiled.trajectory import exp3
 
 PRESSING_GAP = 1e-6
@@ -377,7 +377,7 @@ def min_norm_forces(W, w, unilateral, margins, mu):  # pragma: no cover - compil
             nu += 1
             m_max = max(m_max, margins[j])
     if nu == 0:
-        mu[:] = mu_p
+        copy1(mu, mu_p)
         return True
     tol = 1e-9
     scale = 1e-12
@@ -396,7 +396,7 @@ def min_norm_forces(W, w, unilateral, margins, mu):  # pragma: no cover - compil
             j = idx[c]
             if margins[j] - mu_p[j] > tol * scale:
                 return False
-        mu[:] = mu_p
+        copy1(mu, mu_p)
         return True
     # E = [Gᵀ; gᵀ], G = A[idx], g = m - μ_p[idx]; A = Vt[rank:]ᵀ
     E = np.empty((k + 1, nu))
@@ -508,7 +508,7 @@ def polish(W, w, unilateral, margins, mu):  # pragma: no cover - compiled
                 nu -= W[a, j] * lam[a]
             if nu < -tol:
                 return
-    mu[:] = out
+    copy1(mu, out)
 
 
 @kernel
@@ -633,7 +633,7 @@ def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins
         if uni[j]:
             relaxed[j] = marg[j] - BEST_EFFORT_SLACK * scale
     if not min_norm_forces(Wc, wx, uni, relaxed, x):
-        x[:] = y
+        copy1(x, y)
     for j in range(cols):  # back onto the margins (the reference's clip)
         if uni[j] and x[j] < marg[j]:
             x[j] = marg[j]
