@@ -368,15 +368,13 @@ def step_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, i
         The status of :func:`object_first`, or ``SOLVE_NOT_FINITE`` if ``x`` holds NaN or
         infinity (nothing computed then).
     """
-    k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
-    off = offsets(n, k, m)
-    M, nle, J, Jdq, p, R, tw, vp = _arm_segments(buf, off, n, k, m)
-    rows, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
-    _group_arms_into(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, 0, 0,
-                     M, nle, J, Jdq, p, R, tw, vp)
-    if not _finish_into(x, arm_ints, v_starts, ints, floats, params, nv, nle, J, Jdq, p, R,
-                        tw, rows, h, W, W_o, c, M_o, h_o):
+    if not evaluate_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, ints,
+                           floats, params, dims, buf):  # called, not inlined: compiled once
         return SOLVE_NOT_FINITE
+    k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
+    off = offsets(n, k, m)
+    M = _arm_segments(buf, off, n, k, m)[0]
+    rows, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
     a_o, qdd, mu = _solution_segments(buf, off, n, k, m)
     return object_first(M, h, W, W_o, c, M_o, h_o, N, params[P_RCOND_TOL],
                         params[P_OBJECT_RCOND_TOL], a_o, qdd, mu)
