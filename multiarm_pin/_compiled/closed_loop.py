@@ -25,6 +25,11 @@ machinery of :mod:`multiarm_pin.sim.contact_events` runs). The caller,
 State vector ``x``: the kernels' (:func:`~multiarm_pin._compiled.layout.state_vector`), object
 state, ``q``, ``v`` and ``τ`` (zero here: the blocks are made at zero torque). Tangent ``d``
 (2 nv + 13,): ``[q̇; v̇; ṗ; q̇uat; ȧ]`` as ``Stepper.derivative``.
+
+Twins: ``multiarm_pin.sim.closed_loop`` (the same concept, one closed-loop evaluation, at the
+sim layer: its ``closed_loop_evaluation`` is the Python evaluation the stepper calls at every
+stage, for any controller, which :func:`closed_loop_stage` mirrors for ``object_pd``; these
+kernels are driven by :mod:`multiarm_pin.sim.compiled_loop`, not by it).
 """
 
 from __future__ import annotations

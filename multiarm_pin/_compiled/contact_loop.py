@@ -44,6 +44,10 @@ Whatever the kernel cannot decide as the Python path would (a doubtful controlle
 case, NaN, too many events in one step) it hands back: the status and the sample whose step
 the Python stepper must take, with the state, the active set, the events and the
 controller's hold state as they were at that sample (the step's partial work is dropped).
+
+Twins: ``multiarm_pin.sim.contact_loop`` (this module's Python driver, the sim layer's side of
+the same concept, the contact loop: its ``ContactLoop`` packs the inputs, calls
+:func:`run_contact_rk4` and has the stepper take the steps handed back).
 """
 
 from __future__ import annotations

@@ -9,6 +9,9 @@ coupling), :func:`~multiarm_pin._compiled.mlcp.mlcp`, then ``a_o``, ``q̈`` and 
 :mod:`multiarm_pin.dynamics.unilateral` calls it and hands the rare cases it reports (a
 singular ``M_i``, non-finite values) to the numpy reference, which raises the documented
 errors; the compiled contact loop calls it directly.
+
+Twins: ``multiarm_pin.dynamics.delassus`` (the same concept at the dynamics layer: the numpy
+reference of the ``G`` and ``b`` this kernel builds).
 """
 
 from __future__ import annotations

@@ -5,6 +5,9 @@ compiled layer: that module's :class:`~multiarm_pin.dynamics.force_qp.WarmForceD
 keeps the active set between calls and solves cold when this kernel reports failure; the
 problem and the method are described there). :func:`least_norm_forces` is also called by the
 compiled controller (:mod:`multiarm_pin._compiled.controller_kernels`).
+
+Twins: ``multiarm_pin.dynamics.force_qp`` (the same concept at the dynamics layer:
+``WarmForceDistribution``, the Python driver of this kernel).
 """
 
 from __future__ import annotations

@@ -4,6 +4,10 @@ Mirrors :func:`multiarm_pin.dynamics.object_first.solve_object_first_numpy` (the
 numpy reference: same elimination, same conditioning criteria and thresholds); whenever the
 kernel reports a doubtful case (:data:`SOLVE_ARM_SINGULAR`, :data:`SOLVE_OBJECT_SINGULAR`)
 the callers hand the blocks to that reference, which decides.
+
+Twins: ``multiarm_pin.dynamics.object_first`` (the same concept at the dynamics layer: its
+``solve_object_first`` calls this kernel and its ``solve_object_first_numpy`` is the numpy
+reference).
 """
 
 from __future__ import annotations

@@ -26,6 +26,10 @@ Whatever this kernel cannot decide as the reference does is reported, and the ca
 reference: a bilateral multiplier in the best effort, NNLS not converged, an arm whose rows
 are rank deficient (the reference's inverse dynamics decides, or holds the arms
 still), NaN, an orientation error near π. Conventions as in ``docs/ARCHITECTURE.md``.
+
+Twins: ``multiarm_pin.sim.controllers.phased`` (the same concept, the ``phased_pd`` controller,
+at the sim layer: its ``PhasedPD`` packs the phases as arrays, calls :func:`phased_torques` and
+holds the reference that decides what this kernel reports).
 """
 
 from __future__ import annotations

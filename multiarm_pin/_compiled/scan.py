@@ -14,6 +14,10 @@ interpreter only between these calls. The model comes as the rigid-body tables o
 :mod:`multiarm_pin._compiled.layout`), plus an optional last free-flyer joint (the object of
 a collision scene: parent the universe, placement the identity, ``q`` ``[x, y, z, qx, qy, qz,
 qw]`` after the tables' joints). Units SI, world axes.
+
+Twins: ``multiarm_pin.feasibility.scan`` (the same concept, the collision scan along a run, at
+the feasibility layer: its ``RunScan`` calls these kernels, and runs numpy references instead
+with ``compiled=False``).
 """
 
 from __future__ import annotations

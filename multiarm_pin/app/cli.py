@@ -14,6 +14,10 @@ The argument parsing of ``run``, ``replay``, ``demo`` and ``scenarios`` lives he
 done by :mod:`multiarm_pin.app.runner` (``grasp``, ``sweep`` and ``design`` bring their own
 parsers from :mod:`multiarm_pin.app.grasp_cli`, :mod:`multiarm_pin.study.cli` and
 :mod:`multiarm_pin.design.cli`).
+
+Twins: ``multiarm_pin.design.cli`` and ``multiarm_pin.study.cli`` (the same role one package
+down: each is its package's subcommand of this command line, ``design`` and ``sweep``, whose
+``configure_parser`` and ``run`` this module wires in).
 """
 
 from __future__ import annotations

@@ -3,6 +3,10 @@
 One concept at several layers: each layer's ``cli.py`` (``grasp``, ``study``, ``design``)
 holds its own subcommand of ``multiarm-pin`` (``configure_parser`` and ``run``), which
 :mod:`multiarm_pin.app.cli` wires into the one command line.
+
+Twins: ``multiarm_pin.app.cli`` and ``multiarm_pin.study.cli`` (the same role, a package's
+command line, in three packages: ``app.cli`` is the whole ``multiarm-pin`` command line, which
+wires in this ``design`` subcommand and ``study.cli``'s ``sweep``).
 """
 
 from __future__ import annotations

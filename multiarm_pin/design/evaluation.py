@@ -23,6 +23,11 @@
 
 The candidate's :class:`Evaluation` records the first condition it failed with the value it
 reached (a residual, a margin, a clearance, a ratio), or its scores (:mod:`.scoring`).
+
+Twins: ``multiarm_pin.dynamics.evaluation`` (not the same concept, only the same name: that
+module is one evaluation of the system's dynamics at a state, the compiled path's buffer and its
+numpy reference; this one checks and scores one candidate design, and the two ``Evaluation``
+classes are unrelated).
 """
 
 from __future__ import annotations

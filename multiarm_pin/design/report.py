@@ -14,6 +14,14 @@ One concept at several layers: each layer's ``report.py`` (``grasp``, ``study``,
       designs/design_<k>.png   its picture (arms at the start, object, contacts, supports)
       best_run/              the best design simulated through the task
                              (`multiarm-pin run`'s folder: summary.json, replay.html, plots)
+
+Twins: ``multiarm_pin.feasibility.report``, ``multiarm_pin.grasp.report`` and
+``multiarm_pin.study.report`` (the same role, a package's report of its own results, in four
+packages: this one writes a design's results folder (scenarios, pictures, ``report.md``, the
+best run); ``feasibility.report`` returns the feasibility of a simulated run (limits,
+collisions) as a ``FeasibilityReport``; ``grasp.report`` reads grasp files, analyses them,
+formats the report and draws its picture; ``study.report`` writes a study's ``report.md`` and
+its plots).
 """
 
 from __future__ import annotations

@@ -28,6 +28,10 @@ The object, supports, controller and simulation blocks are read by the scenario 
 (:mod:`multiarm_pin.app.scenario.schema`), so their errors name the same key paths. Every
 error is a :class:`~multiarm_pin.exceptions.DesignError` naming the file, the key path and
 what was expected.
+
+Twins: ``multiarm_pin.study.spec`` (the same role, a package's input file reader, in another
+package, for another format: that module reads study files, a base file and what to vary; this
+one reads design spec files).
 """
 
 from __future__ import annotations

@@ -15,6 +15,10 @@ Its compiled counterpart, the whole unilateral solve in one call, is
 layer); :mod:`multiarm_pin.dynamics.unilateral` calls it and hands the rare cases it reports
 (a singular ``M_i``, non-finite values) to this reference, which raises the documented
 errors.
+
+Twins: ``multiarm_pin._compiled.delassus`` (the same concept, the object-first Delassus operator
+of the contact rows, at the compiled layer: this module is its numpy reference, that one the
+compiled kernel, which also solves the mixed LCP and the motion).
 """
 
 from __future__ import annotations

@@ -20,6 +20,10 @@ otherwise (a free set whose columns do not span the wrenches, no convergence wit
 iteration cap) it reports failure and :class:`WarmForceDistribution` solves cold with
 :func:`~multiarm_pin.dynamics.force_distribution.min_norm_forces` (NNLS), which also raises
 the documented errors (unreachable wrench, infeasible margin).
+
+Twins: ``multiarm_pin._compiled.force_qp`` (the same concept, the warm-started least-norm force
+QP, at the compiled layer: this module is its Python driver, which keeps the active set between
+calls and solves cold when it fails; that one is the kernel, ``least_norm_forces``).
 """
 
 from __future__ import annotations

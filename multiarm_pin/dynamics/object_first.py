@@ -20,6 +20,10 @@ solves (a compiled Cholesky per arm, :func:`_batched_solve`): one solve with
 condition estimate from the Cholesky diagonal of ``S`` was tried first: at a UR5 elbow
 singularity it over-estimated the reciprocal condition number by 1e4 and let 4e-8 errors
 through.)
+
+Twins: ``multiarm_pin._compiled.object_first`` (the same concept, object-first forward dynamics,
+at the compiled layer: that module is the kernel :func:`solve_object_first` calls first; this
+one also holds the numpy reference that decides the cases the kernel reports as doubtful).
 """
 
 from __future__ import annotations

@@ -11,6 +11,13 @@ One concept at several layers: each layer's ``report.py`` (``grasp``, ``study``,
 other body, first time, worst value and the limit), per-joint peaks and margins, and the
 clearances. :func:`check_design` answers the same for one state, before anything is
 simulated. :data:`LIMIT_KINDS` and :data:`POLICIES` are the scenario's ``limits:`` block.
+
+Twins: ``multiarm_pin.design.report``, ``multiarm_pin.grasp.report`` and
+``multiarm_pin.study.report`` (the same role, a package's report of its own results, in four
+packages: this one returns the feasibility of a simulated run (limits, collisions) as a
+``FeasibilityReport``; ``design.report`` writes a design's results folder (scenarios, pictures,
+``report.md``, the best run); ``grasp.report`` reads grasp files, analyses them, formats the
+report and draws its picture; ``study.report`` writes a study's ``report.md`` and its plots).
 """
 
 from __future__ import annotations

@@ -35,6 +35,10 @@ support functions) runs in the ``nogil`` kernels of :mod:`multiarm_pin._compiled
 that the scan's worker thread holds the interpreter only for coal's distances and the
 bookkeeping between them; ``RunScan(..., compiled=False)`` runs the numpy references
 instead (the same samples measured, the same report).
+
+Twins: ``multiarm_pin._compiled.scan`` (the same concept, the collision scan along a run, at the
+compiled layer: that module holds the ``nogil`` kernels; this one is their Python driver,
+:class:`RunScan`, with the numpy references).
 """
 
 from __future__ import annotations

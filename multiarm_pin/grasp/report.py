@@ -21,6 +21,13 @@ names, for each region, the contacts it holds fixed. ``seventh_contact`` (or ``m
 grasp --seventh K``) keeps only contact K's region; ``seventh_contact_face`` keeps the
 contacts on that face, or, when none lies on it (always with six contacts), gives the region
 of one more contact on it with every contact fixed.
+
+Twins: ``multiarm_pin.feasibility.report``, ``multiarm_pin.design.report`` and
+``multiarm_pin.study.report`` (the same role, a package's report of its own results, in four
+packages: this one reads grasp files, analyses them, formats the report and draws its picture;
+``feasibility.report`` returns the feasibility of a simulated run (limits, collisions) as a
+``FeasibilityReport``; ``design.report`` writes a design's results folder (scenarios, pictures,
+``report.md``, the best run); ``study.report`` writes a study's ``report.md`` and its plots).
 """
 
 from __future__ import annotations

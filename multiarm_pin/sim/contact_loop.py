@@ -17,6 +17,9 @@ NaN, too many events in one step, a step that starts or ends with a support poin
 rectangle, a row fallen past an edge) it hands back with the sample whose step the stepper then
 takes in Python (which raises, falls back or decides exactly as before); the next stretch goes
 to the kernel again.
+
+Twins: ``multiarm_pin._compiled.contact_loop`` (this module's kernel, the compiled layer's side
+of the same concept, the contact loop: :class:`ContactLoop` is its Python driver).
 """
 
 from __future__ import annotations

@@ -4,6 +4,10 @@ One concept at several layers: the subcommands of ``multiarm-pin`` above the app
 shell (``study/cli.py``, ``design/cli.py``; the grasp analysis's is ``app/grasp_cli.py``) hold
 their ``configure_parser`` and ``run``, which :mod:`multiarm_pin.app.cli`, the command line
 at the top of the layers, wires into the one command line.
+
+Twins: ``multiarm_pin.app.cli`` and ``multiarm_pin.design.cli`` (the same role, a package's
+command line, in three packages: ``app.cli`` is the whole ``multiarm-pin`` command line, which
+wires in this ``sweep`` subcommand and ``design.cli``'s ``design``).
 """
 
 from __future__ import annotations

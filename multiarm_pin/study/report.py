@@ -10,6 +10,14 @@ For a verdict metric (``form_closure``, ``within_limits``) the plot shows the fr
 cases where it holds at each value of the parameter, counting a failed case (an error row,
 e.g. a contact point pushed off its face) as not holding; for the other metrics, every
 case that ran (points) and the mean at each grid value (line).
+
+Twins: ``multiarm_pin.feasibility.report``, ``multiarm_pin.design.report`` and
+``multiarm_pin.grasp.report`` (the same role, a package's report of its own results, in four
+packages: this one writes a study's ``report.md`` and its plots; ``feasibility.report`` returns
+the feasibility of a simulated run (limits, collisions) as a ``FeasibilityReport``;
+``design.report`` writes a design's results folder (scenarios, pictures, ``report.md``, the best
+run); ``grasp.report`` reads grasp files, analyses them, formats the report and draws its
+picture).
 """
 
 from __future__ import annotations

@@ -28,6 +28,10 @@ Key paths use the base file's own keys: ``object.mass``, ``arms[0].base.position
 
 Every error is a :class:`~multiarm_pin.exceptions.StudyError` naming the file, the key path
 and what was expected.
+
+Twins: ``multiarm_pin.design.spec`` (the same role, a package's input file reader, in another
+package, for another format: that module reads design spec files, the object, task, arms and
+base region of a design; this one reads study files).
 """
 
 from __future__ import annotations

@@ -28,6 +28,10 @@ as :meth:`PhasedPD.reference` does (the margins cannot be kept, a rank-deficient
 the reference decides. The compiled contact loop runs the same kernel inside its steps
 (:class:`~multiarm_pin.sim.contact_loop.ContactLoop`; the registry entry's kernel
 ``phased_pd``) and hands such steps back to the stepper.
+
+Twins: ``multiarm_pin._compiled.phased`` (the same concept, the ``phased_pd`` controller, at the
+compiled layer: its ``phased_torques`` computes the torques of :class:`PhasedPD`'s compiled
+path, whose oracle is :meth:`PhasedPD.reference`).
 """
 
 from __future__ import annotations
