@@ -1,8 +1,9 @@
 """``multiarm-pin design SPEC.yaml --out DIR [--workers N | --scheduler ADDRESS] [--seed S]``.
 
-One concept at several layers: each layer's ``cli.py`` (``grasp``, ``study``, ``design``)
-holds its own subcommand of ``multiarm-pin`` (``configure_parser`` and ``run``), which
-:mod:`multiarm_pin.app.cli` wires into the one command line.
+One concept at several layers: each layer's ``cli.py`` (``study``, ``design``; the grasp
+analysis's is ``app/grasp_cli.py``) holds its own subcommand of ``multiarm-pin``
+(``configure_parser`` and ``run``), which :mod:`multiarm_pin.app.cli` wires into the one
+command line.
 
 Twins: ``multiarm_pin.app.cli`` and ``multiarm_pin.study.cli`` (the same role, a package's
 command line, in three packages: ``app.cli`` is the whole ``multiarm-pin`` command line, which
