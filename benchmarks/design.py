@@ -11,9 +11,10 @@ folder are not included (``--no-run`` territory: the run's own cost is
 task within 60 s, a three-arm one within 3 min, on a 2-core machine.
 
 Each spec's design is also compared with the shipped scenario of the same file name (its
-hand-made bases, contacts and seeds, scored by the same functions: :func:`evaluate` of its
-own design as a candidate): the scores of both, and whether the best design, or some design
-of the Pareto front, is at least as good on every score.
+hand-made bases, contacts and seeds, scored by the same functions:
+:func:`~multiarm_pin.design.assessment.assess` of its own design as a candidate): the scores
+of both, and whether the best design, or some design of the Pareto front, is at least as good
+on every score.
 
 The machine, its load average before and after each search, the date and the commit are
 written with the table: the targets are wall-clock times, and other processes add to them.
@@ -39,10 +40,10 @@ if str(ROOT) not in sys.path:
 from benchmarks._machine import run_line  # noqa: E402
 from multiarm_pin.data import data_path, shipped_files  # noqa: E402
 from multiarm_pin.design import SCORES, load_design, run_design  # noqa: E402
-from multiarm_pin.design.evaluation import (  # noqa: E402
+from multiarm_pin.design.assessment import (  # noqa: E402
     DesignProblem,
+    assess,
     candidate_from_scenario,
-    evaluate,
 )
 from multiarm_pin.design.scoring import at_least_as_good, objective  # noqa: E402
 
@@ -80,7 +81,7 @@ def main(argv=None) -> int:
         shipped = data_path("scenarios", f.name)
         if shipped.is_file():
             problem = DesignProblem(spec)
-            e = evaluate(problem, candidate_from_scenario(problem, shipped))
+            e = assess(problem, candidate_from_scenario(problem, shipped))
             if e.ok:
                 best = res.designs[0]
                 compared.append((f.name, e.scores, objective(e.scores, spec.weights), best,

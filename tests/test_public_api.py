@@ -20,7 +20,7 @@ PACKAGES = [
     "multiarm_pin.design",
     "multiarm_pin.design.spec",
     "multiarm_pin.design.candidates",
-    "multiarm_pin.design.evaluation",
+    "multiarm_pin.design.assessment",
     "multiarm_pin.design.scoring",
     "multiarm_pin.design.search",
     "multiarm_pin.design.report",

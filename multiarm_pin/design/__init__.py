@@ -5,7 +5,7 @@ search returns ranked designs, each a complete scenario that ``multiarm-pin run`
 
 - :mod:`.spec`: reading and validating spec files (:func:`load_design`), named grippers;
 - :mod:`.candidates`: candidate designs (bases, contacts, IK branches), sampled and refined;
-- :mod:`.evaluation`: the checks every returned design passes, and its scores;
+- :mod:`.assessment`: the checks every returned design passes, and its scores;
 - :mod:`.scoring`: the scores, the weighted objective, the Pareto front;
 - :mod:`.search`: the search, in parallel on Dask (:func:`run_design`);
 - :mod:`.report`: the results folder (scenarios, pictures, ``report.md``, the best run);
@@ -29,7 +29,7 @@ def design(spec, *, workers: int = 1, scheduler: str | None = None,
 
     Args:
         spec: a spec file path, a parsed mapping, or a :class:`DesignSpec`.
-        workers: processes of a local Dask cluster evaluating candidates (1: this process).
+        workers: processes of a local Dask cluster assessing candidates (1: this process).
         scheduler: address of an existing Dask scheduler instead.
         seed: overrides the spec's ``search.seed``.
 

@@ -9,7 +9,7 @@ gripper allows).
 
 :func:`sample_candidate` draws a candidate at random (its own generator seeded from the spec's
 seed and the candidate's index, so that a candidate does not depend on which worker or in which
-order it is drawn); :func:`perturb` draws a neighbour of an evaluated candidate for local
+order it is drawn); :func:`perturb` draws a neighbour of an assessed candidate for local
 refinement, on the same IK branch (seeded with the configuration found).
 
 Faces: a weld never goes on a face that rests on a support, nor on a face whose outward
@@ -279,7 +279,7 @@ def random_seed_configuration(problem, slot: int, base: np.ndarray, target: np.n
 
     Without ``branch``: with probability :data:`AIMED_SEED_FRACTION`, when the arm's first
     joint turns about its base's vertical axis, that joint is set so that the arm's neutral
-    reach direction (:attr:`~.evaluation.DesignProblem.pan_offset`) points at ``target``
+    reach direction (:attr:`~.assessment.DesignProblem.pan_offset`) points at ``target``
     (world [m]), give or take a normal 0.2 rad; the seed falls on whichever branch it falls.
     With ``branch`` (an arm with :data:`BRANCHES`): the seed lies on that branch: its first
     joint aims at ``target``, or away from it for the shoulder's other branch, give or take
@@ -372,7 +372,7 @@ def fit_gripper(problem, slot, signs: np.ndarray, axes: tuple[int, ...], rng,
     point drawn on that face near the corner, or to ``preferred`` (K, 3) (preference). The
     fit counts when every tip
     touches inside its face by the face margin (off supported areas); the gripper's links
-    against the object are the collision check's (:mod:`.evaluation`).
+    against the object are the collision check's (:mod:`.assessment`).
 
     Returns:
         ``(faces, points, tool)``: the contact points on the faces (object frame [m]) and
@@ -453,7 +453,7 @@ def fingertip_faces(problem, slot, corners_used: list, rng):
 
 def perturb(problem, parent: Candidate, q0s: list[np.ndarray], index: int,
             scale: float) -> Candidate:
-    """A neighbour of an evaluated candidate, on the same IK branches.
+    """A neighbour of an assessed candidate, on the same IK branches.
 
     Bases move by a normal step of ``0.1 scale`` m (clipped to the region) and yaw by
     ``0.3 scale`` rad; weld points move by ``0.05 scale`` m on their face (kept inside by the
@@ -596,8 +596,8 @@ def slide(problem, parent: Candidate, q0s: list[np.ndarray], index: int, arm: in
     return Candidate(index, tuple(arms), parent.index)
 
 
-def arm_pool(problem, evaluations) -> dict:
-    """Per kind of arm, the arm choices of evaluated candidates whose start pose was found.
+def arm_pool(problem, assessments) -> dict:
+    """Per kind of arm, the arm choices of assessed candidates whose start pose was found.
 
     A kind is ``(robot, urdf, tool frame, gripper)``; each entry is the arm's
     :class:`ArmChoice` with its start configuration as IK seed. Arms of a candidate that failed
@@ -605,7 +605,7 @@ def arm_pool(problem, evaluations) -> dict:
     order of the candidates' indices, then of the arms.
     """
     pool: dict = {}
-    for e in sorted(evaluations, key=lambda e: e.index):
+    for e in sorted(assessments, key=lambda e: e.index):
         if not e.solved:
             continue
         for slot, a, q in zip(problem.spec.arms, e.candidate.arms, e.solved, strict=True):

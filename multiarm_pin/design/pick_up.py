@@ -38,7 +38,7 @@ are tried too (:data:`EXTRA_ANGLES`).
 Each candidate (pivot, angle, base offsets) is checked (:func:`check_plan`) at the key poses
 of its phases: inverse kinematics of every arm's tips within joint limits with residual below
 :data:`IK_RESIDUAL`, warm-started from the previous key pose with no joint moving more than
-:data:`~.evaluation.MAX_JOINT_STEP` (one continuous branch), coal clearances at least
+:data:`~.assessment.MAX_JOINT_STEP` (one continuous branch), coal clearances at least
 ``search.clearance`` (:class:`~multiarm_pin.feasibility.CollisionScene`), the final grasp
 form closure (LP), and the static torques at most :data:`STATIC_TORQUE_RATIO` of the effort
 limits (at rest on the table with the couple pressing, tilted with the couple alone holding
@@ -552,7 +552,7 @@ def check_plan(planner: PickUpPlanner, cand: Candidate) -> PlanCheck:
     from multiarm_pin.app.precheck import effort_limits, static_torques
     from multiarm_pin.app.scenario import build_scenario
     from multiarm_pin.app.scenario.schema import parse_scenario
-    from multiarm_pin.design.evaluation import MAX_JOINT_STEP
+    from multiarm_pin.design.assessment import MAX_JOINT_STEP
     from multiarm_pin.exceptions import DynamicsError, UnreachableError
     from multiarm_pin.feasibility import CollisionScene
     from multiarm_pin.grasp.form_closure import form_closure
@@ -774,7 +774,7 @@ def impossible(spec, checked: list, excluded: list) -> DesignImpossibleError:
 
 def has_overhang(spec) -> bool:
     """The bottom face is not covered whole by the support (fingertips reach under it)."""
-    from multiarm_pin.design.evaluation import DesignProblem
+    from multiarm_pin.design.assessment import DesignProblem
 
     problem = DesignProblem(spec)
     bottom = [f for f, _, _ in problem.rects]

@@ -59,7 +59,7 @@ def draw_design(problem, design, path: Path, title: str = "") -> Path:
     import pinocchio as pin
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    ev = design.evaluation
+    found = design.assessment
     M = problem.object_placement
     poly = problem.poly
     fig = plt.figure(figsize=(6.4, 5.6))
@@ -77,7 +77,7 @@ def draw_design(problem, design, path: Path, title: str = "") -> Path:
                          [lo[0], hi[1], z]])
         ax.add_collection3d(Poly3DCollection([rect], facecolor="tan", alpha=0.5))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for i, (slot, a, q) in enumerate(zip(problem.spec.arms, ev.candidate.arms, ev.q0,
+    for i, (slot, a, q) in enumerate(zip(problem.spec.arms, found.candidate.arms, found.q0,
                                          strict=True)):
         arm = problem.arm(i, a.base)
         pin.forwardKinematics(arm.model, arm.data, q)
@@ -90,7 +90,7 @@ def draw_design(problem, design, path: Path, title: str = "") -> Path:
         ax.plot(*chain.T, "-o", color=c, markersize=3, linewidth=2.5, label=slot.name)
         ax.scatter(*a.base[:3], marker="s", s=40, color=c)
         pts_all.append(chain)
-    cps = ev.scenario["arms"]
+    cps = found.scenario["arms"]
     for e in cps:
         j = e["joint"]
         pts = [j["placement_in_object"]["position"]] if j["type"] == "weld" else \
@@ -211,7 +211,7 @@ def write_design(result, out, simulate: bool = True, overwrite: bool = False,
     from multiarm_pin.app.results_io import ResultsWriter
     from multiarm_pin.app.runner import run_scenario
     from multiarm_pin.app.scenario.schema import parse_scenario
-    from multiarm_pin.design.evaluation import DesignProblem
+    from multiarm_pin.design.assessment import DesignProblem
 
     spec = result.spec
     problem = DesignProblem(spec)

@@ -1,7 +1,7 @@
 """How designs are ranked: the scores, the weighted objective, the Pareto front, a total order.
 
 Every score of :data:`SCORES` is measured on a design that met every condition
-(:mod:`.evaluation`); fingertip scores are None for a weld-only design. The objective is
+(:mod:`.assessment`); fingertip scores are None for a weld-only design. The objective is
 
     J = Σ_s  w_s · term_s,   term_s = min(value_s / scale_s, 1)      (higher is better)
                              term_s = 1 - value_s                     (torque_ratio)
@@ -10,7 +10,7 @@ with the weights ``w_s`` of the spec's ``weights:`` (default :attr:`Score.weight
 each) and a score that does not apply (None) contributing 0. The caps keep one huge score
 from hiding a poor one: a clearance beyond 10 cm, for example, counts as 10 cm. Designs are
 sorted by ``J`` (descending), ties broken by the candidate's index, so that the ranking is a
-total order, the same whatever order the candidates were evaluated in.
+total order, the same whatever order the candidates were assessed in.
 """
 
 from __future__ import annotations

@@ -14,13 +14,13 @@ seeds fell into; at most ``search.candidates`` candidates, whole designs). After
 (:func:`_polish`: its best designs by the objective and those beside its widest gaps; other
 IK branches of the arm with the worst torque, bases toward or away from their grasps, one
 or all together, welds turned about their faces, small steps). A
-design found twice is ranked once (:func:`_distinct`). Candidates are evaluated
-(:func:`~.evaluation.evaluate`) in parallel on Dask (a ``LocalCluster`` of ``workers``
+design found twice is ranked once (:func:`_distinct`). Candidates are assessed
+(:func:`~.assessment.assess`) in parallel on Dask (a ``LocalCluster`` of ``workers``
 processes or the scheduler at ``scheduler``, as ``multiarm-pin sweep``), or in this process
 when ``workers`` is 1.
 
 Determinism: a candidate depends only on the spec's seed, its index and its parent
-(:func:`~.candidates.candidate_rng`); an evaluation only on its candidate; parents and designs
+(:func:`~.candidates.candidate_rng`); an assessment only on its candidate; parents and designs
 are chosen by a total order (:func:`~.scoring.rank_key`). So the same spec and seed give the
 same designs on any number of workers, whatever order they finish in.
 
@@ -36,6 +36,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from multiarm_pin.design.assessment import CONDITIONS, Assessment, DesignProblem, assess
 from multiarm_pin.design.candidates import (
     BRANCHES,
     approach,
@@ -49,7 +50,6 @@ from multiarm_pin.design.candidates import (
     slide,
     turn,
 )
-from multiarm_pin.design.evaluation import CONDITIONS, DesignProblem, Evaluation, evaluate
 from multiarm_pin.design.scoring import (
     SCORES,
     crowding_distance,
@@ -96,7 +96,7 @@ class Design:
         scores: the :data:`~.scoring.SCORES` values (None where they do not apply).
         pareto: on the Pareto front of every design found.
         scenario: the scenario mapping (``multiarm-pin run`` reads it as YAML).
-        evaluation: the :class:`~.evaluation.Evaluation`.
+        assessment: the :class:`~.assessment.Assessment`.
     """
 
     rank: int
@@ -105,7 +105,7 @@ class Design:
     scores: dict
     pareto: bool
     scenario: dict
-    evaluation: Evaluation
+    assessment: Assessment
 
 
 @dataclass
@@ -116,7 +116,7 @@ class DesignResult:
         spec: the :class:`~.spec.DesignSpec`.
         designs: the top designs, best first.
         pareto: every design of the Pareto front (ranked as ``designs``).
-        evaluated: candidates evaluated.
+        evaluated: candidates assessed (named as the ``evaluated`` key of ``design.json``).
         feasible: candidates that met every condition.
         failures: per condition, how many candidates failed it first.
         wall_time: seconds of the search.
@@ -133,8 +133,8 @@ class DesignResult:
     workers: int = 1
 
 
-def _progress_key(e: Evaluation, weights: dict) -> tuple:
-    """Total order of evaluations: furthest condition first, then nearest to meeting it."""
+def _progress_key(e: Assessment, weights: dict) -> tuple:
+    """Total order of assessments: furthest condition first, then nearest to meeting it."""
     if e.ok:
         return (0, *rank_key(objective(e.scores, weights), e.index))
     v = e.value if e.value is not None and np.isfinite(e.value) else np.inf
@@ -142,8 +142,8 @@ def _progress_key(e: Evaluation, weights: dict) -> tuple:
     return (len(CONDITIONS) - e.stage, round(float(v), 12), e.index)
 
 
-def make_and_evaluate(problem: DesignProblem, recipe: tuple) -> Evaluation:
-    """Make a candidate from its recipe and evaluate it (one task of the search).
+def make_and_assess(problem: DesignProblem, recipe: tuple) -> Assessment:
+    """Make a candidate from its recipe and assess it (one task of the search).
 
     Recipes: ``("sample", index)`` (:func:`~.candidates.sample_candidate`), ``("perturb",
     parent, q0s, index, scale)`` (:func:`~.candidates.perturb`), ``("reseed", parent, q0s,
@@ -168,12 +168,12 @@ def make_and_evaluate(problem: DesignProblem, recipe: tuple) -> Evaluation:
         cand = slide(problem, *recipe[1:])
     else:
         cand = recipe[1]
-    return evaluate(problem, cand)
+    return assess(problem, cand)
 
 
 class _Loop:
     def map(self, problem, recipes):
-        return [make_and_evaluate(problem, r) for r in recipes]
+        return [make_and_assess(problem, r) for r in recipes]
 
     def close(self):
         pass
@@ -200,7 +200,7 @@ class _Dask:
         # key, which releasing the first future would take from the tasks using the second
         if self.problem is None:
             self.problem = self.client.scatter(problem, broadcast=True)
-        futures = self.client.map(make_and_evaluate, [self.problem] * len(recipes), recipes,
+        futures = self.client.map(make_and_assess, [self.problem] * len(recipes), recipes,
                                   pure=False)
         return self.client.gather(futures)
 
@@ -219,7 +219,7 @@ def run_design(spec, workers: int = 1, scheduler: str | None = None, client=None
 
     Args:
         spec: a :class:`~.spec.DesignSpec` or a spec file path.
-        workers: evaluate on a local Dask cluster of this many processes (1: in this
+        workers: assess on a local Dask cluster of this many processes (1: in this
             process, no Dask).
         scheduler: address of an existing Dask scheduler instead.
         client: a ``distributed.Client`` to use (not closed here).
@@ -251,50 +251,50 @@ def run_design(spec, workers: int = 1, scheduler: str | None = None, client=None
     runner = _Dask(workers, scheduler, client) if (client is not None or scheduler is not None
                                                    or workers > 1) else _Loop()
     try:
-        evals = runner.map(problem, [("sample", i) for i in range(s.candidates)])
+        assessments = runner.map(problem, [("sample", i) for i in range(s.candidates)])
         nxt = s.candidates
         per_round = max(s.candidates // 2, 1)
         for r in range(1, s.refine + 1):
             if progress is not None:
-                progress(_round_line(r - 1, evals))
-            parents = _parents(sorted(evals, key=key))
+                progress(_round_line(r - 1, assessments))
+            parents = _parents(sorted(assessments, key=key))
             cands = []
             for j in range(per_round // 2):
                 p = parents[j % len(parents)]
                 q0 = p.q0 if p.q0 is not None else [a.q_seed for a in p.candidate.arms]
                 cands.append(("perturb", p.candidate, q0, nxt + j, 0.5 ** r))
-            pool = arm_pool(problem, evals)
+            pool = arm_pool(problem, assessments)
             for j in range(per_round // 2, per_round):
                 c = recombine(problem, pool, nxt + j) if len(spec.arms) > 1 else None
                 cands.append(("ready", c) if c is not None else ("sample", nxt + j))
             nxt += per_round
             new = runner.map(problem, cands)
-            evals += new
-        cands = _branch_round(problem, sorted(evals, key=key), nxt, s.candidates)
+            assessments += new
+        cands = _branch_round(problem, sorted(assessments, key=key), nxt, s.candidates)
         nxt += len(cands)
-        evals += runner.map(problem, cands)
+        assessments += runner.map(problem, cands)
         for r in range(1, s.polish + 1):
             if progress is not None:
-                progress(_round_line(s.refine + r - 1, evals))
-            cands = _polish(sorted(evals, key=key), max(s.candidates // 4, POLISH_MIN), nxt,
+                progress(_round_line(s.refine + r - 1, assessments))
+            cands = _polish(sorted(assessments, key=key), max(s.candidates // 4, POLISH_MIN), nxt,
                             0.5 ** (s.refine + r))
             nxt += len(cands)
-            evals += runner.map(problem, cands)
+            assessments += runner.map(problem, cands)
     finally:
         runner.close()
     if progress is not None:
-        progress(_round_line(s.refine + s.polish, evals))
-    ok = _distinct(sorted((e for e in evals if e.ok), key=key))
-    failures = {c: sum(1 for e in evals if e.condition == c) for c in CONDITIONS}
+        progress(_round_line(s.refine + s.polish, assessments))
+    ok = _distinct(sorted((e for e in assessments if e.ok), key=key))
+    failures = {c: sum(1 for e in assessments if e.condition == c) for c in CONDITIONS}
     if not ok:
-        raise _impossible(problem, evals)
+        raise _impossible(problem, assessments)
     designs = [Design(k + 1, e.index, objective(e.scores, spec.weights), _all_scores(e), False,
                       e.scenario, e) for k, e in enumerate(ok)]
     front = set(pareto_front([d.scores for d in designs]))
     for k, d in enumerate(designs):
         d.pareto = k in front
     return DesignResult(spec, designs[:spec.top], [d for d in designs if d.pareto],
-                        len(evals), sum(1 for e in evals if e.ok), failures,
+                        len(assessments), sum(1 for e in assessments if e.ok), failures,
                         time.perf_counter() - t0,
                         1 if isinstance(runner, _Loop) else max(workers, 1))
 
@@ -409,7 +409,7 @@ def _branch_round(problem, ranked: list, first: int, limit: int | None = None) -
 
 
 def _distinct(ranked: list) -> list:
-    """The evaluations of a ranking without repeats (the same design found twice).
+    """The assessments of a ranking without repeats (the same design found twice).
 
     A design whose bases, grasps and start configurations equal (to 1e-6 m or rad) those of
     one ranked before it is left out.
@@ -426,7 +426,7 @@ def _distinct(ranked: list) -> list:
 
 
 def _diverse(ranked: list, n: int) -> list:
-    """The first ``n`` evaluations of a ranking whose bases differ by :data:`PARENT_DISTANCE`.
+    """The first ``n`` assessments of a ranking whose bases differ by :data:`PARENT_DISTANCE`.
 
     Two candidates differ when some arm's base is at least that far from its place in the
     other (positions [m]); the ranking's first is always kept.
@@ -442,21 +442,21 @@ def _diverse(ranked: list, n: int) -> list:
     return out
 
 
-def _all_scores(e: Evaluation) -> dict:
+def _all_scores(e: Assessment) -> dict:
     return {n: e.scores.get(n) for n in SCORES}
 
 
-def _round_line(r: int, evals: list) -> str:
-    ok = sum(1 for e in evals if e.ok)
-    return f"round {r}: {len(evals)} candidates evaluated, {ok} met every condition"
+def _round_line(r: int, assessments: list) -> str:
+    ok = sum(1 for e in assessments if e.ok)
+    return f"round {r}: {len(assessments)} candidates evaluated, {ok} met every condition"
 
 
-def _impossible(problem, evals: list) -> DesignImpossibleError:
+def _impossible(problem, assessments: list) -> DesignImpossibleError:
     """The error of a search that found nothing: the furthest condition and its best value."""
-    best = min(evals, key=lambda e: _progress_key(e, problem.spec.weights))
+    best = min(assessments, key=lambda e: _progress_key(e, problem.spec.weights))
     c, v, detail = best.condition, best.value, best.detail
     spec = problem.spec
-    n = len(evals)
+    n = len(assessments)
     if c == "reach" and not np.isfinite(v):
         msg = f"no candidate could be built: {detail}"
     elif c == "reach":
@@ -514,4 +514,4 @@ def _closure_hint(problem) -> str:
     return ""
 
 
-__all__ = ["PARENTS", "Design", "DesignResult", "make_and_evaluate", "run_design"]
+__all__ = ["PARENTS", "Design", "DesignResult", "make_and_assess", "run_design"]

@@ -24,11 +24,6 @@ the compiled path, ``MultiArmSystem.blocks(..., reference=True)``)::
 
 (Longer than most modules: the compiled path, the views of its buffer and the
 numpy reference are the two implementations of one evaluation and belong together.)
-
-Twins: ``multiarm_pin.design.evaluation`` (not the same concept, only the same name: that module
-checks and scores one candidate design of the design search (reach, closure, path, collision,
-torque); this one is one evaluation of the system's dynamics at a state, and the two
-``Evaluation`` classes are unrelated).
 """
 
 from __future__ import annotations

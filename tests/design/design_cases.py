@@ -166,7 +166,7 @@ def recheck_fingertip_design(spec, problem, design) -> None:
         q0 = built.initial_state.q[system.arm_set.q_slices[i]]
         tips_obj.append([oMo0.actInv(tip_centre(arm, q0, c))
                          for c in built.scenario.arms[i].joint.contacts])
-    for k, (M, q) in enumerate(zip(problem.path_placements, design.evaluation.path_q,
+    for k, (M, q) in enumerate(zip(problem.path_placements, design.assessment.path_q,
                                    strict=True)):
         for i, arm in enumerate(system.arms):
             qi = q[system.arm_set.q_slices[i]]

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from multiarm_pin.design import load_design, parse_design
+from multiarm_pin.design.assessment import DesignProblem, candidate_from_scenario, weld_placement
 from multiarm_pin.design.candidates import (
     BRANCHES,
     MIN_BASE_DISTANCE,
@@ -23,7 +24,6 @@ from multiarm_pin.design.candidates import (
     turn,
     weld_faces,
 )
-from multiarm_pin.design.evaluation import DesignProblem, candidate_from_scenario, weld_placement
 from multiarm_pin.exceptions import UnreachableError
 from multiarm_pin.model.ik import PoseTarget, solve_ik
 from multiarm_pin.model.polyhedron import box

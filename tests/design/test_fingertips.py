@@ -10,8 +10,8 @@ import yaml
 from multiarm_pin.app.cli import main
 from multiarm_pin.data import data_path
 from multiarm_pin.design import load_design, parse_design, run_design
+from multiarm_pin.design.assessment import DesignProblem, assess, candidate_from_scenario
 from multiarm_pin.design.candidates import corner_assignments, fit_gripper
-from multiarm_pin.design.evaluation import DesignProblem, candidate_from_scenario, evaluate
 from tests.design.design_cases import (
     UR5_TIPS,
     recheck_fingertip_design,
@@ -48,7 +48,7 @@ def test_a_fitted_grip_puts_every_rigid_tip_on_its_face():
 
 def test_the_shipped_design_is_scored_with_every_fingertip_score():
     problem = DesignProblem(load_design(SPEC))
-    e = evaluate(problem, candidate_from_scenario(
+    e = assess(problem, candidate_from_scenario(
         problem, data_path("scenarios", "two_gripper_form_closure.yaml")))
     assert e.ok, (e.condition, e.detail)
     assert e.scores["lp_margin"] == pytest.approx(0.0479, abs=5e-4)  # the scenario's comment

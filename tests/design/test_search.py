@@ -14,11 +14,11 @@ from multiarm_pin.app.precheck import static_torques
 from multiarm_pin.app.scenario import build_scenario
 from multiarm_pin.app.scenario.schema import parse_scenario
 from multiarm_pin.design import load_design, run_design
-from multiarm_pin.design.evaluation import (
+from multiarm_pin.design.assessment import (
     MAX_JOINT_STEP,
     DesignProblem,
+    assess,
     candidate_from_scenario,
-    evaluate,
 )
 from multiarm_pin.design.scoring import SCORES, at_least_as_good, objective
 from multiarm_pin.feasibility import CollisionScene
@@ -47,7 +47,7 @@ def searched():
 def shipped(searched):
     spec = searched[0]
     problem = DesignProblem(spec)
-    return evaluate(problem, candidate_from_scenario(problem, TWO_UR5_SCENARIO))
+    return assess(problem, candidate_from_scenario(problem, TWO_UR5_SCENARIO))
 
 
 def test_the_shipped_design_meets_every_condition_and_is_scored(shipped):
@@ -76,7 +76,7 @@ def test_every_returned_design_passes_independent_rechecks(searched):
         built = build_scenario(parse_scenario(d.scenario, spec.file), load_visuals=False)
         system = built.system
         tools = [a.joint.placement_in_object for a in built.scenario.arms]
-        Q = d.evaluation.path_q
+        Q = d.assessment.path_q
         assert Q.shape == (len(problem.path_times), system.nq)
         np.testing.assert_allclose(Q[0], built.initial_state.q, atol=1e-9)
         scene = CollisionScene(system, built.initial_state, 0.0)
@@ -117,19 +117,19 @@ def test_the_arms_a_polishing_round_moves_are_those_that_set_the_scores(searched
         effort = np.concatenate([a.model.effortLimit for a in system.arms])
         arm_of = np.concatenate([[i] * a.nv for i, a in enumerate(system.arms)])
         worst = (0.0, -1)
-        for M, q in zip(problem.path_placements, d.evaluation.path_q, strict=True):
+        for M, q in zip(problem.path_placements, d.assessment.path_q, strict=True):
             st = system.state(q, None, M.translation, pin.Quaternion(M.rotation).coeffs())
             r = np.abs(rnea_static_torques(system, st)[0]) / effort
             worst = max(worst, (float(r.max()), int(arm_of[int(np.argmax(r))])))
         assert d.scores["torque_ratio"] == pytest.approx(worst[0], rel=1e-9)
-        assert d.evaluation.torque_arm == worst[1]
+        assert d.assessment.torque_arm == worst[1]
         manip = []
         for i, arm in enumerate(system.arms):
-            qi = d.evaluation.path_q[0][system.arm_set.q_slices[i]]
+            qi = d.assessment.path_q[0][system.arm_set.q_slices[i]]
             J = pin.computeFrameJacobian(arm.model, arm.data, qi, arm.tool_frame_id,
                                          pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
             manip.append(np.sqrt(np.linalg.det(J @ J.T)))
-        assert d.evaluation.manipulability_arm == int(np.argmin(manip))
+        assert d.assessment.manipulability_arm == int(np.argmin(manip))
         assert d.scores["manipulability"] == pytest.approx(min(manip), rel=1e-9)
 
 
@@ -147,11 +147,11 @@ def test_a_path_near_a_singularity_fails_the_path_condition(monkeypatch):
     """The shipped demo's arms keep their tool Jacobians' smallest singular values above 0.1
     along the task (numpy's SVD of Pinocchio's Jacobian); asked for 0.2, the design
     fails the ``path`` condition at the first pose below it, naming the arm."""
-    import multiarm_pin.design.evaluation as ev
+    import multiarm_pin.design.assessment as assessment
 
     problem = DesignProblem(load_design(TWO_UR5_SPEC))
     cand = candidate_from_scenario(problem, TWO_UR5_SCENARIO)
-    e = evaluate(problem, cand)
+    e = assess(problem, cand)
     assert e.ok
     built = build_scenario(parse_scenario(e.scenario, problem.spec.file), load_visuals=False)
     sigma = []
@@ -161,8 +161,8 @@ def test_a_path_near_a_singularity_fails_the_path_condition(monkeypatch):
                                          arm.tool_frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
             sigma.append(np.linalg.svd(J, compute_uv=False)[-1])
     assert 0.1 < min(sigma) < 0.15
-    monkeypatch.setattr(ev, "MIN_SINGULAR_VALUE", 0.2)
-    e = evaluate(problem, cand)
+    monkeypatch.setattr(assessment, "MIN_SINGULAR_VALUE", 0.2)
+    e = assess(problem, cand)
     assert not e.ok and e.condition == "path" and "near a singularity" in e.detail
     first = next(x for x in sigma if x < 0.2)  # the first pose and arm below, in task order
     assert e.value == pytest.approx(0.2 - first, abs=1e-9)
@@ -176,13 +176,13 @@ def test_the_branch_round_tries_every_other_branch_of_each_arm(searched):
 
     spec, result = searched
     problem = DesignProblem(spec)
-    evals = [d.evaluation for d in result.pareto]
-    recipes = _branch_round(problem, evals, 10_000)
+    found = [d.assessment for d in result.pareto]
+    recipes = _branch_round(problem, found, 10_000)
     assert [r[3] for r in recipes] == list(range(10_000, 10_000 + len(recipes)))
     parents = {r[1].index: r for r in recipes}
     assert 1 <= len(parents) <= PARENTS + len(SCORES)  # the best, and the best on each score
     for r in parents.values():
-        parent = next(e for e in evals if e.index == r[1].index)
+        parent = next(e for e in found if e.index == r[1].index)
         for arm, a in enumerate(parent.candidate.arms):
             g = problem.object_placement.act(a.points.mean(axis=0))
             own = branch_of(problem, arm, a.base, g, parent.q0[arm])
@@ -194,10 +194,10 @@ def test_the_branch_round_tries_every_other_branch_of_each_arm(searched):
 
     first = [r for r in recipes if r[1].index == recipes[0][1].index]
     assert len(parents) > 1 and len(first) == 14
-    assert keys(_branch_round(problem, evals, 10_000, len(first) + 13)) == keys(first)
-    assert keys(_branch_round(problem, evals, 10_000, 0)) == keys(first)
+    assert keys(_branch_round(problem, found, 10_000, len(first) + 13)) == keys(first)
+    assert keys(_branch_round(problem, found, 10_000, 0)) == keys(first)
 
     def indices(es):
         return [e.index for e in es]
 
-    assert indices(_distinct(evals + evals)) == indices(_distinct(evals)) == indices(evals)
+    assert indices(_distinct(found + found)) == indices(_distinct(found)) == indices(found)

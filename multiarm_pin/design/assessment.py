@@ -1,6 +1,6 @@
-"""Evaluating one candidate design: the checks every returned design passes, and its scores.
+"""Assessing one candidate design: the checks every returned design passes, and its scores.
 
-:func:`evaluate` turns a :class:`~.candidates.Candidate` into a scenario (the form
+:func:`assess` turns a :class:`~.candidates.Candidate` into a scenario (the form
 ``multiarm-pin run`` reads) and checks, in the order of :data:`CONDITIONS`:
 
 1. ``reach``: each arm's inverse kinematics at the start (:func:`~multiarm_pin.model.ik.solve_ik`
@@ -21,13 +21,8 @@
    effort limits at every pose of the task (the distribution keeps every unilateral contact
    pushing; a failure to hold is a ``closure`` failure).
 
-The candidate's :class:`Evaluation` records the first condition it failed with the value it
+The candidate's :class:`Assessment` records the first condition it failed with the value it
 reached (a residual, a margin, a clearance, a ratio), or its scores (:mod:`.scoring`).
-
-Twins: ``multiarm_pin.dynamics.evaluation`` (not the same concept, only the same name: that
-module is one evaluation of the system's dynamics at a state, the compiled path's buffer and its
-numpy reference; this one checks and scores one candidate design, and the two ``Evaluation``
-classes are unrelated).
 """
 
 from __future__ import annotations
@@ -69,8 +64,8 @@ like the candidate's, from the candidate's generator stream of that arm)."""
 
 
 @dataclass
-class Evaluation:
-    """What :func:`evaluate` found about one candidate.
+class Assessment:
+    """What :func:`assess` found about one candidate.
 
     Attributes:
         index: the candidate's index.
@@ -114,7 +109,7 @@ class Evaluation:
 
 
 class DesignProblem:
-    """A spec made ready for evaluation: the object's shape, faces, task poses, arms' data.
+    """A spec made ready for assessment: the object's shape, faces, task poses, arms' data.
 
     Picklable (a Dask task carries it). ``reach`` is each arm's reach bound [m]
     (:func:`~multiarm_pin.app.precheck.arm_reach`), ``seed_bounds`` its IK seeds' joint
@@ -319,8 +314,8 @@ def _without(q0s: list, i: int) -> list:
     return [None if k == i else q for k, q in enumerate(q0s)]
 
 
-def _fail(cand: Candidate, condition: str, value: float, detail: str, **kw) -> Evaluation:
-    return Evaluation(cand.index, cand, False, condition, float(value), detail, **kw)
+def _fail(cand: Candidate, condition: str, value: float, detail: str, **kw) -> Assessment:
+    return Assessment(cand.index, cand, False, condition, float(value), detail, **kw)
 
 
 def _start_ik(problem: DesignProblem, sc, cand: Candidate):
@@ -426,7 +421,7 @@ def closure_scores(problem: DesignProblem, system, state, grasp) -> dict:
     return out
 
 
-def evaluate(problem: DesignProblem, cand: Candidate) -> Evaluation:
+def assess(problem: DesignProblem, cand: Candidate) -> Assessment:
     """Check one candidate against every condition and score it (module docstring)."""
     from multiarm_pin.app.scenario import build_scenario
     from multiarm_pin.app.scenario.schema import parse_scenario
@@ -546,13 +541,13 @@ def evaluate(problem: DesignProblem, cand: Candidate) -> Evaluation:
     manip = [_manipulability(a, q) for a, q in zip(arms, q0s, strict=True)]
     scores["manipulability"] = min(manip)
     ends = np.cumsum([len(effort_limits(a)) for a in arms])
-    return Evaluation(cand.index, cand, True, None, None, worst_at, scores, q0s, Q, data,
+    return Assessment(cand.index, cand, True, None, None, worst_at, scores, q0s, Q, data,
                       list(q0s), int(np.searchsorted(ends, worst_j, side="right")),
                       int(np.argmin(manip)))
 
 
-__all__ = ["CONDITIONS", "MIN_SINGULAR_VALUE", "DesignProblem", "Evaluation",
-           "candidate_from_scenario", "closure_scores", "evaluate", "grasp_of", "scenario_data",
+__all__ = ["CONDITIONS", "MIN_SINGULAR_VALUE", "Assessment", "DesignProblem", "assess",
+           "candidate_from_scenario", "closure_scores", "grasp_of", "scenario_data",
            "weld_placement"]
 
 
