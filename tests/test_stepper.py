@@ -1,4 +1,5 @@
-"""The stepper's reuse of evaluated rows: the gaps of a known state, and of a new one."""
+"""The stepper's reuse of evaluated rows (the gaps of a known state, and of a new one), and the
+initial gaps by the numpy reference."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import numpy as np
 
 from multiarm_pin.app.runner import scenario_controller
 from multiarm_pin.app.scenario import build_scenario, load_scenario
+from multiarm_pin.sim.simulation import simulate
 from multiarm_pin.sim.stepper import ROWS_KEPT, Stepper
 from multiarm_pin.system import SystemState
 
@@ -51,3 +53,39 @@ def test_gaps_reuse_the_rows_of_evaluated_states_only():
         np.testing.assert_array_equal(st.gaps(s), _fresh_gaps(system, s))
     copy = SystemState(state.q.copy(), state.v.copy(), state.obj)
     assert st._known_rows(copy) is None
+
+
+def test_the_initial_gaps_by_the_reference_equal_the_compiled_ones_and_are_not_kept():
+    """``blocks_at(reference=True)`` (what ``simulate`` decides the initial active set from).
+
+    pick_from_table: the same gaps as the compiled path's to round-off, and its rows are not
+    remembered for the stepper's reuse (only its own path's are).
+    """
+    built = build_scenario(load_scenario(SCENARIOS / "pick_from_table.yaml"),
+                           load_visuals=False)
+    system, state = built.system, built.initial_state
+    st = Stepper(system, scenario_controller(built), "auto", built.scenario.simulation.baumgarte)
+    ref = st.blocks_at(0.0, state, reference=True)[1]
+    assert st._known_rows(state) is None
+    fast = st.blocks_at(0.0, state)[1]
+    assert st._known_rows(state) is fast
+    np.testing.assert_allclose(ref.phi, fast.phi, rtol=0.0, atol=1e-12)
+    np.testing.assert_allclose(ref.phi_dot, fast.phi_dot, rtol=0.0, atol=1e-12)
+
+
+def test_simulate_decides_the_initial_active_set_from_the_reference(monkeypatch):
+    """A run the compiled loops take never calls the Python path's compiled evaluation."""
+    built = build_scenario(load_scenario(SCENARIOS / "pick_from_table.yaml"),
+                           load_visuals=False)
+    seen = []
+    blocks_at = Stepper.blocks_at
+
+    def spy(self, t, state, reference=False):
+        seen.append((t, reference))
+        return blocks_at(self, t, state, reference)
+
+    monkeypatch.setattr(Stepper, "blocks_at", spy)
+    sim = built.scenario.simulation
+    simulate(built.system, built.initial_state, scenario_controller(built), 2 * sim.dt, sim.dt,
+             baumgarte=sim.baumgarte, compiled=False)
+    assert seen[0] == (0.0, True)

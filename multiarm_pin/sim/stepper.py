@@ -500,19 +500,24 @@ class Stepper:
         self.active = candidates & ~leave
         return new, joined
 
-    def blocks_at(self, t: float, state: SystemState):
+    def blocks_at(self, t: float, state: SystemState, reference: bool = False):
         """``(blocks, rows)`` of every contact row at a state, without torques.
 
         The impact law uses only ``M``, ``W``, ``W_o`` and ``M_o``: no controller call.
+        ``reference``: the arms' blocks by the numpy reference (``MultiArmSystem.blocks``),
+        equal to the compiled ones to round-off, without compiling the Python path's
+        evaluation kernel (``evaluate_state``) for one call; their rows are not kept for
+        reuse (the stepper's steps reuse only rows of its own path).
         """
         s = self.system
         w = None if self.wrench is None else self.wrench(t)
         if not s.n_arms:
             out = s.contact_blocks(state, None, None, self.baumgarte, w)
         else:
-            ev = s.blocks(state, None, self.baumgarte)
+            ev = s.blocks(state, None, self.baumgarte, reference=reference)
             out = s.contact_blocks(state, ev.blocks, ev.constraints, self.baumgarte, w)
-        self._remember(state, out[1])
+        if not reference:
+            self._remember(state, out[1])
         return out
 
     def rows_at(self, t: float, state: SystemState) -> ContactRows:
