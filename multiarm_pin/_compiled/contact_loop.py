@@ -74,7 +74,6 @@ from multiarm_pin._compiled.closed_loop import (
     wrench_at,
 )
 from multiarm_pin._compiled.controller_kernels import (
-    NO_WRENCH,
     PD_FORCES_FAILED,
     PD_HOLD,
     PD_OK,
@@ -381,7 +380,7 @@ def _torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compiled
                 status = object_pd_step(buf, dims, N, nv_arm, uni, x[:OBJECT_STATE_SIZE], ref,
                                         pd_gains, z, hold_tool, hold_obj, hold_n, g, params,
                                         qp_active if attempt == 0 else qp_active_r, tau,
-                                        mu_p, qdd_p, a_pts, a_d, False, NO_WRENCH)[0]
+                                        mu_p, qdd_p, a_pts, a_d, False, np.zeros(6))[0]
             else:
                 status, rank = touching_torques(buf, dims, N, nv_arm, uni, touching,
                                                 x[:OBJECT_STATE_SIZE], ref, pd_gains, z,

@@ -70,10 +70,6 @@ from multiarm_pin._compiled.linalg import (
 )
 from multiarm_pin._compiled.object_first import object_first
 
-NO_WRENCH = np.zeros(6)
-"""The ``wrench`` of :func:`object_pd_step` when no external wrench acts."""
-NO_WRENCH.setflags(write=False)
-
 PD_OK = 0
 """Status of :func:`object_pd_torques`: torques computed."""
 PD_FORCES_FAILED = 1
@@ -481,7 +477,8 @@ def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold
         solve: also solve the forward dynamics into the buffer's solution segments.
         wrench: (6,) external wrench ``[f; m]`` at the COM, world axes [N, N m], added to
             ``h_o`` for the forward dynamics only (the controller does not know it;
-            :data:`NO_WRENCH` for none).
+            zeros for none: a writable array, as every caller passes, so that one specialisation
+            serves them all; a module-level constant array would be typed read-only in a kernel).
 
     Returns:
         ``(pd_status, solve_status)``: :data:`PD_OK` or the reason to use the reference;
@@ -700,7 +697,7 @@ def solve_with_torques(buf, dims, N, params, tau):  # pragma: no cover - compile
                         params[P_OBJECT_RCOND_TOL], a_o, qdd, mu)
 
 
-__all__ = ["GRASP_RANK_TOLERANCE", "NO_WRENCH", "PD_ARM_RANK", "PD_FORCES_FAILED", "PD_HOLD",
+__all__ = ["GRASP_RANK_TOLERANCE", "PD_ARM_RANK", "PD_FORCES_FAILED", "PD_HOLD",
            "PD_LARGE_ROTATION", "PD_NOT_FINITE", "PD_OK", "desired_acceleration",
            "hold_still_torques", "log3", "min_norm_rows", "object_pd_step", "planned_torques",
            "object_pd_torques", "solve_with_torques", "touching_rank", "touching_torques"]

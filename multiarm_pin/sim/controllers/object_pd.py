@@ -404,8 +404,7 @@ class ObjectPD(Controller):
                 buffer, path.dims, path.N, path.nv_arm, self._unilateral, obj, ref[1],
                 self._pd_gains, z,
                 self.hold_points_in_tool, self.hold_points_in_object, self._hold_n, self._gains,
-                path.params, self._forces.active, tau, mu, qdd, a_pts, a_d, solve,
-                controller_kernels.NO_WRENCH)
+                path.params, self._forces.active, tau, mu, qdd, a_pts, a_d, solve, np.zeros(6))
         if status != controller_kernels.PD_OK:
             if status == controller_kernels.PD_FORCES_FAILED and active is None:
                 self._forces.cold_solves += 1
