@@ -151,6 +151,8 @@ class ContactLoop:
         sp_p, sp_n, sp_a = s.supports.tables()
         wrenches = (np.zeros((0, layout.WRENCH_WIDTH)) if stepper.wrench is None
                     else _f64(stepper.wrench.table()))
+        # N_blocks read-only, as the compiled path's N: object_first, which takes either,
+        # is compiled once
         self.S = (*arm, _f64(params), dims, N, nv_arm, sp_p, sp_n, sp_a,
                   np.array(s.contact_unilateral), np.array(s.contact_mask),
                   _i64(table.nv_blocks), _read_only(_i64(table.N_blocks)),
