@@ -14,12 +14,12 @@ $(STAMP): pyproject.toml
 	rm -f $(VENV)/.installed-*
 	touch $(STAMP)
 
-# Optional: the closed loop compiled ahead of time for this machine
-# (multiarm_pin/_compiled/precompiled.py), so that the first run of a scenario whose contacts
-# all touch compiles nothing. Not on the path of demo, test or pip install: without it the
-# kernels are compiled at first use and cached on disk. Needs a C compiler.
+# Optional: every shipped scenario run once (multiarm_pin/app/precompile.py), so that numba
+# compiles and caches their kernels and a first run of any of them compiles nothing. Not on the
+# path of demo, test or pip install: without it the kernels are compiled at first use and
+# cached on disk.
 precompile: $(STAMP)
-	$(VENV)/bin/multiarm-pin precompile --if-stale
+	$(VENV)/bin/multiarm-pin precompile
 
 venv: $(STAMP)
 

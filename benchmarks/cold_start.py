@@ -5,7 +5,7 @@ Two parts, written to ``--out`` as ``cold_start.md`` (commit, date, command, mac
 ``cold_start.json``:
 
 - **Per shipped scenario** (``multiarm_pin/data/scenarios/*.yaml``): in a fresh process with
-  its own empty ``NUMBA_CACHE_DIR`` and ``MULTIARM_PIN_AOT=0`` (no ahead-of-time module), the
+  its own empty ``NUMBA_CACHE_DIR``, the
   CPU time of the scenario's first ``simulate`` (compilation included) and of a second one in
   the same process (warm); their difference is the compile time. CPU time
   (``time.process_time``) is the steadier figure on a shared machine; wall times are given
@@ -62,7 +62,7 @@ print(json.dumps(out))
 
 def scenario_cold(path: Path) -> dict:
     """Compile and warm times of one scenario in a fresh process with an empty cache."""
-    env = dict(os.environ, MULTIARM_PIN_AOT="0", PYTHONPATH=str(ROOT))
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
     with tempfile.TemporaryDirectory(prefix="numba-cold-") as cache:
         env["NUMBA_CACHE_DIR"] = cache
         proc = subprocess.run([sys.executable, "-c", CHILD, str(path)], env=env,
@@ -120,7 +120,7 @@ def report(rows: list[dict], clone: dict | None, command: str) -> str:
                   "| venv and pip | compilation | demo run | total |", "|---|---|---|---|",
                   f"| {clone['install']:.0f} | {clone['compile']:.1f} | {clone['run']:.1f} | "
                   f"{clone['total']:.0f} |", ""]
-    lines += ["## First run of each shipped scenario, empty numba cache, no AOT module", "",
+    lines += ["## First run of each shipped scenario, empty numba cache", "",
               "Each in its own process and `NUMBA_CACHE_DIR`. compile = first run - warm run "
               "(same process).", "",
               "| scenario | compile CPU [s] | compile wall [s] | warm run CPU [s] "

@@ -10,7 +10,7 @@ forces. The reference path is the Python stepper with the controller's numpy ref
 (``controller.compiled = False``: no kernel serves it, as a run with no kernel).
 
 ``--cold`` also measures the first run in a fresh process with an empty numba cache
-(``NUMBA_CACHE_DIR`` a new folder, no ahead-of-time module used): its CPU time, which is
+(``NUMBA_CACHE_DIR`` a new folder): its CPU time, which is
 nearly all compilation; and, for a ``phased_pd`` scenario, in another such process, the CPU
 time of the first call of ``_compiled.phased.phased_torques`` once the evaluation kernels
 are compiled (the kernel with those of its callees not compiled yet:
@@ -120,8 +120,7 @@ def main(argv=None) -> int:
         sim = built.scenario.simulation
         if args.cold:
             with tempfile.TemporaryDirectory() as cache:
-                env = dict(os.environ, NUMBA_CACHE_DIR=cache, PYTHONPATH=str(ROOT),
-                           MULTIARM_PIN_AOT="0")
+                env = dict(os.environ, NUMBA_CACHE_DIR=cache, PYTHONPATH=str(ROOT))
                 r = subprocess.run([sys.executable, "-c", COLD.format(path=str(path))],
                                    capture_output=True, text=True, env=env, cwd=str(ROOT))
                 wall, cpu = (float(v) for v in r.stdout.split()[-2:])
@@ -130,8 +129,7 @@ def main(argv=None) -> int:
                              f"{os.getloadavg()[0]:.1f} |")
             if built.scenario.controller and built.scenario.controller.type == "phased_pd":
                 with tempfile.TemporaryDirectory() as cache:
-                    env = dict(os.environ, NUMBA_CACHE_DIR=cache, PYTHONPATH=str(ROOT),
-                               MULTIARM_PIN_AOT="0")
+                    env = dict(os.environ, NUMBA_CACHE_DIR=cache, PYTHONPATH=str(ROOT))
                     r = subprocess.run([sys.executable, "-c", KERNEL.format(path=str(path))],
                                        capture_output=True, text=True, env=env, cwd=str(ROOT))
                     notes.append(f"- {name}: first call of `phased_torques` with an empty "

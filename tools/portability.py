@@ -6,8 +6,7 @@ may use, hence the order of a sum's terms), OpenBLAS's kernel (``OPENBLAS_CORETY
 numpy's SIMD paths (``NPY_DISABLE_CPU_FEATURES``). A test whose verdict rests on round-off
 passes on one and fails on another. This script runs the grasp, solver, unilateral and
 contact-event tests once per :data:`TARGETS` entry that this machine can execute, each in a
-fresh process with its own empty numba cache folder and without the ahead-of-time module
-(``MULTIARM_PIN_AOT=0``: it was built for this CPU), and reports each run's BLAS kernel as
+fresh process with its own empty numba cache folder, and reports each run's BLAS kernel as
 OpenBLAS itself names it (``threadpoolctl``), so that a coretype the library ignored is seen.
 
 Usage: ``python tools/portability.py [--list] [--only NAME ...] [pytest args or test paths]``
@@ -98,7 +97,7 @@ def environment(target: Target, cache: str) -> dict[str, str]:
            if k not in ("NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES", "OPENBLAS_CORETYPE",
                         "NPY_DISABLE_CPU_FEATURES", "NUMBA_DISABLE_JIT")}
     env.update(target.env)
-    env.update(NUMBA_CACHE_DIR=cache, MULTIARM_PIN_AOT="0", PYTHONDONTWRITEBYTECODE="1")
+    env.update(NUMBA_CACHE_DIR=cache, PYTHONDONTWRITEBYTECODE="1")
     return env
 
 

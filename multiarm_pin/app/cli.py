@@ -224,20 +224,20 @@ def _build_parser(command: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("scenario", nargs="?", default=None, metavar="SCENARIO",
                    help="scenario YAML file: its arms, tool frames, joints, object and supports")
     p.set_defaults(func=_info)
-    p = sub.add_parser("precompile", help="optional: compile the closed loop ahead of time for "
-                       "this machine (`make precompile`; needs a C compiler): the first run of a "
-                       "scenario whose contacts all touch then compiles nothing")
-    p.add_argument("--if-stale", action="store_true",
-                   help="do nothing if it is built for the installed sources")
+    p = sub.add_parser("precompile", help="optional: run the shipped scenarios once each so "
+                       "that numba compiles and caches their kernels (`make precompile`): "
+                       "their first runs then compile nothing")
+    p.add_argument("--scenarios", nargs="+", default=None, metavar="NAME",
+                   help="only these shipped scenarios (default: all)")
     p.set_defaults(func=_precompile)
     return parser
 
 
 def _precompile(args: argparse.Namespace) -> int:
-    """``multiarm-pin precompile``: :mod:`multiarm_pin.app.precompile`'s build."""
+    """``multiarm-pin precompile``: :mod:`multiarm_pin.app.precompile`."""
     from multiarm_pin.app import precompile
 
-    return precompile.main(["--if-stale"] if args.if_stale else [])
+    return precompile.main([] if args.scenarios is None else ["--scenarios", *args.scenarios])
 
 
 def _demo(args: argparse.Namespace) -> int:

@@ -1,85 +1,120 @@
-"""``multiarm-pin precompile``: the closed loop built ahead of time from a run of the demo.
+"""``multiarm-pin precompile``: the kernels of the shipped scenarios compiled into numba's cache.
 
-The ahead-of-time build itself (:func:`multiarm_pin._compiled.precompiled.build`) sits in the
-compiled layer, which imports nothing above it; the types of a kernel's arguments, which fix
-the module's signature, come from a real run. This module builds them: the arguments a short
-run of the shipped demo scenario passes to each kernel of
-:data:`~multiarm_pin._compiled.precompiled.KERNELS` (:data:`EXAMPLES`; every shipped scenario
-passes arguments of the same types: tested), and runs the build (``make precompile``,
-``python -m multiarm_pin.app.precompile``).
+numba compiles a kernel at its first call and caches it on disk (``cache=True``, each entry
+stamped with a digest of all kernel sources: :mod:`multiarm_pin._compiled.cache`), so the
+first run of a scenario waits once for the compilation of the loops and stages it uses.
+This command (``make precompile``; optional, never part of ``make demo``, ``make test`` or
+``pip install``) runs shipped scenarios once each, exactly as ``multiarm-pin run`` does (the
+whole duration, without plots or replay page, into a temporary folder removed afterwards), so
+that what they use is compiled and cached for this machine. Later runs of them, and of any
+scenario that takes the same loops (the cache is keyed by argument types, not sizes), then
+load the kernels instead.
+
+Nothing is built outside numba's own cache, and no C compiler is needed. With
+``NUMBA_DISABLE_JIT`` set there is nothing to compile and it says so.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
-from multiarm_pin._compiled import precompiled
+from multiarm_pin.data import shipped_files
+from multiarm_pin.exceptions import InputError, MultiArmError
 
 
-def run_rk4_arguments() -> tuple:
-    """The arguments of ``run_rk4`` in a short run of the shipped demo scenario."""
-    from multiarm_pin.app.runner import scenario_controller
-    from multiarm_pin.app.scenario import build_scenario, load_scenario
-    from multiarm_pin.data import DEMO_SCENARIO, data_path
-    from multiarm_pin.sim.compiled_loop import CompiledLoop
-    from multiarm_pin.sim.stepper import Stepper
+@dataclass(frozen=True)
+class Compiled:
+    """One scenario's pass of :func:`precompile`.
 
-    built = build_scenario(load_scenario(data_path("scenarios", DEMO_SCENARIO)),
-                           load_visuals=False)
-    sim = built.scenario.simulation
-    stepper = Stepper(built.system, scenario_controller(built), sim.solver, sim.baumgarte)
-    loop = CompiledLoop.for_run(stepper, "rk4")
-    if loop is None or not loop.ready(built.initial_state):
-        raise RuntimeError("the demo scenario does not run on the compiled closed loop")
-    return loop.example_arguments(built.initial_state)
+    Attributes:
+        name: the scenario's file name without ``.yaml``.
+        seconds: wall time of its run, compilation included [s].
+        outcome: ``"complete"``, or how the run ended (a run that fails, e.g. the grasp
+            failure the scenario shows, still compiles what it used).
+    """
+
+    name: str
+    seconds: float
+    outcome: str
 
 
-EXAMPLES: dict[str, Callable[[], tuple]] = {"run_rk4": run_rk4_arguments}
-"""Kernel name (:data:`~multiarm_pin._compiled.precompiled.KERNELS`) -> ``() -> arguments``
-of a real run (a test checks that every kernel has one)."""
+def shipped_scenarios() -> dict[str, Path]:
+    """The shipped scenario files by name (file name without ``.yaml``)."""
+    return {p.stem: p for p in shipped_files("scenarios")}
 
 
-def build(folder: Path | None = None, verbose: bool = False) -> Path:
-    """Build every kernel of the module for the arguments of :data:`EXAMPLES`.
+def precompile(names: Sequence[str] | None = None,
+               report: Callable[[Compiled], None] | None = None) -> list[Compiled]:
+    """Run shipped scenarios once each, so that numba compiles and caches their kernels.
 
     Args:
-        folder: where (default :data:`~multiarm_pin._compiled.precompiled.FOLDER`).
-        verbose: the AOT compiler's messages.
+        names: scenario names (:func:`shipped_scenarios`); default all.
+        report: called after each scenario (e.g. to print progress).
 
     Returns:
-        The module's path.
+        One :class:`Compiled` per scenario, in order.
 
     Raises:
-        Exception: whatever numba's AOT compiler or the C toolchain raises (e.g. no compiler).
+        InputError: a name that is not a shipped scenario (before anything runs).
     """
-    examples = {name: EXAMPLES[name]() for name in precompiled.KERNELS}
-    return precompiled.build(examples, folder, verbose)
+    from multiarm_pin.app.runner import run_scenario
+
+    shipped = shipped_scenarios()
+    chosen = list(shipped) if names is None else list(names)
+    unknown = [n for n in chosen if n not in shipped]
+    if unknown:
+        raise InputError(f"not shipped scenarios: {', '.join(map(repr, unknown))}; expected "
+                         f"names among {', '.join(shipped)}")
+    done = []
+    with tempfile.TemporaryDirectory(prefix="multiarm-pin-precompile-") as tmp:
+        for name in chosen:
+            t0 = time.perf_counter()
+            quiet = io.StringIO()  # the scenarios' own warnings are not this command's
+            try:
+                with contextlib.redirect_stderr(quiet):
+                    run_scenario(shipped[name], out=Path(tmp) / name, quiet=True, html=False,
+                                 plots=False)
+                outcome = "complete"
+            except MultiArmError as exc:
+                outcome = f"ended early ({type(exc).__name__})"
+            item = Compiled(name, time.perf_counter() - t0, outcome)
+            done.append(item)
+            if report is not None:
+                report(item)
+    return done
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Command line: build the module (``--if-stale``: only when none fits these sources)."""
+    """Command line: compile the kernels of the shipped scenarios (``--scenarios`` some)."""
     import argparse
 
-    parser = argparse.ArgumentParser(description="Compile the simulation loops ahead of time.")
-    parser.add_argument("--if-stale", action="store_true",
-                        help="do nothing if a module of these sources is built")
-    parser.add_argument("--folder", type=Path, default=None,
-                        help="where to build (default: the package's _compiled folder)")
+    from numba.core import config
+
+    parser = argparse.ArgumentParser(
+        prog="multiarm-pin precompile",
+        description="Compile the kernels of the shipped scenarios into numba's cache.")
+    parser.add_argument("--scenarios", nargs="+", default=None, metavar="NAME",
+                        help="only these shipped scenarios (default: all)")
     opts = parser.parse_args(argv)
-    if opts.if_stale and precompiled.load(opts.folder) is not None:
-        print(f"precompiled loops up to date ({precompiled.module_name()})")
+    if config.DISABLE_JIT:
+        print("NUMBA_DISABLE_JIT is set: the kernels run as Python, nothing to compile")
         return 0
     t0 = time.perf_counter()
     try:
-        path = build(opts.folder)
-    except Exception as exc:  # noqa: BLE001 - any build failure: the JIT stays in use
-        print(f"precompiled loops not built ({type(exc).__name__}: {exc}); the kernels "
-              "will be compiled at first use instead", file=sys.stderr)
-        return 1
-    print(f"precompiled loops built in {time.perf_counter() - t0:.0f} s: {path.name}")
+        done = precompile(opts.scenarios, report=lambda c: print(
+            f"  {c.name}: {c.seconds:.0f} s, {c.outcome}", flush=True))
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"the kernels of {len(done)} scenarios are compiled and cached "
+          f"({time.perf_counter() - t0:.0f} s)")
     return 0
 
 
@@ -87,4 +122,4 @@ if __name__ == "__main__":
     sys.exit(main())
 
 
-__all__ = ["EXAMPLES", "build", "main", "run_rk4_arguments"]
+__all__ = ["Compiled", "main", "precompile", "shipped_scenarios"]

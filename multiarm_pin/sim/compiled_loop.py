@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from multiarm_pin._compiled import closed_loop as kernels
-from multiarm_pin._compiled import layout, precompiled
+from multiarm_pin._compiled import layout
 from multiarm_pin._compiled.function_pointers import entry_point
 from multiarm_pin.dynamics.solve import SOLVERS
 from multiarm_pin.dynamics.unilateral import UNILATERAL_SOLVERS
@@ -165,13 +165,9 @@ class CompiledLoop:
         a_d = np.zeros(6)
         args = self._arguments(rec, x, times, k0, k1, a_pts, a_d)
         if self._kernel is None or self._kernel[0] is not self._stage_pointer:
-            # the precompiled module's, or the JIT kernel's entry point for these types (fixed
-            # by construction for this loop: numba's dispatch would type the stage's function
-            # pointer again at every call)
-            kernel = precompiled.run_rk4_for(args)
-            if kernel is kernels.run_rk4:
-                kernel = entry_point(kernel, args)
-            self._kernel = (self._stage_pointer, kernel)
+            # the kernel's entry point for these types (fixed by construction for this loop:
+            # numba's dispatch would type the stage's function pointer again at every call)
+            self._kernel = (self._stage_pointer, entry_point(kernels.run_rk4, args))
         status, k = self._kernel[1](*args)
         tau, mu, qdd = self.work[7:]
         self.last_status = int(status)
@@ -202,19 +198,6 @@ class CompiledLoop:
                 rec.quat, rec.twist, rec.tau, rec.mu, rec.phi, rec.phi_dot, rec.points,
                 rec.normals, rec.a_o, rec.qdd, rec.violation, rec.wrench, rec.ke, rec.pe,
                 rec.momentum, self._stage_pointer[1])
-
-    def example_arguments(self, state: SystemState, steps: int = 2) -> tuple:
-        """The arguments :meth:`run` would pass for ``steps`` steps of 1 ms from ``state``.
-
-        For :mod:`multiarm_pin._compiled.precompiled`, which compiles for their types.
-        """
-        times = np.arange(steps + 1) * 1e-3
-        rec = Recorder(self.system, len(times), self.stepper.solver, 1)
-        o = state.obj
-        x = layout.state_vector(o.position, o.quaternion, o.twist, state.q, state.v, self._zero)
-        return self._arguments(rec, x, times, 0, len(times),
-                               np.zeros(self.stepper.controller.hold_points_in_tool.shape),
-                               np.zeros(6))
 
     def evaluate(self, t: float, state: SystemState) -> tuple[int, np.ndarray, np.ndarray]:
         """One closed-loop evaluation by the kernel of the loop's stages (no record).

@@ -341,20 +341,6 @@ class ContactLoop:
         return (k0, k1, times, x, active, self.S, C, self.W, self._O, self.K, self.Z, self.L,
                 self.I, self.events, self.n_events, self.reserve, Rec, *self._fn[1:])
 
-    def example_arguments(self, state: SystemState, steps: int = 2) -> tuple:
-        """The arguments :meth:`run` would pass for ``steps`` steps of 1 ms from ``state``.
-
-        For :mod:`multiarm_pin._compiled.precompiled`, which compiles for their types.
-        """
-        times = np.arange(steps + 1) * 1e-3
-        rec = Recorder(self.system, len(times), self.stepper.solver, 1)
-        o = state.obj
-        x = layout.state_vector(o.position, o.quaternion, o.twist, state.q, state.v,
-                                self._zero_x)
-        return self._arguments(rec, x, times, 0, len(times), self._controller(),
-                               np.array(self.stepper.active, dtype=bool),
-                               np.zeros(len(times), np.int64))
-
     def run(self, rec: Recorder, state: SystemState, times: np.ndarray, k0: int, k1: int
             ) -> tuple[int, SystemState]:
         """Samples ``k0 .. k1 - 1`` by the kernel, from ``state`` at sample ``k0``.
