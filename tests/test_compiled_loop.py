@@ -82,7 +82,7 @@ def stage_with_pinocchio(system, state, ctrl, t, params):
                             np.zeros(system.nv))
     tau = np.zeros((n, k))
     d = np.zeros(2 * system.nv + layout.OBJECT_STATE_SIZE)
-    status = kernels.closed_loop_stage(
+    args = (
         t, x, False, aset.compiled_model.ints, aset.compiled_model.floats, q_ref,
         pin.difference(aset.model, state.q, q_ref), J, dJ, M, nle, H,
         np.zeros(layout.ENERGY_SIZE), path.arm_table,
@@ -92,6 +92,7 @@ def stage_with_pinocchio(system, state, ctrl, t, params):
         tau, np.zeros((n, m)),
         np.zeros((n, k)), np.zeros(hold_tool.shape), np.zeros(6),
         np.zeros(layout.REFERENCE_SIZE), np.zeros((3, 3)), np.zeros((n, k)), d)
+    status = kernels.closed_loop_stage(*args, kernels.stage_callees(args))
     return status, d, system.unpad(tau)
 
 

@@ -176,8 +176,8 @@ def tangent(x, nv, nv_arm, v_starts, qdd, a_o, d):  # pragma: no cover - compile
 def closed_loop_stage(t, x, arm_pass, model_ints, model_floats, q_ref, err, J, dJ, M, nle, H,
                       energy, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
                       unilateral, traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains,
-                      active, wrenches, buf, tau, mu, qdd, a_pts, a_d, ref, E, z,
-                      d):  # pragma: no cover - compiled
+                      active, wrenches, buf, tau, mu, qdd, a_pts, a_d, ref, E, z, d,
+                      callees):  # pragma: no cover - compiled
     """One closed-loop evaluation at ``(t, x)`` and its tangent ``d``.
 
     With ``arm_pass``, first the arms' terms at ``x`` by
@@ -232,6 +232,11 @@ def closed_loop_stage(t, x, arm_pass, model_ints, model_floats, q_ref, err, J, d
         E: workspace (3, 3).
         z: workspace (n, k).
         d: output (2 nv + 13,) the tangent.
+        callees: ``(arm pass, system, controller)``:
+            :func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass`,
+            :func:`~.evaluate.evaluate_system` and
+            :func:`~.controller_kernels.object_pd_step` as :func:`stage_callees` makes them
+            (each compiled once and called through its address), or those kernels.
 
     Returns:
         ``STAGE_OK`` or the reason to hand the evaluation to the Python path.
@@ -242,20 +247,19 @@ def closed_loop_stage(t, x, arm_pass, model_ints, model_floats, q_ref, err, J, d
         q0 = OBJECT_STATE_SIZE
         nq = q_ref.shape[0]
         q = x[q0:q0 + nq]
-        rigid_body_pass(model_ints, model_floats, q, x[q0 + nq:q0 + nq + nv], J, dJ, M, nle, H,
-                        energy)
+        callees[0](model_ints, model_floats, q, x[q0 + nq:q0 + nq + nv], J, dJ, M, nle, H,
+                   energy)
         difference(model_ints, q, q_ref, err)
-    if not evaluate_system(J, dJ, M, nle, H, x, arm_ints, v_starts, ints, floats, params, dims,
-                           buf):
+    if not callees[1](J, dJ, M, nle, H, x, arm_ints, v_starts, ints, floats, params, dims, buf):
         return STAGE_NOT_FINITE
     reference_motion(t, traj, E, ref)
     joint_pd(err, x, v_starts, nv_arm, null_gains[NULL_KP], null_gains[NULL_KD], z)
     w = np.empty(6)
     for a in range(6):
         w[a] = wrench_at(t, wrenches, a)
-    status, solved = object_pd_step(buf, dims, N, nv_arm, unilateral, x[:OBJECT_STATE_SIZE],
-                                    ref, pd_gains, z, hold_tool, hold_obj, hold_n, gains, params,
-                                    active, tau, mu, qdd, a_pts, a_d, True, w)
+    status, solved = callees[2](buf, dims, N, nv_arm, unilateral, x[:OBJECT_STATE_SIZE], ref,
+                                pd_gains, z, hold_tool, hold_obj, hold_n, gains, params, active,
+                                tau, mu, qdd, a_pts, a_d, True, w)
     if status != PD_OK:
         return STAGE_CONTROLLER
     if solved != SOLVE_OK:
@@ -271,15 +275,42 @@ def closed_loop_stage(t, x, arm_pass, model_ints, model_floats, q_ref, err, J, d
     return STAGE_OK
 
 
+def stage_callees(stage_args: tuple) -> tuple:
+    """The ``callees`` argument of :func:`closed_loop_stage` for its other arguments.
+
+    ``stage_args``: every argument of :func:`closed_loop_stage` before ``callees``, in its
+    order (their types are what count). The rigid-body pass, the system's evaluation and the
+    controller, each compiled once, on its own, for the types the stage passes them
+    (:mod:`~multiarm_pin._compiled.function_pointers`): the stage's module holds only the
+    stage's own code.
+    """
+    (_, x, _, model_ints, model_floats, q_ref, _, J, dJ, M, nle, H, energy, arm_ints, v_starts,
+     ints, floats, params, dims, N, nv_arm, unilateral, _, pd_gains, _, hold_tool, hold_obj,
+     hold_n, gains, active, _, buf, tau, mu, qdd, a_pts, a_d, ref, _, z, _) = stage_args
+    nq, nv = q_ref.shape[0], J.shape[1]
+    q, v = x[OBJECT_STATE_SIZE:OBJECT_STATE_SIZE + nq], x[OBJECT_STATE_SIZE + nq:][:nv]
+    arm_pass = pointer(rigid_body_pass, (model_ints, model_floats, q, v, J, dJ, M, nle, H,
+                                         energy), numba.types.none)
+    system = pointer(evaluate_system, (J, dJ, M, nle, H, x, arm_ints, v_starts, ints, floats,
+                                       params, dims, buf), numba.types.boolean)
+    controller = pointer(object_pd_step, (buf, dims, N, nv_arm, unilateral,
+                                          x[:OBJECT_STATE_SIZE], ref, pd_gains, z, hold_tool,
+                                          hold_obj, hold_n, gains, params, active, tau, mu, qdd,
+                                          a_pts, a_d, True, np.zeros(6)),
+                         numba.types.UniTuple(numba.types.int64, 2))
+    return arm_pass, system, controller
+
+
 def stage_function(x, model_ints, model_floats, q_ref, arm_ints, v_starts, ints, floats,
                    params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
                    hold_obj, hold_n, gains, active, wrenches, work_J, work_dJ, work_M, work_nle,
                    work_H, work_energy, buf, tau, mu, qdd, a_pts, a_d):
-    """The ``evaluate`` argument of :func:`run_rk4` for its arguments (same names).
+    """``(evaluate, callees)``, the last arguments of :func:`run_rk4`, for its others.
 
     :func:`closed_loop_stage` compiled once for the types :func:`run_rk4` passes it and
-    called through its address (:mod:`~multiarm_pin._compiled.function_pointers`): the
-    loop's module does not compile the stage again.
+    called through its address (:mod:`~multiarm_pin._compiled.function_pointers`), and its
+    callees (:func:`stage_callees`): the loop's module does not compile the stage again, nor
+    the stage's module its callees.
     """
     n, k = tau.shape
     nd = 2 * q_ref.shape[0] + OBJECT_STATE_SIZE  # any size: only the types count
@@ -288,7 +319,8 @@ def stage_function(x, model_ints, model_floats, q_ref, arm_ints, v_starts, ints,
                params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
                hold_obj, hold_n, gains, active, wrenches, buf, tau, mu, qdd, a_pts, a_d,
                np.empty(REFERENCE_SIZE), np.empty((3, 3)), np.empty((n, k)), np.empty(nd))
-    return pointer(closed_loop_stage, example, numba.types.int64)
+    callees = stage_callees(example)
+    return pointer(closed_loop_stage, (*example, callees), numba.types.int64), callees
 
 
 @kernel
@@ -400,7 +432,8 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
             hold_obj, hold_n, gains, active, wrenches, separation, work_J, work_dJ, work_M,
             work_nle, work_H, work_energy, buf, tau, mu, qdd, a_pts, a_d, r_q, r_v, r_p, r_quat,
             r_tw, r_tau, r_mu, r_phi, r_phi_dot, r_points, r_normals, r_a_o, r_qdd, r_violation,
-            r_wrench, r_kinetic, r_potential, r_momentum, evaluate):  # pragma: no cover - compiled
+            r_wrench, r_kinetic, r_potential, r_momentum, evaluate,
+            callees):  # pragma: no cover - compiled
     """RK4 (or semi-implicit Euler) steps from sample ``k0``, recording samples ``k0 .. k1 - 1``.
 
     Sample ``k`` is evaluated (stage 1), recorded, and unless it is the grid's last, the state
@@ -471,6 +504,7 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
             origin]`` [kg m/s, kg m²/s].
         evaluate: :func:`closed_loop_stage`, as :func:`stage_function` makes it (compiled
             once, called through its address) or the kernel itself.
+        callees: the stage's ``callees`` (:func:`stage_callees`).
 
     Returns:
         ``(status, k)``: ``STAGE_OK`` and ``k1`` when every sample was done, else the reason
@@ -509,7 +543,8 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
                 ts, xe, True, model_ints, model_floats, q_ref, err, work_J, work_dJ, work_M,
                 work_nle, work_H, work_energy, arm_ints, v_starts, ints, floats, params, dims,
                 N, nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n,
-                gains, active, wrenches, buf, tau, mu, qdd, a_pts, a_d, ref, E, z, ds[stage])
+                gains, active, wrenches, buf, tau, mu, qdd, a_pts, a_d, ref, E, z, ds[stage],
+                callees)
             if st == STAGE_RELEASE and stage > 0:
                 return STAGE_RELEASE_IN_STEP, s
             if st != STAGE_OK:
@@ -648,4 +683,4 @@ def record_energy(s, x, params, energy, arms, r_kinetic, r_potential, r_momentum
 __all__ = ["NULL_KD", "NULL_KP", "STAGE_CONTROLLER", "STAGE_NOT_FINITE", "STAGE_OK",
            "STAGE_RELEASE", "STAGE_RELEASE_IN_STEP", "STAGE_SEPARATION", "STAGE_SOLVE",
            "closed_loop_stage", "joint_pd", "record_energy", "record_state", "run_rk4",
-           "stage_function", "tangent"]
+           "stage_callees", "stage_function", "tangent"]

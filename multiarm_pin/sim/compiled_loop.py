@@ -70,6 +70,7 @@ class CompiledLoop:
                      np.zeros((n, m)), np.zeros((n, k)))
         self.separation = np.array([ce.SEPARATION_GAP, ce.SEPARATION_SPEED])
         self._stage_args = None  # evaluate()'s kernel arguments, made once per controller
+        self._callees = None  # evaluate()'s stage's callees (closed_loop.stage_callees)
         self._stage_pointer = None  # (controller's trajectory table, run_rk4's stage)
         self._kernel = None  # (self._stage_pointer, the kernel to call with these types)
         self._zero = np.zeros(s.nv)
@@ -197,7 +198,7 @@ class CompiledLoop:
         return (k0, k1, times, x, *system, self.separation, *work, rec.q, rec.v, rec.p,
                 rec.quat, rec.twist, rec.tau, rec.mu, rec.phi, rec.phi_dot, rec.points,
                 rec.normals, rec.a_o, rec.qdd, rec.violation, rec.wrench, rec.ke, rec.pe,
-                rec.momentum, self._stage_pointer[1])
+                rec.momentum, *self._stage_pointer[1])
 
     def evaluate(self, t: float, state: SystemState) -> tuple[int, np.ndarray, np.ndarray]:
         """One closed-loop evaluation by the kernel of the loop's stages (no record).
@@ -232,9 +233,9 @@ class CompiledLoop:
                                  np.empty(layout.REFERENCE_SIZE), np.empty((3, 3)),
                                  np.empty((n, k))), ctrl)
             kept = self._stage_args
-            self._stage = entry_point(
-                kernels.closed_loop_stage,
-                (0.0, self._x, True, *kept[0], np.empty(self._tangent_size)))
+            example = (0.0, self._x, True, *kept[0], np.empty(self._tangent_size))
+            self._callees = kernels.stage_callees(example)
+            self._stage = entry_point(kernels.closed_loop_stage, (*example, self._callees))
         o = state.obj
         x = self._x  # read by the kernel only: filled in place (its τ part stays zero)
         x[layout.X_POSITION:layout.X_POSITION + 3] = o.position
@@ -243,7 +244,7 @@ class CompiledLoop:
         x[self._q_part] = state.q
         x[self._v_part] = state.v
         d = np.empty(self._tangent_size)
-        status = self._stage(float(t), x, True, *kept[0], d)
+        status = self._stage(float(t), x, True, *kept[0], d, self._callees)
         return int(status), d, self.work[7].take(self._dofs)
 
     def _finish_record(self, rec: Recorder, times: np.ndarray, done: slice) -> None:
