@@ -227,13 +227,15 @@ def _object_terms(x, params, M_o, h_o):  # pragma: no cover - compiled
 
 
 @kernel
-def _rows_and_blocks(x, sy, wk):  # pragma: no cover - compiled
+def _rows_and_blocks(x, sy, wk, callees):  # pragma: no cover - compiled
     """Every row and the stacked blocks at ``x``, at zero torque (no controller call).
 
-    ``sy``: the system tuple (see :func:`run_contact_rk4`); ``wk``: the workspace tuple. Fills
-    the stacked ``M, h, W, W_o, c, M_o, h_o`` (no wrench) and the rows; returns False on NaN.
-    For a system with arms; without arms :func:`_object_rows_and_blocks` (the loops call the
-    one :func:`stage_functions` picked, through its address: the other is not compiled).
+    ``sy``: the system tuple (see :func:`run_contact_rk4`); ``wk``: the workspace tuple;
+    ``callees``: as :func:`stage_functions` makes them (the rigid-body pass and the system's
+    evaluation first). Fills the stacked ``M, h, W, W_o, c, M_o, h_o`` (no wrench) and the
+    rows; returns False on NaN. For a system with arms; without arms
+    :func:`_object_rows_and_blocks` (the loops call the one :func:`stage_functions` picked,
+    through its address: the other is not compiled).
     """
     (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
      sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
@@ -242,45 +244,44 @@ def _rows_and_blocks(x, sy, wk):  # pragma: no cover - compiled
     k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
     B, kc, R = Wc.shape
     nq = x.shape[0] - OBJECT_STATE_SIZE - 2 * nv
-    if n:
-        q0 = OBJECT_STATE_SIZE
-        rigid_body_pass(model_ints, model_floats, x[q0:q0 + nq], x[q0 + nq:q0 + nq + nv], J,
-                        dJ, Mq, nle, H, energy)
-        if not evaluate_system(J, dJ, Mq, nle, H, x, arm_ints, v_starts, ints, floats, params,
-                               dims, buf):
-            return False
-        off = offsets(n, k, m)
-        Ma = _arm_segments(buf, off, n, k, m)[0]
-        rows, ha, Wa, W_oa, ca, Mo, ho = _block_segments(buf, off, n, k, m)
-        for i in range(n):
-            for a in range(k):
-                hc[i, a] = ha[i, a]
-                for b in range(k):
-                    Mc[i, a, b] = Ma[i, a, b]
-                for r in range(R):
-                    Wc[i, a, r] = Wa[i, a, r] if r < m else 0.0
+    q0 = OBJECT_STATE_SIZE
+    callees[0](model_ints, model_floats, x[q0:q0 + nq], x[q0 + nq:q0 + nq + nv], J, dJ, Mq, nle,
+               H, energy)
+    if not callees[1](J, dJ, Mq, nle, H, x, arm_ints, v_starts, ints, floats, params, dims, buf):
+        return False
+    off = offsets(n, k, m)
+    Ma = _arm_segments(buf, off, n, k, m)[0]
+    rows, ha, Wa, W_oa, ca, Mo, ho = _block_segments(buf, off, n, k, m)
+    for i in range(n):
+        for a in range(k):
+            hc[i, a] = ha[i, a]
+            for b in range(k):
+                Mc[i, a, b] = Ma[i, a, b]
             for r in range(R):
-                inside = r < m
-                for a in range(6):
-                    W_oc[i, a, r] = W_oa[i, a, r] if inside else 0.0
-                cc[i, r] = ca[i, r] if inside else 0.0
-                phi[i, r] = rows[i, r, ROW_PHI] if inside else 0.0
-                phi_dot[i, r] = rows[i, r, ROW_PHI_DOT] if inside else 0.0
-                for a in range(3):
-                    pts[i, r, a] = rows[i, r, ROW_POINT + a] if inside else 0.0
-                    nrm[i, r, a] = rows[i, r, ROW_NORMAL + a] if inside else 0.0
-        for a in range(6):
-            h_o[a] = ho[a]
-            for b in range(6):
-                M_o[a, b] = Mo[a, b]
-    else:
-        _object_terms(x, params, M_o, h_o)
+                Wc[i, a, r] = Wa[i, a, r] if r < m else 0.0
+        for r in range(R):
+            inside = r < m
+            for a in range(6):
+                W_oc[i, a, r] = W_oa[i, a, r] if inside else 0.0
+            cc[i, r] = ca[i, r] if inside else 0.0
+            phi[i, r] = rows[i, r, ROW_PHI] if inside else 0.0
+            phi_dot[i, r] = rows[i, r, ROW_PHI_DOT] if inside else 0.0
+            for a in range(3):
+                pts[i, r, a] = rows[i, r, ROW_POINT + a] if inside else 0.0
+                nrm[i, r, a] = rows[i, r, ROW_NORMAL + a] if inside else 0.0
+    for a in range(6):
+        h_o[a] = ho[a]
+        for b in range(6):
+            M_o[a, b] = Mo[a, b]
     return _supports_and_check(x, sy, wk)
 
 
 @kernel
-def _object_rows_and_blocks(x, sy, wk):  # pragma: no cover - compiled
-    """:func:`_rows_and_blocks` of a system without arms: the object's terms and the supports."""
+def _object_rows_and_blocks(x, sy, wk, callees):  # pragma: no cover - compiled
+    """:func:`_rows_and_blocks` of a system without arms: the object's terms and the supports.
+
+    ``callees`` (empty: nothing is called through it) as :func:`_rows_and_blocks`'s.
+    """
     _object_terms(x, sy[6], wk[12], wk[13])
     return _supports_and_check(x, sy, wk)
 
@@ -332,12 +333,13 @@ def _all_touching(active, N):  # pragma: no cover - compiled
 
 
 @kernel
-def _torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compiled
+def _torques(t, x, active, sy, ctl, wk, out, callees):  # pragma: no cover - compiled
     """The controller's torques ``out.tau`` (n, k) at ``(t, x)`` on the buffer at zero torque.
 
     ``object_pd``: :func:`object_pd_step` when every arm row touches, else
     :func:`touching_torques` on the touching rows, or, when they cannot make every object
     wrench, the hold-still torques toward ``q_hold`` (set at the onset, which is recorded).
+    Those two are ``callees[2]`` and ``callees[3]`` (:func:`stage_functions`).
     """
     (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
      sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
@@ -377,15 +379,15 @@ def _torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compiled
             uni = unilateral if attempt == 0 else no_uni
             g = gains if attempt == 0 else gains_free
             if full:
-                status = object_pd_step(buf, dims, N, nv_arm, uni, x[:OBJECT_STATE_SIZE], ref,
-                                        pd_gains, z, hold_tool, hold_obj, hold_n, g, params,
-                                        qp_active if attempt == 0 else qp_active_r, tau,
-                                        mu_p, qdd_p, a_pts, a_d, False, np.zeros(6))[0]
+                status = callees[2](buf, dims, N, nv_arm, uni, x[:OBJECT_STATE_SIZE], ref,
+                                    pd_gains, z, hold_tool, hold_obj, hold_n, g, params,
+                                    qp_active if attempt == 0 else qp_active_r, tau, mu_p,
+                                    qdd_p, a_pts, a_d, False, np.zeros(6))[0]
             else:
-                status, rank = touching_torques(buf, dims, N, nv_arm, uni, touching,
-                                                x[:OBJECT_STATE_SIZE], ref, pd_gains, z,
-                                                hold_tool, hold_obj, hold_n, g, qp_active_r,
-                                                tau, mu_p, qdd_p, a_pts, a_d)
+                status, rank = callees[3](buf, dims, N, nv_arm, uni, touching,
+                                          x[:OBJECT_STATE_SIZE], ref, pd_gains, z, hold_tool,
+                                          hold_obj, hold_n, g, qp_active_r, tau, mu_p, qdd_p,
+                                          a_pts, a_d)
             if status != PD_FORCES_FAILED:
                 if status == PD_OK:  # (ObjectPD.margin_kept: set by a plan, not by holding)
                     control[CTL_MARGIN_KEPT] = 1 if attempt == 0 else 0
@@ -411,7 +413,7 @@ def _torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compiled
 
 
 @kernel
-def _phased_torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compiled
+def _phased_torques(t, x, active, sy, ctl, wk, out, callees):  # pragma: no cover - compiled
     """``phased_pd``'s torques ``out.tau`` (the arguments as :func:`_torques`'s).
 
     :func:`~multiarm_pin._compiled.phased.phased_torques` on the buffer and the support
@@ -493,7 +495,7 @@ def off_rectangles(x, sp_p, planes):  # pragma: no cover - compiled
 
 
 @kernel
-def _zero_torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compiled
+def _zero_torques(t, x, active, sy, ctl, wk, out, callees):  # pragma: no cover - compiled
     """No controller: zero torques ``out.tau`` (the arguments as :func:`_torques`'s)."""
     tau = out[5]
     for i in range(tau.shape[0]):
@@ -503,8 +505,8 @@ def _zero_torques(t, x, active, sy, ctl, wk, out):  # pragma: no cover - compile
 
 
 @kernel
-def contact_stage(t, x, active, sy, ctl, wk, out, d, rows, torques, lcp
-                  ):  # pragma: no cover - compiled
+def contact_stage(t, x, active, sy, ctl, wk, out, d, rows, torques, lcp,
+                  callees):  # pragma: no cover - compiled
     """One evaluation at ``(t, x)`` on the active set, and its tangent ``d``.
 
     The rows and blocks (``rows``: :func:`_rows_and_blocks` or :func:`_object_rows_and_blocks`),
@@ -522,9 +524,9 @@ def contact_stage(t, x, active, sy, ctl, wk, out, d, rows, torques, lcp
     (J, dJ, Mq, nle, H, energy, buf, Mc, hc, Wc, W_oc, cc, M_o, h_o, phi, phi_dot, pts,
      nrm) = wk
     (a_o, qdd_c, mu, phi_dd, Av, tau, err, z, ref, E, mu_p, qdd_p, a_pts, a_d) = out
-    if not rows(x, sy, wk):
+    if not rows(x, sy, wk, callees):
         return STAGE_NOT_FINITE, 0
-    st = torques(t, x, active, sy, ctl, wk, out)
+    st = torques(t, x, active, sy, ctl, wk, out, callees)
     if st != STAGE_OK:
         return st, 0
     k, nv, n = dims[DIMS_K], dims[DIMS_NV], dims[DIMS_N]
@@ -584,13 +586,20 @@ def contact_stage(t, x, active, sy, ctl, wk, out, d, rows, torques, lcp
 def stage_functions(x, active, sy, ctl, wk, out, d):
     """The ``fn`` argument of :func:`run_contact_rk4`, for the types of these arguments.
 
-    ``(contact_stage, rows, torques, lcp)``: the rows and blocks (:func:`_rows_and_blocks`,
-    or :func:`_object_rows_and_blocks` for a system without arms), the controller's torques
-    (:func:`_torques` for ``object_pd``, :func:`_zero_torques` without a controller: only the
-    ones a run uses are compiled) and the active-set kernel
-    (:func:`~multiarm_pin._compiled.delassus.contact_kernel`). Each is compiled once and
-    called through its address (:mod:`~multiarm_pin._compiled.function_pointers`): the
-    loop's module, and the stage's, do not compile them again.
+    ``(contact_stage, rows, torques, lcp, callees)``: the rows and blocks
+    (:func:`_rows_and_blocks`, or :func:`_object_rows_and_blocks` for a system without arms),
+    the controller's torques (:func:`_torques` for ``object_pd``, :func:`_phased_torques` for
+    ``phased_pd``, :func:`_zero_torques` without a controller: only the ones a run uses are
+    compiled), the active-set kernel (:func:`~multiarm_pin._compiled.delassus.contact_kernel`)
+    and what the first two call: with arms, the rigid-body pass and the system's evaluation
+    (:func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass`,
+    :func:`~multiarm_pin._compiled.evaluate.evaluate_system`), then for ``object_pd``
+    :func:`~multiarm_pin._compiled.controller_kernels.object_pd_step` and
+    :func:`~multiarm_pin._compiled.controller_kernels.touching_torques`. Each is compiled once
+    and called through its address (:mod:`~multiarm_pin._compiled.function_pointers`): the
+    loop's module, and the stage's, do not compile them again, and a kernel the closed loop
+    calls with the same types (:func:`~multiarm_pin._compiled.closed_loop.stage_callees`) is
+    the same compiled function.
     """
     mode = int(ctl[0][CTL_MODE])
     arms = int(sy[7][DIMS_N]) > 0
@@ -599,21 +608,47 @@ def stage_functions(x, active, sy, ctl, wk, out, d):
     if found is not None:
         return found
     int64 = numba.types.int64
+    pair = numba.types.UniTuple(int64, 2)
     rules = sy[19]
+    callees = ()
+    if arms:
+        (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
+         *_) = sy
+        J, dJ, Mq, nle, H, energy, buf = wk[:7]
+        nv = J.shape[1]
+        q = x[OBJECT_STATE_SIZE:x.shape[0] - 2 * nv]
+        v = x[x.shape[0] - 2 * nv:x.shape[0] - nv]
+        callees = (pointer(rigid_body_pass, (model_ints, model_floats, q, v, J, dJ, Mq, nle, H,
+                                             energy), numba.types.none),
+                   pointer(evaluate_system, (J, dJ, Mq, nle, H, x, arm_ints, v_starts, ints,
+                                             floats, params, dims, buf), numba.types.boolean))
+        if mode == CONTROL_OBJECT_PD:
+            (_, _, pd_gains, _, hold_tool, hold_obj, hold_n, gains, qp_active, unilateral, _,
+             _, _, _, qp_active_r, touching, _, _, _) = ctl
+            (_, _, _, _, _, tau, _, z, ref, _, mu_p, qdd_p, a_pts, a_d) = out
+            obj = x[:OBJECT_STATE_SIZE]
+            callees += (
+                pointer(object_pd_step, (buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z,
+                                         hold_tool, hold_obj, hold_n, gains, params, qp_active,
+                                         tau, mu_p, qdd_p, a_pts, a_d, False, np.zeros(6)),
+                        pair),
+                pointer(touching_torques, (buf, dims, N, nv_arm, unilateral, touching, obj, ref,
+                                           pd_gains, z, hold_tool, hold_obj, hold_n, gains,
+                                           qp_active_r, tau, mu_p, qdd_p, a_pts, a_d), pair))
     torque_kernel = (_torques if mode == CONTROL_OBJECT_PD
                      else _phased_torques if mode == CONTROL_PHASED else _zero_torques)
-    torques = pointer(torque_kernel, (0.0, x, active, sy, ctl, wk, out), int64)
+    torques = pointer(torque_kernel, (0.0, x, active, sy, ctl, wk, out, callees), int64)
     a_o, qdd_c, mu, Av = out[0], out[1], out[2], out[4]
     lcp = pointer(contact_kernel,
                   (wk[7], wk[8], wk[9], wk[10], wk[11], wk[12], a_o, sy[15], sy[16], sy[13],
                    active, active, False, rules[R_DEP], rules[R_VIOL], rules[R_CONS], a_o,
                    qdd_c, mu, Av),
                   numba.types.Tuple((int64, int64, int64, int64, numba.types.float64)))
-    rows = pointer(_rows_and_blocks if arms else _object_rows_and_blocks, (x, sy, wk),
+    rows = pointer(_rows_and_blocks if arms else _object_rows_and_blocks, (x, sy, wk, callees),
                    numba.types.boolean)
-    stage = pointer(contact_stage, (0.0, x, active, sy, ctl, wk, out, d, rows, torques, lcp),
-                    numba.types.UniTuple(int64, 2))
-    found = _stages[key] = (stage, rows, torques, lcp)
+    stage = pointer(contact_stage, (0.0, x, active, sy, ctl, wk, out, d, rows, torques, lcp,
+                                    callees), pair)
+    found = _stages[key] = (stage, rows, torques, lcp, callees)
     return found
 
 
@@ -662,7 +697,8 @@ def _step(t, x, d1, h, active, sy, ctl, wk, out, rk, x_new, fn):  # pragma: no c
         hs = h if stage == 2 else 0.5 * h
         _advance(model_ints, x, d1 if stage == 0 else (d2 if stage == 1 else d3), hs, hd, xs)
         st = fn[0](t + hs, xs, active, sy, ctl, wk, out,
-                   d2 if stage == 0 else (d3 if stage == 1 else d4), fn[1], fn[2], fn[3])[0]
+                   d2 if stage == 0 else (d3 if stage == 1 else d4), fn[1], fn[2], fn[3],
+                   fn[4])[0]
         if st != STAGE_OK:
             return st
     for a in range(d1.shape[0]):  # (d1 + 2 d2 + 2 d3 + d4) / 6, numpy's order of operations
@@ -674,7 +710,7 @@ def _step(t, x, d1, h, active, sy, ctl, wk, out, rk, x_new, fn):  # pragma: no c
 @kernel
 def _min_gap(x, watch, sy, wk, fn):  # pragma: no cover - compiled
     """The smallest gap [m] of the ``watch`` rows at ``x`` (``Stepper.gaps``), NaN if not finite."""
-    if not fn[1](x, sy, wk):
+    if not fn[1](x, sy, wk, fn[4]):
         return np.nan
     phi = wk[14]
     g = np.inf
@@ -756,7 +792,7 @@ def _evaluate_start(t, x, active, sy, ctl, wk, out, st0, keep, use_keep, ev, n_e
     solver = memo[1]
     for attempt in range(2):  # one call site of the stage
         if attempt > 0 or not reuse:
-            st, solver = fn[0](t, x, active, sy, ctl, wk, out, d1, fn[1], fn[2], fn[3])
+            st, solver = fn[0](t, x, active, sy, ctl, wk, out, d1, fn[1], fn[2], fn[3], fn[4])
             if st != STAGE_OK:
                 return st, solver
         if attempt == 1 or not _separations(t, active, out[2], out[3], wk[14], wk[15], keep,
@@ -776,7 +812,7 @@ def _impact(t, x, watch, active, sy, wk, imp, ev, n_ev, joined, fn):  # pragma: 
     (J, dJ, Mq, nle, H, energy, buf, Mc, hc, Wc, W_oc, cc, M_o, h_o, phi, phi_dot, pts,
      nrm) = wk
     touching, cand, uni, rhs, dv_o, dqd, P, Av, zero_h, zero6 = imp
-    if not fn[1](x, sy, wk):
+    if not fn[1](x, sy, wk, fn[4]):
         return STAGE_NOT_FINITE
     B, R = phi.shape
     for b in range(B):
@@ -872,7 +908,7 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
         end_eval = False  # wk and out hold the evaluation at (t_end, new)
         if any_push:
             st, memo[1] = fn[0](t_end, new, active, sy, ctl, wk, out, dtmp, fn[1], fn[2],
-                                fn[3])
+                                fn[3], fn[4])
             if st != STAGE_OK:
                 return st
             end_eval = True
@@ -906,7 +942,7 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
                         if st != STAGE_OK:
                             return st
                         st = fn[0](t + theta * h, s_e, active, sy, ctl, wk, out, dtmp, fn[1],
-                                   fn[2], fn[3])[0]
+                                   fn[2], fn[3], fn[4])[0]
                         if st != STAGE_OK:
                             return st
                         value = _release(out[2], out[3], rows_sep, rules)
@@ -954,7 +990,7 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
             t = t + h
             copy1(x, new)
             # Stepper._separate: the leaving rows' events with their rates at (t, x)
-            if not fn[1](x, sy, wk):
+            if not fn[1](x, sy, wk, fn[4]):
                 return STAGE_NOT_FINITE
             phi_dot = wk[15]
             for b in range(B):
@@ -1001,7 +1037,7 @@ def _locate_touchdown(t, x, d1, h, watch, g_hi, active, sy, ctl, wk, out, rk, lo
     tol = rules[R_GAP]
     target = -0.5 * tol
     lo, hi = 0.0, 1.0
-    if not fn[1](x, sy, wk):
+    if not fn[1](x, sy, wk, fn[4]):
         return STAGE_NOT_FINITE, 0.0
     phi, phi_dot = wk[14], wk[15]
     g0 = np.inf
@@ -1125,7 +1161,7 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         Rec: the record arrays (``Recorder``'s, and the active set and solver codes), then
             the (B, R) bool rows kept out of the recorded penetration (``beside_start``: in
             and out).
-        fn: ``(contact_stage, rows, torques, lcp)`` as :func:`stage_functions`
+        fn: ``(contact_stage, rows, torques, lcp, callees)`` as :func:`stage_functions`
             makes them (compiled once, called through their addresses).
         advance: :func:`_advance_with_events`, likewise (:func:`advance_function`).
 
