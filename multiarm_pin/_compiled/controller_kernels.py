@@ -492,9 +492,11 @@ def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold
     off = offsets(n, k, m)
     M, _, J, Jdq, tp, tR, ttw, _ = _arm_segments(buf, off, n, k, m)
     _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
-    status = _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilateral,
-                      obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains, active, tau, mu, qdd,
-                      a_pts)
+    # N and unilateral as writable arrays, the type of the rows touching_torques compacts:
+    # one specialisation of _torques (and its force QP and plan) serves both
+    status = _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N.copy(), nv_arm,
+                      unilateral.copy(), obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains,
+                      active, tau, mu, qdd, a_pts)
     if status != PD_OK or not solve:
         return status, -1
     # solve_with_torques, written out: calling it would compile it and optimise object_first
