@@ -73,7 +73,13 @@ from multiarm_pin._compiled.layout import (
     REFERENCE_SIZE,
     offsets,
 )
-from multiarm_pin._compiled.linalg import copy1, householder_qr, householder_reflect
+from multiarm_pin._compiled.linalg import (
+    cholesky,
+    cholesky_solve,
+    copy1,
+    householder_qr,
+    householder_reflect,
+)
 from multiarm_pin._compiled.trajectory import exp3
 
 PRESSING_GAP = 1e-6
@@ -545,9 +551,15 @@ def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins
     """
     P = G.shape[0]
     a = a_d.copy()
+    # M_o⁻¹ by its Cholesky factor (M_o is symmetric positive definite; numpy's solve, which
+    # the reference calls, gives the same to round-off, and compiles several times longer)
+    L = np.empty((6, 6))
+    if not cholesky(M_o, L, 6):
+        return False
+    step = np.empty((6, 1))
     if P:
-        Gt = np.ascontiguousarray(G.T)
-        Minv_Gt = np.linalg.solve(M_o, Gt)
+        Minv_Gt = np.ascontiguousarray(G.T)
+        cholesky_solve(L, Minv_Gt, 6, P)
         GMG = np.ascontiguousarray(G @ Minv_Gt)
         rhs = G @ a_d + kappa
         # (G M_o⁻¹ Gᵀ)⁺ rhs: the pseudo-inverse of the symmetric positive semi-definite
@@ -602,9 +614,11 @@ def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins
                 acc += root * Pw[j]
             wr[i] = acc
     unreached = w - wr
-    step = np.linalg.solve(M_o, unreached)
     for i in range(6):
-        a_o[i] = a[i] - step[i]
+        step[i, 0] = unreached[i]
+    cholesky_solve(L, step, 6, 1)
+    for i in range(6):
+        a_o[i] = a[i] - step[i, 0]
     if not cols:
         return True
     uni, marg, x = unilateral[:cols], margins[:cols], mu[:cols]
@@ -642,9 +656,11 @@ def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins
         if uni[j] and x[j] < marg[j]:
             x[j] = marg[j]
     unreached = w - Wc @ x
-    step = np.linalg.solve(M_o, unreached)
     for i in range(6):
-        a_o[i] = a[i] - step[i]
+        step[i, 0] = unreached[i]
+    cholesky_solve(L, step, 6, 1)
+    for i in range(6):
+        a_o[i] = a[i] - step[i, 0]
     return True
 
 
