@@ -17,6 +17,7 @@ argument types.
 from __future__ import annotations
 
 from numba import njit, types
+from numba.core import config
 
 OPTIONS = {"cache": True, "error_model": "numpy"}
 """The options every kernel is compiled with (:func:`kernel` adds ``inline``, ``nogil``)."""
@@ -55,4 +56,9 @@ def kernel(function=None, **options):
     return _typed_by_types(njit(**OPTIONS, **options)(function))
 
 
-__all__ = ["OPTIONS", "kernel"]
+def jit_disabled() -> bool:
+    """True when numba's JIT is off (``NUMBA_DISABLE_JIT``): the kernels then run as Python."""
+    return bool(config.DISABLE_JIT)
+
+
+__all__ = ["OPTIONS", "jit_disabled", "kernel"]

@@ -95,7 +95,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Command line: compile the kernels of the shipped scenarios (``--scenarios`` some)."""
     import argparse
 
-    from numba.core import config
+    from multiarm_pin._compiled.jit import jit_disabled
 
     parser = argparse.ArgumentParser(
         prog="multiarm-pin precompile",
@@ -103,7 +103,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--scenarios", nargs="+", default=None, metavar="NAME",
                         help="only these shipped scenarios (default: all)")
     opts = parser.parse_args(argv)
-    if config.DISABLE_JIT:
+    if jit_disabled():
         print("NUMBA_DISABLE_JIT is set: the kernels run as Python, nothing to compile")
         return 0
     t0 = time.perf_counter()
