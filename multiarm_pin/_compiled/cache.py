@@ -14,11 +14,21 @@ modification time, so a fresh checkout with the same sources reuses a cache.
 It plugs into numba's cache locators (``numba.core.caching``: the classes numba tries in turn
 to place a function's cache), the extension point numba has for this; on a numba without that
 point it does nothing and numba's own stamps apply.
+
+It also makes the cache safe for several processes at once (the kernels are compiled in
+child processes, :func:`~multiarm_pin._compiled.function_pointers.compile_all`, and a study
+runs in several). numba saves an entry by reading a function's index, choosing the first
+data file name the index does not use, writing the index, then the data: two processes that
+save two signatures of one function at once choose the same name, and the index can then
+point a signature at the other's code. Every index's reads and saves here hold a lock on a
+file beside it (``fcntl.flock``: shared to load, exclusive to save).
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import os
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parent.parent
@@ -76,7 +86,50 @@ def install() -> bool:
     mine = [type(f"Kernel{base.__name__.lstrip('_')}", (_KernelStamp, base),
                  {"_multiarm_pin": True}) for base in bases]
     classes[:0] = mine
+    _lock_index_files(getattr(caching, "IndexDataCacheFile", None))
     return True
+
+
+@contextlib.contextmanager
+def index_lock(index_path: str, exclusive: bool):
+    """Hold a lock on the file ``index_path + ".lock"`` (shared, or ``exclusive``).
+
+    Without ``fcntl`` (not POSIX), or when the lock file cannot be made (no cache folder
+    yet: then there is nothing to read), no lock is held.
+    """
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        yield
+        return
+    try:
+        fd = os.open(index_path + ".lock", os.O_RDWR | os.O_CREAT, 0o666)
+    except OSError:
+        yield
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
+        yield
+    finally:
+        os.close(fd)  # closing the file releases the lock
+
+
+def _lock_index_files(index_file) -> None:
+    """Make ``IndexDataCacheFile.save`` and ``.load`` hold :func:`index_lock` (once)."""
+    if index_file is None or getattr(index_file, "_multiarm_pin", False):
+        return  # pragma: no cover - another numba; or installed already
+    save, load = index_file.save, index_file.load
+
+    def locked_save(self, key, data):
+        with index_lock(self._index_path, exclusive=True):
+            return save(self, key, data)
+
+    def locked_load(self, key):
+        with index_lock(self._index_path, exclusive=False):
+            return load(self, key)
+
+    index_file.save, index_file.load = locked_save, locked_load
+    index_file._multiarm_pin = True
 
 
 class _KernelStamp:
@@ -94,4 +147,4 @@ class _KernelStamp:
         return super().from_function(py_func, py_file)
 
 
-__all__ = ["KERNEL_FILES", "install", "is_kernel_file", "kernel_sources_digest"]
+__all__ = ["KERNEL_FILES", "index_lock", "install", "is_kernel_file", "kernel_sources_digest"]
