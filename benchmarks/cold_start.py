@@ -6,11 +6,14 @@ Two parts, written to ``--out`` as ``cold_start.md`` (commit, date, command, mac
 
 - **Per shipped scenario** (``multiarm_pin/data/scenarios/*.yaml``): in a fresh process with
   its own empty ``NUMBA_CACHE_DIR``, the
-  CPU time of the scenario's first ``simulate`` (compilation included) and of a second one in
-  the same process (warm); their difference is the compile time. CPU time
-  (``time.process_time``) is the steadier figure on a shared machine; wall times are given
-  too, and the warm run's real-time factor by CPU time (one run: a rough figure; the speed
-  benchmark is ``closed_loop.py``).
+  wall and CPU times of the scenario's first ``simulate`` (compilation included) and of a
+  second one in the same process (warm); their difference is the compile time. The kernels
+  compile in this process and in child processes at once
+  (``function_pointers.compile_all``, one process per core unless
+  ``MULTIARM_PIN_COMPILE_PROCESSES`` says otherwise): the wall time is what a user waits;
+  the CPU time counts every process (``time.process_time`` and the children's ``os.times``)
+  and is the steadier figure on a shared machine. The warm run's real-time factor is by CPU
+  time (one run: a rough figure; the speed benchmark is ``closed_loop.py``).
 - **Fresh clone** (``--fresh-clone``): ``git clone`` of this checkout's HEAD into a temporary
   folder, then the phases of ``make demo`` timed one by one: the venv and ``pip install``
   (the Makefile's install stamp), then ``multiarm-pin demo`` twice with an empty numba
@@ -42,16 +45,22 @@ ROOT = HERE.parent
 SCENARIOS = ROOT / "multiarm_pin" / "data" / "scenarios"
 
 CHILD = """
-import json, sys, time
+import json, os, sys, time
+from multiarm_pin._compiled.function_pointers import processes
 from multiarm_pin.app.runner import scenario_controller, simulate_built
 from multiarm_pin.app.scenario import build_scenario, load_scenario
+
+def cpu():
+    t = os.times()
+    return time.process_time() + t.children_user + t.children_system
+
 built = build_scenario(load_scenario(sys.argv[1]), load_visuals=False)
 sim = built.scenario.simulation
-out = {}
+out = {"processes": processes()}
 for key in ("first", "warm"):
-    c0, w0 = time.process_time(), time.perf_counter()
+    c0, w0 = cpu(), time.perf_counter()
     result = simulate_built(built, scenario_controller(built), sim.duration, sim.dt, sim.solver)
-    out[key + "_cpu"] = time.process_time() - c0
+    out[key + "_cpu"] = cpu() - c0
     out[key + "_wall"] = time.perf_counter() - w0
 out["duration"] = sim.duration
 out["events"] = len(result.events)
@@ -122,20 +131,22 @@ def report(rows: list[dict], clone: dict | None, command: str) -> str:
                   f"{clone['total']:.0f} |", ""]
     lines += ["## First run of each shipped scenario, empty numba cache", "",
               "Each in its own process and `NUMBA_CACHE_DIR`. compile = first run - warm run "
-              "(same process).", "",
-              "| scenario | compile CPU [s] | compile wall [s] | warm run CPU [s] "
+              "(same process). Compile processes (this one and its children): "
+              f"{rows[0].get('processes', 1) if rows else 1}; compile CPU counts them all.", "",
+              "| scenario | compile wall [s] | compile CPU [s] | warm run CPU [s] "
               "| warm run wall [s] | real time / warm CPU | events |",
               "|---|---|---|---|---|---|---|"]
     for r in rows:
         if "error" in r:
             lines.append(f"| {r['scenario']} | error: {r['error']} | | | | |")
             continue
-        lines.append(f"| {r['scenario']} | {r['compile_cpu']:.1f} | {r['compile_wall']:.1f} | "
+        lines.append(f"| {r['scenario']} | {r['compile_wall']:.1f} | {r['compile_cpu']:.1f} | "
                      f"{r['warm_cpu']:.3f} | {r['warm_wall']:.3f} | "
                      f"{r['duration'] / r['warm_cpu']:.1f}x | {r['events']} |")
-    ok = [r["compile_cpu"] for r in rows if "error" not in r]
+    ok = [r for r in rows if "error" not in r]
     if ok:
-        lines += ["", f"Largest compile: {max(ok):.1f} s CPU (target: at most 20 s)."]
+        lines += ["", f"Largest compile: {max(r['compile_wall'] for r in ok):.1f} s wall, "
+                  f"{max(r['compile_cpu'] for r in ok):.1f} s CPU (target: at most 20 s)."]
     return "\n".join(lines) + "\n"
 
 

@@ -41,7 +41,7 @@ import numpy as np
 
 from multiarm_pin._compiled.controller_kernels import PD_OK, object_pd_step
 from multiarm_pin._compiled.evaluate import evaluate_system, quaternion_rotation
-from multiarm_pin._compiled.function_pointers import pointer
+from multiarm_pin._compiled.function_pointers import Compile, compile_all, compile_of, compiled
 from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.layout import (
     DIMS_K,
@@ -275,8 +275,8 @@ def closed_loop_stage(t, x, arm_pass, model_ints, model_floats, q_ref, err, J, d
     return STAGE_OK
 
 
-def stage_callees(stage_args: tuple) -> tuple:
-    """The ``callees`` argument of :func:`closed_loop_stage` for its other arguments.
+def callee_compiles(stage_args: tuple) -> tuple[Compile, Compile, Compile]:
+    """The compiles of the ``callees`` of :func:`closed_loop_stage`, for its other arguments.
 
     ``stage_args``: every argument of :func:`closed_loop_stage` before ``callees``, in its
     order (their types are what count). The rigid-body pass, the system's evaluation and the
@@ -289,28 +289,50 @@ def stage_callees(stage_args: tuple) -> tuple:
      hold_n, gains, active, _, buf, tau, mu, qdd, a_pts, a_d, ref, _, z, _) = stage_args
     nq, nv = q_ref.shape[0], J.shape[1]
     q, v = x[OBJECT_STATE_SIZE:OBJECT_STATE_SIZE + nq], x[OBJECT_STATE_SIZE + nq:][:nv]
-    arm_pass = pointer(rigid_body_pass, (model_ints, model_floats, q, v, J, dJ, M, nle, H,
-                                         energy), numba.types.none)
-    system = pointer(evaluate_system, (J, dJ, M, nle, H, x, arm_ints, v_starts, ints, floats,
-                                       params, dims, buf), numba.types.boolean)
-    controller = pointer(object_pd_step, (buf, dims, N, nv_arm, unilateral,
-                                          x[:OBJECT_STATE_SIZE], ref, pd_gains, z, hold_tool,
-                                          hold_obj, hold_n, gains, params, active, tau, mu, qdd,
-                                          a_pts, a_d, True, np.zeros(6)),
-                         numba.types.UniTuple(numba.types.int64, 2))
-    return arm_pass, system, controller
+    return (compile_of(rigid_body_pass, (model_ints, model_floats, q, v, J, dJ, M, nle, H,
+                                         energy), numba.types.none),
+            compile_of(evaluate_system, (J, dJ, M, nle, H, x, arm_ints, v_starts, ints, floats,
+                                         params, dims, buf), numba.types.boolean),
+            compile_of(object_pd_step, (buf, dims, N, nv_arm, unilateral,
+                                        x[:OBJECT_STATE_SIZE], ref, pd_gains, z, hold_tool,
+                                        hold_obj, hold_n, gains, params, active, tau, mu, qdd,
+                                        a_pts, a_d, True, np.zeros(6)),
+                       numba.types.UniTuple(numba.types.int64, 2)))
 
 
-def stage_function(x, model_ints, model_floats, q_ref, arm_ints, v_starts, ints, floats,
-                   params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
-                   hold_obj, hold_n, gains, active, wrenches, work_J, work_dJ, work_M, work_nle,
-                   work_H, work_energy, buf, tau, mu, qdd, a_pts, a_d):
-    """``(evaluate, callees)``, the last arguments of :func:`run_rk4`, for its others.
+def stage_callees(stage_args: tuple) -> tuple:
+    """The ``callees`` argument of :func:`closed_loop_stage` (:func:`callee_compiles`)."""
+    return tuple(compiled(c) for c in callee_compiles(stage_args))
 
+
+def stage_entry(stage_args: tuple) -> tuple:
+    """``(entry point of closed_loop_stage, its callees)`` for its other arguments.
+
+    ``stage_args`` as for :func:`callee_compiles`. The stage, compiled for the types of its
+    callees, and the callees are independent compiles:
+    :func:`~multiarm_pin._compiled.function_pointers.compile_all` runs them at once.
+    """
+    arm_pass, system, controller = callees = callee_compiles(stage_args)
+    stage = compile_of(closed_loop_stage,
+                       (*stage_args, tuple(c.function_type for c in callees)))
+    compile_all([[controller], [system], [stage], [arm_pass]])  # the larger first
+    return compiled(stage), tuple(compiled(c) for c in callees)
+
+
+def loop_functions(head: tuple, x, model_ints, model_floats, q_ref, arm_ints, v_starts, ints,
+                   floats, params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains,
+                   hold_tool, hold_obj, hold_n, gains, active, wrenches, work_J, work_dJ,
+                   work_M, work_nle, work_H, work_energy, buf, tau, mu, qdd, a_pts, a_d):
+    """``(run_rk4's entry point, evaluate, callees)`` for these arguments of :func:`run_rk4`.
+
+    ``head``: every argument of :func:`run_rk4` before ``evaluate`` (the others are among
+    them: they are given again by name for the stage's example arguments).
     :func:`closed_loop_stage` compiled once for the types :func:`run_rk4` passes it and
     called through its address (:mod:`~multiarm_pin._compiled.function_pointers`), and its
-    callees (:func:`stage_callees`): the loop's module does not compile the stage again, nor
-    the stage's module its callees.
+    callees (:func:`callee_compiles`): the loop's module does not compile the stage again, nor
+    the stage's module its callees. The loop, the stage and each callee are independent
+    compiles (a caller needs only the type of a function it calls through its address):
+    :func:`~multiarm_pin._compiled.function_pointers.compile_all` runs them at once.
     """
     n, k = tau.shape
     nd = 2 * q_ref.shape[0] + OBJECT_STATE_SIZE  # any size: only the types count
@@ -319,8 +341,13 @@ def stage_function(x, model_ints, model_floats, q_ref, arm_ints, v_starts, ints,
                params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
                hold_obj, hold_n, gains, active, wrenches, buf, tau, mu, qdd, a_pts, a_d,
                np.empty(REFERENCE_SIZE), np.empty((3, 3)), np.empty((n, k)), np.empty(nd))
-    callees = stage_callees(example)
-    return pointer(closed_loop_stage, (*example, callees), numba.types.int64), callees
+    arm_pass, system, controller = callees = callee_compiles(example)
+    callee_types = tuple(c.function_type for c in callees)
+    stage = compile_of(closed_loop_stage, (*example, callee_types), numba.types.int64)
+    loop = compile_of(run_rk4, (*head, stage.function_type, callee_types))
+    # one group each, the larger first (by the code each compiles)
+    compile_all([[controller], [loop], [system], [stage], [arm_pass]])
+    return compiled(loop), compiled(stage), tuple(compiled(c) for c in callees)
 
 
 @kernel
@@ -502,9 +529,9 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
         r_potential: (T,) their potential energy ``-Σ m g·c`` [J] (zero at the origin).
         r_momentum: (T, 6) their total momentum ``[linear; angular about the world
             origin]`` [kg m/s, kg m²/s].
-        evaluate: :func:`closed_loop_stage`, as :func:`stage_function` makes it (compiled
+        evaluate: :func:`closed_loop_stage`, as :func:`loop_functions` makes it (compiled
             once, called through its address) or the kernel itself.
-        callees: the stage's ``callees`` (:func:`stage_callees`).
+        callees: the stage's ``callees`` (:func:`callee_compiles`).
 
     Returns:
         ``(status, k)``: ``STAGE_OK`` and ``k1`` when every sample was done, else the reason
@@ -682,5 +709,5 @@ def record_energy(s, x, params, energy, arms, r_kinetic, r_potential, r_momentum
 
 __all__ = ["NULL_KD", "NULL_KP", "STAGE_CONTROLLER", "STAGE_NOT_FINITE", "STAGE_OK",
            "STAGE_RELEASE", "STAGE_RELEASE_IN_STEP", "STAGE_SEPARATION", "STAGE_SOLVE",
-           "closed_loop_stage", "joint_pd", "record_energy", "record_state", "run_rk4",
-           "stage_callees", "stage_function", "tangent"]
+           "callee_compiles", "closed_loop_stage", "joint_pd", "loop_functions", "record_energy",
+           "record_state", "run_rk4", "stage_callees", "stage_entry", "tangent"]

@@ -37,8 +37,8 @@ every unilateral multiplier is ``>= 0``; otherwise the active-set kernel
 
 The evaluation, the rows alone, the controller's torques, the active-set kernel and the step
 with its events are handed to :func:`run_contact_rk4` as function pointers
-(:func:`stage_functions`, :func:`advance_function`): each is compiled once, on its own, and
-only the controller a run uses.
+(:func:`loop_functions`): each is compiled once, on its own, and only the controller a run
+uses.
 
 Whatever the kernel cannot decide as the Python path would (a doubtful controller or solver
 case, NaN, too many events in one step) it hands back: the status and the sample whose step
@@ -88,7 +88,7 @@ from multiarm_pin._compiled.evaluate import (
     evaluate_system,
     quaternion_rotation,
 )
-from multiarm_pin._compiled.function_pointers import pointer, type_key
+from multiarm_pin._compiled.function_pointers import compile_all, compile_of, compiled, type_key
 from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.layout import (
     DIMS_K,
@@ -231,10 +231,10 @@ def _rows_and_blocks(x, sy, wk, callees):  # pragma: no cover - compiled
     """Every row and the stacked blocks at ``x``, at zero torque (no controller call).
 
     ``sy``: the system tuple (see :func:`run_contact_rk4`); ``wk``: the workspace tuple;
-    ``callees``: as :func:`stage_functions` makes them (the rigid-body pass and the system's
+    ``callees``: as :func:`stage_compiles` makes them (the rigid-body pass and the system's
     evaluation first). Fills the stacked ``M, h, W, W_o, c, M_o, h_o`` (no wrench) and the
     rows; returns False on NaN. For a system with arms; without arms
-    :func:`_object_rows_and_blocks` (the loops call the one :func:`stage_functions` picked,
+    :func:`_object_rows_and_blocks` (the loops call the one :func:`stage_compiles` picked,
     through its address: the other is not compiled).
     """
     (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
@@ -339,7 +339,7 @@ def _torques(t, x, active, sy, ctl, wk, out, callees):  # pragma: no cover - com
     ``object_pd``: :func:`object_pd_step` when every arm row touches, else
     :func:`touching_torques` on the touching rows, or, when they cannot make every object
     wrench, the hold-still torques toward ``q_hold`` (set at the onset, which is recorded).
-    Those two are ``callees[2]`` and ``callees[3]`` (:func:`stage_functions`).
+    Those two are ``callees[2]`` and ``callees[3]`` (:func:`stage_compiles`).
     """
     (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
      sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
@@ -583,10 +583,11 @@ def contact_stage(t, x, active, sy, ctl, wk, out, d, rows, torques, lcp,
     return STAGE_OK, solver
 
 
-def stage_functions(x, active, sy, ctl, wk, out, d):
-    """The ``fn`` argument of :func:`run_contact_rk4`, for the types of these arguments.
+def stage_compiles(x, active, sy, ctl, wk, out, d) -> tuple:
+    """The compiles of the ``fn`` argument of :func:`run_contact_rk4`, for these arguments' types.
 
-    ``(contact_stage, rows, torques, lcp, callees)``: the rows and blocks
+    ``(contact_stage, rows, torques, lcp, callees)``, each a
+    :class:`~multiarm_pin._compiled.function_pointers.Compile`: the rows and blocks
     (:func:`_rows_and_blocks`, or :func:`_object_rows_and_blocks` for a system without arms),
     the controller's torques (:func:`_torques` for ``object_pd``, :func:`_phased_torques` for
     ``phased_pd``, :func:`_zero_torques` without a controller: only the ones a run uses are
@@ -598,15 +599,11 @@ def stage_functions(x, active, sy, ctl, wk, out, d):
     :func:`~multiarm_pin._compiled.controller_kernels.touching_torques`. Each is compiled once
     and called through its address (:mod:`~multiarm_pin._compiled.function_pointers`): the
     loop's module, and the stage's, do not compile them again, and a kernel the closed loop
-    calls with the same types (:func:`~multiarm_pin._compiled.closed_loop.stage_callees`) is
+    calls with the same types (:func:`~multiarm_pin._compiled.closed_loop.callee_compiles`) is
     the same compiled function.
     """
     mode = int(ctl[0][CTL_MODE])
     arms = int(sy[7][DIMS_N]) > 0
-    key = (mode, arms, type_key((x, active, sy, ctl, wk, out, d)))
-    found = _stages.get(key)  # the same tuple for the same types: a stable argument type key
-    if found is not None:
-        return found
     int64 = numba.types.int64
     pair = numba.types.UniTuple(int64, 2)
     rules = sy[19]
@@ -618,52 +615,76 @@ def stage_functions(x, active, sy, ctl, wk, out, d):
         nv = J.shape[1]
         q = x[OBJECT_STATE_SIZE:x.shape[0] - 2 * nv]
         v = x[x.shape[0] - 2 * nv:x.shape[0] - nv]
-        callees = (pointer(rigid_body_pass, (model_ints, model_floats, q, v, J, dJ, Mq, nle, H,
-                                             energy), numba.types.none),
-                   pointer(evaluate_system, (J, dJ, Mq, nle, H, x, arm_ints, v_starts, ints,
-                                             floats, params, dims, buf), numba.types.boolean))
+        callees = (compile_of(rigid_body_pass, (model_ints, model_floats, q, v, J, dJ, Mq, nle,
+                                                H, energy), numba.types.none),
+                   compile_of(evaluate_system, (J, dJ, Mq, nle, H, x, arm_ints, v_starts, ints,
+                                                floats, params, dims, buf), numba.types.boolean))
         if mode == CONTROL_OBJECT_PD:
             (_, _, pd_gains, _, hold_tool, hold_obj, hold_n, gains, qp_active, unilateral, _,
              _, _, _, qp_active_r, touching, _, _, _) = ctl
             (_, _, _, _, _, tau, _, z, ref, _, mu_p, qdd_p, a_pts, a_d) = out
             obj = x[:OBJECT_STATE_SIZE]
             callees += (
-                pointer(object_pd_step, (buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z,
-                                         hold_tool, hold_obj, hold_n, gains, params, qp_active,
-                                         tau, mu_p, qdd_p, a_pts, a_d, False, np.zeros(6)),
-                        pair),
-                pointer(touching_torques, (buf, dims, N, nv_arm, unilateral, touching, obj, ref,
-                                           pd_gains, z, hold_tool, hold_obj, hold_n, gains,
-                                           qp_active_r, tau, mu_p, qdd_p, a_pts, a_d), pair))
+                compile_of(object_pd_step, (buf, dims, N, nv_arm, unilateral, obj, ref,
+                                            pd_gains, z, hold_tool, hold_obj, hold_n, gains,
+                                            params, qp_active, tau, mu_p, qdd_p, a_pts, a_d,
+                                            False, np.zeros(6)), pair),
+                compile_of(touching_torques, (buf, dims, N, nv_arm, unilateral, touching, obj,
+                                              ref, pd_gains, z, hold_tool, hold_obj, hold_n,
+                                              gains, qp_active_r, tau, mu_p, qdd_p, a_pts,
+                                              a_d), pair))
+    callee_types = tuple(c.function_type for c in callees)
     torque_kernel = (_torques if mode == CONTROL_OBJECT_PD
                      else _phased_torques if mode == CONTROL_PHASED else _zero_torques)
-    torques = pointer(torque_kernel, (0.0, x, active, sy, ctl, wk, out, callees), int64)
+    torques = compile_of(torque_kernel, (0.0, x, active, sy, ctl, wk, out, callee_types), int64)
     a_o, qdd_c, mu, Av = out[0], out[1], out[2], out[4]
-    lcp = pointer(contact_kernel,
-                  (wk[7], wk[8], wk[9], wk[10], wk[11], wk[12], a_o, sy[15], sy[16], sy[13],
-                   active, active, False, rules[R_DEP], rules[R_VIOL], rules[R_CONS], a_o,
-                   qdd_c, mu, Av),
-                  numba.types.Tuple((int64, int64, int64, int64, numba.types.float64)))
-    rows = pointer(_rows_and_blocks if arms else _object_rows_and_blocks, (x, sy, wk, callees),
-                   numba.types.boolean)
-    stage = pointer(contact_stage, (0.0, x, active, sy, ctl, wk, out, d, rows, torques, lcp,
-                                    callees), pair)
-    found = _stages[key] = (stage, rows, torques, lcp, callees)
+    lcp = compile_of(contact_kernel,
+                     (wk[7], wk[8], wk[9], wk[10], wk[11], wk[12], a_o, sy[15], sy[16], sy[13],
+                      active, active, False, rules[R_DEP], rules[R_VIOL], rules[R_CONS], a_o,
+                      qdd_c, mu, Av),
+                     numba.types.Tuple((int64, int64, int64, int64, numba.types.float64)))
+    rows = compile_of(_rows_and_blocks if arms else _object_rows_and_blocks,
+                      (x, sy, wk, callee_types), numba.types.boolean)
+    stage = compile_of(contact_stage, (0.0, x, active, sy, ctl, wk, out, d, rows.function_type,
+                                       torques.function_type, lcp.function_type, callee_types),
+                       pair)
+    return stage, rows, torques, lcp, callees
+
+
+def loop_functions(head: tuple) -> tuple:
+    """``(run_contact_rk4's entry point, fn, advance)`` for its arguments before ``fn``.
+
+    ``fn`` is :func:`stage_compiles`' tuple compiled; ``advance`` is
+    :func:`_advance_with_events`, compiled once for the types of ``head``'s arrays and ``fn``
+    and called through its address. The loop, the advance, the stages and their callees are
+    independent compiles (a caller needs only the type of a function it calls through its
+    address): :func:`~multiarm_pin._compiled.function_pointers.compile_all` runs them at once.
+    Made once per process for the types of ``head``.
+    """
+    (_, _, _, x, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev, _, _) = head
+    key = (int(ctl[0][CTL_MODE]), int(sy[7][DIMS_N]) > 0, type_key(head))
+    found = _loops.get(key)  # compile_of types every argument: once per types
+    if found is not None:
+        return found
+    stages = stage_compiles(x, active, sy, ctl, wk, out, rk[0])
+    stage, rows, torques, lcp, callees = stages
+    fn_type = (stage.function_type, rows.function_type, torques.function_type,
+               lcp.function_type, tuple(c.function_type for c in callees))
+    advance = compile_of(_advance_with_events, (0.0, x, 0.0, active, sy, ctl, wk, out, rk, st0,
+                                                loc, imp, ev, n_ev, fn_type), numba.types.int64)
+    loop = compile_of(run_contact_rk4, (*head, fn_type, advance.function_type))
+    # the larger first (by the code each compiles); object_pd_step and touching_torques share
+    # the controller's torques: one group
+    groups = [[advance], [loop], [*callees[2:]], [lcp], [torques], [*callees[1:2]], [rows],
+              [stage], [*callees[:1]]]
+    compile_all([g for g in groups if g])
+    fn = (compiled(stage), compiled(rows), compiled(torques), compiled(lcp),
+          tuple(compiled(c) for c in callees))
+    found = _loops[key] = (compiled(loop), fn, compiled(advance))
     return found
 
 
-_stages: dict = {}  # (controller mode, arms?, type_key of the arguments) -> stage_functions' tuple
-
-
-def advance_function(x, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev, fn):
-    """The ``advance`` argument of :func:`run_contact_rk4`.
-
-    :func:`_advance_with_events` compiled once for the types of these arguments (``fn`` from
-    :func:`stage_functions`), called through its address.
-    """
-    return pointer(_advance_with_events,
-                   (0.0, x, 0.0, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev, fn),
-                   numba.types.int64)
+_loops: dict = {}  # (controller mode, arms?, type_key of the head) -> loop_functions' tuple
 
 
 # ------------------------------------------------------------------ steps and events
@@ -1161,9 +1182,9 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         Rec: the record arrays (``Recorder``'s, and the active set and solver codes), then
             the (B, R) bool rows kept out of the recorded penetration (``beside_start``: in
             and out).
-        fn: ``(contact_stage, rows, torques, lcp, callees)`` as :func:`stage_functions`
+        fn: ``(contact_stage, rows, torques, lcp, callees)`` as :func:`stage_compiles`
             makes them (compiled once, called through their addresses).
-        advance: :func:`_advance_with_events`, likewise (:func:`advance_function`).
+        advance: :func:`_advance_with_events`, likewise (:func:`loop_functions`).
 
     Returns:
         ``(status, k)``: ``STAGE_OK`` and ``k1``, or the reason and the sample whose step the

@@ -8,17 +8,57 @@ most of a first run's compile. A stage handed to a loop as a first-class functio
 ``cfunc``: a C-callable function of one fixed signature) is compiled once, on its own, and
 the loop calls it through its address: the loop's module holds the loop's own code only.
 The code is the same; only where it is compiled changes.
+
+A caller's module needs only the *type* of a first-class function it calls
+(:attr:`Compile.function_type`), not its code: the stages of a loop and the loop itself are
+independent compiles. :func:`compile_all` runs them in this process and in child processes
+at once, which share numba's disk cache (:mod:`~multiarm_pin._compiled.cache`): a first run
+compiles on every core the machine gives it.
 """
 
 from __future__ import annotations
 
+import os
+import signal
+import sys
+import threading
 from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numba
 from numba._dispatcher import compute_fingerprint
-from numba.core import config
+from numba.core import types as nb_types
+from numba.core.registry import cpu_target
 
-_made: dict = {}  # (py_func, type_key of the arguments) -> cfunc
+from multiarm_pin._compiled.jit import jit_disabled
+
+PROCESSES_VARIABLE = "MULTIARM_PIN_COMPILE_PROCESSES"
+"""Environment variable: how many processes :func:`compile_all` may use (``1``: this one
+only). Unset: one per core this process may run on."""
+
+_by_signature: dict = {}  # (py_func, signature) -> cfunc
+
+
+@dataclass(frozen=True)
+class Compile:
+    """One compile of a kernel for fixed argument types.
+
+    Attributes:
+        kernel: a kernel (``multiarm_pin._compiled.jit.kernel``).
+        types: the numba types of its arguments.
+        result: the numba type it returns as a first-class function (a ``cfunc``), or
+            ``None`` for the kernel's own entry point (an overload of its dispatcher).
+    """
+
+    kernel: Any
+    types: tuple
+    result: Any = None
+
+    @property
+    def function_type(self) -> nb_types.FunctionType:
+        """The numba type of the first-class function: what a caller's signature holds."""
+        return nb_types.FunctionType(self.result(*self.types))
 
 
 def type_key(args: Sequence) -> tuple:
@@ -38,48 +78,167 @@ def type_key(args: Sequence) -> tuple:
     return tuple(key)
 
 
-def pointer(kernel, args: Sequence, result_type):
-    """``kernel`` as a first-class function for the types of ``args`` (made once per process).
+def _holds_type(a) -> bool:
+    return isinstance(a, nb_types.Type) or (
+        isinstance(a, tuple) and any(_holds_type(e) for e in a))
+
+
+def numba_type(a):
+    """The numba type of the argument ``a``; a numba type stands for an argument of that type.
+
+    A tuple that holds numba types (the function types of stages not compiled yet) is typed
+    element by element, as ``numba.typeof`` types a tuple.
+    """
+    if isinstance(a, nb_types.Type):
+        return a
+    if isinstance(a, tuple) and _holds_type(a):
+        return nb_types.BaseTuple.from_types([numba_type(e) for e in a])
+    return numba.typeof(a)
+
+
+def compile_of(kernel, args: Sequence, result=None) -> Compile:
+    """The :class:`Compile` of ``kernel`` for the types of the example arguments ``args``.
 
     Args:
-        kernel: a kernel (``multiarm_pin._compiled.jit.kernel``).
-        args: example arguments: their numba types are the signature.
-        result_type: the numba type it returns.
+        kernel: a kernel.
+        args: example arguments, or their numba types (:func:`numba_type`).
+        result: the return type of the first-class function, or ``None`` for the kernel's
+            entry point.
+    """
+    return Compile(kernel, tuple(numba_type(a) for a in args), result)
+
+
+def compiled(job: Compile):
+    """The compiled function of ``job``: made, loaded from numba's disk cache, or compiled.
+
+    A first-class function is made once per process. A kernel's entry point is called
+    without numba's dispatch, which types every argument again at every call (the function
+    pointers through ``numba.typeof``): only for arguments whose types are fixed by
+    construction (the loop's own arrays), as the entry point does not check them.
 
     Returns:
-        The compiled function (cached on disk as the kernels are), or ``kernel`` itself when
-        the JIT is off (``NUMBA_DISABLE_JIT``: the loops then run as Python).
+        The ``cfunc`` (``job.result`` given) or the entry point of the kernel's overload;
+        ``job.kernel`` itself when the JIT is off (``NUMBA_DISABLE_JIT``: the loops then run
+        as Python).
     """
-    if config.DISABLE_JIT or not hasattr(kernel, "py_func"):
+    kernel = job.kernel
+    if jit_disabled() or not hasattr(kernel, "py_func"):
         return kernel
-    key = (kernel.py_func, type_key(args))
-    made = _made.get(key)
+    if job.result is None:
+        return kernel.compile(job.types)  # an overload already made is returned as it is
+    key = (kernel.py_func, job.result(*job.types))
+    made = _by_signature.get(key)
     if made is None:
-        types = tuple(numba.typeof(a) for a in args)
-        made = numba.cfunc(result_type(*types), cache=True, error_model="numpy")(kernel.py_func)
-        _made[key] = made
+        made = _by_signature[key] = numba.cfunc(key[1], cache=True, error_model="numpy")(
+            kernel.py_func)
     return made
 
 
-def entry_point(kernel, args: Sequence):
-    """The compiled specialisation of ``kernel`` for exactly the types of ``args``.
+# ------------------------------------------------------------------ compiling on every core
+def _ready(job: Compile) -> bool:
+    """True if ``job`` is compiled in this process or in numba's disk cache."""
+    kernel = job.kernel
+    if job.result is None:
+        if job.types in kernel.overloads:
+            return True
+        cache = getattr(kernel, "_cache", None)
+        signature = job.types
+    else:
+        signature = job.result(*job.types)
+        if (kernel.py_func, signature) in _by_signature:
+            return True
+        cache = None
+    try:
+        if cache is None:
+            from numba.core.caching import FunctionCache
 
-    Called without numba's dispatch, which types every argument again at every call (the
-    function pointers through ``numba.typeof``); ``kernel`` itself when it is not compiled
-    (``NUMBA_DISABLE_JIT``).
-    Compiled or loaded from the cache here, not run. Only for arguments whose types are
-    fixed by construction (the loop's own arrays): the entry point does not check them.
+            cache = FunctionCache(kernel.py_func)
+        key = cache._index_key(signature, cpu_target.target_context.codegen())
+        return key in cache._cache_file._load_index()
+    except Exception:  # noqa: BLE001 - numba's cache internals: then it is not known ready
+        return False
+
+
+def processes() -> int:
+    """How many processes :func:`compile_all` uses (:data:`PROCESSES_VARIABLE`, or the cores).
+
+    One, this process, where a child cannot be forked safely: without ``os.fork`` (not
+    Linux), or with other Python threads running (a Dask worker, a server), whose locks a
+    forked child would inherit held.
     """
-    if not hasattr(kernel, "overloads"):
-        return kernel
-    key = (kernel, type_key(args))  # numba.typeof of every argument: once per types
-    found = _entries.get(key)
-    if found is None:
-        found = _entries[key] = kernel.compile(tuple(numba.typeof(a) for a in args))
-    return found
+    if not sys.platform.startswith("linux") or threading.active_count() > 1:
+        return 1
+    value = os.environ.get(PROCESSES_VARIABLE, "").strip()
+    if value:
+        try:
+            return max(1, int(value))
+        except ValueError:
+            return 1
+    return max(1, len(os.sched_getaffinity(0)))
 
 
-_entries: dict = {}  # (kernel, type_key of the arguments) -> entry point
+def _work(queue: int, groups: Sequence[Sequence[Compile]]) -> None:
+    """Compile the groups whose numbers this process reads from the pipe ``queue``.
+
+    One byte a read: a pipe hands each byte to one reader only.
+    """
+    while True:
+        b = os.read(queue, 1)
+        if not b:
+            return
+        for job in groups[b[0]]:
+            compiled(job)
 
 
-__all__ = ["entry_point", "pointer", "type_key"]
+def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
+    """Compile ``groups`` of :class:`Compile` here and in child processes, at once.
+
+    A group is compiled in order, in one process (kernels that share a large callee belong
+    in one group: each process compiles the callees of its own groups); the processes take
+    the next group from one queue, so list the larger ones first. The children compile into
+    numba's disk cache and exit; this process then loads their work from it (a compile a
+    child did not finish is done here). Groups already compiled, here or on disk, are
+    skipped; with one of them left, or one process (:func:`processes`), all is done here.
+
+    Nothing is returned: :func:`compiled` then gives each compiled function without
+    compiling.
+    """
+    if jit_disabled():
+        return
+    todo = [g for g in groups if not all(_ready(j) for j in g)]
+    children = min(processes(), len(todo), 256) - 1
+    if children > 0:
+        read, write = os.pipe()
+        os.write(write, bytes(range(len(todo))))
+        os.close(write)
+        pids = []
+        try:
+            for _ in range(children):
+                pid = os.fork()
+                if pid == 0:  # the child: compile into the disk cache, then leave at once
+                    status = 1
+                    try:
+                        _work(read, todo)
+                        status = 0
+                    finally:
+                        os._exit(status)
+                pids.append(pid)
+            _work(read, todo)
+        except BaseException:
+            for pid in pids:
+                try:
+                    os.kill(pid, signal.SIGTERM)
+                except OSError:
+                    pass
+            raise
+        finally:
+            os.close(read)
+            for pid in pids:
+                os.waitpid(pid, 0)
+    for group in todo:
+        for job in group:
+            compiled(job)
+
+
+__all__ = ["PROCESSES_VARIABLE", "Compile", "compile_all", "compile_of", "compiled",
+           "numba_type", "processes", "type_key"]

@@ -25,7 +25,6 @@ import numpy as np
 
 from multiarm_pin._compiled import closed_loop as kernels
 from multiarm_pin._compiled import layout
-from multiarm_pin._compiled.function_pointers import entry_point
 from multiarm_pin.dynamics.solve import SOLVERS
 from multiarm_pin.dynamics.unilateral import UNILATERAL_SOLVERS
 from multiarm_pin.model.rigid_object import ObjectState
@@ -70,9 +69,9 @@ class CompiledLoop:
                      np.zeros((n, m)), np.zeros((n, k)))
         self.separation = np.array([ce.SEPARATION_GAP, ce.SEPARATION_SPEED])
         self._stage_args = None  # evaluate()'s kernel arguments, made once per controller
-        self._callees = None  # evaluate()'s stage's callees (closed_loop.stage_callees)
-        self._stage_pointer = None  # (controller's trajectory table, run_rk4's stage)
-        self._kernel = None  # (self._stage_pointer, the kernel to call with these types)
+        self._callees = None  # evaluate()'s stage's callees (closed_loop.stage_entry)
+        # (controller's trajectory table, run_rk4's entry point, its stage, the stage's callees)
+        self._kernel = None
         self._zero = np.zeros(s.nv)
         self._tangent_size = 2 * s.nv + layout.OBJECT_STATE_SIZE
         q0 = layout.OBJECT_STATE_SIZE
@@ -165,11 +164,7 @@ class CompiledLoop:
         a_pts = np.zeros(ctrl.hold_points_in_tool.shape)
         a_d = np.zeros(6)
         args = self._arguments(rec, x, times, k0, k1, a_pts, a_d)
-        if self._kernel is None or self._kernel[0] is not self._stage_pointer:
-            # the kernel's entry point for these types (fixed by construction for this loop:
-            # numba's dispatch would type the stage's function pointer again at every call)
-            self._kernel = (self._stage_pointer, entry_point(kernels.run_rk4, args))
-        status, k = self._kernel[1](*args)
+        status, k = self._kernel[1](*args, *self._kernel[2:])
         tau, mu, qdd = self.work[7:]
         self.last_status = int(status)
         k = int(k)
@@ -181,7 +176,7 @@ class CompiledLoop:
 
     def _arguments(self, rec: Recorder, x: np.ndarray, times: np.ndarray, k0: int, k1: int,
                    a_pts: np.ndarray, a_d: np.ndarray) -> tuple:
-        """The arguments of :func:`~multiarm_pin._compiled.closed_loop.run_rk4` (its order)."""
+        """:func:`~multiarm_pin._compiled.closed_loop.run_rk4`'s arguments before ``evaluate``."""
         path = self.path
         (traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, active, unilateral,
          q_ref) = self.stepper.controller.kernel_inputs()
@@ -191,14 +186,17 @@ class CompiledLoop:
                   path.N, path.nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
                   hold_obj, hold_n, gains, active, self.wrenches)
         work = (J, dJ, M, nle, H, energy, buf, tau, mu, qdd, a_pts, a_d)
-        if self._stage_pointer is None or self._stage_pointer[0] is not traj:
-            # the stage for these types (made once per controller input, whose arrays are the
-            # only ones that may change between runs)
-            self._stage_pointer = (traj, kernels.stage_function(x, *system, *work))
-        return (k0, k1, times, x, *system, self.separation, *work, rec.q, rec.v, rec.p,
+        head = (k0, k1, times, x, *system, self.separation, *work, rec.q, rec.v, rec.p,
                 rec.quat, rec.twist, rec.tau, rec.mu, rec.phi, rec.phi_dot, rec.points,
                 rec.normals, rec.a_o, rec.qdd, rec.violation, rec.wrench, rec.ke, rec.pe,
-                rec.momentum, *self._stage_pointer[1])
+                rec.momentum)
+        if self._kernel is None or self._kernel[0] is not traj:
+            # the loop's entry point, its stage and the stage's callees for these types (made
+            # once per controller input, whose arrays are the only ones that may change
+            # between runs); the entry point without numba's dispatch, which would type the
+            # stage's function pointer again at every call
+            self._kernel = (traj, *kernels.loop_functions(head, x, *system, *work))
+        return head
 
     def evaluate(self, t: float, state: SystemState) -> tuple[int, np.ndarray, np.ndarray]:
         """One closed-loop evaluation by the kernel of the loop's stages (no record).
@@ -234,8 +232,7 @@ class CompiledLoop:
                                  np.empty((n, k))), ctrl)
             kept = self._stage_args
             example = (0.0, self._x, True, *kept[0], np.empty(self._tangent_size))
-            self._callees = kernels.stage_callees(example)
-            self._stage = entry_point(kernels.closed_loop_stage, (*example, self._callees))
+            self._stage, self._callees = kernels.stage_entry(example)
         o = state.obj
         x = self._x  # read by the kernel only: filled in place (its τ part stays zero)
         x[layout.X_POSITION:layout.X_POSITION + 3] = o.position

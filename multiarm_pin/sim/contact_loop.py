@@ -28,7 +28,6 @@ import numpy as np
 
 from multiarm_pin._compiled import contact_loop as kernels
 from multiarm_pin._compiled import layout, mlcp
-from multiarm_pin._compiled.function_pointers import entry_point
 from multiarm_pin.dynamics.unilateral import UNILATERAL_SOLVERS
 from multiarm_pin.sim import contact_events as ce
 from multiarm_pin.sim import event_location as el
@@ -191,8 +190,8 @@ class ContactLoop:
         self.n_onsets = np.zeros(1, np.int64)
         self.q_hold = np.zeros(nq)
         self.last_status = kernels.STAGE_OK
-        self._fn = None  # (controller tuple, the kernel's stage functions for its types)
-        self._kernel = None  # (self._fn, the kernel's entry point for these types)
+        # (controller tuple, the kernel's entry point, fn and advance for its types)
+        self._kernel = None
         self._kept_controller = None  # (controller inputs, the kernel's controller tuple)
         self._zero_x = np.zeros(nv)
         self.beside = np.zeros((B, R), dtype=bool)  # the stepper's beside_start, in and out
@@ -326,20 +325,20 @@ class ContactLoop:
 
     def _arguments(self, rec: Recorder, x: np.ndarray, times: np.ndarray, k0: int, k1: int,
                    C: tuple, active: np.ndarray, codes: np.ndarray) -> tuple:
-        """The arguments of :func:`~multiarm_pin._compiled.contact_loop.run_contact_rk4`."""
+        """The arguments of the contact kernel (``run_contact_rk4``) before ``fn``."""
         self.n_events[0] = 0
         self.n_onsets[0] = 0
         self.Z[4][0] = 0  # no evaluation to reuse at the first sample
         Rec = (rec.q, rec.v, rec.p, rec.quat, rec.twist, rec.tau, rec.mu, rec.phi,
                rec.phi_dot, rec.points, rec.normals, rec.a_o, rec.qdd, rec.violation,
                rec.wrench, rec.ke, rec.pe, rec.momentum, rec.active, codes, self.beside)
-        if self._fn is None or self._fn[0] is not C:  # the stages, for these types
-            fn = kernels.stage_functions(x, active, self.S, C, self.W, self._O, self.K[0])
-            self._fn = (C, fn, kernels.advance_function(
-                x, active, self.S, C, self.W, self._O, self.K, self.Z, self.L, self.I,
-                self.events, self.n_events, fn))
-        return (k0, k1, times, x, active, self.S, C, self.W, self._O, self.K, self.Z, self.L,
-                self.I, self.events, self.n_events, self.reserve, Rec, *self._fn[1:])
+        head = (k0, k1, times, x, active, self.S, C, self.W, self._O, self.K, self.Z, self.L,
+                self.I, self.events, self.n_events, self.reserve, Rec)
+        if self._kernel is None or self._kernel[0] is not C:
+            # the loop's entry point and its stages, for these types (the entry point without
+            # numba's dispatch, which would type the function pointers again at every call)
+            self._kernel = (C, *kernels.loop_functions(head))
+        return head
 
     def run(self, rec: Recorder, state: SystemState, times: np.ndarray, k0: int, k1: int
             ) -> tuple[int, SystemState]:
@@ -367,12 +366,7 @@ class ContactLoop:
         self.beside[:] = stepper.beside_start
         codes = np.zeros(len(times), np.int64)
         args = self._arguments(rec, x, times, k0, k1, C, active, codes)
-        if self._kernel is None or self._kernel[0] is not self._fn:
-            # the arguments' types are fixed by construction for this loop and its stages:
-            # the compiled entry point, without the dispatcher's type matching (which types
-            # the function pointers again at every call)
-            self._kernel = (self._fn, entry_point(kernels.run_contact_rk4, args))
-        status, k = self._kernel[1](*args)
+        status, k = self._kernel[1](*args, *self._kernel[2:])
         self.last_status = int(status)
         k = int(k)
         # the samples recorded: up to k, and k itself when its step failed (it is recorded

@@ -1,0 +1,145 @@
+"""Compiling on every core: ``function_pointers.compile_all`` and the cache's index lock."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import threading
+
+import numba
+import numpy as np
+import pytest
+from numba.core import caching
+
+from multiarm_pin._compiled import cache, function_pointers, linalg
+from multiarm_pin._compiled.function_pointers import (
+    PROCESSES_VARIABLE,
+    compile_all,
+    compile_of,
+    compiled,
+    numba_type,
+    processes,
+)
+
+pytestmark = pytest.mark.skipif(numba.config.DISABLE_JIT, reason="compiles kernels")
+
+# A fresh process (one Python thread: it may fork) compiles three small kernels in two
+# groups, one of which cannot be compiled for its types, over two processes sharing an empty
+# disk cache; it prints what it got.
+_SCRIPT = r"""
+import json, os, sys
+import numba, numpy as np
+from multiarm_pin._compiled import linalg
+from multiarm_pin._compiled.function_pointers import compile_all, compile_of, compiled
+a = np.array([[4.0, 1.0], [1.0, 3.0]])
+b = np.array([[1.0], [2.0]])
+jobs = [compile_of(linalg.cholesky, (a, a, 2), numba.types.boolean),
+        compile_of(linalg.cholesky_solve, (a, b, 2, 1), numba.types.none)]
+bad = compile_of(linalg.cholesky, (np.zeros(3), a, 2), numba.types.boolean)
+out = {}
+try:
+    compile_all([[jobs[0]], [jobs[1]], [bad]] if sys.argv[1] == "bad" else [[jobs[0]], [jobs[1]]])
+except numba.core.errors.TypingError:
+    out["error"] = "TypingError"
+L = np.zeros((2, 2))
+ok = compiled(jobs[0])(a, L, 2)
+x = b.copy()
+compiled(jobs[1])(L, x, 2, 1)
+t = os.times()
+out.update(ok=bool(ok), x=x[:, 0].tolist(), expected=np.linalg.solve(a, b[:, 0]).tolist(),
+           children=t.children_user + t.children_system, hits=compiled(jobs[0]).cache_hits)
+print(json.dumps(out))
+"""
+
+
+def _run(tmp_path, *args, processes="2"):
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"),
+               **{PROCESSES_VARIABLE: processes})
+    env.pop("NUMBA_DISABLE_JIT", None)
+    done = subprocess.run([sys.executable, "-c", _SCRIPT, *args], env=env, capture_output=True,
+                          text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_compile_all_over_two_processes_gives_the_same_functions(tmp_path):
+    first = _run(tmp_path, "good")
+    assert first["ok"]
+    np.testing.assert_allclose(first["x"], first["expected"], rtol=1e-12)
+    assert first["children"] > 0.0  # a child process ran
+    again = _run(tmp_path, "good")  # all on disk now: loaded, no child
+    assert again["x"] == first["x"]
+    assert again["children"] == 0.0
+    assert again["hits"] == 1
+
+
+def test_a_compile_that_fails_in_any_process_raises_here(tmp_path):
+    out = _run(tmp_path, "bad")
+    assert out["error"] == "TypingError"
+    np.testing.assert_allclose(out["x"], out["expected"], rtol=1e-12)
+
+
+def test_one_process_compiles_here_without_a_child(tmp_path):
+    out = _run(tmp_path, "good", processes="1")
+    assert out["children"] == 0.0
+    np.testing.assert_allclose(out["x"], out["expected"], rtol=1e-12)
+
+
+def test_processes_follows_the_variable_and_never_forks_beside_threads(monkeypatch):
+    monkeypatch.setenv(PROCESSES_VARIABLE, "3")
+    assert processes() == (3 if sys.platform.startswith("linux") else 1)
+    monkeypatch.setenv(PROCESSES_VARIABLE, "not a number")
+    assert processes() == 1
+    monkeypatch.setenv(PROCESSES_VARIABLE, "0")
+    assert processes() == 1
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        monkeypatch.setenv(PROCESSES_VARIABLE, "3")
+        assert processes() == 1
+    finally:
+        stop.set()
+        other.join()
+
+
+def test_a_pending_function_is_typed_as_the_compiled_one():
+    a = np.array([[4.0, 1.0], [1.0, 3.0]])
+    job = compile_of(linalg.cholesky, (a, a, 2), numba.types.boolean)
+    made = compiled(job)
+    assert job.function_type == numba.typeof(made)
+    assert numba_type((job.function_type, (job.function_type,))) == numba.typeof((made, (made,)))
+    assert compile_of(linalg.cholesky_solve, (a, a, 2, 1)) == compile_of(
+        linalg.cholesky_solve, (numba.typeof(a), numba.typeof(a), numba.types.int64, 1))
+
+
+def test_every_cache_index_read_and_save_holds_the_lock(tmp_path):
+    assert caching.IndexDataCacheFile.save.__name__ == "locked_save"
+    assert caching.IndexDataCacheFile.load.__name__ == "locked_load"
+    index = str(tmp_path / "f.nbi")
+    probe = ("import fcntl, os, sys\n"
+             "fd = os.open(sys.argv[1] + '.lock', os.O_RDWR | os.O_CREAT)\n"
+             "try:\n    fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)\n    print('free')\n"
+             "except BlockingIOError:\n    print('held')\n")
+
+    def other_process_sees():
+        return subprocess.run([sys.executable, "-c", probe, index], capture_output=True,
+                              text=True, timeout=60).stdout.strip()
+
+    with cache.index_lock(index, exclusive=True):
+        assert other_process_sees() == "held"
+    assert other_process_sees() == "free"
+    with cache.index_lock(index, exclusive=False):
+        assert other_process_sees() == "free"  # readers share it
+
+
+def test_compile_all_does_nothing_twice():
+    a = np.array([[4.0, 1.0], [1.0, 3.0]])
+    job = compile_of(linalg.cholesky, (a, a, 2), numba.types.boolean)
+    compile_all([[job]])
+    made = compiled(job)
+    compile_all([[job], [job]])
+    assert compiled(job) is made
+    assert function_pointers._ready(job)
