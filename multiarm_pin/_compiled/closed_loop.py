@@ -275,6 +275,24 @@ def closed_loop_stage(t, x, arm_pass, model_ints, model_floats, q_ref, err, J, d
     return STAGE_OK
 
 
+def arm_compiles(x, model_ints, model_floats, J, dJ, M, nle, H, energy, arm_ints, v_starts,
+                 ints, floats, params, dims, buf) -> tuple[Compile, Compile]:
+    """The compiles of the rigid-body pass and of the system's evaluation, as the stages call them.
+
+    Both loops' stages call :func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass` and
+    :func:`~multiarm_pin._compiled.evaluate.evaluate_system` through their addresses with
+    these arguments (``q`` and ``v`` are parts of the state vector ``x``, (13 + nq + 2 nv,)):
+    one compiled function each for both loops.
+    """
+    nv = J.shape[1]
+    q = x[OBJECT_STATE_SIZE:x.shape[0] - 2 * nv]
+    v = x[x.shape[0] - 2 * nv:x.shape[0] - nv]
+    return (compile_of(rigid_body_pass, (model_ints, model_floats, q, v, J, dJ, M, nle, H,
+                                         energy), numba.types.none),
+            compile_of(evaluate_system, (J, dJ, M, nle, H, x, arm_ints, v_starts, ints, floats,
+                                         params, dims, buf), numba.types.boolean))
+
+
 def callee_compiles(stage_args: tuple) -> tuple[Compile, Compile, Compile]:
     """The compiles of the ``callees`` of :func:`closed_loop_stage`, for its other arguments.
 
@@ -284,15 +302,11 @@ def callee_compiles(stage_args: tuple) -> tuple[Compile, Compile, Compile]:
     (:mod:`~multiarm_pin._compiled.function_pointers`): the stage's module holds only the
     stage's own code.
     """
-    (_, x, _, model_ints, model_floats, q_ref, _, J, dJ, M, nle, H, energy, arm_ints, v_starts,
+    (_, x, _, model_ints, model_floats, _, _, J, dJ, M, nle, H, energy, arm_ints, v_starts,
      ints, floats, params, dims, N, nv_arm, unilateral, _, pd_gains, _, hold_tool, hold_obj,
      hold_n, gains, active, _, buf, tau, mu, qdd, a_pts, a_d, ref, _, z, _) = stage_args
-    nq, nv = q_ref.shape[0], J.shape[1]
-    q, v = x[OBJECT_STATE_SIZE:OBJECT_STATE_SIZE + nq], x[OBJECT_STATE_SIZE + nq:][:nv]
-    return (compile_of(rigid_body_pass, (model_ints, model_floats, q, v, J, dJ, M, nle, H,
-                                         energy), numba.types.none),
-            compile_of(evaluate_system, (J, dJ, M, nle, H, x, arm_ints, v_starts, ints, floats,
-                                         params, dims, buf), numba.types.boolean),
+    return (*arm_compiles(x, model_ints, model_floats, J, dJ, M, nle, H, energy, arm_ints,
+                          v_starts, ints, floats, params, dims, buf),
             compile_of(object_pd_step, (buf, dims, N, nv_arm, unilateral,
                                         x[:OBJECT_STATE_SIZE], ref, pd_gains, z, hold_tool,
                                         hold_obj, hold_n, gains, params, active, tau, mu, qdd,
@@ -709,5 +723,5 @@ def record_energy(s, x, params, energy, arms, r_kinetic, r_potential, r_momentum
 
 __all__ = ["NULL_KD", "NULL_KP", "STAGE_CONTROLLER", "STAGE_NOT_FINITE", "STAGE_OK",
            "STAGE_RELEASE", "STAGE_RELEASE_IN_STEP", "STAGE_SEPARATION", "STAGE_SOLVE",
-           "callee_compiles", "closed_loop_stage", "joint_pd", "loop_functions", "record_energy",
-           "record_state", "run_rk4", "stage_callees", "stage_entry", "tangent"]
+           "arm_compiles", "callee_compiles", "closed_loop_stage", "joint_pd", "loop_functions",
+           "record_energy", "record_state", "run_rk4", "stage_callees", "stage_entry", "tangent"]

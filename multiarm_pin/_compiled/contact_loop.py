@@ -67,6 +67,7 @@ from multiarm_pin._compiled.closed_loop import (
     STAGE_SOLVE,
     _advance,
     _advance_semi_implicit,
+    arm_compiles,
     joint_pd,
     record_energy,
     record_state,
@@ -85,7 +86,6 @@ from multiarm_pin._compiled.delassus import contact_kernel
 from multiarm_pin._compiled.evaluate import (
     _arm_segments,
     _block_segments,
-    evaluate_system,
     quaternion_rotation,
 )
 from multiarm_pin._compiled.function_pointers import compile_all, compile_of, compiled, type_key
@@ -122,7 +122,7 @@ from multiarm_pin._compiled.linalg import copy1, copy2
 from multiarm_pin._compiled.mlcp import OK as LCP_OK
 from multiarm_pin._compiled.object_first import SOLVE_OK, object_first
 from multiarm_pin._compiled.phased import phased_torques
-from multiarm_pin._compiled.rigid_body import difference, rigid_body_pass
+from multiarm_pin._compiled.rigid_body import difference
 from multiarm_pin._compiled.trajectory import reference_motion
 
 STAGE_TOO_MANY_EVENTS = 7
@@ -612,13 +612,8 @@ def stage_compiles(x, active, sy, ctl, wk, out, d) -> tuple:
         (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
          *_) = sy
         J, dJ, Mq, nle, H, energy, buf = wk[:7]
-        nv = J.shape[1]
-        q = x[OBJECT_STATE_SIZE:x.shape[0] - 2 * nv]
-        v = x[x.shape[0] - 2 * nv:x.shape[0] - nv]
-        callees = (compile_of(rigid_body_pass, (model_ints, model_floats, q, v, J, dJ, Mq, nle,
-                                                H, energy), numba.types.none),
-                   compile_of(evaluate_system, (J, dJ, Mq, nle, H, x, arm_ints, v_starts, ints,
-                                                floats, params, dims, buf), numba.types.boolean))
+        callees = arm_compiles(x, model_ints, model_floats, J, dJ, Mq, nle, H, energy, arm_ints,
+                               v_starts, ints, floats, params, dims, buf)
         if mode == CONTROL_OBJECT_PD:
             (_, _, pd_gains, _, hold_tool, hold_obj, hold_n, gains, qp_active, unilateral, _,
              _, _, _, qp_active_r, touching, _, _, _) = ctl
