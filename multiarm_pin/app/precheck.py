@@ -115,7 +115,7 @@ def static_torques(system, state, supports: bool = False, engaged_arms=None,
     rest = SystemState(np.asarray(state.q, float), np.zeros(system.nv),
                        ObjectState(np.asarray(o.position, float),
                                    np.asarray(o.quaternion, float), np.zeros(6)))
-    ev = system.blocks(rest)
+    ev = system.blocks(rest, reference=True)  # once per run: numpy's, nothing to compile
     b = ev.blocks
     n = system.n_arms
     with_supports = bool(supports and system.supports.n_rows)
@@ -195,7 +195,8 @@ def grasp_wrenches(system, state, length_scale: float) -> np.ndarray:
     Columns ``[n; (p - c) × n / L]`` (world axes, about the object's COM ``c``): a unilateral
     row as it is, a bilateral row twice (``±``: it pushes and pulls).
     """
-    W_o = system.blocks(state).blocks.W_o  # (n, 6, N_max), rows already [n; r × n]
+    # (n, 6, N_max), rows already [n; r × n]; numpy's blocks (once: nothing to compile)
+    W_o = system.blocks(state, reference=True).blocks.W_o
     cols = []
     for i in range(system.n_arms):
         for k in range(int(system.constraint_set.N[i])):
