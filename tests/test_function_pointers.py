@@ -15,6 +15,7 @@ from numba.core import caching
 
 from multiarm_pin._compiled import cache, function_pointers, linalg
 from multiarm_pin._compiled.function_pointers import (
+    DEFAULT_MOST_PROCESSES,
     PROCESSES_VARIABLE,
     compile_all,
     compile_of,
@@ -88,8 +89,12 @@ def test_one_process_compiles_here_without_a_child(tmp_path):
 
 
 def test_processes_follows_the_variable_and_never_forks_beside_threads(monkeypatch):
-    monkeypatch.setenv(PROCESSES_VARIABLE, "3")
-    assert processes() == (3 if sys.platform.startswith("linux") else 1)
+    linux = sys.platform.startswith("linux")
+    monkeypatch.setenv(PROCESSES_VARIABLE, "6")
+    assert processes() == (6 if linux else 1)
+    monkeypatch.delenv(PROCESSES_VARIABLE)
+    assert processes() == (min(DEFAULT_MOST_PROCESSES, len(os.sched_getaffinity(0))) if linux
+                           else 1)
     monkeypatch.setenv(PROCESSES_VARIABLE, "not a number")
     assert processes() == 1
     monkeypatch.setenv(PROCESSES_VARIABLE, "0")

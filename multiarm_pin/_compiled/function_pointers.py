@@ -35,7 +35,12 @@ from multiarm_pin._compiled.jit import jit_disabled
 
 PROCESSES_VARIABLE = "MULTIARM_PIN_COMPILE_PROCESSES"
 """Environment variable: how many processes :func:`compile_all` may use (``1``: this one
-only). Unset: one per core this process may run on."""
+only). Unset: one per core this process may run on, at most :data:`DEFAULT_MOST_PROCESSES`."""
+
+DEFAULT_MOST_PROCESSES = 4
+"""Most processes :func:`compile_all` uses unless told otherwise: a loop has about ten groups,
+one of them much larger than the others, which bounds the wall time beyond a few processes
+(each of which compiles the shared small callees of its groups again)."""
 
 _by_signature: dict = {}  # (py_func, signature) -> cfunc
 
@@ -174,7 +179,7 @@ def processes() -> int:
             return max(1, int(value))
         except ValueError:
             return 1
-    return max(1, len(os.sched_getaffinity(0)))
+    return max(1, min(DEFAULT_MOST_PROCESSES, len(os.sched_getaffinity(0))))
 
 
 def _work(queue: int, groups: Sequence[Sequence[Compile]]) -> None:
@@ -240,5 +245,5 @@ def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
             compiled(job)
 
 
-__all__ = ["PROCESSES_VARIABLE", "Compile", "compile_all", "compile_of", "compiled",
-           "numba_type", "processes", "type_key"]
+__all__ = ["DEFAULT_MOST_PROCESSES", "PROCESSES_VARIABLE", "Compile", "compile_all",
+           "compile_of", "compiled", "numba_type", "processes", "type_key"]
