@@ -94,8 +94,9 @@ def install() -> bool:
 def index_lock(index_path: str, exclusive: bool):
     """Hold a lock on the file ``index_path + ".lock"`` (shared, or ``exclusive``).
 
-    Without ``fcntl`` (not POSIX), or when the lock file cannot be made (no cache folder
-    yet: then there is nothing to read), no lock is held.
+    Without ``fcntl`` (not POSIX), when the lock file cannot be made (no cache folder yet:
+    then there is nothing to read), or where the file system does not lock (some network
+    file systems refuse ``flock``), no lock is held: numba's own behaviour.
     """
     try:
         import fcntl
@@ -108,7 +109,10 @@ def index_lock(index_path: str, exclusive: bool):
         yield
         return
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
+        except OSError:
+            pass  # not lockable here: as numba does without the lock
         yield
     finally:
         os.close(fd)  # closing the file releases the lock

@@ -223,6 +223,10 @@ def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
                 if pid == 0:  # the child: compile into the disk cache, then leave at once
                     status = 1
                     try:
+                        # an interrupt ends the child at once (not the caller's handlers, which
+                        # may hold signals while the run writes its results)
+                        for s in (signal.SIGINT, signal.SIGTERM):
+                            signal.signal(s, signal.SIG_DFL)
                         _work(read, todo)
                         status = 0
                     finally:
