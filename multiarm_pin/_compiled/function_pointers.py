@@ -22,6 +22,7 @@ import os
 import signal
 import sys
 import threading
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -219,7 +220,11 @@ def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
         pids = []
         try:
             for _ in range(children):
-                pid = os.fork()
+                with warnings.catch_warnings():
+                    # Python 3.12+ warns at a fork beside any OS thread: no other Python
+                    # thread runs (processes()), and OpenBLAS's pool handles fork itself
+                    warnings.simplefilter("ignore", DeprecationWarning)
+                    pid = os.fork()
                 if pid == 0:  # the child: compile into the disk cache, then leave at once
                     status = 1
                     try:
