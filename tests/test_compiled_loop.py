@@ -92,7 +92,7 @@ def stage_with_pinocchio(system, state, ctrl, t, params):
         tau, np.zeros((n, m)),
         np.zeros((n, k)), np.zeros(hold_tool.shape), np.zeros(6),
         np.zeros(layout.REFERENCE_SIZE), np.zeros((3, 3)), np.zeros((n, k)), d)
-    status = kernels.closed_loop_stage(*args, kernels.stage_callees(args))
+    status = kernels.closed_loop_stage(*args, kernels.stage_entry(args)[1])
     return status, d, system.unpad(tau)
 
 

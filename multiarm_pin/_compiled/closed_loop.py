@@ -41,7 +41,13 @@ import numpy as np
 
 from multiarm_pin._compiled.controller_kernels import PD_OK, object_pd_step
 from multiarm_pin._compiled.evaluate import evaluate_system, quaternion_rotation
-from multiarm_pin._compiled.function_pointers import Compile, compile_all, compile_of, compiled
+from multiarm_pin._compiled.function_pointers import (
+    Compile,
+    compile_all,
+    compile_of,
+    compiled,
+    type_key,
+)
 from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.layout import (
     DIMS_K,
@@ -235,7 +241,7 @@ def closed_loop_stage(t, x, arm_pass, model_ints, model_floats, q_ref, err, J, d
         callees: ``(arm pass, system, controller)``:
             :func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass`,
             :func:`~.evaluate.evaluate_system` and
-            :func:`~.controller_kernels.object_pd_step` as :func:`stage_callees` makes them
+            :func:`~.controller_kernels.object_pd_step` as :func:`callee_compiles` lists them
             (each compiled once and called through its address), or those kernels.
 
     Returns:
@@ -314,11 +320,6 @@ def callee_compiles(stage_args: tuple) -> tuple[Compile, Compile, Compile]:
                        numba.types.UniTuple(numba.types.int64, 2)))
 
 
-def stage_callees(stage_args: tuple) -> tuple:
-    """The ``callees`` argument of :func:`closed_loop_stage` (:func:`callee_compiles`)."""
-    return tuple(compiled(c) for c in callee_compiles(stage_args))
-
-
 def stage_entry(stage_args: tuple) -> tuple:
     """``(entry point of closed_loop_stage, its callees)`` for its other arguments.
 
@@ -347,7 +348,12 @@ def loop_functions(head: tuple, x, model_ints, model_floats, q_ref, arm_ints, v_
     the stage's module its callees. The loop, the stage and each callee are independent
     compiles (a caller needs only the type of a function it calls through its address):
     :func:`~multiarm_pin._compiled.function_pointers.compile_all` runs them at once.
+    Made once per process for the types of ``head`` (which holds every other argument).
     """
+    key = type_key(head)
+    found = _loops.get(key)  # compile_of types every argument: once per types
+    if found is not None:
+        return found
     n, k = tau.shape
     nd = 2 * q_ref.shape[0] + OBJECT_STATE_SIZE  # any size: only the types count
     example = (0.0, x, True, model_ints, model_floats, q_ref, np.empty(work_J.shape[1]), work_J,
@@ -361,7 +367,11 @@ def loop_functions(head: tuple, x, model_ints, model_floats, q_ref, arm_ints, v_
     loop = compile_of(run_rk4, (*head, stage.function_type, callee_types))
     # one group each, the larger first (by the code each compiles)
     compile_all([[controller], [loop], [system], [stage], [arm_pass]])
-    return compiled(loop), compiled(stage), tuple(compiled(c) for c in callees)
+    found = _loops[key] = (compiled(loop), compiled(stage), tuple(compiled(c) for c in callees))
+    return found
+
+
+_loops: dict = {}  # type_key of run_rk4's head -> loop_functions' tuple
 
 
 @kernel
@@ -724,4 +734,4 @@ def record_energy(s, x, params, energy, arms, r_kinetic, r_potential, r_momentum
 __all__ = ["NULL_KD", "NULL_KP", "STAGE_CONTROLLER", "STAGE_NOT_FINITE", "STAGE_OK",
            "STAGE_RELEASE", "STAGE_RELEASE_IN_STEP", "STAGE_SEPARATION", "STAGE_SOLVE",
            "arm_compiles", "callee_compiles", "closed_loop_stage", "joint_pd", "loop_functions",
-           "record_energy", "record_state", "run_rk4", "stage_callees", "stage_entry", "tangent"]
+           "record_energy", "record_state", "run_rk4", "stage_entry", "tangent"]
