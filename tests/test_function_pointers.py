@@ -159,3 +159,16 @@ def test_a_file_system_that_does_not_lock_leaves_the_index_unlocked(tmp_path, mo
     monkeypatch.setattr(fcntl, "flock", refuse)
     with cache.index_lock(str(tmp_path / "f.nbi"), exclusive=True):
         pass  # no error: numba's own, unlocked behaviour
+
+
+def test_more_groups_than_the_queue_holds_are_compiled_here(monkeypatch):
+    a = np.array([[4.0, 1.0], [1.0, 3.0]])
+    job = compile_of(linalg.cholesky, (a, a, 2), numba.types.boolean)
+    made = compiled(job)
+    forks = []
+    monkeypatch.setattr(function_pointers, "processes", lambda: 2)
+    monkeypatch.setattr(function_pointers, "_ready", lambda j: False)
+    monkeypatch.setattr(os, "fork", lambda: forks.append(1) or 0)
+    compile_all([[job]] * 257)  # one byte a group number: 257 do not fit
+    assert not forks
+    assert compiled(job) is made

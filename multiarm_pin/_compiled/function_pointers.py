@@ -203,16 +203,20 @@ def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
     in one group: each process compiles the callees of its own groups); the processes take
     the next group from one queue, so list the larger ones first. The children compile into
     numba's disk cache and exit; this process then loads their work from it (a compile a
-    child did not finish is done here). Groups already compiled, here or on disk, are
-    skipped; with one of them left, or one process (:func:`processes`), all is done here.
+    child did not finish is done here). Groups already compiled, here or on disk, are not
+    given to a child; with one group left, more than 256, or one process
+    (:func:`processes`), all is done here.
 
     Nothing is returned: :func:`compiled` then gives each compiled function without
     compiling.
     """
     if jit_disabled():
         return
-    todo = [g for g in groups if not all(_ready(j) for j in g)]
-    children = min(processes(), len(todo), 256) - 1
+    many = processes()
+    # what is left to compile decides whether to fork: with one process, all is done here
+    todo = [g for g in groups if not all(_ready(j) for j in g)] if many > 1 else list(groups)
+    # the queue holds a group's number in one byte: more groups are all done here
+    children = min(many, len(todo)) - 1 if len(todo) <= 256 else 0
     if children > 0:
         read, write = os.pipe()
         os.write(write, bytes(range(len(todo))))
