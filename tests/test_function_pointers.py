@@ -28,22 +28,38 @@ pytestmark = pytest.mark.skipif(numba.config.DISABLE_JIT, reason="compiles kerne
 
 # A fresh process (one Python thread: it may fork) compiles three small kernels in two
 # groups, one of which cannot be compiled for its types, over two processes sharing an empty
-# disk cache; it prints what it got.
+# disk cache; it prints what it got. With "hang", the child takes a group and never ends.
 _SCRIPT = r"""
-import json, os, sys
+import json, os, sys, time, warnings
 import numba, numpy as np
-from multiarm_pin._compiled import linalg
+from multiarm_pin._compiled import function_pointers, linalg
 from multiarm_pin._compiled.function_pointers import compile_all, compile_of, compiled
+if sys.argv[1] == "hang":
+    parent, work = os.getpid(), function_pointers._work
+    def hanging(queue, groups):
+        if os.getpid() != parent:
+            os.read(queue, 1)
+            time.sleep(3600)
+        time.sleep(0.5)  # the child takes its group first
+        work(queue, groups)
+    function_pointers._work = hanging
+    function_pointers.CHILD_TIMEOUT = 1.0
 a = np.array([[4.0, 1.0], [1.0, 3.0]])
 b = np.array([[1.0], [2.0]])
 jobs = [compile_of(linalg.cholesky, (a, a, 2), numba.types.boolean),
         compile_of(linalg.cholesky_solve, (a, b, 2, 1), numba.types.none)]
 bad = compile_of(linalg.cholesky, (np.zeros(3), a, 2), numba.types.boolean)
 out = {}
+start = time.monotonic()
 try:
-    compile_all([[jobs[0]], [jobs[1]], [bad]] if sys.argv[1] == "bad" else [[jobs[0]], [jobs[1]]])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        compile_all([[jobs[0]], [jobs[1]], [bad]] if sys.argv[1] == "bad"
+                    else [[jobs[0]], [jobs[1]]])
 except numba.core.errors.TypingError:
     out["error"] = "TypingError"
+out["seconds"] = time.monotonic() - start
+out["warnings"] = [str(w.message) for w in caught if w.category is RuntimeWarning]
 L = np.zeros((2, 2))
 ok = compiled(jobs[0])(a, L, 2)
 x = b.copy()
@@ -79,6 +95,14 @@ def test_compile_all_over_two_processes_gives_the_same_functions(tmp_path):
 def test_a_compile_that_fails_in_any_process_raises_here(tmp_path):
     out = _run(tmp_path, "bad")
     assert out["error"] == "TypingError"
+    np.testing.assert_allclose(out["x"], out["expected"], rtol=1e-12)
+
+
+def test_a_child_that_hangs_is_stopped_and_its_group_compiled_here(tmp_path):
+    out = _run(tmp_path, "hang")
+    assert len(out["warnings"]) == 1 and "was stopped" in out["warnings"][0]
+    assert out["seconds"] < 300.0  # not the child's hour
+    assert out["ok"]
     np.testing.assert_allclose(out["x"], out["expected"], rtol=1e-12)
 
 

@@ -22,6 +22,7 @@ import os
 import signal
 import sys
 import threading
+import time
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -37,6 +38,10 @@ from multiarm_pin._compiled.jit import jit_disabled
 PROCESSES_VARIABLE = "MULTIARM_PIN_COMPILE_PROCESSES"
 """Environment variable: how many processes :func:`compile_all` may use (``1``: this one
 only). Unset: one per core this process may run on, at most :data:`DEFAULT_MOST_PROCESSES`."""
+
+CHILD_TIMEOUT = 600.0
+"""How long [s] :func:`compile_all` waits for its children once it has taken its last group.
+A child still compiling then is stopped (``SIGKILL``), and its groups are compiled here."""
 
 DEFAULT_MOST_PROCESSES = 4
 """Most processes :func:`compile_all` uses unless told otherwise: a loop has about ten groups,
@@ -196,6 +201,33 @@ def _work(queue: int, groups: Sequence[Sequence[Compile]]) -> None:
             compiled(job)
 
 
+def _reap(pids: Sequence[int], timeout: float) -> int:
+    """Wait for the child processes ``pids``; stop those still running after ``timeout`` [s].
+
+    Returns:
+        How many were stopped (``SIGKILL``). What a stopped child had not saved is compiled
+        again: numba writes each cache file whole (by a rename), and loading an entry whose
+        index was written but whose data was not compiles it.
+    """
+    deadline = time.monotonic() + timeout
+    left = list(pids)
+    delay = 0.001
+    while left:
+        left = [pid for pid in left if os.waitpid(pid, os.WNOHANG)[0] == 0]
+        if left and time.monotonic() >= deadline:
+            for pid in left:
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except OSError:
+                    pass
+                os.waitpid(pid, 0)
+            return len(left)
+        if left:
+            time.sleep(delay)
+            delay = min(2.0 * delay, 0.05)
+    return 0
+
+
 def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
     """Compile ``groups`` of :class:`Compile` here and in child processes, at once.
 
@@ -205,7 +237,9 @@ def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
     numba's disk cache and exit; this process then loads their work from it (a compile a
     child did not finish is done here). Groups already compiled, here or on disk, are not
     given to a child; with one group left, more than 256, or one process
-    (:func:`processes`), all is done here.
+    (:func:`processes`), all is done here. A child still compiling :data:`CHILD_TIMEOUT`
+    seconds after this process took its last group is stopped, with a ``RuntimeWarning``,
+    and what it had not saved is compiled here.
 
     Nothing is returned: :func:`compiled` then gives each compiled function without
     compiling.
@@ -251,12 +285,14 @@ def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
             raise
         finally:
             os.close(read)
-            for pid in pids:
-                os.waitpid(pid, 0)
+            if _reap(pids, CHILD_TIMEOUT):
+                warnings.warn(f"a compile process took more than {CHILD_TIMEOUT:g} s after the "
+                              "last group was taken and was stopped; its kernels are compiled "
+                              "in this process", RuntimeWarning, stacklevel=2)
     for group in todo:
         for job in group:
             compiled(job)
 
 
-__all__ = ["DEFAULT_MOST_PROCESSES", "PROCESSES_VARIABLE", "Compile", "compile_all",
-           "compile_of", "compiled", "numba_type", "processes", "type_key"]
+__all__ = ["CHILD_TIMEOUT", "DEFAULT_MOST_PROCESSES", "PROCESSES_VARIABLE", "Compile",
+           "compile_all", "compile_of", "compiled", "numba_type", "processes", "type_key"]
