@@ -47,6 +47,28 @@ def test_without_the_hook_numba_compiles_a_literal_specialisation():
     assert len(callee.signatures) == 2
 
 
+@needs_jit
+def test_a_kernel_called_from_a_kernel_is_its_twin_without_python_wrappers(monkeypatch):
+    monkeypatch.setattr(jit, "OPTIONS", {"error_model": "numpy"})  # no disk cache here
+
+    def add(a, n):
+        return a + n
+
+    callee = jit.kernel(add)
+    caller = jit.kernel(lambda a: callee(a, 2.0) * 3.0)
+    assert caller(1.0) == 9.0
+    twin = callee.get_overload.__self__  # the dispatcher compiled callers call
+    assert twin is not callee and callee.signatures == []
+    assert len(twin.signatures) == 1
+    assert twin.py_func.__qualname__ == add.__qualname__ + jit.CALLEE_SUFFIX
+    assert twin.targetoptions["no_cpython_wrapper"] and twin.targetoptions["no_cfunc_wrapper"]
+    # from Python, the same types: compiled again with its wrappers (the twin's entry point
+    # has none, and calling it from Python would crash)
+    assert callee(1.0, 2.0) == 3.0
+    assert len(callee.signatures) == 1
+    assert not callee.targetoptions.get("no_cpython_wrapper", False)
+
+
 def test_every_kernel_is_compiled_by_the_one_decorator():
     """No ``numba.njit`` outside :mod:`multiarm_pin._compiled.jit`: one set of options."""
     bare = []

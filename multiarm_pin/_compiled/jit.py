@@ -16,6 +16,8 @@ argument types.
 
 from __future__ import annotations
 
+import types as py_types
+
 from numba import njit, types
 from numba.core import config
 
@@ -23,14 +25,28 @@ OPTIONS = {"cache": True, "error_model": "numpy"}
 """The options every kernel is compiled with (:func:`kernel` adds ``inline``, ``nogil``)."""
 
 
-def _typed_by_types(dispatcher):
+CALLEE_SUFFIX = "__in_kernels"
+"""Added to a kernel's ``__qualname__`` for the dispatcher that compiled callers call (its
+disk cache files are named by it)."""
+
+
+def _typed_by_types(dispatcher, callee=None):
     """``dispatcher`` with its calls from compiled code typed by non-literal argument types.
+
+    Args:
+        dispatcher: a numba dispatcher.
+        callee: the dispatcher that compiles and serves those calls instead (the same Python
+            function compiled without the wrappers for calls from Python); ``None``:
+            ``dispatcher`` itself.
 
     Without the JIT (``NUMBA_DISABLE_JIT``) ``njit`` returns the Python function: returned as is.
     """
     find = getattr(dispatcher, "get_call_template", None)
     if find is None:
         return dispatcher
+    if callee is not None:
+        find = callee.get_call_template
+        dispatcher.get_overload = callee.get_overload  # the compiled call's implementation
 
     def get_call_template(args, kws):
         return find(tuple(types.unliteral(a) for a in args),
@@ -53,7 +69,16 @@ def kernel(function=None, **options):
     """
     if function is None:
         return lambda f: kernel(f, **options)
-    return _typed_by_types(njit(**OPTIONS, **options)(function))
+    dispatcher = njit(**OPTIONS, **options)(function)
+    if "inline" in options or not hasattr(dispatcher, "get_call_template"):
+        return _typed_by_types(dispatcher)  # inlined (or no JIT): no call to serve
+    twin = py_types.FunctionType(function.__code__, function.__globals__, function.__name__,
+                                 function.__defaults__, function.__closure__)
+    twin.__qualname__ = function.__qualname__ + CALLEE_SUFFIX
+    twin.__module__ = function.__module__
+    twin.__doc__ = function.__doc__
+    callee = njit(**OPTIONS, **options, no_cpython_wrapper=True, no_cfunc_wrapper=True)(twin)
+    return _typed_by_types(dispatcher, callee)
 
 
 def jit_disabled() -> bool:
@@ -61,4 +86,4 @@ def jit_disabled() -> bool:
     return bool(config.DISABLE_JIT)
 
 
-__all__ = ["OPTIONS", "jit_disabled", "kernel"]
+__all__ = ["CALLEE_SUFFIX", "OPTIONS", "jit_disabled", "kernel"]
