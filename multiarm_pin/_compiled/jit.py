@@ -1,9 +1,10 @@
 """The one decorator of every compiled kernel: :func:`kernel`.
 
 ``@kernel`` is ``numba.njit(cache=True, error_model="numpy")`` (cached on disk, numpy's
-floating-point semantics: a division by zero gives inf or NaN, never an exception), with one
-difference in how a kernel called from another kernel is specialised: by the types of its
-arguments, never by their literal values.
+floating-point semantics: a division by zero gives inf or NaN, never an exception), with two
+differences in how a kernel called from another kernel is compiled: it is specialised by the
+types of its arguments, never by their literal values, and it is compiled without numba's
+wrappers.
 
 numba types a constant argument (``f(x, 0)``, ``f(x, True)``) and, during type inference, a
 variable not yet unified with its later values (``n = 0`` before ``n += 1`` in a loop) as a
@@ -12,6 +13,15 @@ for ``int64``. Each such specialisation is a full compile of the callee and of e
 calls. The kernels never branch on an argument's literal value, so here a call's argument
 types are made non-literal before the callee is looked up: one specialisation per
 argument types.
+
+numba compiles with every function a wrapper for calls from Python (it unboxes each
+argument: for the loops' tuples of arrays, code about as large as the kernel's own) and one
+for its use as a first-class function. A kernel called from another kernel uses neither: the
+calls from compiled code are served by a twin dispatcher of the same Python function compiled
+without them (``no_cpython_wrapper``, ``no_cfunc_wrapper``; its disk cache files are named by
+its ``__qualname__``, the kernel's and :data:`CALLEE_SUFFIX`). Calls from Python take the
+dispatcher :func:`kernel` returns, which compiles its own overloads with both wrappers: a
+twin's overload has no entry point for Python.
 """
 
 from __future__ import annotations
@@ -64,8 +74,9 @@ def kernel(function=None, **options):
         **options: further ``numba.njit`` options (``inline``, ``nogil``).
 
     Returns:
-        Its numba dispatcher (``OPTIONS`` and ``options``), specialised by argument types only
-        when called from another kernel (see the module).
+        Its numba dispatcher (``OPTIONS`` and ``options``) for calls from Python; calls from
+        another kernel are served by its twin, specialised by argument types only (see the
+        module).
     """
     if function is None:
         return lambda f: kernel(f, **options)
@@ -77,6 +88,7 @@ def kernel(function=None, **options):
     twin.__qualname__ = function.__qualname__ + CALLEE_SUFFIX
     twin.__module__ = function.__module__
     twin.__doc__ = function.__doc__
+    twin.__kwdefaults__ = function.__kwdefaults__
     callee = njit(**OPTIONS, **options, no_cpython_wrapper=True, no_cfunc_wrapper=True)(twin)
     return _typed_by_types(dispatcher, callee)
 
