@@ -39,12 +39,18 @@ COLUMNS = (("t_closed_s", "closed [us]", 1e6), ("t_closed_run_s", "in run [us]",
            ("t_open_s", "open [us]", 1e6), ("rtf", "RTF", 1.0))
 
 
-def _measure(tree: Path, out: Path, quick: bool = False) -> list[dict]:
+def _options(tree: Path) -> list[str]:
+    """The options that keep ``tree``'s ``closed_loop.py`` to its weld table (older ones
+    have no feasibility rows to turn off)."""
+    helps = subprocess.run([sys.executable, "benchmarks/closed_loop.py", "--help"], cwd=tree,
+                           capture_output=True, text=True, check=True,
+                           env=dict(os.environ, PYTHONPATH=str(tree)))
+    return ["--feasibility="] if "--feasibility" in helps.stdout else []
+
+
+def _measure(tree: Path, extra: list[str], out: Path, quick: bool = False) -> list[dict]:
     """``closed_loop.py`` of ``tree`` (weld table and ``two_ur5_box`` only) into ``out``."""
     env = dict(os.environ, PYTHONPATH=str(tree))
-    helps = subprocess.run([sys.executable, "benchmarks/closed_loop.py", "--help"], cwd=tree,
-                           capture_output=True, text=True, env=env)
-    extra = ["--feasibility="] if "--feasibility" in helps.stdout else []
     args = ["--quick"] if quick else ["--no-cold", "--scenarios", "two_ur5_box"]
     subprocess.run([sys.executable, "benchmarks/closed_loop.py", *args, *extra, "--out",
                     str(out)], cwd=tree, check=True, capture_output=True, env=env)
@@ -85,12 +91,14 @@ def main(argv=None) -> int:
                         args.base], check=True, capture_output=True)
         try:
             trees = {"base": tree, "this": ROOT}
+            extra = {name: _options(where) for name, where in trees.items()}
             for name, where in trees.items():  # fill each tree's cache
-                _measure(where, work / f"warm-{name}", quick=True)
+                _measure(where, extra[name], work / f"warm-{name}", quick=True)
             sides: dict[str, list[list[dict]]] = {"base": [], "this": []}
             for r in range(args.rounds):
                 for i, name in enumerate(("base", "this", "this", "base")):
-                    sides[name].append(_measure(trees[name], work / f"{r}-{i}-{name}"))
+                    sides[name].append(_measure(trees[name], extra[name],
+                                                work / f"{r}-{i}-{name}"))
                     print(f"round {r + 1}, {name}: done", flush=True)
         finally:
             subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)],
