@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import signal
+import sys
 import threading
 import time
 import uuid
@@ -328,7 +329,9 @@ class SigintLatch:
     Python raises ``KeyboardInterrupt`` wherever the main thread is when SIGINT arrives; in a
     garbage-collector callback (distributed installs one) the exception is printed as
     "ignored" and dropped, and the study would run on to its end. The latch's handler notes
-    the signal before raising, so the driver's loop stops at its next result anyway.
+    the signal before raising, so the driver's loop stops at its next result anyway; and while
+    the latch is installed, such a dropped ``KeyboardInterrupt`` is not printed (Python's
+    ``sys.unraisablehook``): the latch holds it, and the user sees the interrupt's own message.
 
     Attributes:
         hit: a SIGINT arrived while the latch was installed.
@@ -357,10 +360,18 @@ class SigintLatch:
                 signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
             yield self
             return
+        previous = sys.unraisablehook
+
+        def hook(unraisable) -> None:
+            if not (self.hit and isinstance(unraisable.exc_value, KeyboardInterrupt)):
+                previous(unraisable)
+
         signal.signal(signal.SIGINT, self._handler)
+        sys.unraisablehook = hook
         try:
             yield self
         finally:
+            sys.unraisablehook = previous
             signal.signal(signal.SIGINT, signal.default_int_handler)
 
 

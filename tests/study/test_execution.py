@@ -197,3 +197,41 @@ def test_a_ctrl_c_swallowed_on_its_way_still_stops_the_driver():
             assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+def test_a_ctrl_c_dropped_in_a_finaliser_is_not_printed_but_other_errors_are(monkeypatch):
+    """Python prints an exception raised where it cannot propagate (a finaliser, a garbage
+    collector callback) as "Exception ignored ... Traceback": for the latch's own interrupt
+    that is noise beside the interrupt's message, for any other error it is kept."""
+    import gc
+    import sys
+
+    from multiarm_pin.study.execution import SigintLatch
+
+    seen = []
+
+    def record(unraisable):
+        seen.append(type(unraisable.exc_value))
+
+    monkeypatch.setattr(sys, "unraisablehook", record)
+    latch = SigintLatch()
+
+    class Interrupted:
+        def __del__(self):
+            latch._handler(signal.SIGINT, None)  # the signal lands here
+
+    class Failing:
+        def __del__(self):
+            raise ValueError("kept")
+
+    with latch.installed():
+        Interrupted()
+        Failing()
+        gc.collect()
+        with pytest.raises(KeyboardInterrupt):
+            latch.check()
+    assert seen == [ValueError]
+    assert sys.unraisablehook is record
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    Interrupted()  # outside the block the hook is the caller's again
+    assert seen == [ValueError, KeyboardInterrupt]
