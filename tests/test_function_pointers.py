@@ -17,10 +17,12 @@ from multiarm_pin._compiled import cache, function_pointers, linalg
 from multiarm_pin._compiled.function_pointers import (
     DEFAULT_MOST_PROCESSES,
     PROCESSES_VARIABLE,
+    bind,
     compile_all,
     compile_of,
     compiled,
     numba_type,
+    pointer,
     processes,
 )
 
@@ -142,6 +144,44 @@ def test_a_pending_function_is_typed_as_the_compiled_one():
     assert numba_type((job.function_type, (job.function_type,))) == numba.typeof((made, (made,)))
     assert compile_of(linalg.cholesky_solve, (a, a, 2, 1)) == compile_of(
         linalg.cholesky_solve, (numba.typeof(a), numba.typeof(a), numba.types.int64, 1))
+
+
+@numba.njit
+def _factor_and_solve(a, L, x, functions):
+    """Calls ``functions``, ``(cholesky, (cholesky_solve, ()))``, as pointers or functions."""
+    f = bind(functions)
+    ok = f[0](a, L, 2)
+    f[1][0](L, x, 2, 1)
+    return ok, len(f[1][1])
+
+
+def test_pointers_from_python_call_their_functions_without_calling_back(monkeypatch):
+    from numba.experimental import function_type
+
+    a = np.array([[4.0, 1.0], [1.0, 3.0]])
+    b = np.array([[1.0], [2.0]])
+    jobs = (compile_of(linalg.cholesky, (a, a, 2), numba.types.boolean),
+            compile_of(linalg.cholesky_solve, (a, b, 2, 1), numba.types.none))
+    pointers = (pointer(jobs[0]), (pointer(jobs[1]), ()))
+    functions = (compiled(jobs[0]), (compiled(jobs[1]), ()))
+    assert pointers[0] == (compiled(jobs[0]).address, jobs[0].function_type)
+    assert numba.typeof(pointers[0]) == jobs[0].pointer_type
+    calls = []
+    real = function_type._get_wrapper_address
+    monkeypatch.setattr(function_type, "_get_wrapper_address",
+                        lambda f, sig: calls.append(f) or real(f, sig))
+    for given in (pointers, functions):
+        x = b.copy()
+        _factor_and_solve(a, np.zeros((2, 2)), x, given)  # compiles for these types
+        calls.clear()
+        x = b.copy()
+        ok, empty = _factor_and_solve(a, np.zeros((2, 2)), x, given)
+        assert ok and empty == 0
+        np.testing.assert_allclose(x[:, 0], np.linalg.solve(a, b[:, 0]), rtol=1e-14)
+        # numba unboxes a first-class function by asking Python for its address at every
+        # call; a pointer is an integer
+        assert (len(calls) == 0) if given is pointers else (len(calls) >= 2)
+    assert bind(pointers) is pointers  # in Python (no JIT): as given
 
 
 def test_every_cache_index_read_and_save_holds_the_lock(tmp_path):

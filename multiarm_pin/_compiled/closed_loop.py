@@ -43,9 +43,11 @@ from multiarm_pin._compiled.controller_kernels import PD_OK, object_pd_step
 from multiarm_pin._compiled.evaluate import evaluate_system, quaternion_rotation
 from multiarm_pin._compiled.function_pointers import (
     Compile,
+    bind,
     compile_all,
     compile_of,
     compiled,
+    pointer,
     type_key,
 )
 from multiarm_pin._compiled.jit import kernel
@@ -242,30 +244,32 @@ def closed_loop_stage(t, x, arm_pass, model_ints, model_floats, q_ref, err, J, d
             :func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass`,
             :func:`~.evaluate.evaluate_system` and
             :func:`~.controller_kernels.object_pd_step` as :func:`callee_compiles` lists them
-            (each compiled once and called through its address), or those kernels.
+            (each compiled once and called through its address), as functions or as
+            pointers from Python (:func:`~multiarm_pin._compiled.function_pointers.pointer`),
+            or those kernels.
 
     Returns:
         ``STAGE_OK`` or the reason to hand the evaluation to the Python path.
     """
     k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
     off = offsets(n, k, m)
+    fns = bind(callees)
     if arm_pass:
         q0 = OBJECT_STATE_SIZE
         nq = q_ref.shape[0]
         q = x[q0:q0 + nq]
-        callees[0](model_ints, model_floats, q, x[q0 + nq:q0 + nq + nv], J, dJ, M, nle, H,
-                   energy)
+        fns[0](model_ints, model_floats, q, x[q0 + nq:q0 + nq + nv], J, dJ, M, nle, H, energy)
         difference(model_ints, q, q_ref, err)
-    if not callees[1](J, dJ, M, nle, H, x, arm_ints, v_starts, ints, floats, params, dims, buf):
+    if not fns[1](J, dJ, M, nle, H, x, arm_ints, v_starts, ints, floats, params, dims, buf):
         return STAGE_NOT_FINITE
     reference_motion(t, traj, E, ref)
     joint_pd(err, x, v_starts, nv_arm, null_gains[NULL_KP], null_gains[NULL_KD], z)
     w = np.empty(6)
     for a in range(6):
         w[a] = wrench_at(t, wrenches, a)
-    status, solved = callees[2](buf, dims, N, nv_arm, unilateral, x[:OBJECT_STATE_SIZE], ref,
-                                pd_gains, z, hold_tool, hold_obj, hold_n, gains, params, active,
-                                tau, mu, qdd, a_pts, a_d, True, w)
+    status, solved = fns[2](buf, dims, N, nv_arm, unilateral, x[:OBJECT_STATE_SIZE], ref,
+                            pd_gains, z, hold_tool, hold_obj, hold_n, gains, params, active, tau,
+                            mu, qdd, a_pts, a_d, True, w)
     if status != PD_OK:
         return STAGE_CONTROLLER
     if solved != SOLVE_OK:
@@ -321,7 +325,7 @@ def callee_compiles(stage_args: tuple) -> tuple[Compile, Compile, Compile]:
 
 
 def stage_entry(stage_args: tuple) -> tuple:
-    """``(entry point of closed_loop_stage, its callees)`` for its other arguments.
+    """``(entry point of closed_loop_stage, its callees' pointers)`` for its other arguments.
 
     ``stage_args`` as for :func:`callee_compiles`. The stage, compiled for the types of its
     callees, and the callees are independent compiles:
@@ -329,9 +333,9 @@ def stage_entry(stage_args: tuple) -> tuple:
     """
     arm_pass, system, controller = callees = callee_compiles(stage_args)
     stage = compile_of(closed_loop_stage,
-                       (*stage_args, tuple(c.function_type for c in callees)))
+                       (*stage_args, tuple(c.pointer_type for c in callees)))
     compile_all([[controller], [system], [stage], [arm_pass]])  # the larger first
-    return compiled(stage), tuple(compiled(c) for c in callees)
+    return compiled(stage), tuple(pointer(c) for c in callees)
 
 
 def loop_functions(head: tuple, x, model_ints, model_floats, q_ref, arm_ints, v_starts, ints,
@@ -364,10 +368,11 @@ def loop_functions(head: tuple, x, model_ints, model_floats, q_ref, arm_ints, v_
     arm_pass, system, controller = callees = callee_compiles(example)
     callee_types = tuple(c.function_type for c in callees)
     stage = compile_of(closed_loop_stage, (*example, callee_types), numba.types.int64)
-    loop = compile_of(run_rk4, (*head, stage.function_type, callee_types))
+    loop = compile_of(run_rk4, (*head, stage.pointer_type,
+                                tuple(c.pointer_type for c in callees)))
     # one group each, the larger first (by the code each compiles)
     compile_all([[controller], [loop], [system], [stage], [arm_pass]])
-    found = _loops[key] = (compiled(loop), compiled(stage), tuple(compiled(c) for c in callees))
+    found = _loops[key] = (compiled(loop), pointer(stage), tuple(pointer(c) for c in callees))
     return found
 
 
@@ -554,8 +559,9 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
         r_momentum: (T, 6) their total momentum ``[linear; angular about the world
             origin]`` [kg m/s, kg m²/s].
         evaluate: :func:`closed_loop_stage`, as :func:`loop_functions` makes it (compiled
-            once, called through its address) or the kernel itself.
-        callees: the stage's ``callees`` (:func:`callee_compiles`).
+            once, called through its address: its pointer,
+            :func:`~multiarm_pin._compiled.function_pointers.pointer`) or the kernel itself.
+        callees: the stage's ``callees`` (:func:`callee_compiles`), likewise.
 
     Returns:
         ``(status, k)``: ``STAGE_OK`` and ``k1`` when every sample was done, else the reason
@@ -572,6 +578,8 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
     d1, d2, d3, d4 = np.empty(nd), np.empty(nd), np.empty(nd), np.empty(nd)
     hd = np.empty(nd)
     xs = np.empty(nx)
+    stage_fn = bind(evaluate)
+    fns = bind(callees)
     err = np.empty(nv)
     ref = np.empty(REFERENCE_SIZE)
     E = np.empty((3, 3))
@@ -590,12 +598,12 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
                 ts = t + h if stage == 3 else t + 0.5 * h
                 _advance(model_ints, x, ds[stage - 1], h if stage == 3 else 0.5 * h, hd, xs)
                 xe = xs
-            st = evaluate(
+            st = stage_fn(
                 ts, xe, True, model_ints, model_floats, q_ref, err, work_J, work_dJ, work_M,
                 work_nle, work_H, work_energy, arm_ints, v_starts, ints, floats, params, dims,
                 N, nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n,
                 gains, active, wrenches, buf, tau, mu, qdd, a_pts, a_d, ref, E, z, ds[stage],
-                callees)
+                fns)
             if st == STAGE_RELEASE and stage > 0:
                 return STAGE_RELEASE_IN_STEP, s
             if st != STAGE_OK:

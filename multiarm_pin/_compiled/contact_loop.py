@@ -88,7 +88,14 @@ from multiarm_pin._compiled.evaluate import (
     _block_segments,
     quaternion_rotation,
 )
-from multiarm_pin._compiled.function_pointers import compile_all, compile_of, compiled, type_key
+from multiarm_pin._compiled.function_pointers import (
+    bind,
+    compile_all,
+    compile_of,
+    compiled,
+    pointer,
+    type_key,
+)
 from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.layout import (
     DIMS_K,
@@ -667,15 +674,17 @@ def loop_functions(head: tuple) -> tuple:
                lcp.function_type, tuple(c.function_type for c in callees))
     advance = compile_of(_advance_with_events, (0.0, x, 0.0, active, sy, ctl, wk, out, rk, st0,
                                                 loc, imp, ev, n_ev, fn_type), numba.types.int64)
-    loop = compile_of(run_contact_rk4, (*head, fn_type, advance.function_type))
+    pointer_types = (stage.pointer_type, rows.pointer_type, torques.pointer_type,
+                     lcp.pointer_type, tuple(c.pointer_type for c in callees))
+    loop = compile_of(run_contact_rk4, (*head, pointer_types, advance.pointer_type))
     # the larger first (by the code each compiles); object_pd_step and touching_torques share
     # the controller's torques: one group
     groups = [[advance], [loop], [*callees[2:]], [lcp], [torques], [*callees[1:2]], [rows],
               [stage], [*callees[:1]]]
     compile_all([g for g in groups if g])
-    fn = (compiled(stage), compiled(rows), compiled(torques), compiled(lcp),
-          tuple(compiled(c) for c in callees))
-    found = _loops[key] = (compiled(loop), fn, compiled(advance))
+    fn = (pointer(stage), pointer(rows), pointer(torques), pointer(lcp),
+          tuple(pointer(c) for c in callees))
+    found = _loops[key] = (compiled(loop), fn, pointer(advance))
     return found
 
 
@@ -1178,7 +1187,8 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
             the (B, R) bool rows kept out of the recorded penetration (``beside_start``: in
             and out).
         fn: ``(contact_stage, rows, torques, lcp, callees)`` as :func:`stage_compiles`
-            makes them (compiled once, called through their addresses).
+            makes them (compiled once, called through their addresses), as pointers from
+            Python (:func:`~multiarm_pin._compiled.function_pointers.pointer`) or functions.
         advance: :func:`_advance_with_events`, likewise (:func:`loop_functions`).
 
     Returns:
@@ -1191,6 +1201,8 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         evaluation, nothing of it done).
     """
     control, q_hold, n_onsets = ctl[0], ctl[11], ctl[13]
+    fns = bind(fn)
+    advance_fn = bind(advance)
     nx = x.shape[0]
     x0 = np.empty(nx)
     active0 = np.empty_like(active)
@@ -1206,7 +1218,7 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         if reuse:
             copy1(st0[0], loc[10])  # the end's tangent
         st, solver = _evaluate_start(t, x, active, sy, ctl, wk, out, st0, loc[9],
-                                     np.bool_(False), ev, n_ev, reuse, fn)
+                                     np.bool_(False), ev, n_ev, reuse, fns)
         if st != STAGE_OK:
             return st, s
         _record_sample(s, t, x, active, sy, wk, out, solver, Rec)
@@ -1216,8 +1228,8 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         copy2(active0, active)
         copy1(q_hold0, q_hold)
         n0, holding0, onsets0 = n_ev[0], control[CTL_HOLDING], n_onsets[0]
-        st = advance(t, x, times[s + 1], active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev,
-                     fn)
+        st = advance_fn(t, x, times[s + 1], active, sy, ctl, wk, out, rk, st0, loc, imp, ev,
+                        n_ev, fns)
         if st == STAGE_OK and off_rectangles(x, sy[10], sy[12]):
             st = STAGE_OFF_RECTANGLE  # the step ends off a rectangle: the stepper's (off edge)
         if st != STAGE_OK:

@@ -30,8 +30,10 @@ from typing import Any
 
 import numba
 from numba._dispatcher import compute_fingerprint
+from numba.core import cgutils
 from numba.core import types as nb_types
 from numba.core.registry import cpu_target
+from numba.extending import intrinsic, overload
 
 from multiarm_pin._compiled.jit import jit_disabled
 
@@ -70,6 +72,11 @@ class Compile:
     def function_type(self) -> nb_types.FunctionType:
         """The numba type of the first-class function: what a caller's signature holds."""
         return nb_types.FunctionType(self.result(*self.types))
+
+    @property
+    def pointer_type(self) -> nb_types.Tuple:
+        """The numba type of :func:`pointer`'s ``(address, function type)``."""
+        return nb_types.Tuple((nb_types.int64, nb_types.TypeRef(self.function_type)))
 
 
 def type_key(args: Sequence) -> tuple:
@@ -143,6 +150,74 @@ def compiled(job: Compile):
         made = _by_signature[key] = numba.cfunc(key[1], cache=True, error_model="numpy")(
             kernel.py_func)
     return made
+
+
+# ------------------------------------------------------------------ pointers from Python
+def pointer(job: Compile):
+    """``job``'s first-class function as an argument from Python: ``(address, function type)``.
+
+    numba unboxes a first-class function passed from Python by calling back into Python for
+    its addresses, at every call (microseconds each). A pointer is an integer, the address of
+    the ``cfunc`` (kept alive in this module), and the function's numba type as a type
+    reference, which holds no data: unboxing them costs next to nothing. A kernel makes the
+    function from it by :func:`bind`. Without the JIT, the Python function itself.
+    """
+    function = compiled(job)
+    if function is job.kernel:  # no JIT: the kernel is its Python function
+        return function
+    return (function.address, job.function_type)
+
+
+def bind(pointers):
+    """In a kernel: the functions of ``pointers`` (:func:`pointer`), in a tuple nested as given.
+
+    Each pointer becomes its first-class function; anything else (a function already bound)
+    stays as it is. Called from Python (no JIT), where pointers are the functions: returns
+    ``pointers``.
+    """
+    return pointers
+
+
+def _is_pointer(ty) -> bool:
+    return (isinstance(ty, nb_types.BaseTuple) and len(ty) == 2
+            and isinstance(ty[0], nb_types.Integer) and isinstance(ty[1], nb_types.TypeRef)
+            and isinstance(ty[1].instance_type, nb_types.FunctionType))
+
+
+def _bound_type(ty):
+    if _is_pointer(ty):
+        return ty[1].instance_type
+    if isinstance(ty, nb_types.BaseTuple):
+        return nb_types.BaseTuple.from_types([_bound_type(e) for e in ty])
+    return ty
+
+
+def _bound_value(context, builder, ty, value):
+    """The LLVM value of ``_bound_type(ty)`` for ``value`` of type ``ty``."""
+    if _is_pointer(ty):
+        void_p = context.get_value_type(nb_types.voidptr)
+        function = cgutils.create_struct_proxy(ty[1].instance_type)(context, builder)
+        function.c_addr = builder.inttoptr(builder.extract_value(value, 0), void_p)
+        function.py_addr = cgutils.get_null_value(void_p)  # no Python object behind it
+        function.jit_addr = cgutils.get_null_value(void_p)  # called through c_addr
+        return function._getvalue()
+    if isinstance(ty, nb_types.BaseTuple):
+        return context.make_tuple(builder, _bound_type(ty), [
+            _bound_value(context, builder, e, builder.extract_value(value, i))
+            for i, e in enumerate(ty)])
+    return value
+
+
+@intrinsic
+def _bind(typingctx, pointers):
+    def codegen(context, builder, signature, args):
+        return _bound_value(context, builder, pointers, args[0])
+    return _bound_type(pointers)(pointers), codegen
+
+
+@overload(bind)
+def _bind_overload(pointers):
+    return lambda pointers: _bind(pointers)
 
 
 # ------------------------------------------------------------------ compiling on every core
