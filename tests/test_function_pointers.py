@@ -236,3 +236,36 @@ def test_more_groups_than_the_queue_holds_are_compiled_here(monkeypatch):
     compile_all([[job]] * 257)  # one byte a group number: 257 do not fit
     assert not forks
     assert compiled(job) is made
+
+
+def test_registered_workers_are_ended_only_for_a_compile_worth_a_child(monkeypatch):
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    class Owner:
+        def __init__(self):
+            self.pool = ThreadPoolExecutor(1)
+            self.pool.submit(int).result()  # its thread runs
+            self.ended = 0
+
+        def end_worker(self):
+            self.pool.shutdown(wait=True)
+            self.ended += 1
+
+    owner = Owner()
+    function_pointers.register_thread_owner(owner)
+    left = {"a": True, "b": True}
+    monkeypatch.setattr(function_pointers, "_ready", lambda job: left[job])
+    monkeypatch.setattr(function_pointers, "compiled", lambda job: None)
+    monkeypatch.setattr(function_pointers, "processes", lambda: 1)
+    try:
+        compile_all([["a"], ["b"]])  # nothing left to compile
+        left["a"] = False
+        compile_all([["a"], ["b"]])  # one group left: compiled here, no child
+        assert owner.ended == 0
+        left["b"] = False
+        threads = threading.active_count()
+        compile_all([["a"], ["b"]])
+        assert owner.ended == 1 and threading.active_count() == threads - 1
+    finally:
+        owner.pool.shutdown(wait=True)

@@ -24,6 +24,7 @@ import sys
 import threading
 import time
 import warnings
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -245,6 +246,23 @@ def _ready(job: Compile) -> bool:
         return False
 
 
+_thread_owners: weakref.WeakSet = weakref.WeakSet()
+
+
+def register_thread_owner(owner) -> None:
+    """Let :func:`compile_all` end ``owner``'s worker thread before it compiles.
+
+    A child process is forked to compile only while this process runs no other Python
+    thread (:func:`processes`). A worker thread that checks a run's samples beside its loop
+    (the simulation's monitors) would otherwise keep every compile after its start (the
+    contact loop's, once the closed loop hands a run over) to one process.
+    ``owner.end_worker()`` must end its thread before it returns, its work under way done
+    and its results kept; the owner starts a new thread when it next needs one. Held
+    weakly: an owner that is gone is forgotten.
+    """
+    _thread_owners.add(owner)
+
+
 def processes() -> int:
     """How many processes :func:`compile_all` uses (:data:`PROCESSES_VARIABLE`, or the cores).
 
@@ -303,6 +321,11 @@ def _reap(pids: Sequence[int], timeout: float) -> int:
     return 0
 
 
+def _left(groups: Sequence[Sequence[Compile]]) -> list:
+    """The groups with a compile not yet done, here or on disk."""
+    return [g for g in groups if not all(_ready(j) for j in g)]
+
+
 def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
     """Compile ``groups`` of :class:`Compile` here and in child processes, at once.
 
@@ -312,7 +335,9 @@ def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
     numba's disk cache and exit; this process then loads their work from it (a compile a
     child did not finish is done here). Groups already compiled, here or on disk, are not
     given to a child; with one group left, more than 256, or one process
-    (:func:`processes`), all is done here. A child still compiling :data:`CHILD_TIMEOUT`
+    (:func:`processes`), all is done here. With two groups or more left, the worker threads
+    of the owners registered by :func:`register_thread_owner` are ended first, so that a
+    child may be forked. A child still compiling :data:`CHILD_TIMEOUT`
     seconds after this process took its last group is stopped, with a ``RuntimeWarning``,
     and what it had not saved is compiled here.
 
@@ -321,9 +346,17 @@ def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
     """
     if jit_disabled():
         return
+    todo = None
+    if (threading.active_count() > 1 and len(_thread_owners)
+            and threading.current_thread() is threading.main_thread()):
+        todo = _left(groups)
+        if len(todo) > 1:  # worth a child: end the workers that would forbid its fork
+            for owner in list(_thread_owners):
+                owner.end_worker()
     many = processes()
     # what is left to compile decides whether to fork: with one process, all is done here
-    todo = [g for g in groups if not all(_ready(j) for j in g)] if many > 1 else list(groups)
+    if todo is None:
+        todo = _left(groups) if many > 1 else list(groups)
     # the queue holds a group's number in one byte: more groups are all done here
     children = min(many, len(todo)) - 1 if len(todo) <= 256 else 0
     if children > 0:
@@ -369,5 +402,6 @@ def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
             compiled(job)
 
 
-__all__ = ["CHILD_TIMEOUT", "DEFAULT_MOST_PROCESSES", "PROCESSES_VARIABLE", "Compile",
-           "compile_all", "compile_of", "compiled", "numba_type", "processes", "type_key"]
+__all__ = ["CHILD_TIMEOUT", "DEFAULT_MOST_PROCESSES", "PROCESSES_VARIABLE", "Compile", "bind",
+           "compile_all", "compile_of", "compiled", "numba_type", "pointer", "processes",
+           "register_thread_owner", "type_key"]

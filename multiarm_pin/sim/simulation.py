@@ -57,6 +57,7 @@ import numpy as np
 
 from multiarm_pin._compiled.closed_loop import STAGE_OK, STAGE_RELEASE
 from multiarm_pin._compiled.contact_loop import STAGE_EVENTS_FULL, STAGE_OFF_RECTANGLE
+from multiarm_pin._compiled.function_pointers import register_thread_owner
 from multiarm_pin._registry import lookup
 from multiarm_pin.constraints.joint import INITIAL_GAP_TOLERANCE
 from multiarm_pin.dynamics.solve import solver_for_rows
@@ -485,7 +486,17 @@ class _Watch:
             return
         if self._pool is None:
             self._pool = ThreadPoolExecutor(1, thread_name_prefix="multiarm-pin-monitors")
+            register_thread_owner(self)
         self._pending = self._pool.submit(self._check, rec, k0, end)
+
+    def end_worker(self) -> None:
+        """End the worker thread now, its check under way done; its result is kept.
+
+        Called by :func:`~multiarm_pin._compiled.function_pointers.compile_all` before a
+        loop compiles in the middle of a run (the contact loop, once the closed loop hands
+        over), so that it may fork children to compile: the next stretch starts a new thread.
+        """
+        self._close()
 
     def finish(self) -> None:
         """The run's end: wait for the last checks (raises their violation) and stop the thread."""

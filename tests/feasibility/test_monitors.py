@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import numba
 import numpy as np
 import pytest
 
@@ -137,3 +138,37 @@ def test_stretches_recorded_while_the_worker_checks_are_shown_together():
     assert starts[0] == 0 and ends[-1] == len(result.t) and starts[1:] == ends[:-1]
     a, b = spy.stretches[1]  # shown once the worker was free: several hand-backs
     assert len([k for k in handed_back if a < k < b]) >= 1, (spy.stretches, handed_back)
+
+
+@pytest.mark.skipif(numba.config.DISABLE_JIT, reason="compile_all compiles nothing without JIT")
+def test_a_compile_ends_the_monitors_worker_and_keeps_what_it_found(monkeypatch):
+    # a loop compiled in the middle of a run (the contact loop after the closed loop) may fork
+    # children to compile only with no other thread: compile_all ends the monitors' worker
+    # first; the check it was running is done and its stop is raised as it would have been
+    import threading
+    from types import SimpleNamespace
+
+    from multiarm_pin._compiled import function_pointers
+    from multiarm_pin.sim.simulation import _Watch
+
+    class Stop(Spy):
+        def check(self, record, k0, k1):
+            super().check(record, k0, k1)
+            return k0 + 3
+
+    stop = Stop()
+    watch = _Watch((stop,))
+    record = SimpleNamespace(t=np.linspace(0.0, 1.0, 200))
+    before = threading.active_count()
+    watch.recorded(record, MONITOR_STRIDE + 2)  # the first stretch: a worker checks it
+    assert threading.active_count() == before + 1
+    counted = []
+    monkeypatch.setattr(function_pointers, "_ready", lambda job: False)
+    monkeypatch.setattr(function_pointers, "compiled", lambda job: None)
+    monkeypatch.setattr(function_pointers, "processes",
+                        lambda: counted.append(threading.active_count()) or 1)
+    function_pointers.compile_all([["a"], ["b"]])  # two groups left: worth a child
+    assert counted == [before]  # the worker had ended when the processes were counted
+    assert stop.stretches == [(0, MONITOR_STRIDE + 1)]
+    with pytest.raises(RunStoppedError, match=r"spy: stop at the first violation \(sample 3\)"):
+        watch.finish()
