@@ -194,6 +194,25 @@ def _write_height(d, row, col, low, exact, best):  # pragma: no cover - compiled
 
 
 @kernel(nogil=True)
+def stable_order(a):  # pragma: no cover - compiled
+    """The indices that sort ``a`` (n,) ascending: ``np.argsort(a, kind="stable")``.
+
+    Equal values keep their order, NaN last. By insertion: ``n`` is a scene's body count, and
+    numba's mergesort compiles for seconds.
+    """
+    order = np.arange(a.shape[0])
+    for i in range(1, a.shape[0]):
+        k = order[i]
+        j = i - 1
+        while j >= 0 and (a[order[j]] > a[k]
+                          or (math.isnan(a[order[j]]) and not math.isnan(a[k]))):
+            order[j + 1] = order[j]
+            j -= 1
+        order[j + 1] = k
+    return order
+
+
+@kernel(nogil=True)
 def ground_heights(R, p, joints, corners, vertices, starts, height, best, tol, n0, pairs,
                    low, exact):  # pragma: no cover - compiled
     """The polytopes' ground pairs at ``m`` samples: bounds, and exact where they matter.
@@ -236,7 +255,7 @@ def ground_heights(R, p, joints, corners, vertices, starts, height, best, tol, n
             low[n0 + s, col] = z + p[s, j, 2] - height
             lk = min(lk, low[n0 + s, col])
         lowest[k] = lk
-    for k in np.argsort(lowest, kind="mergesort"):
+    for k in stable_order(lowest):
         limit = max(best, tol)
         if lowest[k] >= limit:
             break  # and every later pair's bound is at least as large
@@ -402,5 +421,4 @@ def support_max(u, vertices, out):  # pragma: no cover - compiled
 
 
 __all__ = ["first_exceeding", "grasp_openings", "ground_heights", "joint_placements",
-           "pair_bounds", "path_lengths", "round_heights",
-           "support_max"]
+           "pair_bounds", "path_lengths", "round_heights", "stable_order", "support_max"]

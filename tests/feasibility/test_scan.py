@@ -145,3 +145,15 @@ def test_the_compiled_stretches_equal_their_numpy_references(name):
     for cat, value in b.clearance.items():
         assert a.clearance[cat] == pytest.approx(value, abs=1e-10) if value is not None \
             else a.clearance[cat] is None
+
+
+def test_the_stable_order_is_numpys_stable_argsort():
+    from multiarm_pin._compiled.scan import stable_order
+
+    rng = np.random.default_rng(7)
+    cases = [np.empty(0), np.array([1.0]), np.array([np.inf, -np.inf, 0.0, np.nan, 0.0]),
+             np.full(6, 2.5)]
+    cases += [rng.integers(0, 5, n).astype(float) for n in (2, 9, 40)]  # many ties
+    cases += [np.where(rng.random(30) < 0.2, np.nan, rng.normal(size=30))]
+    for a in cases:
+        np.testing.assert_array_equal(stable_order(a), np.argsort(a, kind="stable"))
