@@ -269,3 +269,35 @@ def test_registered_workers_are_ended_only_for_a_compile_worth_a_child(monkeypat
         assert owner.ended == 1 and threading.active_count() == threads - 1
     finally:
         owner.pool.shutdown(wait=True)
+
+
+def test_groups_ride_with_the_next_compile_and_warm_ups_run_only_where_groups_are_taken(
+        monkeypatch):
+    ran = []
+
+    def fails():
+        ran.append("fails")
+        raise RuntimeError("a warm-up's error is dropped")
+
+    warm = (function_pointers.WarmUp(lambda: ran.append("warm")),
+            function_pointers.WarmUp(fails))
+    taken = []
+    monkeypatch.setattr(function_pointers, "compiled", taken.append)
+    monkeypatch.setattr(function_pointers, "processes", lambda: 1)
+    function_pointers.compile_with_next(["rider"])
+    function_pointers.compile_with_next(warm)
+    gone = ("forgotten",)
+    function_pointers.compile_with_next(gone)
+    function_pointers.forget(gone)
+    compile_all([["a"]])  # one process: everything here, in order; no warm-up runs
+    assert taken == ["a", "rider"] and ran == []
+    compile_all([["b"]])  # the riders went with the first call
+    assert taken == ["a", "rider", "b"]
+    read, write = os.pipe()  # the queue a forking compile_all's processes read
+    os.write(write, bytes([1, 0]))
+    os.close(write)
+    try:
+        function_pointers._work(read, [["c"], warm])
+    finally:
+        os.close(read)
+    assert ran == ["warm", "fails"] and taken[-1] == "c"

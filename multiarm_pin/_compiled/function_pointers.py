@@ -25,7 +25,7 @@ import threading
 import time
 import warnings
 import weakref
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -78,6 +78,40 @@ class Compile:
     def pointer_type(self) -> nb_types.Tuple:
         """The numba type of :func:`pointer`'s ``(address, function type)``."""
         return nb_types.Tuple((nb_types.int64, nb_types.TypeRef(self.function_type)))
+
+
+@dataclass(frozen=True)
+class WarmUp:
+    """Kernels compiled by calling them: ``run()`` calls them on a small example.
+
+    For kernels whose argument types are simplest to get by running the code that calls
+    them (the collision scan's, on two samples of a run's own state). A group of
+    :func:`compile_all` may hold one. It runs only when :func:`compile_all` forks: in the
+    process that takes its group (a child compiles into numba's disk cache, from which this
+    process loads the kernels at their first call). Best effort: an error in ``run`` is
+    dropped (the kernels are then compiled at their first call, as without it).
+    """
+
+    run: Callable[[], object]
+
+
+_riders: list = []  # groups that ride along with the next compile_all
+
+
+def compile_with_next(group: Sequence) -> None:
+    """Add ``group`` (of :class:`Compile` or :class:`WarmUp`) to the next :func:`compile_all`.
+
+    After that call's own groups: the small compiles of a run's monitors fill the time a
+    process would otherwise wait for the last of a loop's groups. Dropped if no call comes
+    (:func:`forget`).
+    """
+    _riders.append(tuple(group))
+
+
+def forget(group: Sequence) -> None:
+    """Drop ``group`` from the next :func:`compile_all`'s, if it is still waiting there."""
+    key = tuple(group)
+    _riders[:] = [g for g in _riders if g != key]
 
 
 def type_key(args: Sequence) -> tuple:
@@ -224,6 +258,8 @@ def _bind_overload(pointers):
 # ------------------------------------------------------------------ compiling on every core
 def _ready(job: Compile) -> bool:
     """True if ``job`` is compiled in this process or in numba's disk cache."""
+    if isinstance(job, WarmUp):
+        return False  # not known: it runs when a child takes it
     kernel = job.kernel
     if job.result is None:
         if job.types in kernel.overloads:
@@ -291,7 +327,13 @@ def _work(queue: int, groups: Sequence[Sequence[Compile]]) -> None:
         if not b:
             return
         for job in groups[b[0]]:
-            compiled(job)
+            if isinstance(job, WarmUp):
+                try:
+                    job.run()
+                except Exception:  # noqa: BLE001 - best effort (WarmUp): compiled at first call
+                    pass
+            else:
+                compiled(job)
 
 
 def _reap(pids: Sequence[int], timeout: float) -> int:
@@ -335,15 +377,20 @@ def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
     numba's disk cache and exit; this process then loads their work from it (a compile a
     child did not finish is done here). Groups already compiled, here or on disk, are not
     given to a child; with one group left, more than 256, or one process
-    (:func:`processes`), all is done here. With two groups or more left, the worker threads
-    of the owners registered by :func:`register_thread_owner` are ended first, so that a
-    child may be forked. A child still compiling :data:`CHILD_TIMEOUT`
+    (:func:`processes`), all is done here. A child still compiling :data:`CHILD_TIMEOUT`
     seconds after this process took its last group is stopped, with a ``RuntimeWarning``,
     and what it had not saved is compiled here.
+
+    The groups added by :func:`compile_with_next` come after ``groups`` (a
+    :class:`WarmUp` among them runs only when children are forked). With two groups or more
+    left, the worker threads of the owners registered by :func:`register_thread_owner` are
+    ended first, so that a child may be forked.
 
     Nothing is returned: :func:`compiled` then gives each compiled function without
     compiling.
     """
+    groups = [*groups, *_riders]
+    _riders.clear()
     if jit_disabled():
         return
     todo = None
@@ -399,9 +446,10 @@ def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
                               "in this process", RuntimeWarning, stacklevel=2)
     for group in todo:
         for job in group:
-            compiled(job)
+            if not isinstance(job, WarmUp):  # run by a child, or compiled at first call
+                compiled(job)
 
 
-__all__ = ["CHILD_TIMEOUT", "DEFAULT_MOST_PROCESSES", "PROCESSES_VARIABLE", "Compile", "bind",
-           "compile_all", "compile_of", "compiled", "numba_type", "pointer", "processes",
-           "register_thread_owner", "type_key"]
+__all__ = ["CHILD_TIMEOUT", "DEFAULT_MOST_PROCESSES", "PROCESSES_VARIABLE", "Compile", "WarmUp",
+           "bind", "compile_all", "compile_of", "compile_with_next", "compiled", "forget",
+           "numba_type", "pointer", "processes", "register_thread_owner", "type_key"]

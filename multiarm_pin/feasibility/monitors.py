@@ -14,6 +14,8 @@ checks after a run, with the same rules, so a stop falls on the report's first v
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 
 from multiarm_pin.feasibility.limits import exceeded, system_limits
@@ -71,6 +73,36 @@ class CollisionMonitor:
         self.stop = bool(stop)
         self.scan: RunScan | None = None
         self._stopped = False
+
+    def warm_up(self, record, state) -> None:
+        """Scan two samples at ``state``, shaped as ``record``'s, and report the clearances.
+
+        On a scan of its own (this monitor is unchanged): the scan's kernels are called
+        with the types of this run's, so that they may compile beside the run's loop
+        (:class:`~multiarm_pin._compiled.function_pointers.WarmUp`).
+
+        Args:
+            record: the run's recorder (only the shapes of its contact points are read).
+            state: a :class:`~multiarm_pin.system.SystemState`, the run's initial one.
+        """
+        two = SimpleNamespace(
+            t=np.zeros(2), q=np.tile(np.asarray(state.q, float), (2, 1)),
+            p=np.tile(np.asarray(state.obj.position, float), (2, 1)),
+            quat=np.tile(np.asarray(state.obj.quaternion, float), (2, 1)),
+            points=np.zeros((2, *record.points.shape[1:])))
+        probe = CollisionMonitor(self.scene, stop=False)
+        probe.check(two, 0, 2)
+        scan = probe.scan
+        if scan is None:
+            return
+        scan.result()
+        # what the clearances call only for some runs: the bounds of a pair over the samples,
+        # and a hull's support function
+        if len(self.scene.pairs):
+            scan.column_bounds(np.arange(1))
+        hull = next((g for g, V in enumerate(scan.geo.hull_vertices) if V is not None), None)
+        if hull is not None:
+            scan.geo.support(hull, np.zeros((1, 3)), scan.compiled)
 
     def check(self, record, k0: int, k1: int) -> int | None:
         """The first sample in ``[k0, k1)`` where two bodies collide, or None."""

@@ -47,6 +47,7 @@ re-exported here).
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -57,7 +58,12 @@ import numpy as np
 
 from multiarm_pin._compiled.closed_loop import STAGE_OK, STAGE_RELEASE
 from multiarm_pin._compiled.contact_loop import STAGE_EVENTS_FULL, STAGE_OFF_RECTANGLE
-from multiarm_pin._compiled.function_pointers import register_thread_owner
+from multiarm_pin._compiled.function_pointers import (
+    WarmUp,
+    compile_with_next,
+    forget,
+    register_thread_owner,
+)
 from multiarm_pin._registry import lookup
 from multiarm_pin.constraints.joint import INITIAL_GAP_TOLERANCE
 from multiarm_pin.dynamics.solve import solver_for_rows
@@ -265,7 +271,7 @@ def simulate(
         # the gaps at t = 0 by the numpy reference: a run the compiled loops take never needs
         # the Python path's compiled evaluation, which would be compiled for this one call
         stepper.init_active(stepper.blocks_at(0.0, state, reference=True)[1], initial_tol)
-    watch = _Watch(monitors)
+    watch = _Watch(monitors, rec, state)
     try:
         _integrate(stepper, rec, state, times, integrator, rtol, atol, report, watch,
                    compiled)
@@ -421,7 +427,13 @@ class Monitor(Protocol):
     name: str
 
     def check(self, record: Recorder, k0: int, k1: int) -> int | None:
-        """The first sample in ``[k0, k1)`` that violates what it watches, or None."""
+        """The first sample in ``[k0, k1)`` that violates what it watches, or None.
+
+        A monitor may also have ``warm_up(record, state)``: call the compiled kernels its
+        checks call, on a small example shaped as ``record``'s samples at ``state`` and
+        without changing itself, so that they compile beside the run's loop
+        (:class:`~multiarm_pin._compiled.function_pointers.WarmUp`).
+        """
 
 
 class _Watch:
@@ -448,13 +460,21 @@ class _Watch:
     (a machine without a free core), and a stop still comes within two batches of its sample.
     """
 
-    def __init__(self, monitors: Sequence[Monitor]):
+    def __init__(self, monitors: Sequence[Monitor], rec: Recorder | None = None,
+                 state: SystemState | None = None):
         self.monitors = tuple(monitors)
         self.checked = 0  # samples shown to the monitors
         self.batch = MONITOR_STRETCH  # most samples shown at once
         self._step = 1  # most samples a loop records between two calls
         self._pool: ThreadPoolExecutor | None = None
         self._pending: Future | None = None
+        # the monitors' kernels, compiled beside the run's loop if it compiles (else at their
+        # first call, on the worker)
+        self._warm = () if rec is None or state is None else tuple(
+            WarmUp(functools.partial(m.warm_up, rec, state)) for m in self.monitors
+            if hasattr(m, "warm_up"))
+        if self._warm:
+            compile_with_next(self._warm)
 
     def longest_stretch(self, samples: int) -> None:
         """A loop's calls come at most ``samples`` samples apart.
@@ -519,6 +539,8 @@ class _Watch:
         return pending.result() if pending is not None else None
 
     def _close(self) -> None:
+        if self._warm:
+            forget(self._warm)
         if self._pool is not None:
             self._pool.shutdown(wait=True)
             self._pool = None

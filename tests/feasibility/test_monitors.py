@@ -172,3 +172,44 @@ def test_a_compile_ends_the_monitors_worker_and_keeps_what_it_found(monkeypatch)
     assert stop.stretches == [(0, MONITOR_STRIDE + 1)]
     with pytest.raises(RunStoppedError, match=r"spy: stop at the first violation \(sample 3\)"):
         watch.finish()
+
+
+@pytest.mark.skipif(numba.config.DISABLE_JIT, reason="types of compiled calls")
+@pytest.mark.parametrize("case", sorted(ALONG_A_RUN))
+def test_the_collision_scans_warm_up_calls_its_kernels_with_the_runs_types(monkeypatch, case):
+    # what compiles the scan beside the run's loop (WarmUp) must be what the run then calls:
+    # every kernel call of the run's scan and report has the types of a warm-up call
+    from multiarm_pin._compiled import scan as scan_kernels
+    from multiarm_pin.feasibility.monitors import CollisionMonitor
+
+    data, file = ALONG_A_RUN[case][0]()
+    built = _built(data, file)
+    scene = check_initial_state(built)
+    calls: dict[str, set] = {"run": set(), "warm": set()}
+    side = ["run"]
+
+    def recording(name, kernel):
+        def call(*args):
+            calls[side[0]].add((name, tuple(numba.typeof(a) for a in args)))
+            return kernel(*args)
+        return call
+
+    for name in ("joint_placements", "path_lengths", "first_exceeding", "grasp_openings",
+                 "round_heights", "ground_heights", "pair_bounds", "support_max"):  # from Python
+        monkeypatch.setattr(scan_kernels, name, recording(name, getattr(scan_kernels, name)))
+
+    class Keep(Spy):
+        def check(self, record, k0, k1):
+            self.record = record
+            return super().check(record, k0, k1)
+
+    monitor, keep = CollisionMonitor(scene, stop=False), Keep()
+    _simulate(built, (monitor, keep))
+    monitor.scan.result()
+    scan, exact = monitor.scan, monitor.scan.exact.copy()
+    side[0] = "warm"
+    monitor.warm_up(keep.record, built.initial_state)
+    assert monitor.scan is scan  # the warm-up scans on its own
+    np.testing.assert_array_equal(scan.exact, exact)
+    assert {n for n, _ in calls["run"]} >= {"joint_placements", "path_lengths", "pair_bounds"}
+    assert calls["run"] <= calls["warm"], calls["run"] - calls["warm"]
