@@ -301,3 +301,40 @@ def test_groups_ride_with_the_next_compile_and_warm_ups_run_only_where_groups_ar
     finally:
         os.close(read)
     assert ran == ["warm", "fails"] and taken[-1] == "c"
+
+
+def test_a_compile_leaves_the_owners_and_riders_of_other_threads_alone(monkeypatch):
+    # a run in another thread may be using its worker and expects its riders with its own
+    # compile: neither is this thread's to end or to take
+    import threading
+
+    class Owner:
+        ended = 0
+
+        def end_worker(self):
+            self.ended += 1
+
+    owner, rider = Owner(), ["theirs"]
+    registered = threading.Event()
+    done = threading.Event()
+
+    def other_run():
+        function_pointers.register_thread_owner(owner)
+        function_pointers.compile_with_next(rider)
+        registered.set()
+        done.wait(20.0)
+        function_pointers.forget(rider)
+
+    other = threading.Thread(target=other_run)
+    other.start()
+    try:
+        assert registered.wait(20.0)
+        taken = []
+        monkeypatch.setattr(function_pointers, "_ready", lambda job: False)
+        monkeypatch.setattr(function_pointers, "compiled", taken.append)
+        monkeypatch.setattr(function_pointers, "processes", lambda: 1)
+        compile_all([["a"], ["b"]])
+        assert owner.ended == 0 and taken == ["a", "b"]
+    finally:
+        done.set()
+        other.join()

@@ -95,23 +95,30 @@ class WarmUp:
     run: Callable[[], object]
 
 
-_riders: list = []  # groups that ride along with the next compile_all
+_this_thread = threading.local()  # .riders: groups that ride along with its next compile_all
+
+
+def _riders() -> list:
+    if not hasattr(_this_thread, "riders"):
+        _this_thread.riders = []
+    return _this_thread.riders
 
 
 def compile_with_next(group: Sequence) -> None:
-    """Add ``group`` (of :class:`Compile` or :class:`WarmUp`) to the next :func:`compile_all`.
+    """Add ``group`` (:class:`Compile` or :class:`WarmUp` jobs) to the next compile_all here.
 
-    After that call's own groups: the small compiles of a run's monitors fill the time a
-    process would otherwise wait for the last of a loop's groups. Dropped if no call comes
-    (:func:`forget`).
+    To this thread's next :func:`compile_all`, after that call's own groups: the small
+    compiles of a run's monitors fill the time a process would otherwise wait for the last of
+    a loop's groups. Dropped if no call comes (:func:`forget`). Per thread: a run in another
+    thread neither takes nor drops it.
     """
-    _riders.append(tuple(group))
+    _riders().append(tuple(group))
 
 
 def forget(group: Sequence) -> None:
     """Drop ``group`` from the next :func:`compile_all`'s, if it is still waiting there."""
     key = tuple(group)
-    _riders[:] = [g for g in _riders if g != key]
+    _riders()[:] = [g for g in _riders() if g != key]
 
 
 def type_key(args: Sequence) -> tuple:
@@ -282,21 +289,23 @@ def _ready(job: Compile) -> bool:
         return False
 
 
-_thread_owners: weakref.WeakSet = weakref.WeakSet()
+_thread_owners: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # -> thread id
 
 
 def register_thread_owner(owner) -> None:
-    """Let :func:`compile_all` end ``owner``'s worker thread before it compiles.
+    """Let :func:`compile_all`, called from this thread, end ``owner``'s worker thread first.
 
     A child process is forked to compile only while this process runs no other Python
     thread (:func:`processes`). A worker thread that checks a run's samples beside its loop
     (the simulation's monitors) would otherwise keep every compile after its start (the
     contact loop's, once the closed loop hands a run over) to one process.
-    ``owner.end_worker()`` must end its thread before it returns, its work under way done
-    and its results kept; the owner starts a new thread when it next needs one. Held
-    weakly: an owner that is gone is forgotten.
+    ``owner.end_worker()`` must end its one worker thread before it returns, its work under
+    way done and its results kept; the owner starts a new thread when it next needs one. Only
+    a :func:`compile_all` of the thread that registered the owner (the run's own) ends it:
+    never a run in another thread, while the owner's thread may be using it. Held weakly: an
+    owner that is gone is forgotten.
     """
-    _thread_owners.add(owner)
+    _thread_owners[owner] = threading.get_ident()
 
 
 def processes() -> int:
@@ -383,22 +392,24 @@ def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
 
     The groups added by :func:`compile_with_next` come after ``groups`` (a
     :class:`WarmUp` among them runs only when children are forked). With two groups or more
-    left, the worker threads of the owners registered by :func:`register_thread_owner` are
-    ended first, so that a child may be forked.
+    left, the worker threads of the owners this thread registered
+    (:func:`register_thread_owner`) are ended first, so that a child may be forked.
 
     Nothing is returned: :func:`compiled` then gives each compiled function without
     compiling.
     """
-    groups = [*groups, *_riders]
-    _riders.clear()
+    riders = _riders()
+    groups = [*groups, *riders]
+    riders.clear()
     if jit_disabled():
         return
     todo = None
-    if (threading.active_count() > 1 and len(_thread_owners)
-            and threading.current_thread() is threading.main_thread()):
+    here = threading.get_ident()
+    mine = [owner for owner, thread in list(_thread_owners.items()) if thread == here]
+    if mine and threading.active_count() > 1:
         todo = _left(groups)
         if len(todo) > 1:  # worth a child: end the workers that would forbid its fork
-            for owner in list(_thread_owners):
+            for owner in mine:
                 owner.end_worker()
     many = processes()
     # what is left to compile decides whether to fork: with one process, all is done here
