@@ -403,6 +403,27 @@ def test_householder_qr_equals_numpy(shape):
         assert np.abs(x - want).max() <= 1e-12 * np.linalg.cond(A) * np.abs(want).max()
 
 
+@pytest.mark.parametrize("rows, cols, zero", [(6, 4, [1]), (7, 7, [0, 5]), (6, 3, [0, 1, 2]),
+                                              (3, 5, []), (4, 6, [2])])
+def test_column_least_squares_without_full_column_rank_equals_lstsq(rows, cols, zero):
+    """Columns of zeros (their QR pivot is exactly 0) or more columns than rows: by
+    construction not of full column rank, so ``column_least_squares`` takes
+    ``np.linalg.lstsq``'s minimum-norm solution at its rank (``rcond = eps max(p, n)``); on a
+    subset of ``E``'s columns in shuffled order, the entries past ``n`` untouched."""
+    rng = np.random.default_rng(rows * 17 + cols + 100 * len(zero))
+    A = rng.normal(size=(rows, cols)) * 3.0
+    A[:, zero] = 0.0
+    E = np.zeros((rows, cols + 2))
+    order = rng.permutation(cols + 2)[:cols]
+    E[:, order] = A
+    f = rng.normal(size=rows)
+    out = np.full(cols + 1, np.nan)
+    phased.column_least_squares(E, order, np.int64(cols), f, out)
+    want = np.linalg.lstsq(A, f, rcond=np.finfo(float).eps * max(rows, cols))[0]
+    assert np.abs(out[:cols] - want).max() <= 1e-10 * max(1.0, np.abs(want).max())
+    assert np.isnan(out[cols])
+
+
 @pytest.mark.parametrize("shape, rank", [((6, 3), 2), ((7, 7), 4), ((8, 5), 1), ((4, 6), 3)])
 def test_householder_qr_shows_rank_deficiency_with_margin(shape, rank):
     """Rank deficient by construction (``A = B C``, inner size ``rank``, columns in general

@@ -217,8 +217,9 @@ def column_least_squares(E, cols, n, f, out):  # pragma: no cover - compiled
     """``out[:n] = argmin ‖E[:, cols[:n]] x - f‖`` by Householder QR (no allocation by LAPACK).
 
     For the passive columns of :func:`nnls` (linearly independent by construction); when a
-    column is dependent on the ones before it (``|R_jj|`` at round-off of the largest), the
-    minimum-norm solution of ``np.linalg.lstsq`` decides instead. The QR is
+    column is dependent on the ones before it (``|R_jj|`` at round-off of the largest), or
+    there are more columns than rows, the minimum-norm solution of ``np.linalg.lstsq``
+    (its rank, by one SVD) decides instead. The QR is
     :func:`~multiarm_pin._compiled.linalg.householder_qr` on a copy of the columns.
 
     Args:
@@ -249,13 +250,24 @@ def column_least_squares(E, cols, n, f, out):  # pragma: no cover - compiled
         if not abs(diag[j]) > 10.0 * eps * max(p, n) * rmax:
             ok = False
     if not ok:
+        # lstsq's minimum-norm solution at its rank (singular values above eps max(p, n) of
+        # the largest) by one thin SVD: out = V Σ⁺ Uᵀ f (np.linalg.lstsq gives the same to
+        # round-off, and compiles for seconds)
         Ep = np.empty((p, n))
         for c in range(n):
             for a in range(p):
                 Ep[a, c] = E[a, cols[c]]
-        x = np.linalg.lstsq(Ep, f, eps * max(p, n))[0]
+        U, sv, Vt = np.linalg.svd(Ep, full_matrices=False)
         for c in range(n):
-            out[c] = x[c]
+            out[c] = 0.0
+        for q in range(sv.shape[0]):
+            if sv[q] > eps * max(p, n) * sv[0]:
+                acc = 0.0
+                for a in range(p):
+                    acc += U[a, q] * f[a]
+                acc /= sv[q]
+                for c in range(n):
+                    out[c] += Vt[q, c] * acc
         return
     for j in range(n - 1, -1, -1):
         acc = b[j]
