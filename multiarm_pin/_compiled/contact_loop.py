@@ -128,6 +128,7 @@ from multiarm_pin._compiled.layout import (
 from multiarm_pin._compiled.linalg import copy1, copy2
 from multiarm_pin._compiled.mlcp import OK as LCP_OK
 from multiarm_pin._compiled.object_first import SOLVE_OK, object_first
+from multiarm_pin._compiled.phased import callee_compiles as phased_callee_compiles
 from multiarm_pin._compiled.phased import phased_torques
 from multiarm_pin._compiled.rigid_body import difference
 from multiarm_pin._compiled.trajectory import reference_motion
@@ -425,7 +426,8 @@ def _phased_torques(t, x, active, sy, ctl, wk, out, callees):  # pragma: no cove
 
     :func:`~multiarm_pin._compiled.phased.phased_torques` on the buffer and the support
     block's rows (``κ`` from ``c = -κ - 2α φ̇ - β² φ``); ``STAGE_CONTROLLER`` when it reports a
-    case the reference decides (the stepper then takes the step).
+    case the reference decides (the stepper then takes the step). Its ``distribute`` and
+    ``plan`` are ``callees[2]`` and ``callees[3]`` (:func:`stage_compiles`).
     """
     (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
      sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
@@ -461,7 +463,7 @@ def _phased_torques(t, x, active, sy, ctl, wk, out, callees):  # pragma: no cove
                                   x[:OBJECT_STATE_SIZE], G, kappa, gaps, phases, press, release,
                                   named, offs, margins, offset_start, pd_gains, z, hold_tool,
                                   grasp_obj, hold_n, gains, tau, mu_p, lam, qdd_p, a_pts, a_d,
-                                  a_plan)
+                                  a_plan, callees[2], callees[3])
     if status != PD_OK:
         return STAGE_CONTROLLER
     control[CTL_HOLDING] = 0
@@ -635,6 +637,11 @@ def stage_compiles(x, active, sy, ctl, wk, out, d) -> tuple:
                                               ref, pd_gains, z, hold_tool, hold_obj, hold_n,
                                               gains, qp_active_r, tau, mu_p, qdd_p, a_pts,
                                               a_d), pair))
+        elif mode == CONTROL_PHASED:
+            (_, _, _, _, hold_tool, _, hold_n, gains, *_, ph) = ctl
+            (_, _, _, _, _, tau, _, z, _, _, _, qdd_p, a_pts, a_d) = out
+            callees += phased_callee_compiles(buf, nv_arm, z, hold_tool, hold_n, gains, tau,
+                                              qdd_p, a_pts, a_d, ph[8])
     callee_types = tuple(c.function_type for c in callees)
     torque_kernel = (_torques if mode == CONTROL_OBJECT_PD
                      else _phased_torques if mode == CONTROL_PHASED else _zero_torques)
@@ -678,8 +685,10 @@ def loop_functions(head: tuple) -> tuple:
                      lcp.pointer_type, tuple(c.pointer_type for c in callees))
     loop = compile_of(run_contact_rk4, (*head, pointer_types, advance.pointer_type))
     # the larger first (by the code each compiles); object_pd_step and touching_torques share
-    # the controller's torques: one group
-    groups = [[advance], [loop], [*callees[2:]], [lcp], [torques], [*callees[1:2]], [rows],
+    # the controller's torques: one group; phased_pd's distribution and plan share nothing
+    controller = ([[c] for c in callees[2:]] if int(ctl[0][CTL_MODE]) == CONTROL_PHASED
+                  else [[*callees[2:]]])
+    groups = [[advance], [loop], *controller, [lcp], [torques], [*callees[1:2]], [rows],
               [stage], [*callees[:1]]]
     compile_all([g for g in groups if g])
     fn = (pointer(stage), pointer(rows), pointer(torques), pointer(lcp),

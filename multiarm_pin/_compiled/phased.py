@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
 from multiarm_pin._compiled.controller_kernels import (
@@ -48,6 +49,7 @@ from multiarm_pin._compiled.controller_kernels import (
     planned_torques,
 )
 from multiarm_pin._compiled.evaluate import _arm_segments, _block_segments
+from multiarm_pin._compiled.function_pointers import Compile, compile_of
 from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.layout import (
     DIMS_K,
@@ -680,7 +682,7 @@ def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins
 def phased_torques(t, buf, dims, N, nv_arm, unilateral, active, obj, G_sup, kappa_sup, phi_sup,
                    phases, press, release, named, offs, margins, offset_start, pd_gains, z,
                    hold_tool, grasp_obj, hold_n, gains, tau, mu, lam, qdd, a_pts,
-                   a_d, a_o):  # pragma: no cover - compiled
+                   a_d, a_o, distribute, plan):  # pragma: no cover - compiled
     """``PhasedPD`` torques at ``t`` from the flat buffer and the support rows (see the module).
 
     Args:
@@ -715,6 +717,11 @@ def phased_torques(t, buf, dims, N, nv_arm, unilateral, active, obj, G_sup, kapp
         a_pts: output (n, h, 3) desired point accelerations [m/s²].
         a_d: output (6,) desired object acceleration.
         a_o: output (6,) the planned object acceleration (``SupportedDistribution.a_o``).
+        distribute: :func:`supported_distribution`, or its first-class function.
+        plan: :func:`~multiarm_pin._compiled.controller_kernels.planned_torques`, or its
+            first-class function. A compiled loop passes both by address
+            (:mod:`~multiarm_pin._compiled.function_pointers`): each is then compiled once, on
+            its own, and not again inside this kernel.
 
     Returns:
         ``(status, margin_kept)``: :data:`PD_OK` or the reason the caller must use the
@@ -789,15 +796,13 @@ def phased_torques(t, buf, dims, N, nv_arm, unilateral, active, obj, G_sup, kapp
         marg[cols] = phases[ph, PH_SUPPORT_MARGIN]
         cols += 1
     mu_all = np.zeros(max(C, 1))
-    kept = supported_distribution(M_o, h_o, a_d, Wall, cols, G, kap, uni, marg, mu_all, a_o,
-                                  False)
+    kept = distribute(M_o, h_o, a_d, Wall, cols, G, kap, uni, marg, mu_all, a_o, False)
     if not kept:
         # no forces keep the margins: pushing forces (margins 0), the closest wrench they
         # make if none makes the whole, as the reference falls back
         for j in range(cols):
             marg[j] = 0.0
-        if not supported_distribution(M_o, h_o, a_d, Wall, cols, G, kap, uni, marg, mu_all,
-                                      a_o, True):
+        if not distribute(M_o, h_o, a_d, Wall, cols, G, kap, uni, marg, mu_all, a_o, True):
             return PD_FORCES_FAILED, False
     mu_r = np.zeros((n, m))
     col = 0
@@ -809,8 +814,8 @@ def phased_torques(t, buf, dims, N, nv_arm, unilateral, active, obj, G_sup, kapp
         lam[j] = 0.0
     for q in range(P):
         lam[rows[q]] = mu_all[ka + q]
-    status = planned_torques(M, J, Jdq, tp, tR, ttw, h, W_r, W_o_r, c_r, N_r, nv_arm, obj_x,
-                             a_o, z, hold_tool, hold_obj, hold_n, gains, tau, mu_r, qdd, a_pts)
+    status = plan(M, J, Jdq, tp, tR, ttw, h, W_r, W_o_r, c_r, N_r, nv_arm, obj_x, a_o, z,
+                  hold_tool, hold_obj, hold_n, gains, tau, mu_r, qdd, a_pts)
     if status != PD_OK:
         return status, kept
     for i in range(n):
@@ -821,7 +826,35 @@ def phased_torques(t, buf, dims, N, nv_arm, unilateral, active, obj, G_sup, kapp
     return PD_OK, kept
 
 
+def callee_compiles(buf, nv_arm, z, hold_tool, hold_n, gains, tau, qdd, a_pts, a_d,
+                    a_o) -> tuple[Compile, Compile]:
+    """The compiles of :func:`phased_torques`' ``distribute`` and ``plan``, for the types it passes.
+
+    Each is compiled once, on its own, and called through its address by a compiled caller
+    (:mod:`~multiarm_pin._compiled.function_pointers`). The arguments are those of
+    :func:`phased_torques` of the same names (their types are what count); the arrays
+    :func:`phased_torques` makes itself, and the views of ``buf``, are C-contiguous.
+    """
+    int64 = numba.types.int64
+
+    def made(ndim, dtype=np.float64):  # an array as phased_torques makes it
+        return np.zeros((0,) * ndim, dtype=dtype)
+
+    def view(ndim):  # a view of buf
+        return buf[:0].reshape((0,) * ndim)
+
+    distribute = compile_of(supported_distribution,
+                            (view(2), view(1), a_d, made(2), 0, made(2), made(1),
+                             made(1, np.bool_), made(1), made(1), a_o, False),
+                            numba.types.boolean)
+    plan = compile_of(planned_torques,
+                      (view(3), view(3), view(2), view(2), view(3), view(2), view(2), made(3),
+                       made(3), made(2), made(1, np.int64), nv_arm, made(1), a_o, z, hold_tool,
+                       made(3), hold_n, gains, tau, made(2), qdd, a_pts), int64)
+    return distribute, plan
+
+
 __all__ = ["PD_ARM_RANK", "PD_FORCES_FAILED", "PD_NOT_FINITE", "PINV_RCOND", "PRESSING_GAP",
-           "RANK_TOL", "column_least_squares", "min_norm_forces", "minimum_jerk", "nnls",
-           "phase_index", "phase_offsets", "phase_reference", "phased_torques", "polish",
-           "supported_distribution"]
+           "RANK_TOL", "callee_compiles", "column_least_squares", "min_norm_forces",
+           "minimum_jerk", "nnls", "phase_index", "phase_offsets", "phase_reference",
+           "phased_torques", "polish", "supported_distribution"]

@@ -42,8 +42,8 @@ import numpy as np
 import pinocchio as pin
 
 from multiarm_pin._compiled import layout
-from multiarm_pin._compiled.controller_kernels import PD_OK
-from multiarm_pin._compiled.phased import phased_torques
+from multiarm_pin._compiled.controller_kernels import PD_OK, planned_torques
+from multiarm_pin._compiled.phased import phased_torques, supported_distribution
 from multiarm_pin.dynamics.blocks import expand_rows, restrict_rows, select_rows
 from multiarm_pin.dynamics.force_distribution import distribute_with_supports
 from multiarm_pin.dynamics.inverse_dynamics import InverseDynamicsResult, inverse_dynamics
@@ -447,7 +447,8 @@ class PhasedPD(ObjectPD):
             np.ascontiguousarray(st.G_object, dtype=float), np.ascontiguousarray(st.kappa),
             np.ascontiguousarray(st.phi), phases, press, release, named, offs, margins,
             self.offset_start, self._pd_gains, z, self.hold_points_in_tool,
-            self._grasp_points, self._hold_n, self._gains, tau, mu, lam, qdd, a_pts, a_d, a_o)
+            self._grasp_points, self._hold_n, self._gains, tau, mu, lam, qdd, a_pts, a_d, a_o,
+            supported_distribution, planned_torques)
         if status != PD_OK:
             return None
         self.last_point_acceleration = a_pts
