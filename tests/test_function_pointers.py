@@ -303,6 +303,20 @@ def test_groups_ride_with_the_next_compile_and_warm_ups_run_only_where_groups_ar
     assert ran == ["warm", "fails"] and taken[-1] == "c"
 
 
+def test_riders_are_taken_after_the_first_group_of_each_process():
+    # the groups come largest first; a rider (a warm-up of a few seconds) goes ahead of the
+    # small ones that end the compile, not last where the other processes would wait for it
+    own = [["big"], ["loop"], ["mid"], ["small"]]
+    rider = ("warm",)
+    order = function_pointers._queue_order([*own, rider], [rider], 2)
+    assert order == [["big"], ["loop"], rider, ["mid"], ["small"]]
+    assert function_pointers._queue_order([*own, rider], [rider], 1)[:2] == [["big"], rider]
+    assert function_pointers._queue_order(own[:1] + [rider], [rider], 4) == [["big"], rider]
+    # an own group equal to a rider is still the caller's
+    twin = ["warm"]
+    assert function_pointers._queue_order([twin, rider], [rider], 1) == [twin, rider]
+
+
 def test_a_compile_leaves_the_owners_and_riders_of_other_threads_alone(monkeypatch):
     # a run in another thread may be using its worker and expects its riders with its own
     # compile: neither is this thread's to end or to take

@@ -107,9 +107,9 @@ def _riders() -> list:
 def compile_with_next(group: Sequence) -> None:
     """Add ``group`` (:class:`Compile` or :class:`WarmUp` jobs) to the next compile_all here.
 
-    To this thread's next :func:`compile_all`, after that call's own groups: the small
-    compiles of a run's monitors fill the time a process would otherwise wait for the last of
-    a loop's groups. Dropped if no call comes (:func:`forget`). Per thread: a run in another
+    To this thread's next :func:`compile_all`, taken after the first group of each process
+    (:func:`_queue_order`): the compiles of a run's monitors fill the processes beside the
+    loop's. Dropped if no call comes (:func:`forget`). Per thread: a run in another
     thread neither takes nor drops it.
     """
     _riders().append(tuple(group))
@@ -377,6 +377,19 @@ def _left(groups: Sequence[Sequence[Compile]]) -> list:
     return [g for g in groups if not all(_ready(j) for j in g)]
 
 
+def _queue_order(todo: list, riders: list, many: int) -> list:
+    """``todo`` in the order the processes take it: the riders after ``many`` groups of its own.
+
+    The callers list their groups largest first, and a rider (the monitors' warm-up: a few
+    seconds) is about as large as the middle ones: taken after the first group of each of the
+    ``many`` processes, it goes ahead of the small groups that end the compile, where a rider
+    taken last keeps the other processes waiting for it.
+    """
+    ride = [g for g in todo if any(g is r for r in riders)]
+    own = [g for g in todo if not any(g is r for r in riders)]
+    return [*own[:many], *ride, *own[many:]]
+
+
 def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
     """Compile ``groups`` of :class:`Compile` here and in child processes, at once.
 
@@ -390,17 +403,18 @@ def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
     seconds after this process took its last group is stopped, with a ``RuntimeWarning``,
     and what it had not saved is compiled here.
 
-    The groups added by :func:`compile_with_next` come after ``groups`` (a
-    :class:`WarmUp` among them runs only when children are forked). With two groups or more
-    left, the worker threads of the owners this thread registered
-    (:func:`register_thread_owner`) are ended first, so that a child may be forked.
+    The groups added by :func:`compile_with_next` are taken after the first group of each
+    process (:func:`_queue_order`; a :class:`WarmUp` among them runs only when children are
+    forked). With two groups or more left, the worker threads of the owners this thread
+    registered (:func:`register_thread_owner`) are ended first, so that a child may be
+    forked.
 
     Nothing is returned: :func:`compiled` then gives each compiled function without
     compiling.
     """
-    riders = _riders()
+    riders = list(_riders())
+    _riders().clear()
     groups = [*groups, *riders]
-    riders.clear()
     if jit_disabled():
         return
     todo = None
@@ -415,6 +429,7 @@ def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
     # what is left to compile decides whether to fork: with one process, all is done here
     if todo is None:
         todo = _left(groups) if many > 1 else list(groups)
+    todo = _queue_order(todo, riders, many)
     # the queue holds a group's number in one byte: more groups are all done here
     children = min(many, len(todo)) - 1 if len(todo) <= 256 else 0
     if children > 0:
