@@ -403,6 +403,20 @@ def test_householder_qr_equals_numpy(shape):
         assert np.abs(x - want).max() <= 1e-12 * np.linalg.cond(A) * np.abs(want).max()
 
 
+@pytest.mark.parametrize("r, s, c", [(6, 6, 1), (6, 3, 0), (1, 6, 4), (6, 0, 2), (3, 5, 7)])
+def test_mat_vec_and_mat_mat_equal_numpy(r, s, c):
+    """``linalg.mat_vec`` and ``mat_mat`` (the products of ``phased``'s kernels) equal numpy's
+    ``@`` to round-off, empty dimensions included (a product over none is zero)."""
+    rng = np.random.default_rng(100 * r + 10 * s + c)
+    A, B, x = rng.normal(size=(r, s)), rng.normal(size=(s, c)), rng.normal(size=s)
+    out = np.full(r, np.nan)
+    linalg.mat_vec(A, x, out)
+    np.testing.assert_allclose(out, A @ x, rtol=0, atol=1e-14 * max(1, s))
+    prod = np.full((r, c), np.nan)
+    linalg.mat_mat(A, B, prod)
+    np.testing.assert_allclose(prod, A @ B, rtol=0, atol=1e-14 * max(1, s))
+
+
 @pytest.mark.parametrize("rows, cols, zero", [(6, 4, [1]), (7, 7, [0, 5]), (6, 3, [0, 1, 2]),
                                               (3, 5, []), (4, 6, [2])])
 def test_column_least_squares_without_full_column_rank_equals_lstsq(rows, cols, zero):

@@ -251,5 +251,31 @@ def copy2(dst, src):  # pragma: no cover - compiled
             dst[i, j] = src[i, j]
 
 
+@kernel
+def mat_vec(A, x, out):  # pragma: no cover - compiled
+    """``out = A x`` for a matrix ``A`` (r, c) and a vector ``x`` (c,), summed in column order.
+
+    numpy's ``A @ x`` (BLAS, with its shape checks and their messages) compiles for about
+    half a second at every type.
+    """
+    for i in range(A.shape[0]):
+        acc = 0.0
+        for j in range(A.shape[1]):
+            acc += A[i, j] * x[j]
+        out[i] = acc
+
+
+@kernel
+def mat_mat(A, B, out):  # pragma: no cover - compiled
+    """``out = A B`` for matrices ``A`` (r, s) and ``B`` (s, c) (see :func:`mat_vec`)."""
+    for i in range(A.shape[0]):
+        for j in range(B.shape[1]):
+            acc = 0.0
+            for k in range(A.shape[1]):
+                acc += A[i, k] * B[k, j]
+            out[i, j] = acc
+
+
 __all__ = ["batched_spd_solve", "cholesky", "cholesky_solve", "copy1", "copy2",
-           "householder_qr", "householder_reflect", "inverse_diagonal", "singular_values"]
+           "householder_qr", "householder_reflect", "inverse_diagonal", "mat_mat", "mat_vec",
+           "singular_values"]

@@ -81,6 +81,8 @@ from multiarm_pin._compiled.linalg import (
     copy1,
     householder_qr,
     householder_reflect,
+    mat_mat,
+    mat_vec,
 )
 from multiarm_pin._compiled.trajectory import exp3
 
@@ -434,7 +436,10 @@ def min_norm_forces(W, w, unilateral, margins, mu):  # pragma: no cover - compil
     u = np.empty(nu)
     if not nnls(E, f, 50 * (k + 1 + nu), u):
         return False
-    rho = E @ u - f
+    rho = np.empty(k + 1)
+    mat_vec(E, u, rho)
+    for r in range(k + 1):
+        rho[r] -= f[r]
     if -rho[k] <= 1e-12:
         return False
     for j in range(C):
@@ -572,10 +577,17 @@ def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins
         return False
     step = np.empty((6, 1))
     if P:
-        Minv_Gt = np.ascontiguousarray(G.T)
+        Minv_Gt = np.empty((6, P))
+        for i in range(6):
+            for p in range(P):
+                Minv_Gt[i, p] = G[p, i]
         cholesky_solve(L, Minv_Gt, 6, P)
-        GMG = np.ascontiguousarray(G @ Minv_Gt)
-        rhs = G @ a_d + kappa
+        GMG = np.empty((P, P))
+        mat_mat(G, Minv_Gt, GMG)
+        rhs = np.empty(P)
+        mat_vec(G, a_d, rhs)
+        for p in range(P):
+            rhs[p] += kappa[p]
         # (G M_o⁻¹ Gᵀ)⁺ rhs: the pseudo-inverse of the symmetric positive semi-definite
         # matrix by its eigenvalues (its singular values), those above PINV_RCOND of the
         # largest kept, as np.linalg.pinv decides
@@ -592,10 +604,18 @@ def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins
                 acc /= lev[p]
                 for q in range(P):
                     lam[q] += LV[q, p] * acc
-        a = a_d - Minv_Gt @ lam
-    w = M_o @ a - h_o
+        mat_vec(Minv_Gt, lam, a)
+        for i in range(6):
+            a[i] = a_d[i] - a[i]
+    w = np.empty(6)
+    mat_vec(M_o, a, w)
+    for i in range(6):
+        w[i] -= h_o[i]
     wr = np.zeros(6)
-    Wc = np.ascontiguousarray(W[:, :cols])
+    Wc = np.empty((6, cols))
+    for i in range(6):
+        for j in range(cols):
+            Wc[i, j] = W[i, j]
     ev, V = np.linalg.eigh(M_o)
     S = np.empty((6, 6))
     for i in range(6):
@@ -604,8 +624,10 @@ def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins
             for p in range(6):
                 acc += V[i, p] * V[j, p] / math.sqrt(ev[p])
             S[i, j] = acc
-    SW = np.ascontiguousarray(S @ Wc)
-    Sw = S @ w
+    SW = np.empty((6, cols))
+    mat_mat(S, Wc, SW)
+    Sw = np.empty(6)
+    mat_vec(S, w, Sw)
     if cols:
         # lstsq's W x = M_o^{1/2} P S w, P the projector on the range of S W at lstsq's
         # rank (singular values above eps max(6, C) of the largest): one thin SVD
@@ -645,13 +667,17 @@ def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins
             return False  # a bilateral multiplier: not a shifted NNLS (the reference decides)
     # lsq_linear(S W, S w, bounds=(margins, inf)): y = x - margins >= 0 minimises
     # ‖S W y - (S w - S W margins)‖
-    f = Sw - SW @ marg
+    f = np.empty(6)
+    mat_vec(SW, marg, f)
+    for i in range(6):
+        f[i] = Sw[i] - f[i]
     y = np.empty(cols)
     if not nnls(SW, f, 50 * (6 + cols), y):
         return False
     for j in range(cols):
         y[j] += marg[j]
-    wx = Wc @ y
+    wx = np.empty(6)
+    mat_vec(Wc, y, wx)
     # the smallest such forces making that wrench (the bounded least squares leaves the
     # internal forces arbitrary), the margins relaxed by BEST_EFFORT_SLACK of the wrench's scale
     # as the reference does (y is strictly feasible then); y itself where that solve fails
@@ -669,7 +695,9 @@ def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins
     for j in range(cols):  # back onto the margins (the reference's clip)
         if uni[j] and x[j] < marg[j]:
             x[j] = marg[j]
-    unreached = w - Wc @ x
+    mat_vec(Wc, x, unreached)
+    for i in range(6):
+        unreached[i] = w[i] - unreached[i]
     for i in range(6):
         step[i, 0] = unreached[i]
     cholesky_solve(L, step, 6, 1)
