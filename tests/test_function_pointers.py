@@ -308,13 +308,13 @@ def test_riders_are_taken_after_the_first_group_of_each_process():
     # small ones that end the compile, not last where the other processes would wait for it
     own = [["big"], ["loop"], ["mid"], ["small"]]
     rider = ("warm",)
-    order = function_pointers._queue_order([*own, rider], [rider], 2)
+    order = function_pointers._queue_order(own, [rider], 2)
     assert order == [["big"], ["loop"], rider, ["mid"], ["small"]]
-    assert function_pointers._queue_order([*own, rider], [rider], 1)[:2] == [["big"], rider]
-    assert function_pointers._queue_order(own[:1] + [rider], [rider], 4) == [["big"], rider]
+    assert function_pointers._queue_order(own, [rider], 1)[:2] == [["big"], rider]
+    assert function_pointers._queue_order(own[:1], [rider], 4) == [["big"], rider]
     # an own group equal to a rider is still the caller's
     twin = ["warm"]
-    assert function_pointers._queue_order([twin, rider], [rider], 1) == [twin, rider]
+    assert function_pointers._queue_order([twin], [rider], 1) == [twin, rider]
 
 
 def test_a_compile_leaves_the_owners_and_riders_of_other_threads_alone(monkeypatch):

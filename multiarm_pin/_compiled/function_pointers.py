@@ -377,17 +377,15 @@ def _left(groups: Sequence[Sequence[Compile]]) -> list:
     return [g for g in groups if not all(_ready(j) for j in g)]
 
 
-def _queue_order(todo: list, riders: list, many: int) -> list:
-    """``todo`` in the order the processes take it: the riders after ``many`` groups of its own.
+def _queue_order(own: list, riders: list, many: int) -> list:
+    """The groups in the order the processes take them: ``riders`` after ``many`` of ``own``.
 
     The callers list their groups largest first, and a rider (the monitors' warm-up: a few
     seconds) is about as large as the middle ones: taken after the first group of each of the
     ``many`` processes, it goes ahead of the small groups that end the compile, where a rider
     taken last keeps the other processes waiting for it.
     """
-    ride = [g for g in todo if any(g is r for r in riders)]
-    own = [g for g in todo if not any(g is r for r in riders)]
-    return [*own[:many], *ride, *own[many:]]
+    return [*own[:many], *riders, *own[many:]]
 
 
 def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
@@ -414,22 +412,21 @@ def compile_all(groups: Sequence[Sequence[Compile]]) -> None:
     """
     riders = list(_riders())
     _riders().clear()
-    groups = [*groups, *riders]
     if jit_disabled():
         return
-    todo = None
+    left = None  # (own groups, riders) not compiled yet, here or on disk
     here = threading.get_ident()
     mine = [owner for owner, thread in list(_thread_owners.items()) if thread == here]
     if mine and threading.active_count() > 1:
-        todo = _left(groups)
-        if len(todo) > 1:  # worth a child: end the workers that would forbid its fork
+        left = _left(groups), _left(riders)
+        if len(left[0]) + len(left[1]) > 1:  # worth a child: end the workers forbidding it
             for owner in mine:
                 owner.end_worker()
     many = processes()
     # what is left to compile decides whether to fork: with one process, all is done here
-    if todo is None:
-        todo = _left(groups) if many > 1 else list(groups)
-    todo = _queue_order(todo, riders, many)
+    if left is None:
+        left = (_left(groups), _left(riders)) if many > 1 else (list(groups), riders)
+    todo = _queue_order(*left, many)
     # the queue holds a group's number in one byte: more groups are all done here
     children = min(many, len(todo)) - 1 if len(todo) <= 256 else 0
     if children > 0:
