@@ -79,6 +79,7 @@ from multiarm_pin._compiled.linalg import (
     cholesky,
     cholesky_solve,
     copy1,
+    copy2,
     householder_qr,
     householder_reflect,
     mat_mat,
@@ -578,9 +579,7 @@ def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins
     step = np.empty((6, 1))
     if P:
         Minv_Gt = np.empty((6, P))
-        for i in range(6):
-            for p in range(P):
-                Minv_Gt[i, p] = G[p, i]
+        copy2(Minv_Gt, G.T)
         cholesky_solve(L, Minv_Gt, 6, P)
         GMG = np.empty((P, P))
         mat_mat(G, Minv_Gt, GMG)
@@ -613,9 +612,7 @@ def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins
         w[i] -= h_o[i]
     wr = np.zeros(6)
     Wc = np.empty((6, cols))
-    for i in range(6):
-        for j in range(cols):
-            Wc[i, j] = W[i, j]
+    copy2(Wc, W[:, :cols])
     ev, V = np.linalg.eigh(M_o)
     S = np.empty((6, 6))
     for i in range(6):
