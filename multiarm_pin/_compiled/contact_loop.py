@@ -671,29 +671,29 @@ def loop_functions(head: tuple) -> tuple:
     Made once per process for the types of ``head``.
     """
     (_, _, _, x, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev, _, _) = head
-    key = (int(ctl[0][CTL_MODE]), int(sy[7][DIMS_N]) > 0, type_key(head))
+    mode = int(ctl[0][CTL_MODE])
+    key = (mode, int(sy[7][DIMS_N]) > 0, type_key(head))
     found = _loops.get(key)  # compile_of types every argument: once per types
     if found is not None:
         return found
-    stages = stage_compiles(x, active, sy, ctl, wk, out, rk[0])
-    stage, rows, torques, lcp, callees = stages
-    fn_type = (stage.function_type, rows.function_type, torques.function_type,
-               lcp.function_type, tuple(c.function_type for c in callees))
-    advance = compile_of(_advance_with_events, (0.0, x, 0.0, active, sy, ctl, wk, out, rk, st0,
-                                                loc, imp, ev, n_ev, fn_type), numba.types.int64)
-    pointer_types = (stage.pointer_type, rows.pointer_type, torques.pointer_type,
-                     lcp.pointer_type, tuple(c.pointer_type for c in callees))
-    loop = compile_of(run_contact_rk4, (*head, pointer_types, advance.pointer_type))
+    stage, rows, torques, lcp, callees = stage_compiles(x, active, sy, ctl, wk, out, rk[0])
+
+    def each(f):  # f of every compile of fn, nested as fn
+        return (f(stage), f(rows), f(torques), f(lcp), tuple(f(c) for c in callees))
+
+    advance = compile_of(_advance_with_events,
+                         (0.0, x, 0.0, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev,
+                          each(lambda c: c.function_type)), numba.types.int64)
+    loop = compile_of(run_contact_rk4,
+                      (*head, each(lambda c: c.pointer_type), advance.pointer_type))
     # the larger first (by the code each compiles); object_pd_step and touching_torques share
     # the controller's torques: one group; phased_pd's distribution and plan share nothing
-    controller = ([[c] for c in callees[2:]] if int(ctl[0][CTL_MODE]) == CONTROL_PHASED
+    controller = ([[c] for c in callees[2:]] if mode == CONTROL_PHASED
                   else [[*callees[2:]]])
     groups = [[advance], [loop], *controller, [lcp], [torques], [*callees[1:2]], [rows],
               [stage], [*callees[:1]]]
     compile_all([g for g in groups if g])
-    fn = (pointer(stage), pointer(rows), pointer(torques), pointer(lcp),
-          tuple(pointer(c) for c in callees))
-    found = _loops[key] = (compiled(loop), fn, pointer(advance))
+    found = _loops[key] = (compiled(loop), each(pointer), pointer(advance))
     return found
 
 
