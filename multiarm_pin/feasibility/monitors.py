@@ -104,12 +104,16 @@ class CollisionMonitor:
         if hull is not None:
             scan.geo.support(hull, np.zeros((1, 3)), scan.compiled)
 
+    def prepare(self, record) -> None:
+        """Make the run's scan, its arrays for ``record``'s samples (else the first check does)."""
+        if self.scan is None:
+            self.scan = RunScan(self.scene, len(record.t))
+
     def check(self, record, k0: int, k1: int) -> int | None:
         """The first sample in ``[k0, k1)`` where two bodies collide, or None."""
         if self._stopped:
             return None
-        if self.scan is None:
-            self.scan = RunScan(self.scene, len(record.t))
+        self.prepare(record)
         q, p, quat = record.q[k0:k1], record.p[k0:k1], record.quat[k0:k1]
         n = _finite_rows(q, p, quat)
         if n < k1 - k0:

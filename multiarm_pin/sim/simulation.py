@@ -432,8 +432,16 @@ class Monitor(Protocol):
         A monitor may also have ``warm_up(record, state)``: call the compiled kernels its
         checks call, on a small example shaped as ``record``'s samples at ``state`` and
         without changing itself, so that they compile beside the run's loop
-        (:class:`~multiarm_pin._compiled.function_pointers.WarmUp`).
+        (:class:`~multiarm_pin._compiled.function_pointers.WarmUp`); and ``prepare(record)``:
+        make what its checks need for a run of ``record``'s samples (a scan's arrays), called
+        on the worker thread as the run starts, while the loop is loaded or compiled.
         """
+
+
+def _prepare(ready: Sequence, rec: Recorder) -> None:
+    """Call each monitor's ``prepare`` (:class:`Monitor`) for the run of ``rec``."""
+    for prepare in ready:
+        prepare(rec)
 
 
 class _Watch:
@@ -449,7 +457,8 @@ class _Watch:
 
     The checks of a stretch run on a worker thread while the loop simulates the next one (the
     compiled loops release the GIL), so on a machine with a free core they add little to a
-    run's wall time. They stay in order (a stretch's checks start once the previous stretch's
+    run's wall time. The monitors' ``prepare`` runs there first, as the run starts, while the
+    loop is loaded or compiled. They stay in order (a stretch's checks start once the previous stretch's
     have ended) and read only samples that are settled (the loops write later ones). A
     violation is raised at the next call (or at :meth:`finish`): the samples simulated since
     are dropped, so the run ends exactly as if the checks had been made in line.
@@ -475,6 +484,9 @@ class _Watch:
             if hasattr(m, "warm_up"))
         if self._warm:
             compile_with_next(self._warm)
+        ready = [m.prepare for m in self.monitors if hasattr(m, "prepare")]
+        if rec is not None and ready:  # the first check then finds them made
+            self._pending = self._worker().submit(_prepare, ready, rec)
 
     def longest_stretch(self, samples: int) -> None:
         """A loop's calls come at most ``samples`` samples apart.
@@ -504,10 +516,7 @@ class _Watch:
         if last:
             self._raise(self._check(rec, k0, end))
             return
-        if self._pool is None:
-            self._pool = ThreadPoolExecutor(1, thread_name_prefix="multiarm-pin-monitors")
-            register_thread_owner(self)
-        self._pending = self._pool.submit(self._check, rec, k0, end)
+        self._pending = self._worker().submit(self._check, rec, k0, end)
 
     def end_worker(self) -> None:
         """End the worker thread now, its check under way done; its result is kept.
@@ -533,6 +542,13 @@ class _Watch:
             return None
         finally:
             self._close()
+
+    def _worker(self) -> ThreadPoolExecutor:
+        """The worker thread that checks the stretches (started at the first need)."""
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(1, thread_name_prefix="multiarm-pin-monitors")
+            register_thread_owner(self)
+        return self._pool
 
     def _collect(self) -> RunStoppedError | None:
         pending, self._pending = self._pending, None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from types import SimpleNamespace
 
 import numba
 import numpy as np
@@ -140,13 +141,39 @@ def test_stretches_recorded_while_the_worker_checks_are_shown_together():
     assert len([k for k in handed_back if a < k < b]) >= 1, (spy.stretches, handed_back)
 
 
+def test_monitors_prepare_on_the_worker_once_before_their_first_check():
+    # a monitor's own set-up for a run (the collision scan's arrays) is made on the worker
+    # as the run starts, beside the loop's loading or compile, for the run's record
+    import threading
+
+    built = _built(demo_data(duration=0.3), "scenarios/two_ur5_box.yaml")
+
+    class Preparing(Spy):
+        def __init__(self):
+            super().__init__()
+            self.prepared = []
+
+        def prepare(self, record):
+            self.prepared.append((threading.current_thread() is threading.main_thread(),
+                                  len(record.t), len(self.stretches)))
+
+    spy = Preparing()
+    scan_only = feasibility_monitors(built.system, (), check_initial_state(built))
+    result = _simulate(built, scan_only + (spy,))
+    assert spy.prepared == [(False, len(result.t), 0)]
+    (collision,) = (m for m in scan_only if hasattr(m, "prepare"))
+    scan = collision.scan  # made by prepare, then extended by every check
+    assert scan.T == scan.n == len(result.t)
+    collision.prepare(SimpleNamespace(t=result.t))
+    assert collision.scan is scan
+
+
 @pytest.mark.skipif(numba.config.DISABLE_JIT, reason="compile_all compiles nothing without JIT")
 def test_a_compile_ends_the_monitors_worker_and_keeps_what_it_found(monkeypatch):
     # a loop compiled in the middle of a run (the contact loop after the closed loop) may fork
     # children to compile only with no other thread: compile_all ends the monitors' worker
     # first; the check it was running is done and its stop is raised as it would have been
     import threading
-    from types import SimpleNamespace
 
     from multiarm_pin._compiled import function_pointers
     from multiarm_pin.sim.simulation import _Watch
