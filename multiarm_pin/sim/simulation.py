@@ -382,7 +382,7 @@ class _Stretch:
 
     1 % of the run, doubled while a call takes less than :attr:`WALL` seconds, up to 10 % of
     the run and :data:`MONITOR_STRETCH` samples: so that a call's Python around it (unboxing
-    its arguments, the record's bookkeeping: about 0.1 ms) stays small against the call,
+    its arguments, the record's bookkeeping) stays small against the call,
     while the progress reports and a Ctrl-C (seen between calls) still come every few
     hundredths of a second, and the run's monitors see each stretch soon after it is done.
     """
