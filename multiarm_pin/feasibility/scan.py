@@ -393,11 +393,6 @@ class RunScan:
         self.path_turn[n0:n1] = base_t + np.cumsum(turn, axis=0)
         self._last_rel = (R[-1].copy(), p[-1].copy())
 
-    def _path(self, s: np.ndarray, k: np.ndarray) -> np.ndarray:
-        """``C`` of pairs ``k`` at samples ``s`` (same shapes) [m]."""
-        u = self.geo.joint_pair[k]
-        return self.path_shift[s, u] + self.geo.rho[k] * self.path_turn[s, u]
-
     def _first_exceeding(self, ks: np.ndarray, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
         """First sample in ``[lo, hi)`` where each pair's bound falls to its target.
 

@@ -458,8 +458,8 @@ class _Watch:
     The checks of a stretch run on a worker thread while the loop simulates the next one (the
     compiled loops release the GIL), so on a machine with a free core they add little to a
     run's wall time. The monitors' ``prepare`` runs there first, as the run starts, while the
-    loop is loaded or compiled. They stay in order (a stretch's checks start once the previous stretch's
-    have ended) and read only samples that are settled (the loops write later ones). A
+    loop is loaded or compiled. They stay in order (a stretch's checks start once the previous
+    stretch's have ended) and read only samples that are settled (the loops write later ones). A
     violation is raised at the next call (or at :meth:`finish`): the samples simulated since
     are dropped, so the run ends exactly as if the checks had been made in line.
 
