@@ -11,9 +11,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from numba.core import caching
 
 from multiarm_pin._compiled import cache, linalg
+from multiarm_pin._compiled.jit import jit_disabled
 
 PACKAGE = Path(cache.__file__).resolve().parent.parent
 
@@ -83,3 +85,64 @@ def test_editing_another_kernel_file_recompiles(tmp_path):
     other.write_text(other.read_text(encoding="utf-8") + "\n# edited\n", encoding="utf-8")
     again = probe(root, cache_dir)
     assert again["misses"] == 1 and again["hits"] == 0  # recompiled, though linalg.py is as it was
+
+
+@pytest.mark.skipif(jit_disabled(), reason="numba's cache of a compiled kernel")
+def test_a_compile_lock_holds_one_signature_and_not_the_others():
+    # flock: two holders in one process (two open files) exclude each other, as two processes
+    import threading
+
+    from numba import types
+
+    c = linalg.cholesky._cache
+    one, other = (types.float64[:, ::1], types.int64), (types.float64[:, :], types.int64)
+    order = []
+    held, done = threading.Event(), threading.Event()
+
+    def holder():
+        with cache.compile_lock(c, one):
+            held.set()
+            order.append(("other taken meanwhile", done.wait(20.0)))
+            order.append("released")
+
+    thread = threading.Thread(target=holder)
+    thread.start()
+    assert held.wait(20.0)
+    with cache.compile_lock(c, other):  # another signature: not held up
+        done.set()
+    with cache.compile_lock(c, one):  # the same one: once the holder has let go
+        order.append("taken")
+    thread.join()
+    assert order == [("other taken meanwhile", True), "released", "taken"]
+
+
+@pytest.mark.skipif(jit_disabled(), reason="nothing is compiled without the JIT")
+def test_compiled_holds_the_compile_lock_only_to_compile(monkeypatch):
+    import contextlib
+
+    import numpy as np
+    from numba import types
+
+    from multiarm_pin._compiled import function_pointers
+
+    taken = []
+
+    @contextlib.contextmanager
+    def recording(c, signature):
+        taken.append((c._py_func, signature))
+        yield
+
+    monkeypatch.setattr(function_pointers, "compile_lock", recording)
+    # types no other test compiles copy2 for: float32, the source a strided view
+    a, b = np.zeros((2, 3), np.float32), np.ones((2, 6), np.float32)[:, ::2]
+    entry = function_pointers.compile_of(linalg.copy2, (a, b))
+    assert entry.types not in linalg.copy2.overloads
+    first = function_pointers.compiled(entry)
+    function_pointers.compiled(entry)  # made: no lock
+    cfunc = function_pointers.compile_of(linalg.copy2, (a, b), types.none)
+    function_pointers.compiled(cfunc)
+    function_pointers.compiled(cfunc)
+    assert taken == [(linalg.copy2.py_func, entry.types),
+                     (linalg.copy2.py_func, types.none(*entry.types))]
+    first(a, b)
+    assert (a == 1).all()

@@ -21,7 +21,8 @@ runs in several). numba saves an entry by reading a function's index, choosing t
 data file name the index does not use, writing the index, then the data: two processes that
 save two signatures of one function at once choose the same name, and the index can then
 point a signature at the other's code. Every index's reads and saves here hold a lock on a
-file beside it (``fcntl.flock``: shared to load, exclusive to save).
+file beside it (``fcntl.flock``: shared to load, exclusive to save). And two processes that
+need one compile at once make it once (:func:`compile_lock`).
 """
 
 from __future__ import annotations
@@ -98,13 +99,50 @@ def index_lock(index_path: str, exclusive: bool):
     then there is nothing to read), or where the file system does not lock (some network
     file systems refuse ``flock``), no lock is held: numba's own behaviour.
     """
+    with _file_lock(index_path + ".lock", exclusive):
+        yield
+
+
+@contextlib.contextmanager
+def compile_lock(cache, signature):
+    """Hold an exclusive lock on one signature's compile in ``cache``'s folder.
+
+    Two processes that need the same kernel compiled for the same signature at once (the
+    test workers, a study's workers, on a cache without it) would each compile it: the second
+    to take this lock finds it in the cache instead, since numba's compile looks there first.
+    One lock file per signature, beside the function's index (``<index>.<key digest>.compile``);
+    compiles of other signatures are not held up. No lock where :func:`index_lock` would hold
+    none, or where the cache's paths are not known (another numba).
+
+    Args:
+        cache: the function's numba cache (``dispatcher._cache``, or a ``FunctionCache``).
+        signature: what numba keys the entry by (a dispatcher's argument types; a ``cfunc``'s
+            signature).
+    """
+    from numba.core.registry import cpu_target
+
+    try:
+        key = cache._index_key(signature, cpu_target.target_context.codegen())
+        index_path = cache._cache_file._index_path
+        cache._impl.locator.ensure_cache_path()
+    except Exception:  # noqa: BLE001 - numba's cache internals, or no writable folder
+        yield
+        return
+    digest = hashlib.sha256(repr(key).encode()).hexdigest()[:16]
+    with _file_lock(f"{index_path}.{digest}.compile", exclusive=True):
+        yield
+
+
+@contextlib.contextmanager
+def _file_lock(path: str, exclusive: bool):
+    """Hold an ``flock`` on the file ``path`` (made if missing); none where it cannot be had."""
     try:
         import fcntl
     except ImportError:  # pragma: no cover - not POSIX
         yield
         return
     try:
-        fd = os.open(index_path + ".lock", os.O_RDWR | os.O_CREAT, 0o666)
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
     except OSError:
         yield
         return
@@ -151,4 +189,5 @@ class _KernelStamp:
         return super().from_function(py_func, py_file)
 
 
-__all__ = ["KERNEL_FILES", "index_lock", "install", "is_kernel_file", "kernel_sources_digest"]
+__all__ = ["KERNEL_FILES", "compile_lock", "index_lock", "install", "is_kernel_file",
+           "kernel_sources_digest"]

@@ -36,6 +36,7 @@ from numba.core import types as nb_types
 from numba.core.registry import cpu_target
 from numba.extending import intrinsic, overload
 
+from multiarm_pin._compiled.cache import compile_lock
 from multiarm_pin._compiled.jit import jit_disabled
 
 PROCESSES_VARIABLE = "MULTIARM_PIN_COMPILE_PROCESSES"
@@ -171,6 +172,9 @@ def compile_of(kernel, args: Sequence, result=None) -> Compile:
 def compiled(job: Compile):
     """The compiled function of ``job``: made, loaded from numba's disk cache, or compiled.
 
+    A compile holds :func:`~multiarm_pin._compiled.cache.compile_lock`: a process that needs
+    the same compile as another at once waits for it and loads its work from the cache.
+
     A first-class function is made once per process. A kernel's entry point is called
     without numba's dispatch, which types every argument again at every call (the function
     pointers through ``numba.typeof``): only for arguments whose types are fixed by
@@ -185,12 +189,18 @@ def compiled(job: Compile):
     if jit_disabled() or not hasattr(kernel, "py_func"):
         return kernel
     if job.result is None:
-        return kernel.compile(job.types)  # an overload already made is returned as it is
+        if job.types in kernel.overloads:
+            return kernel.compile(job.types)  # the overload made: returned as it is
+        with compile_lock(kernel._cache, job.types):  # another process may be compiling it
+            return kernel.compile(job.types)
     key = (kernel.py_func, job.result(*job.types))
     made = _by_signature.get(key)
     if made is None:
-        made = _by_signature[key] = numba.cfunc(key[1], cache=True, error_model="numpy")(
-            kernel.py_func)
+        from numba.core.caching import FunctionCache
+
+        with compile_lock(FunctionCache(kernel.py_func), key[1]):
+            made = _by_signature[key] = numba.cfunc(key[1], cache=True, error_model="numpy")(
+                kernel.py_func)
     return made
 
 
