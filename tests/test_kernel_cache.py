@@ -114,6 +114,9 @@ def test_a_compile_lock_holds_one_signature_and_not_the_others():
         order.append("taken")
     thread.join()
     assert order == [("other taken meanwhile", True), "released", "taken"]
+    with cache.compile_lock(object(), one):  # no numba cache behind it: no lock, no error
+        order.append("unlocked")
+    assert order[-1] == "unlocked"
 
 
 @pytest.mark.skipif(jit_disabled(), reason="nothing is compiled without the JIT")

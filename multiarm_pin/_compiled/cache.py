@@ -107,9 +107,10 @@ def index_lock(index_path: str, exclusive: bool):
 def compile_lock(cache, signature):
     """Hold an exclusive lock on one signature's compile in ``cache``'s folder.
 
-    Two processes that need the same kernel compiled for the same signature at once (the
-    test workers, a study's workers, on a cache without it) would each compile it: the second
-    to take this lock finds it in the cache instead, since numba's compile looks there first.
+    Two processes that need the same kernel compiled for the same signature at once (two runs
+    started together, a study's workers, on a cache without it) would each compile it: the
+    second to take this lock finds it in the cache instead, since numba's compile looks there
+    first.
     One lock file per signature, beside the function's index (``<index>.<key digest>.compile``);
     compiles of other signatures are not held up. No lock where :func:`index_lock` would hold
     none, or where the cache's paths are not known (another numba).
@@ -121,15 +122,18 @@ def compile_lock(cache, signature):
     """
     from numba.core.registry import cpu_target
 
+    path = None
     try:
         key = cache._index_key(signature, cpu_target.target_context.codegen())
-        index_path = cache._cache_file._index_path
         cache._impl.locator.ensure_cache_path()
-    except Exception:  # noqa: BLE001 - numba's cache internals, or no writable folder
+        digest = hashlib.sha256(repr(key).encode()).hexdigest()[:16]
+        path = f"{cache._cache_file._index_path}.{digest}.compile"
+    except Exception:  # noqa: BLE001, S110 - numba's cache internals, or no writable folder
+        pass
+    if path is None:
         yield
         return
-    digest = hashlib.sha256(repr(key).encode()).hexdigest()[:16]
-    with _file_lock(f"{index_path}.{digest}.compile", exclusive=True):
+    with _file_lock(path, exclusive=True):
         yield
 
 
