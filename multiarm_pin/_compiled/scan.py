@@ -181,14 +181,14 @@ def first_exceeding(shift, turn, u, rho, thr, lo, hi, at):  # pragma: no cover -
 
 
 @kernel(nogil=True)
-def _write_height(d, row, col, low, exact, best):  # pragma: no cover - compiled
-    """An exact height ``d`` [m] into ``low[row, col]`` and ``exact[row, col]``; the new best.
+def _write_height(d, row, col, slot, low, exact, best):  # pragma: no cover - compiled
+    """An exact height ``d`` [m] into ``low[row, slot]`` and ``exact[row, col]``; the new best.
 
     The tail of :func:`ground_heights` and :func:`round_heights`: ``d`` is the body's origin
     height minus its support function along ``-z`` minus the ground's height; returns
     ``min(best, d)``.
     """
-    low[row, col] = d
+    low[row, slot] = d
     exact[row, col] = d
     return min(best, d)
 
@@ -214,7 +214,7 @@ def stable_order(a):  # pragma: no cover - compiled
 
 @kernel(nogil=True)
 def ground_heights(R, p, joints, corners, vertices, starts, height, best, tol, n0, pairs,
-                   low, exact):  # pragma: no cover - compiled
+                   slots, low, exact):  # pragma: no cover - compiled
     """The polytopes' ground pairs at ``m`` samples: bounds, and exact where they matter.
 
     Each body's lowest box corner bounds its height above the ground ``z = height`` from
@@ -234,8 +234,9 @@ def ground_heights(R, p, joints, corners, vertices, starts, height, best, tol, n
         best: the smallest height found so far [m].
         tol: the penetration tolerance [m].
         n0: the run index of the first sample.
-        pairs: (K,) int64 the pairs' columns.
-        low: (T, P) the ground pairs' lower bounds: rows ``n0 .. n0 + m - 1`` written.
+        pairs: (K,) int64 the pairs' columns of ``exact``.
+        slots: (K,) int64 their columns of ``low``.
+        low: (T, Pg) the ground pairs' lower bounds: rows ``n0 .. n0 + m - 1`` written.
         exact: (T, P) exact heights: written where computed.
 
     Returns:
@@ -244,7 +245,7 @@ def ground_heights(R, p, joints, corners, vertices, starts, height, best, tol, n
     m, K = R.shape[0], joints.shape[0]
     lowest = np.empty(K)
     for k in range(K):
-        j, col = joints[k], pairs[k]
+        j, col = joints[k], slots[k]
         lk = np.inf
         for s in range(m):
             z = np.inf
@@ -259,7 +260,7 @@ def ground_heights(R, p, joints, corners, vertices, starts, height, best, tol, n
         limit = max(best, tol)
         if lowest[k] >= limit:
             break  # and every later pair's bound is at least as large
-        j, col = joints[k], pairs[k]
+        j, col = joints[k], slots[k]
         for s in range(m):
             if low[n0 + s, col] >= limit:
                 continue
@@ -267,7 +268,8 @@ def ground_heights(R, p, joints, corners, vertices, starts, height, best, tol, n
             for v in range(starts[k], starts[k + 1]):
                 top = max(top, -R[s, j, 2, 0] * vertices[v, 0] - R[s, j, 2, 1] * vertices[v, 1]
                           - R[s, j, 2, 2] * vertices[v, 2])
-            best = _write_height(p[s, j, 2] - top - height, n0 + s, col, low, exact, best)
+            best = _write_height(p[s, j, 2] - top - height, n0 + s, pairs[k], col, low, exact,
+                                 best)
     return best
 
 
@@ -306,7 +308,7 @@ def grasp_openings(centres, bodies, radius, points, zone, n0, columns,
 
 
 @kernel(nogil=True)
-def pair_bounds(exact, shift, turn, ks, u, rho, centres, a, b, ra, rb, spheres, ground,
+def pair_bounds(exact, shift, turn, ks, u, rho, centres, a, b, ra, rb, spheres, slots,
                 ground_lower, out):  # pragma: no cover - compiled
     """Lower bounds of pairs' hull distances at every sample scanned (``column_bounds``).
 
@@ -327,16 +329,17 @@ def pair_bounds(exact, shift, turn, ks, u, rho, centres, a, b, ra, rb, spheres, 
         ra: (K,) the first bodies' sphere radii [m].
         rb: (K,) the second bodies' [m].
         spheres: (K,) bool: the spheres' gap bounds the pair.
-        ground: (K,) bool: a ground pair (its ``ground_lower`` column is its bound).
-        ground_lower: (T, P) the ground pairs' bounds [m].
+        slots: (K,) int64 a ground pair's column of ``ground_lower`` (its bound there), -1 for
+            another pair.
+        ground_lower: (T, Pg) the ground pairs' bounds [m].
         out: output (n, K) the bounds at samples ``0 .. n - 1`` [m].
     """
     n = out.shape[0]
     for k in range(ks.shape[0]):
         col, uk, rk = ks[k], u[k], rho[k]
-        if ground[k]:
+        if slots[k] >= 0:
             for s in range(n):
-                out[s, k] = ground_lower[s, col]
+                out[s, k] = ground_lower[s, slots[k]]
             continue
         best = -np.inf  # max over measured s' <= s of d + C(s')
         for s in range(n):
@@ -363,8 +366,8 @@ def pair_bounds(exact, shift, turn, ks, u, rho, centres, a, b, ra, rb, spheres, 
 
 
 @kernel(nogil=True)
-def round_heights(R, p, joints, rotations, offsets, sizes, cylinder, height, n0, pairs, low,
-                  exact):  # pragma: no cover - compiled
+def round_heights(R, p, joints, rotations, offsets, sizes, cylinder, height, n0, pairs, slots,
+                  low, exact):  # pragma: no cover - compiled
     """Heights above the ground ``z = height`` of round bodies' lowest points, exactly.
 
     Spheres, capsules (``sizes[k] = (radius, half length)``, a sphere's half length 0) and
@@ -380,8 +383,9 @@ def round_heights(R, p, joints, rotations, offsets, sizes, cylinder, height, n0,
         cylinder: (K,) bool: a cylinder (else a sphere or capsule).
         height: the ground's height [m].
         n0: the run index of the first sample.
-        pairs: (K,) int64 the pairs' columns.
-        low: (T, P) the ground pairs' bounds: rows ``n0 .. n0 + m - 1`` written.
+        pairs: (K,) int64 the pairs' columns of ``exact``.
+        slots: (K,) int64 their columns of ``low``.
+        low: (T, Pg) the ground pairs' bounds: rows ``n0 .. n0 + m - 1`` written.
         exact: (T, P) exact heights: the same rows written.
 
     Returns:
@@ -389,7 +393,7 @@ def round_heights(R, p, joints, rotations, offsets, sizes, cylinder, height, n0,
     """
     best = np.inf
     for k in range(joints.shape[0]):
-        j, col = joints[k], pairs[k]
+        j = joints[k]
         for s in range(R.shape[0]):
             u0, u1, u2 = -R[s, j, 2, 0], -R[s, j, 2, 1], -R[s, j, 2, 2]
             g0 = u0 * rotations[k, 0, 0] + u1 * rotations[k, 1, 0] + u2 * rotations[k, 2, 0]
@@ -399,7 +403,8 @@ def round_heights(R, p, joints, rotations, offsets, sizes, cylinder, height, n0,
                       else math.sqrt(u0 * u0 + u1 * u1 + u2 * u2))
             top = (u0 * offsets[k, 0] + u1 * offsets[k, 1] + u2 * offsets[k, 2]
                    + sizes[k, 1] * abs(g2) + sizes[k, 0] * radial)
-            best = _write_height(p[s, j, 2] - top - height, n0 + s, col, low, exact, best)
+            best = _write_height(p[s, j, 2] - top - height, n0 + s, pairs[k], slots[k], low,
+                                 exact, best)
     return best
 
 

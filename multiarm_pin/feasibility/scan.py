@@ -171,6 +171,9 @@ class _ScanGeometry:
         self.boxed_ground = np.array(sorted(self.vertices), dtype=int)
         self.ground_columns = np.flatnonzero(self.ground)
         self.other_columns = np.flatnonzero(~self.ground)
+        # each ground pair's column of a scan's ground bounds (RunScan.ground_lower), -1 else
+        self.ground_slot = np.full(P, -1, dtype=np.int64)
+        self.ground_slot[self.ground_columns] = np.arange(len(self.ground_columns))
         self.corners = (np.array([self.vertices[k] for k in self.boxed_ground])
                         if self.vertices else np.zeros((0, 8, 3)))
         # the same bodies' vertices, one array for the compiled ground heights
@@ -251,7 +254,8 @@ class RunScan:
         self.path_shift = np.zeros((T, U))  # Σ |Δp| of each joint pair's relative placement
         self.path_turn = np.zeros((T, U))  # Σ ‖ΔR‖_2
         self.exact = np.full((T, P), np.nan)
-        self.ground_lower = np.full((T, P), -np.inf)  # ground pairs' bounds (exact if measured)
+        # the ground pairs' bounds (exact where measured), column geo.ground_slot[pair]
+        self.ground_lower = np.full((T, len(self.geo.ground_columns)), -np.inf)
         self.ground_best = np.inf
         never = T  # a sample index no stretch reaches
         self.due = np.where(self.geo.ground, never, 0)
@@ -481,7 +485,7 @@ class RunScan:
         if not len(ks):
             return
         pairs = self.scene.pairs
-        low = self.ground_lower[n0:n1]
+        low, slot = self.ground_lower[n0:n1], geo.ground_slot
 
         def lowest(k, rows):  # exact heights above the ground at rows of the stretch
             g = int(pairs[k, 0])
@@ -493,32 +497,32 @@ class RunScan:
             R, p = np.ascontiguousarray(R), np.ascontiguousarray(p)
             self.ground_best = min(self.ground_best, kernels.round_heights(
                 R, p, geo.round_joints, geo.round_R, geo.round_t, geo.round_size,
-                geo.round_cylinder, self.scene.ground, n0, geo.round_ground, self.ground_lower,
-                self.exact))
+                geo.round_cylinder, self.scene.ground, n0, geo.round_ground,
+                slot[geo.round_ground], self.ground_lower, self.exact))
         for k in ks if not self.compiled else ():
             if k not in geo.vertices:
-                self.exact[n0:n1, k] = low[:, k] = lowest(k, every)
-                self.ground_best = min(self.ground_best, float(low[:, k].min()))
+                self.exact[n0:n1, k] = low[:, slot[k]] = lowest(k, every)
+                self.ground_best = min(self.ground_best, float(low[:, slot[k]].min()))
         boxed = geo.boxed_ground  # the polytopes' pairs, all at once
         if len(boxed) and self.compiled:
             self.ground_best = kernels.ground_heights(
                 np.ascontiguousarray(R), np.ascontiguousarray(p), geo.boxed_joints, geo.corners,
                 geo.boxed_vertices, geo.boxed_starts, self.scene.ground, self.ground_best,
-                self.tol, n0, boxed, self.ground_lower, self.exact)
+                self.tol, n0, boxed, slot[boxed], self.ground_lower, self.exact)
             return
         if len(boxed):
             j = joint[pairs[boxed, 0]]
-            low[:, boxed] = self._lowest(geo.corners, R[:, j, 2, :], p[:, j, 2])
-        lowest_bound = low[:, boxed].min(axis=0)
+            low[:, slot[boxed]] = self._lowest(geo.corners, R[:, j, 2, :], p[:, j, 2])
+        lowest_bound = low[:, slot[boxed]].min(axis=0)
         for i in np.argsort(lowest_bound, kind="stable"):
             if lowest_bound[i] >= max(self.ground_best, self.tol):
                 break  # and every later pair's bound is at least as large
             k = int(boxed[i])
-            rows = np.flatnonzero(low[:, k] < max(self.ground_best, self.tol))
+            rows = np.flatnonzero(low[:, slot[k]] < max(self.ground_best, self.tol))
             if not len(rows):
                 continue
             d = lowest(k, rows)
-            self.exact[n0 + rows, k] = low[rows, k] = d
+            self.exact[n0 + rows, k] = low[rows, slot[k]] = d
             self.ground_best = min(self.ground_best, float(d.min()))
 
     def _lowest(self, corners: np.ndarray, Rz: np.ndarray, pz: np.ndarray) -> np.ndarray:
@@ -612,7 +616,7 @@ class RunScan:
             kernels.pair_bounds(self.exact, self.path_shift, self.path_turn, ks,
                                 geo.joint_pair[ks], geo.rho[ks],
                                 self._centres if kept else np.zeros((1, 1, 3)), a, b,
-                                geo.radius[a], geo.radius[b], spheres, ground,
+                                geo.radius[a], geo.radius[b], spheres, geo.ground_slot[ks],
                                 self.ground_lower, out)
             return out
         d = self.exact[:n, ks]
@@ -629,7 +633,7 @@ class RunScan:
         bound = np.where(missing, bound, d)
         ground = geo.ground[ks]
         if ground.any():
-            bound[:, ground] = self.ground_lower[:n, ks[ground]]
+            bound[:, ground] = self.ground_lower[:n, geo.ground_slot[ks[ground]]]
         return bound
 
     def _sphere_bounds(self, ks: np.ndarray) -> np.ndarray | None:
@@ -705,7 +709,7 @@ class RunScan:
         out = np.minimum(np.minimum(self._segment_min, self._before_first), after)
         out[np.isnan(self._last_d)] = -np.inf
         g = np.flatnonzero(geo.ground)
-        out[g] = self.ground_lower[:n, g].min(axis=0)
+        out[g] = self.ground_lower[:n, geo.ground_slot[g]].min(axis=0)
         return out
 
     def result(self) -> ScanResult:
