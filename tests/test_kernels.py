@@ -417,6 +417,31 @@ def test_mat_vec_and_mat_mat_equal_numpy(r, s, c):
     np.testing.assert_allclose(prod, A @ B, rtol=0, atol=1e-14 * max(1, s))
 
 
+@pytest.mark.parametrize("rows, cols, rank", [(6, 4, 4), (6, 4, 2), (3, 5, 3), (5, 5, 0)])
+def test_spectral_solve_is_the_pseudo_inverse_solve(rows, cols, rank):
+    """``linalg.spectral_solve`` on a thin SVD, and on the eigendecomposition of a symmetric
+    indefinite matrix, is the pseudo-inverse solve at the matrix's rank. The matrices are
+    made from their factors: kept values of magnitude 1 to 3, dropped ones exactly 0 (their
+    computed values at round-off, 1e-15 or less), the tolerance 1e-8 between them."""
+    rng = np.random.default_rng(10 * rows + cols + rank)
+    Q1 = np.linalg.qr(rng.normal(size=(rows, rows)))[0][:, :rank]
+    Q2 = np.linalg.qr(rng.normal(size=(cols, cols)))[0][:, :rank]
+    sigma = rng.uniform(1.0, 3.0, size=rank)
+    A = (Q1 * sigma) @ Q2.T
+    f = rng.normal(size=rows)
+    U, sv, Vt = np.linalg.svd(A, full_matrices=False)
+    out = np.full(cols, np.nan)
+    linalg.spectral_solve(U, sv, Vt, f, 1e-8, out)
+    np.testing.assert_allclose(out, (Q2 / sigma) @ (Q1.T @ f), rtol=0, atol=1e-12)
+    e = sigma * np.where(np.arange(rank) % 2, -1.0, 1.0)  # eigenvalues of both signs
+    S = (Q2 * e) @ Q2.T
+    ev, V = np.linalg.eigh(S)
+    g = rng.normal(size=cols)
+    sym = np.full(cols, np.nan)
+    linalg.spectral_solve(V, ev, np.ascontiguousarray(V.T), g, 1e-8, sym)
+    np.testing.assert_allclose(sym, (Q2 / e) @ (Q2.T @ g), rtol=0, atol=1e-12)
+
+
 @pytest.mark.parametrize("rows, cols, zero", [(6, 4, [1]), (7, 7, [0, 5]), (6, 3, [0, 1, 2]),
                                               (3, 5, []), (4, 6, [2])])
 def test_column_least_squares_without_full_column_rank_equals_lstsq(rows, cols, zero):

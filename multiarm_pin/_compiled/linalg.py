@@ -276,6 +276,34 @@ def mat_mat(A, B, out):  # pragma: no cover - compiled
             out[i, j] = acc
 
 
+@kernel
+def spectral_solve(U, s, Vt, f, tol, out):  # pragma: no cover - compiled
+    """``out = Σ_q Vt[q]ᵀ (U[:, q]·f) / s[q]`` over the ``q`` with ``|s[q]| > tol``.
+
+    The pseudo-inverse solve of a factorisation ``A = U diag(s) Vt`` (a thin SVD, or an
+    eigendecomposition ``V diag(s) Vᵀ`` with ``Vt = Vᵀ``), the values at or below ``tol``
+    (and NaN) dropped.
+
+    Args:
+        U: (r, K) left vectors in columns.
+        s: (K,) singular values or eigenvalues.
+        Vt: (K, c) right vectors in rows.
+        f: (r,) right-hand side.
+        tol: the largest value dropped.
+        out: output (c,).
+    """
+    for c in range(out.shape[0]):
+        out[c] = 0.0
+    for q in range(s.shape[0]):
+        if abs(s[q]) > tol:
+            acc = 0.0
+            for a in range(U.shape[0]):
+                acc += U[a, q] * f[a]
+            acc /= s[q]
+            for c in range(out.shape[0]):
+                out[c] += Vt[q, c] * acc
+
+
 __all__ = ["batched_spd_solve", "cholesky", "cholesky_solve", "copy1", "copy2",
            "householder_qr", "householder_reflect", "inverse_diagonal", "mat_mat", "mat_vec",
-           "singular_values"]
+           "singular_values", "spectral_solve"]

@@ -84,6 +84,7 @@ from multiarm_pin._compiled.linalg import (
     householder_reflect,
     mat_mat,
     mat_vec,
+    spectral_solve,
 )
 from multiarm_pin._compiled.trajectory import exp3
 
@@ -263,16 +264,7 @@ def column_least_squares(E, cols, n, f, out):  # pragma: no cover - compiled
             for a in range(p):
                 Ep[a, c] = E[a, cols[c]]
         U, sv, Vt = np.linalg.svd(Ep, full_matrices=False)
-        for c in range(n):
-            out[c] = 0.0
-        for q in range(sv.shape[0]):
-            if sv[q] > eps * max(p, n) * sv[0]:
-                acc = 0.0
-                for a in range(p):
-                    acc += U[a, q] * f[a]
-                acc /= sv[q]
-                for c in range(n):
-                    out[c] += Vt[q, c] * acc
+        spectral_solve(U, sv, Vt, f, eps * max(p, n) * sv[0], out[:n])
         return
     for j in range(n - 1, -1, -1):
         acc = b[j]
@@ -594,15 +586,8 @@ def supported_distribution(M_o, h_o, a_d, W, cols, G, kappa, unilateral, margins
         top = 0.0
         for p in range(P):
             top = max(top, abs(lev[p]))
-        lam = np.zeros(P)
-        for p in range(P):
-            if abs(lev[p]) > PINV_RCOND * top:
-                acc = 0.0
-                for q in range(P):
-                    acc += LV[q, p] * rhs[q]
-                acc /= lev[p]
-                for q in range(P):
-                    lam[q] += LV[q, p] * acc
+        lam = np.empty(P)
+        spectral_solve(LV, lev, LV.T, rhs, PINV_RCOND * top, lam)
         mat_vec(Minv_Gt, lam, a)
         for i in range(6):
             a[i] = a_d[i] - a[i]
