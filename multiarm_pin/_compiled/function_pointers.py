@@ -33,6 +33,7 @@ import numba
 from numba._dispatcher import compute_fingerprint
 from numba.core import cgutils
 from numba.core import types as nb_types
+from numba.core.caching import FunctionCache
 from numba.core.registry import cpu_target
 from numba.extending import intrinsic, overload
 
@@ -196,8 +197,6 @@ def compiled(job: Compile):
     key = (kernel.py_func, job.result(*job.types))
     made = _by_signature.get(key)
     if made is None:
-        from numba.core.caching import FunctionCache
-
         with compile_lock(FunctionCache(kernel.py_func), key[1]):
             made = _by_signature[key] = numba.cfunc(key[1], cache=True, error_model="numpy")(
                 kernel.py_func)
@@ -290,8 +289,6 @@ def _ready(job: Compile) -> bool:
         cache = None
     try:
         if cache is None:
-            from numba.core.caching import FunctionCache
-
             cache = FunctionCache(kernel.py_func)
         key = cache._index_key(signature, cpu_target.target_context.codegen())
         return key in cache._cache_file._load_index()
