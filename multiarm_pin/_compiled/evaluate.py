@@ -168,7 +168,7 @@ def solution_views(buf, off, n, k, m):  # pragma: no cover - compiled
 @kernel(inline="always")
 def _group_arms_into(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_offset, lo,
                      M, nle, J, Jdq, p, R, tw, vp):  # pragma: no cover - compiled
-    """:func:`_group_arms` on the arm views themselves (inlined)."""
+    """:func:`arm_terms` of the group of arms ``lo..lo + len(H)`` into the arm views (inlined)."""
     k = M.shape[1]
     hi = lo + H.shape[0]
     start = x.shape[0] - 2 * nv + v_offset
@@ -176,15 +176,6 @@ def _group_arms_into(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_
     arm_terms(J_world, dJ_world, M_full, nle_full, v, H, arm_ints[:, ARM_JOINTS:ARM_JOINTS + k],
               arm_ints[:, ARM_NV], arm_ints[:, ARM_JOINTS + k:ARM_JOINTS + 2 * k], M[lo:hi],
               nle[lo:hi], J[lo:hi], Jdq[lo:hi], p[lo:hi], R[lo:hi], tw[lo:hi], vp[lo:hi])
-
-
-@kernel
-def _group_arms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_offset, lo, arms
-                ):  # pragma: no cover - compiled
-    """:func:`arm_terms` of the group of arms ``lo..lo + len(H)`` into the arm views."""
-    M, nle, J, Jdq, p, R, tw, vp = arms
-    _group_arms_into(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_offset, lo,
-                     M, nle, J, Jdq, p, R, tw, vp)
 
 
 @kernel(inline="always")

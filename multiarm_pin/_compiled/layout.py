@@ -472,8 +472,6 @@ SHAPE_CODES = np.array([[_DIM_CODE.get(d, d) for d in shape] + [1] * (_MAX_NDIM 
                         for _, shape in SEGMENT_TABLE], dtype=np.int64)
 """(N_SEGMENTS, 3) int64: each segment's shape, ``-1, -2, -3`` standing for ``n, k, m``
 (padded with 1), the form in which the compiled code reads :data:`SEGMENT_TABLE`."""
-SEGMENT_NDIM = np.array([len(shape) for _, shape in SEGMENT_TABLE], dtype=np.int64)
-"""(N_SEGMENTS,) number of axes of each segment."""
 
 
 @kernel
