@@ -245,7 +245,7 @@ def ground_heights(R, p, joints, corners, vertices, starts, height, best, tol, n
     m, K = R.shape[0], joints.shape[0]
     lowest = np.empty(K)
     for k in range(K):
-        j, col = joints[k], slots[k]
+        j, slot = joints[k], slots[k]
         lk = np.inf
         for s in range(m):
             z = np.inf
@@ -253,22 +253,22 @@ def ground_heights(R, p, joints, corners, vertices, starts, height, best, tol, n
                 zv = (corners[k, v, 0] * R[s, j, 2, 0] + corners[k, v, 1] * R[s, j, 2, 1]
                       + corners[k, v, 2] * R[s, j, 2, 2])
                 z = min(z, zv)
-            low[n0 + s, col] = z + p[s, j, 2] - height
-            lk = min(lk, low[n0 + s, col])
+            low[n0 + s, slot] = z + p[s, j, 2] - height
+            lk = min(lk, low[n0 + s, slot])
         lowest[k] = lk
     for k in stable_order(lowest):
         limit = max(best, tol)
         if lowest[k] >= limit:
             break  # and every later pair's bound is at least as large
-        j, col = joints[k], slots[k]
+        j, slot = joints[k], slots[k]
         for s in range(m):
-            if low[n0 + s, col] >= limit:
+            if low[n0 + s, slot] >= limit:
                 continue
             top = -np.inf  # the support function along -z: max of -z over the vertices
             for v in range(starts[k], starts[k + 1]):
                 top = max(top, -R[s, j, 2, 0] * vertices[v, 0] - R[s, j, 2, 1] * vertices[v, 1]
                           - R[s, j, 2, 2] * vertices[v, 2])
-            best = _write_height(p[s, j, 2] - top - height, n0 + s, pairs[k], col, low, exact,
+            best = _write_height(p[s, j, 2] - top - height, n0 + s, pairs[k], slot, low, exact,
                                  best)
     return best
 
