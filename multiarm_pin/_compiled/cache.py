@@ -103,6 +103,18 @@ def index_lock(index_path: str, exclusive: bool):
         yield
 
 
+def index_key(cache, signature):
+    """The key of ``signature``'s entry in the index of ``cache`` (a numba function cache).
+
+    numba's own key (``_index_key``: the signature, the code generation's target, hashes of
+    the function's bytecode and closure): what a compile in this process saves or loads.
+    Raises what numba's cache internals raise for an object that is not such a cache.
+    """
+    from numba.core.registry import cpu_target
+
+    return cache._index_key(signature, cpu_target.target_context.codegen())
+
+
 @contextlib.contextmanager
 def compile_lock(cache, signature):
     """Hold an exclusive lock on one signature's compile in ``cache``'s folder.
@@ -120,11 +132,9 @@ def compile_lock(cache, signature):
         signature: what numba keys the entry by (a dispatcher's argument types; a ``cfunc``'s
             signature).
     """
-    from numba.core.registry import cpu_target
-
     path = None
     try:
-        key = cache._index_key(signature, cpu_target.target_context.codegen())
+        key = index_key(cache, signature)
         cache._impl.locator.ensure_cache_path()
         digest = hashlib.sha256(repr(key).encode()).hexdigest()[:16]
         path = f"{cache._cache_file._index_path}.{digest}.compile"
@@ -193,5 +203,5 @@ class _KernelStamp:
         return super().from_function(py_func, py_file)
 
 
-__all__ = ["KERNEL_FILES", "compile_lock", "index_lock", "install", "is_kernel_file",
-           "kernel_sources_digest"]
+__all__ = ["KERNEL_FILES", "compile_lock", "index_key", "index_lock", "install",
+           "is_kernel_file", "kernel_sources_digest"]

@@ -34,10 +34,9 @@ from numba._dispatcher import compute_fingerprint
 from numba.core import cgutils
 from numba.core import types as nb_types
 from numba.core.caching import FunctionCache
-from numba.core.registry import cpu_target
 from numba.extending import intrinsic, overload
 
-from multiarm_pin._compiled.cache import compile_lock
+from multiarm_pin._compiled.cache import compile_lock, index_key
 from multiarm_pin._compiled.jit import jit_disabled
 
 PROCESSES_VARIABLE = "MULTIARM_PIN_COMPILE_PROCESSES"
@@ -290,8 +289,7 @@ def _ready(job: Compile) -> bool:
     try:
         if cache is None:
             cache = FunctionCache(kernel.py_func)
-        key = cache._index_key(signature, cpu_target.target_context.codegen())
-        return key in cache._cache_file._load_index()
+        return index_key(cache, signature) in cache._cache_file._load_index()
     except Exception:  # noqa: BLE001 - numba's cache internals: then it is not known ready
         return False
 
