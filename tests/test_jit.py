@@ -5,6 +5,7 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+import numba
 import numpy as np
 import pytest
 from numba import njit, types
@@ -57,7 +58,7 @@ def test_a_kernel_called_from_a_kernel_is_its_twin_without_python_wrappers(monke
     callee = jit.kernel(add)
     caller = jit.kernel(lambda a: callee(a, 2.0) * 3.0)
     assert caller(1.0) == 9.0
-    twin = callee.get_overload.__self__  # the dispatcher compiled callers call
+    twin = callee.get_overload.__self__.callee  # the dispatcher compiled callers call
     assert twin is not callee and callee.signatures == []
     assert len(twin.signatures) == 1
     assert twin.py_func.__qualname__ == add.__qualname__ + jit.CALLEE_SUFFIX
@@ -89,3 +90,53 @@ def test_the_decorator_keeps_numbas_options():
         k = jit.kernel(inline="always")(lambda a: a)
         assert k.targetoptions["inline"] == "always"
         assert k.targetoptions["error_model"] == "numpy"
+
+
+@needs_jit
+def test_a_kernel_without_refcounts_calls_its_callees_own_twin(monkeypatch):
+    """Callers compiled without reference counting are served by a second twin, never the first.
+
+    A callee compiled without counting that returned an array would give a counting caller a
+    reference it does not own: the two kinds of callers never share a compiled callee.
+    """
+    monkeypatch.setattr(jit, "OPTIONS", {"error_model": "numpy"})  # no disk cache here
+
+    def scale(a, s):
+        for j in range(a.shape[0]):
+            a[j] *= s
+
+    callee = jit.kernel(scale)
+
+    def twice(a):
+        callee(a, 2.0)
+        callee(a, 2.0)
+
+    counted = jit.kernel(twice)
+    borrowed = jit.kernel(refcounts=False)(twice)
+    router = callee.get_overload.__self__
+    a = np.ones(3)
+    borrowed(a)
+    twin, twin_borrowed = router.callee, router._borrowed()
+    assert twin.signatures == [] and len(twin_borrowed.signatures) == 1
+    assert twin_borrowed.targetoptions["_nrt"] is False
+    assert twin_borrowed.py_func.__qualname__ == (scale.__qualname__ + jit.CALLEE_SUFFIX
+                                                  + jit.BORROWED_SUFFIX)
+    counted(a)
+    assert len(twin.signatures) == 1 and twin.targetoptions["_nrt"] is True
+    np.testing.assert_array_equal(a, np.full(3, 16.0))
+    assert borrowed.targetoptions["_nrt"] is False and "_nrt" not in counted.targetoptions
+
+
+@needs_jit
+def test_numba_refuses_an_allocation_without_refcounts(monkeypatch):
+    """What makes ``refcounts=False`` safe to declare: an allocation does not compile."""
+    monkeypatch.setattr(jit, "OPTIONS", {"error_model": "numpy"})
+
+    def first_of_zeros(n):
+        z = np.zeros(n)
+        return z[0]
+
+    callee = jit.kernel(first_of_zeros)
+    with pytest.raises(numba.TypingError, match="Only accept returning of array"):
+        jit.kernel(refcounts=False)(lambda n: callee(n))(3)  # np.zeros's own, without counting
+    assert jit.kernel(lambda n: callee(n))(3) == 0.0

@@ -197,8 +197,9 @@ def compiled(job: Compile):
     made = _by_signature.get(key)
     if made is None:
         with compile_lock(FunctionCache(kernel.py_func), key[1]):
-            made = _by_signature[key] = numba.cfunc(key[1], cache=True, error_model="numpy")(
-                kernel.py_func)
+            made = _by_signature[key] = numba.cfunc(  # without refcounts as the kernel says
+                key[1], cache=True, error_model="numpy",
+                _nrt=kernel.targetoptions.get("_nrt", True))(kernel.py_func)
     return made
 
 

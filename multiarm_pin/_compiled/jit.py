@@ -22,6 +22,18 @@ without them (``no_cpython_wrapper``, ``no_cfunc_wrapper``; its disk cache files
 its ``__qualname__``, the kernel's and :data:`CALLEE_SUFFIX`). Calls from Python take the
 dispatcher :func:`kernel` returns, which compiles its own overloads with both wrappers: a
 twin's overload has no entry point for Python.
+
+numba counts the references to every array a function holds: an array argument is counted as
+the function starts and released on every path out of it, each array of a tuple argument
+too. The loops' kernels take tuples of about a hundred arrays and have many paths out: that
+code grows with the product of the two. A kernel whose call tree allocates no array needs none of it: every array it holds
+is its caller's, alive for the whole call. ``@kernel(refcounts=False)`` compiles such a
+kernel without reference counting (numba's ``_nrt=False``), and its callees likewise: calls
+from a caller compiled so are served by a second twin compiled without it (its cache files
+named with :data:`BORROWED_SUFFIX`), never by the twin that serves other callers (a callee
+compiled without counting that returned an array would give its caller a reference it does
+not own). numba refuses to compile an allocation without reference counting, so a kernel
+that allocates cannot be marked so by mistake.
 """
 
 from __future__ import annotations
@@ -30,6 +42,7 @@ import types as py_types
 
 from numba import njit, types
 from numba.core import config
+from numba.core.targetconfig import ConfigStack
 
 OPTIONS = {"cache": True, "error_model": "numpy"}
 """The options every kernel is compiled with (:func:`kernel` adds ``inline``, ``nogil``)."""
@@ -39,8 +52,12 @@ CALLEE_SUFFIX = "__in_kernels"
 """Added to a kernel's ``__qualname__`` for the dispatcher that compiled callers call (its
 disk cache files are named by it)."""
 
+BORROWED_SUFFIX = "__borrowed"
+"""Added after :data:`CALLEE_SUFFIX` for the twin that serves callers compiled without reference
+counting (its disk cache files are named by it)."""
 
-def _typed_by_types(dispatcher, callee=None):
+
+def _typed_by_types(dispatcher, callee=None, borrowed=None):
     """``dispatcher`` with its calls from compiled code typed by non-literal argument types.
 
     Args:
@@ -48,49 +65,83 @@ def _typed_by_types(dispatcher, callee=None):
         callee: the dispatcher that compiles and serves those calls instead (the same Python
             function compiled without the wrappers for calls from Python); ``None``:
             ``dispatcher`` itself.
+        borrowed: a function returning the dispatcher that serves the calls from a caller
+            compiled without reference counting (the twin compiled without it); ``None``:
+            ``callee`` serves them too.
 
     Without the JIT (``NUMBA_DISABLE_JIT``) ``njit`` returns the Python function: returned as is.
     """
-    find = getattr(dispatcher, "get_call_template", None)
-    if find is None:
+    own = getattr(dispatcher, "get_call_template", None)
+    if own is None:
         return dispatcher
-    if callee is not None:
-        find = callee.get_call_template
-        dispatcher.get_overload = callee.get_overload  # the compiled call's implementation
-
-    def get_call_template(args, kws):
-        return find(tuple(types.unliteral(a) for a in args),
-                    {k: types.unliteral(v) for k, v in kws.items()})
-
-    dispatcher.get_call_template = get_call_template
+    router = _Router(own, callee, borrowed)
+    dispatcher.get_call_template = router.get_call_template
+    if callee is not None:  # the compiled call's implementation
+        dispatcher.get_overload = router.get_overload
     return dispatcher
 
 
-def kernel(function=None, **options):
+class _Router:
+    """Serves a kernel's calls from compiled code (:func:`_typed_by_types`'s arguments)."""
+
+    def __init__(self, own, callee, borrowed):
+        self.own, self.callee, self._borrowed = own, callee, borrowed
+
+    def serving(self):
+        """The twin for the caller being compiled (the top of numba's configuration stack)."""
+        if self._borrowed is not None and not getattr(ConfigStack.top_or_none(), "nrt", True):
+            return self._borrowed()
+        return self.callee
+
+    def get_call_template(self, args, kws):
+        find = self.own if self.callee is None else self.serving().get_call_template
+        return find(tuple(types.unliteral(a) for a in args),
+                    {k: types.unliteral(v) for k, v in kws.items()})
+
+    def get_overload(self, sig):
+        return self.serving().get_overload(sig)
+
+
+def _twin(function, suffix: str, **options):
+    """``function`` compiled for calls from kernels only, its cache files named by ``suffix``."""
+    twin = py_types.FunctionType(function.__code__, function.__globals__, function.__name__,
+                                 function.__defaults__, function.__closure__)
+    twin.__qualname__ = function.__qualname__ + suffix
+    twin.__module__ = function.__module__
+    twin.__doc__ = function.__doc__
+    twin.__kwdefaults__ = function.__kwdefaults__
+    return njit(**OPTIONS, **options, no_cpython_wrapper=True, no_cfunc_wrapper=True)(twin)
+
+
+def kernel(function=None, *, refcounts: bool = True, **options):
     """Compile ``function`` as a kernel (``@kernel`` or ``@kernel(inline="always")``).
 
     Args:
         function: the Python function (numba's ``nopython`` subset).
+        refcounts: ``False``: compiled without reference counting (numba's ``_nrt=False``)
+            when called from Python or as a first-class function, and so are its callees
+            (see the module). For a kernel whose call tree allocates no array.
         **options: further ``numba.njit`` options (``inline``, ``nogil``).
 
     Returns:
         Its numba dispatcher (``OPTIONS`` and ``options``) for calls from Python; calls from
-        another kernel are served by its twin, specialised by argument types only (see the
+        another kernel are served by its twins, specialised by argument types only (see the
         module).
     """
     if function is None:
-        return lambda f: kernel(f, **options)
-    dispatcher = njit(**OPTIONS, **options)(function)
+        return lambda f: kernel(f, refcounts=refcounts, **options)
+    dispatcher = njit(**OPTIONS, **options, **({} if refcounts else {"_nrt": False}))(function)
     if "inline" in options or not hasattr(dispatcher, "get_call_template"):
         return _typed_by_types(dispatcher)  # inlined (or no JIT): no call to serve
-    twin = py_types.FunctionType(function.__code__, function.__globals__, function.__name__,
-                                 function.__defaults__, function.__closure__)
-    twin.__qualname__ = function.__qualname__ + CALLEE_SUFFIX
-    twin.__module__ = function.__module__
-    twin.__doc__ = function.__doc__
-    twin.__kwdefaults__ = function.__kwdefaults__
-    callee = njit(**OPTIONS, **options, no_cpython_wrapper=True, no_cfunc_wrapper=True)(twin)
-    return _typed_by_types(dispatcher, callee)
+    callee = _twin(function, CALLEE_SUFFIX, **options, _nrt=True)
+    made = []
+
+    def borrowed():
+        if not made:
+            made.append(_twin(function, CALLEE_SUFFIX + BORROWED_SUFFIX, **options, _nrt=False))
+        return made[0]
+
+    return _typed_by_types(dispatcher, callee, borrowed)
 
 
 def jit_disabled() -> bool:
@@ -98,4 +149,4 @@ def jit_disabled() -> bool:
     return bool(config.DISABLE_JIT)
 
 
-__all__ = ["CALLEE_SUFFIX", "OPTIONS", "jit_disabled", "kernel"]
+__all__ = ["BORROWED_SUFFIX", "CALLEE_SUFFIX", "OPTIONS", "jit_disabled", "kernel"]
