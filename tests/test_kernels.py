@@ -534,7 +534,7 @@ def test_compiled_views_are_the_python_segments():
     n, k, m = 3, 7, 5
     segments = layout.segment_slices(n, k, m)
     buf = np.arange(float(segments["mu"].stop))
-    off = layout.offsets(n, k, m)
+    off = layout.offsets(layout.dims_vector(k, m, 0, n))
     arms = evaluate.arm_views(buf, off, n, k, m)
     blocks = evaluate.block_views(buf, off, n, k, m)
     solution = evaluate.solution_views(buf, off, n, k, m)

@@ -40,7 +40,7 @@ import numba
 import numpy as np
 
 from multiarm_pin._compiled.controller_kernels import PD_OK, object_pd_step
-from multiarm_pin._compiled.evaluate import evaluate_system, quaternion_rotation
+from multiarm_pin._compiled.evaluate import evaluate_system, quaternion_rotation, rotation_rows
 from multiarm_pin._compiled.function_pointers import (
     Compile,
     bind,
@@ -252,7 +252,7 @@ def closed_loop_stage(t, x, arm_pass, model_ints, model_floats, q_ref, err, J, d
         ``STAGE_OK`` or the reason to hand the evaluation to the Python path.
     """
     k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
-    off = offsets(n, k, m)
+    off = offsets(dims)
     fns = bind(callees)
     if arm_pass:
         q0 = OBJECT_STATE_SIZE
@@ -449,11 +449,12 @@ def _advance_semi_implicit(model_ints, x, d, h, v_new, R, out):  # pragma: no co
     dR02, dR20 = a_vxvx * wx * wz + a_vx * wy, a_vxvx * wx * wz - a_vx * wy
     dR12, dR21 = a_vxvx * wy * wz - a_vx * wx, a_vxvx * wy * wz + a_vx * wx
     quaternion_rotation(x[X_QUATERNION:X_QUATERNION + 4], R)
-    m = np.empty((3, 3))
+    m = R  # dR R, column by column in place (each column of the product needs its own)
     for c in range(3):
-        m[0, c] = dR00 * R[0, c] + dR01 * R[1, c] + dR02 * R[2, c]
-        m[1, c] = dR10 * R[0, c] + dR11 * R[1, c] + dR12 * R[2, c]
-        m[2, c] = dR20 * R[0, c] + dR21 * R[1, c] + dR22 * R[2, c]
+        r0, r1, r2 = R[0, c], R[1, c], R[2, c]
+        m[0, c] = dR00 * r0 + dR01 * r1 + dR02 * r2
+        m[1, c] = dR10 * r0 + dR11 * r1 + dR12 * r2
+        m[2, c] = dR20 * r0 + dR21 * r1 + dR22 * r2
     o = X_QUATERNION  # Eigen's Quaternion(Matrix3) (as pin.Quaternion), then w >= 0
     tr = m[0, 0] + m[1, 1] + m[2, 2]
     if tr > 0.0:
@@ -611,7 +612,7 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
             if stage > 0:
                 continue
             if not _record(s, t, x, nq, nv, N, nv_arm, v_starts, unilateral, wrenches,
-                           separation, params, buf, tau, work_energy, r_q, r_v, r_p, r_quat,
+                           separation, params, dims, buf, tau, work_energy, r_q, r_v, r_p, r_quat,
                            r_tw, r_tau, r_mu, r_phi, r_phi_dot, r_points, r_normals, r_a_o,
                            r_qdd, r_violation, r_wrench, r_kinetic, r_potential, r_momentum):
                 return STAGE_SEPARATION, s
@@ -632,7 +633,7 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
 
 @kernel
 def _record(s, t, x, nq, nv, N, nv_arm, v_starts, unilateral, wrenches, separation, params,
-            buf, tau, energy, r_q, r_v, r_p, r_quat, r_tw, r_tau, r_mu, r_phi, r_phi_dot,
+            dims, buf, tau, energy, r_q, r_v, r_p, r_quat, r_tw, r_tau, r_mu, r_phi, r_phi_dot,
             r_points, r_normals, r_a_o, r_qdd, r_violation, r_wrench, r_kinetic, r_potential,
             r_momentum):  # pragma: no cover - compiled
     """Record sample ``s`` from its evaluation (arguments as :func:`run_rk4`'s).
@@ -640,9 +641,8 @@ def _record(s, t, x, nq, nv, N, nv_arm, v_starts, unilateral, wrenches, separati
     Returns False, recording nothing, if a unilateral row's gap or gap rate is past
     ``separation`` (the event machinery decides that sample).
     """
-    n, k = tau.shape
-    m = r_mu.shape[2]
-    off = offsets(n, k, m)
+    k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
+    off = offsets(dims)
     rows = view3(buf, off, SEG_ROWS, n, k, m)
     mu_s = view2(buf, off, SEG_MU, n, k, m)
     qdd_s = view2(buf, off, SEG_QDD, n, k, m)
@@ -707,27 +707,25 @@ def record_energy(s, x, params, energy, arms, r_kinetic, r_potential, r_momentum
     ``arms``. The object's: ``½ m |ẋ|² + ½ ωᵀ I_w ω``, ``-m g·x``, ``[m ẋ; I_w ω + x × m ẋ]``
     (``I_w = R I_c Rᵀ``); the potential is zero at the origin.
     """
-    R = np.empty((3, 3))
-    quaternion_rotation(x[X_QUATERNION:X_QUATERNION + 4], R)
+    R = rotation_rows(x[X_QUATERNION:X_QUATERNION + 4])
     mass = params[P_MASS]
-    L = np.zeros(3)  # I_w ω = R (I_c (Rᵀ ω))
-    b = np.zeros(3)
-    for a in range(3):
-        for c in range(3):
-            b[a] += R[c, a] * x[X_TWIST + 3 + c]
-    for a in range(3):
-        acc = 0.0
-        for c in range(3):
-            acc += params[P_INERTIA + 3 * a + c] * b[c]
-        for r in range(3):
-            L[r] += R[r, a] * acc
+    w = (x[X_TWIST + 3], x[X_TWIST + 4], x[X_TWIST + 5])
+    b = (R[0][0] * w[0] + R[1][0] * w[1] + R[2][0] * w[2],  # Rᵀ ω
+         R[0][1] * w[0] + R[1][1] * w[1] + R[2][1] * w[2],
+         R[0][2] * w[0] + R[1][2] * w[1] + R[2][2] * w[2])
+    i0 = P_INERTIA
+    c = (params[i0] * b[0] + params[i0 + 1] * b[1] + params[i0 + 2] * b[2],  # I_c Rᵀ ω
+         params[i0 + 3] * b[0] + params[i0 + 4] * b[1] + params[i0 + 5] * b[2],
+         params[i0 + 6] * b[0] + params[i0 + 7] * b[1] + params[i0 + 8] * b[2])
+    L = (R[0][0] * c[0] + R[0][1] * c[1] + R[0][2] * c[2],  # I_w ω = R I_c Rᵀ ω
+         R[1][0] * c[0] + R[1][1] * c[1] + R[1][2] * c[2],
+         R[2][0] * c[0] + R[2][1] * c[1] + R[2][2] * c[2])
+    p_lin = (mass * x[X_TWIST], mass * x[X_TWIST + 1], mass * x[X_TWIST + 2])
     ke = energy[EN_KINETIC] if arms else 0.0
     pe = energy[EN_POTENTIAL] if arms else 0.0
-    p_lin = np.empty(3)
     for a in range(3):
-        ke += 0.5 * (mass * x[X_TWIST + a] * x[X_TWIST + a] + x[X_TWIST + 3 + a] * L[a])
+        ke += 0.5 * (mass * x[X_TWIST + a] * x[X_TWIST + a] + w[a] * L[a])
         pe -= mass * params[P_GRAVITY + a] * x[X_POSITION + a]
-        p_lin[a] = mass * x[X_TWIST + a]
     for a in range(3):
         c1, c2 = (a + 1) % 3, (a + 2) % 3
         lin = energy[EN_MOMENTUM + a] if arms else 0.0

@@ -87,6 +87,7 @@ from multiarm_pin._compiled.evaluate import (
     _arm_segments,
     _block_segments,
     quaternion_rotation,
+    rotation_rows,
 )
 from multiarm_pin._compiled.function_pointers import (
     bind,
@@ -191,15 +192,14 @@ def _support_rows(x, sp_p, sp_n, sp_a, params, b, rows_phi, rows_phi_dot, pts, n
 
     ``W_o[b, :, r] = [n; r × n]``, ``c[b, r] = -κ - 2α φ̇ - β² φ`` (Baumgarte when on).
     """
-    R = np.empty((3, 3))
-    quaternion_rotation(x[X_QUATERNION:X_QUATERNION + 4], R)
+    R = rotation_rows(x[X_QUATERNION:X_QUATERNION + 4])
     wx, wy, wz = x[X_TWIST + 3], x[X_TWIST + 4], x[X_TWIST + 5]
     on = params[P_BAUMGARTE_ON] != 0.0
     al, be = params[P_BAUMGARTE_ALPHA], params[P_BAUMGARTE_BETA]
     for j in range(sp_p.shape[0]):
-        r0 = R[0, 0] * sp_p[j, 0] + R[0, 1] * sp_p[j, 1] + R[0, 2] * sp_p[j, 2]
-        r1 = R[1, 0] * sp_p[j, 0] + R[1, 1] * sp_p[j, 1] + R[1, 2] * sp_p[j, 2]
-        r2 = R[2, 0] * sp_p[j, 0] + R[2, 1] * sp_p[j, 1] + R[2, 2] * sp_p[j, 2]
+        r0 = R[0][0] * sp_p[j, 0] + R[0][1] * sp_p[j, 1] + R[0][2] * sp_p[j, 2]
+        r1 = R[1][0] * sp_p[j, 0] + R[1][1] * sp_p[j, 1] + R[1][2] * sp_p[j, 2]
+        r2 = R[2][0] * sp_p[j, 0] + R[2][1] * sp_p[j, 1] + R[2][2] * sp_p[j, 2]
         n0, n1, n2 = sp_n[j, 0], sp_n[j, 1], sp_n[j, 2]
         p0, p1, p2 = x[X_POSITION] + r0, x[X_POSITION + 1] + r1, x[X_POSITION + 2] + r2
         g3 = r1 * n2 - r2 * n1
@@ -234,7 +234,7 @@ def _object_terms(x, params, M_o, h_o):  # pragma: no cover - compiled
                  params[P_GRAVITY:P_GRAVITY + 3], R, x[X_TWIST:X_TWIST + 6], M_o, h_o)
 
 
-@kernel
+@kernel(refcounts=False)  # allocates nothing: see multiarm_pin._compiled.jit
 def _rows_and_blocks(x, sy, wk, callees):  # pragma: no cover - compiled
     """Every row and the stacked blocks at ``x``, at zero torque (no controller call).
 
@@ -257,7 +257,7 @@ def _rows_and_blocks(x, sy, wk, callees):  # pragma: no cover - compiled
                H, energy)
     if not callees[1](J, dJ, Mq, nle, H, x, arm_ints, v_starts, ints, floats, params, dims, buf):
         return False
-    off = offsets(n, k, m)
+    off = offsets(dims)
     Ma = _arm_segments(buf, off, n, k, m)[0]
     rows, ha, Wa, W_oa, ca, Mo, ho = _block_segments(buf, off, n, k, m)
     for i in range(n):
@@ -340,7 +340,7 @@ def _all_touching(active, N):  # pragma: no cover - compiled
     return True
 
 
-@kernel
+@kernel(refcounts=False)  # allocates nothing: see multiarm_pin._compiled.jit
 def _torques(t, x, active, sy, ctl, wk, out, callees):  # pragma: no cover - compiled
     """The controller's torques ``out.tau`` (n, k) at ``(t, x)`` on the buffer at zero torque.
 
@@ -353,7 +353,7 @@ def _torques(t, x, active, sy, ctl, wk, out, callees):  # pragma: no cover - com
      sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
     (control, traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, qp_active,
      unilateral, q_ref, q_hold, onsets, n_onsets, qp_active_r, touching, no_uni,
-     gains_free, _) = ctl
+     gains_free, no_wrench, _) = ctl
     buf = wk[6]
     (a_o, qdd_c, mu, phi_dd, Av, tau, err, z, ref, E, mu_p, qdd_p, a_pts, a_d) = out
     k, n = dims[DIMS_K], dims[DIMS_N]
@@ -390,7 +390,7 @@ def _torques(t, x, active, sy, ctl, wk, out, callees):  # pragma: no cover - com
                 status = callees[2](buf, dims, N, nv_arm, uni, x[:OBJECT_STATE_SIZE], ref,
                                     pd_gains, z, hold_tool, hold_obj, hold_n, g, params,
                                     qp_active if attempt == 0 else qp_active_r, tau, mu_p,
-                                    qdd_p, a_pts, a_d, False, np.zeros(6))[0]
+                                    qdd_p, a_pts, a_d, False, no_wrench)[0]
             else:
                 status, rank = callees[3](buf, dims, N, nv_arm, uni, touching,
                                           x[:OBJECT_STATE_SIZE], ref, pd_gains, z, hold_tool,
@@ -433,7 +433,7 @@ def _phased_torques(t, x, active, sy, ctl, wk, out, callees):  # pragma: no cove
      sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
     (control, traj, pd_gains, null_gains, hold_tool, grasp_obj, hold_n, gains, qp_active,
      unilateral, q_ref, q_hold, onsets, n_onsets, qp_active_r, touching, no_uni,
-     gains_free, ph) = ctl
+     gains_free, _, ph) = ctl
     (phases, press, release, named, offs, margins, offset_start, lam, a_plan) = ph
     buf, W_oc, cc, phi, phi_dot = wk[6], wk[10], wk[11], wk[14], wk[15]
     (a_o, qdd_c, mu, phi_dd, Av, tau, err, z, ref, E, mu_p, qdd_p, a_pts, a_d) = out
@@ -484,8 +484,7 @@ def off_rectangles(x, sp_p, planes):  # pragma: no cover - compiled
         sp_p: (K, 3) the rows' object-frame points [m].
         planes: (K, SUPPORT_PLANE_SIZE) their supports' planes (``SUPPORT_PLANE_FIELDS``).
     """
-    R = np.empty((3, 3))
-    quaternion_rotation(x[X_QUATERNION:X_QUATERNION + 4], R)
+    R = rotation_rows(x[X_QUATERNION:X_QUATERNION + 4])
     for j in range(sp_p.shape[0]):
         hx, hy = planes[j, PLANE_HALF_EXTENT], planes[j, PLANE_HALF_EXTENT + 1]
         if math.isinf(hx) and math.isinf(hy):
@@ -493,8 +492,8 @@ def off_rectangles(x, sp_p, planes):  # pragma: no cover - compiled
         u = 0.0
         v = 0.0
         for a in range(3):
-            p = x[X_POSITION + a] + (R[a, 0] * sp_p[j, 0] + R[a, 1] * sp_p[j, 1]
-                                     + R[a, 2] * sp_p[j, 2])
+            p = x[X_POSITION + a] + (R[a][0] * sp_p[j, 0] + R[a][1] * sp_p[j, 1]
+                                     + R[a][2] * sp_p[j, 2])
             d = p - planes[j, PLANE_POINT + a]
             u += d * planes[j, PLANE_X_AXIS + a]
             v += d * planes[j, PLANE_Y_AXIS + a]
@@ -625,7 +624,7 @@ def stage_compiles(x, active, sy, ctl, wk, out, d) -> tuple:
                                v_starts, ints, floats, params, dims, buf)
         if mode == CONTROL_OBJECT_PD:
             (_, _, pd_gains, _, hold_tool, hold_obj, hold_n, gains, qp_active, unilateral, _,
-             _, _, _, qp_active_r, touching, _, _, _) = ctl
+             _, _, _, qp_active_r, touching, _, _, _, _) = ctl
             (_, _, _, _, _, tau, _, z, ref, _, mu_p, qdd_p, a_pts, a_d) = out
             obj = x[:OBJECT_STATE_SIZE]
             callees += (
@@ -910,7 +909,7 @@ def _impact(t, x, watch, active, sy, wk, imp, ev, n_ev, joined, fn):  # pragma: 
     return STAGE_OK
 
 
-@kernel
+@kernel(refcounts=False)  # allocates nothing: see multiarm_pin._compiled.jit
 def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev, fn
                          ):  # pragma: no cover - compiled
     """``Stepper.advance_with_events``: ``x`` to ``t_end`` with its events, in place.
@@ -921,8 +920,8 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
     rules = sy[19]
     uni_c, mask_c = sy[13], sy[14]
     d1, mu0, phi_dd0, phi0, memo = st0
-    (new, s_e, s_hi, mu_end, phi_dd_end, mu_hi, rows_sep, leaving, watch, joined, dtmp,
-     phi_x) = loc
+    (new, s_e, s_hi, mu_end, phi_dd_end, mu_hi, rows_sep, leaving, watch, joined, dtmp, _,
+     _, _) = loc
     memo[0] = 0
     B, R = active.shape
     tol = rules[R_GAP]
@@ -1163,7 +1162,7 @@ def _record_sample(s, t, x, active, sy, wk, out, solver, Rec):  # pragma: no cov
     record_energy(s, x, params, energy, n > 0, r_kinetic, r_potential, r_momentum)
 
 
-@kernel(nogil=True)  # monitors check beside it
+@kernel(nogil=True, refcounts=False)  # monitors check beside it; it allocates nothing
 def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev,
                     reserve, Rec, fn, advance):  # pragma: no cover - compiled
     """RK4 with contact events from sample ``k0``, recording samples ``k0 .. k1 - 1``.
@@ -1186,7 +1185,8 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         out: the outputs of one evaluation (solution, torques, plan).
         rk: the step's workspace (RK4 stages, the semi-implicit step's rotation).
         st0: the start of a step (tangent, multipliers, rates, gaps, reuse memo).
-        loc: the event-location workspace.
+        loc: the event-location workspace, then the copies of ``x``, ``active`` and the hold
+            configuration that a failed step restores.
         imp: the impact workspace.
         (:class:`multiarm_pin.sim.contact_loop.ContactLoop` builds them.)
         ev: (E, EVENT_WIDTH) the event table (appended to).
@@ -1212,10 +1212,7 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
     control, q_hold, n_onsets = ctl[0], ctl[11], ctl[13]
     fns = bind(fn)
     advance_fn = bind(advance)
-    nx = x.shape[0]
-    x0 = np.empty(nx)
-    active0 = np.empty_like(active)
-    q_hold0 = np.empty_like(q_hold)
+    x0, active0, q_hold0 = loc[11], loc[12], loc[13]
     for s in range(k0, k1):
         if n_ev[0] + reserve > ev.shape[0]:
             return STAGE_EVENTS_FULL, s

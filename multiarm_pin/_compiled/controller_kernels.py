@@ -363,7 +363,7 @@ def object_pd_torques(buf, dims, N, nv_arm, unilateral, obj_x, a_d, z, hold_tool
         :data:`PD_OK`, or the reason the caller must use the reference.
     """
     k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
-    off = offsets(n, k, m)
+    off = offsets(dims)
     M, _, J, Jdq, tp, tR, ttw, _ = _arm_segments(buf, off, n, k, m)
     _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
     return _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilateral,
@@ -489,7 +489,7 @@ def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold
     if not desired_acceleration(obj, ref, pd_gains, obj_x, a_d):
         return PD_LARGE_ROTATION, -1
     k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
-    off = offsets(n, k, m)
+    off = offsets(dims)
     M, _, J, Jdq, tp, tR, ttw, _ = _arm_segments(buf, off, n, k, m)
     _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
     # N and unilateral as writable arrays, the type of the rows touching_torques compacts:
@@ -600,7 +600,7 @@ def touching_torques(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_ga
         the reference (outputs then meaningless); the grasp rank of the touching rows (0..6).
     """
     k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
-    off = offsets(n, k, m)
+    off = offsets(dims)
     M, _, J, Jdq, tp, tR, ttw, _ = _arm_segments(buf, off, n, k, m)
     _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
     W_r = np.zeros((n, k, m))
@@ -658,7 +658,7 @@ def hold_still_torques(buf, dims, nv_arm, z, tau):  # pragma: no cover - compile
         tau: output (n, k) torques [N m], zero on padding.
     """
     k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
-    off = offsets(n, k, m)
+    off = offsets(dims)
     M = _arm_segments(buf, off, n, k, m)[0]
     h = _block_segments(buf, off, n, k, m)[1]
     for i in range(n):
@@ -691,7 +691,7 @@ def solve_with_torques(buf, dims, N, params, tau):  # pragma: no cover - compile
         The status of :func:`multiarm_pin._compiled.object_first.object_first`.
     """
     k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
-    off = offsets(n, k, m)
+    off = offsets(dims)
     M = _arm_segments(buf, off, n, k, m)[0]
     _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
     a_o, qdd, mu = _solution_segments(buf, off, n, k, m)

@@ -107,6 +107,15 @@ def quaternion_rotation(quat, R):  # pragma: no cover - compiled
     R[2, 2] = 1 - 2 * (x * x + y * y)
 
 
+@kernel
+def rotation_rows(quat):  # pragma: no cover - compiled
+    """:func:`quaternion_rotation` of ``quat`` as three row tuples ``R[a][c]`` (no array)."""
+    x, y, z, w = quat[0], quat[1], quat[2], quat[3]
+    return ((1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)),
+            (2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)),
+            (2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)))
+
+
 # The segment views are taken by the three inlined helpers below, with the shapes of
 # SEGMENT_TABLE written out (tests/test_kernels.py checks them against it): every other
 # compiled function, or a call to a jitted helper, on the path of a kernel is one more
@@ -238,7 +247,7 @@ def group_arm_terms(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, dims, v
         buf: the flat output buffer.
     """
     k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
-    M, nle, J, Jdq, p, R, tw, vp = _arm_segments(buf, offsets(n, k, m), n, k, m)
+    M, nle, J, Jdq, p, R, tw, vp = _arm_segments(buf, offsets(dims), n, k, m)
     _group_arms_into(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, v_offset,
                      first_arm, M, nle, J, Jdq, p, R, tw, vp)
 
@@ -263,7 +272,7 @@ def finish_system(x, arm_ints, v_starts, ints, floats, params, dims,
         False (and nothing computed) if some entry of ``x`` is NaN or infinite.
     """
     k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
-    off = offsets(n, k, m)
+    off = offsets(dims)
     _, nle, J, Jdq, p, R, tw, _ = _arm_segments(buf, off, n, k, m)
     rows, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
     return _finish_into(x, arm_ints, v_starts, ints, floats, params, nv, nle, J, Jdq, p, R, tw,
@@ -284,7 +293,7 @@ def solve_buffer(N, params, dims, buf):  # pragma: no cover - compiled
         The status of :func:`object_first`.
     """
     k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
-    off = offsets(n, k, m)
+    off = offsets(dims)
     M = _arm_segments(buf, off, n, k, m)[0]
     _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
     a_o, qdd, mu = _solution_segments(buf, off, n, k, m)
@@ -325,7 +334,7 @@ def evaluate_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_start
         False (and the buffer meaningless) if some entry of ``x`` is NaN or infinite.
     """
     k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
-    off = offsets(n, k, m)
+    off = offsets(dims)
     M, nle, J, Jdq, p, R, tw, vp = _arm_segments(buf, off, n, k, m)
     rows, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
     _group_arms_into(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, nv, 0, 0,
@@ -363,7 +372,7 @@ def step_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, i
                            floats, params, dims, buf):  # called, not inlined: compiled once
         return SOLVE_NOT_FINITE
     k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
-    off = offsets(n, k, m)
+    off = offsets(dims)
     M = _arm_segments(buf, off, n, k, m)[0]
     rows, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
     a_o, qdd, mu = _solution_segments(buf, off, n, k, m)

@@ -256,23 +256,6 @@ def state_size(nq: int, nv: int) -> int:
     return OBJECT_STATE_SIZE + nq + 2 * nv
 
 
-# ------------------------------------------------------------------ dimensions
-DIMS_FIELDS = (("k", 1), ("m", 1), ("nv", 1), ("n", 1))
-"""The int64 vector ``dims``: ``nv_max``, ``N_max``, total joints, arms."""
-_D, DIMS_SIZE = _starts(DIMS_FIELDS)
-DIMS_K = _D["k"]
-DIMS_M = _D["m"]
-DIMS_NV = _D["nv"]
-DIMS_N = _D["n"]
-
-
-def dims_vector(k: int, m: int, nv: int, n: int) -> np.ndarray:
-    """The ``dims`` vector (:data:`DIMS_FIELDS`)."""
-    dims = np.zeros(DIMS_SIZE, dtype=np.int64)
-    dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N] = k, m, nv, n
-    return dims
-
-
 # ------------------------------------------------------------------ parameters
 PARAM_FIELDS = (("mass", 1), ("inertia", 9), ("gravity", 3), ("baumgarte_alpha", 1),
                 ("baumgarte_beta", 1), ("baumgarte_on", 1), ("rcond_tol", 1),
@@ -486,17 +469,38 @@ def _dim(code, n, k, m):  # pragma: no cover - compiled
     return code
 
 
-@kernel
-def offsets(n, k, m):  # pragma: no cover - compiled
+def segment_offsets(n: int, k: int, m: int) -> np.ndarray:
     """Start offsets (N_SEGMENTS + 1,) int64 of the segments; the last entry is the total size."""
-    off = np.empty(N_SEGMENTS + 1, dtype=np.int64)
-    off[0] = 0
-    for j in range(N_SEGMENTS):
-        size = 1
-        for a in range(_MAX_NDIM):
-            size *= _dim(SHAPE_CODES[j, a], n, k, m)
-        off[j + 1] = off[j] + size
-    return off
+    shapes = segment_shapes(n, k, m)
+    sizes = [int(np.prod(shapes[name], dtype=np.int64)) for name in SEGMENTS]
+    return np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+
+
+# ------------------------------------------------------------------ dimensions
+DIMS_FIELDS = (("k", 1), ("m", 1), ("nv", 1), ("n", 1), ("offsets", N_SEGMENTS + 1))
+"""The int64 vector ``dims``: ``nv_max``, ``N_max``, total joints, arms, then the buffer
+segments' start offsets for those (:func:`segment_offsets`), computed once with the
+dimensions: the kernels read them (:func:`offsets`) and allocate nothing for them."""
+_D, DIMS_SIZE = _starts(DIMS_FIELDS)
+DIMS_K = _D["k"]
+DIMS_M = _D["m"]
+DIMS_NV = _D["nv"]
+DIMS_N = _D["n"]
+DIMS_OFFSETS = _D["offsets"]
+
+
+def dims_vector(k: int, m: int, nv: int, n: int) -> np.ndarray:
+    """The ``dims`` vector (:data:`DIMS_FIELDS`)."""
+    dims = np.zeros(DIMS_SIZE, dtype=np.int64)
+    dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N] = k, m, nv, n
+    dims[DIMS_OFFSETS:] = segment_offsets(n, k, m)
+    return dims
+
+
+@kernel(inline="always")
+def offsets(dims):  # pragma: no cover - compiled
+    """The segments' start offsets (N_SEGMENTS + 1,) int64 in ``dims``: a view of it."""
+    return dims[DIMS_OFFSETS:DIMS_OFFSETS + N_SEGMENTS + 1]
 
 
 @kernel(inline="always")
@@ -527,8 +531,8 @@ def segment_shapes(n: int, k: int, m: int) -> dict[str, tuple[int, ...]]:
 
 
 def buffer_layout(n: int, k: int, m: int) -> tuple[np.ndarray, int]:
-    """Start offsets (N_SEGMENTS + 1,) int64 of every segment (:func:`offsets`), and the size."""
-    off = offsets(n, k, m)
+    """Start offsets (N_SEGMENTS + 1,) int64 of every segment, and the buffer's size."""
+    off = segment_offsets(n, k, m)
     return off, int(off[-1])
 
 

@@ -741,7 +741,7 @@ def phased_torques(t, buf, dims, N, nv_arm, unilateral, active, obj, G_sup, kapp
         bounded least squares, :data:`PD_FORCES_FAILED`).
     """
     k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
-    off = offsets(n, k, m)
+    off = offsets(dims)
     M, _, J, Jdq, tp, tR, ttw, _ = _arm_segments(buf, off, n, k, m)
     _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
     ph = phase_index(t, phases)

@@ -173,7 +173,7 @@ class ContactLoop:
         boolean = np.zeros((B, R), dtype=bool)
         self.L = (np.zeros(nx), np.zeros(nx), np.zeros(nx), np.zeros((B, R)), np.zeros((B, R)),
                   np.zeros((B, R)), boolean.copy(), boolean.copy(), boolean.copy(),
-                  boolean.copy(), np.zeros(nd), np.zeros((B, R)))
+                  boolean.copy(), np.zeros(nd), np.zeros(nx), boolean.copy(), np.zeros(nq))
         self.I = (boolean.copy(), boolean.copy(), boolean.copy(), np.zeros((B, R)), np.zeros(6),
                   np.zeros((B, kc)), np.zeros((B, R)), np.zeros((B, R)), np.zeros((B, kc)),
                   np.zeros(6))
@@ -312,7 +312,7 @@ class ContactLoop:
         C = (self.control, traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains,
              qp_active, unilateral, q_ref, self.q_hold, self.onsets, self.n_onsets,
              np.zeros((n, m), np.uint8), np.zeros((n, m), bool), np.zeros((n, m), bool),
-             self._free_gains(gains), phased)
+             self._free_gains(gains), np.zeros(6), phased)
         self._kept_controller = (inputs, C)
         return C
 
