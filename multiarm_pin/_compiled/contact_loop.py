@@ -84,7 +84,6 @@ from multiarm_pin._compiled.controller_kernels import (
 )
 from multiarm_pin._compiled.delassus import contact_kernel
 from multiarm_pin._compiled.evaluate import (
-    _arm_segments,
     _block_segments,
     quaternion_rotation,
     rotation_rows,
@@ -121,10 +120,12 @@ from multiarm_pin._compiled.layout import (
     ROW_PHI,
     ROW_PHI_DOT,
     ROW_POINT,
+    SEG_M,
     X_POSITION,
     X_QUATERNION,
     X_TWIST,
     offsets,
+    view3,
 )
 from multiarm_pin._compiled.linalg import copy1, copy2
 from multiarm_pin._compiled.mlcp import OK as LCP_OK
@@ -258,7 +259,7 @@ def _rows_and_blocks(x, sy, wk, callees):  # pragma: no cover - compiled
     if not callees[1](J, dJ, Mq, nle, H, x, arm_ints, v_starts, ints, floats, params, dims, buf):
         return False
     off = offsets(dims)
-    Ma = _arm_segments(buf, off, n, k, m)[0]
+    Ma = view3(buf, off, SEG_M, n, k, m)
     rows, ha, Wa, W_oa, ca, Mo, ho = _block_segments(buf, off, n, k, m)
     for i in range(n):
         for a in range(k):

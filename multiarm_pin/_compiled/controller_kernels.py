@@ -56,10 +56,14 @@ from multiarm_pin._compiled.layout import (
     REF_POSITION,
     REF_ROTATION,
     REF_TWIST,
+    SEG_H,
+    SEG_M,
     X_POSITION,
     X_QUATERNION,
     X_TWIST,
     offsets,
+    view2,
+    view3,
 )
 from multiarm_pin._compiled.linalg import (
     cholesky,
@@ -659,8 +663,8 @@ def hold_still_torques(buf, dims, nv_arm, z, tau):  # pragma: no cover - compile
     """
     k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
     off = offsets(dims)
-    M = _arm_segments(buf, off, n, k, m)[0]
-    h = _block_segments(buf, off, n, k, m)[1]
+    M = view3(buf, off, SEG_M, n, k, m)
+    h = view2(buf, off, SEG_H, n, k, m)
     for i in range(n):
         nvi = nv_arm[i]
         for j in range(k):
@@ -692,7 +696,7 @@ def solve_with_torques(buf, dims, N, params, tau):  # pragma: no cover - compile
     """
     k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
     off = offsets(dims)
-    M = _arm_segments(buf, off, n, k, m)[0]
+    M = view3(buf, off, SEG_M, n, k, m)
     _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
     a_o, qdd, mu = _solution_segments(buf, off, n, k, m)
     return object_first(M, h + tau, W, W_o, c, M_o, h_o, N, params[P_RCOND_TOL],

@@ -79,6 +79,7 @@ from multiarm_pin._compiled.layout import (
     X_QUATERNION,
     X_TWIST,
     offsets,
+    view3,
 )
 from multiarm_pin._compiled.object_first import SOLVE_OK, object_first
 from multiarm_pin._compiled.rigid_body import rigid_body_pass
@@ -294,7 +295,7 @@ def solve_buffer(N, params, dims, buf):  # pragma: no cover - compiled
     """
     k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
     off = offsets(dims)
-    M = _arm_segments(buf, off, n, k, m)[0]
+    M = view3(buf, off, SEG_M, n, k, m)
     _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
     a_o, qdd, mu = _solution_segments(buf, off, n, k, m)
     return object_first(M, h, W, W_o, c, M_o, h_o, N, params[P_RCOND_TOL],
@@ -373,7 +374,7 @@ def step_system(J_world, dJ_world, M_full, nle_full, H, x, arm_ints, v_starts, i
         return SOLVE_NOT_FINITE
     k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
     off = offsets(dims)
-    M = _arm_segments(buf, off, n, k, m)[0]
+    M = view3(buf, off, SEG_M, n, k, m)
     rows, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
     a_o, qdd, mu = _solution_segments(buf, off, n, k, m)
     return object_first(M, h, W, W_o, c, M_o, h_o, N, params[P_RCOND_TOL],

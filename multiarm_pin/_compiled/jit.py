@@ -26,14 +26,15 @@ twin's overload has no entry point for Python.
 numba counts the references to every array a function holds: an array argument is counted as
 the function starts and released on every path out of it, each array of a tuple argument
 too. The loops' kernels take tuples of about a hundred arrays and have many paths out: that
-code grows with the product of the two. A kernel whose call tree allocates no array needs none of it: every array it holds
-is its caller's, alive for the whole call. ``@kernel(refcounts=False)`` compiles such a
-kernel without reference counting (numba's ``_nrt=False``), and its callees likewise: calls
-from a caller compiled so are served by a second twin compiled without it (its cache files
-named with :data:`BORROWED_SUFFIX`), never by the twin that serves other callers (a callee
-compiled without counting that returned an array would give its caller a reference it does
-not own). numba refuses to compile an allocation without reference counting, so a kernel
-that allocates cannot be marked so by mistake.
+code grows with the product of the two. A kernel whose call tree allocates no array needs
+none of it: every array it holds is its caller's, alive for the whole call.
+``@kernel(refcounts=False)`` compiles such a kernel without reference counting (numba's
+``_nrt=False``), and its callees likewise: calls from a caller compiled so are served by a
+second twin compiled without it (its cache files named with :data:`BORROWED_SUFFIX`), never
+by the twin that serves other callers (a callee compiled without counting that returned an
+array would give its caller a reference it does not own). numba refuses to compile an
+allocation without reference counting, so a kernel that allocates cannot be marked so by
+mistake.
 """
 
 from __future__ import annotations
