@@ -96,21 +96,17 @@ SOLVE_BAD_LENGTH = 4
 @kernel
 def quaternion_rotation(quat, R):  # pragma: no cover - compiled
     """Rotation matrix (3, 3) of a unit quaternion ``[x, y, z, w]`` into ``R``."""
-    x, y, z, w = quat[0], quat[1], quat[2], quat[3]
-    R[0, 0] = 1 - 2 * (y * y + z * z)
-    R[0, 1] = 2 * (x * y - z * w)
-    R[0, 2] = 2 * (x * z + y * w)
-    R[1, 0] = 2 * (x * y + z * w)
-    R[1, 1] = 1 - 2 * (x * x + z * z)
-    R[1, 2] = 2 * (y * z - x * w)
-    R[2, 0] = 2 * (x * z - y * w)
-    R[2, 1] = 2 * (y * z + x * w)
-    R[2, 2] = 1 - 2 * (x * x + y * y)
+    rows = rotation_rows(quat)
+    for a in range(3):
+        R[a, 0], R[a, 1], R[a, 2] = rows[a]
 
 
 @kernel
 def rotation_rows(quat):  # pragma: no cover - compiled
-    """:func:`quaternion_rotation` of ``quat`` as three row tuples ``R[a][c]`` (no array)."""
+    """Rotation matrix of a unit quaternion ``[x, y, z, w]`` as three row tuples ``R[a][c]``.
+
+    No array: :func:`quaternion_rotation` writes it into one.
+    """
     x, y, z, w = quat[0], quat[1], quat[2], quat[3]
     return ((1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)),
             (2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)),
