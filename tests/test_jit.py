@@ -140,3 +140,33 @@ def test_numba_refuses_an_allocation_without_refcounts(monkeypatch):
     with pytest.raises(numba.TypingError, match="Only accept returning of array"):
         jit.kernel(refcounts=False)(lambda n: callee(n))(3)  # np.zeros's own, without counting
     assert jit.kernel(lambda n: callee(n))(3) == 0.0
+
+
+@needs_jit
+def test_a_twins_module_is_left_for_its_callers_to_optimise(monkeypatch):
+    """A twin's own module is optimised function by function only; its callers' as a whole.
+
+    The middle kernel's twin still calls the inner one (no whole-module pass inlined it);
+    the entry point, compiled from Python with numba's own pipeline, has both inlined.
+    """
+    monkeypatch.setattr(jit, "OPTIONS", {"error_model": "numpy"})  # no disk cache here
+
+    def add_one(a):
+        return a + 1.0
+
+    inner = jit.kernel(add_one)
+    middle = jit.kernel(lambda a: inner(a) * 2.0)
+    outer = jit.kernel(lambda a: middle(a) - 3.0)
+    assert outer(1.0) == 1.0
+
+    def calls(library, name):
+        return [line for line in library.get_llvm_str().splitlines()
+                if " call " in line and name in line]
+
+    twin = middle.get_overload.__self__.callee
+    twin_library = next(iter(twin.overloads.values())).library
+    assert isinstance(twin_library, jit._LinkedLibrary)
+    assert calls(twin_library, add_one.__name__ + jit.CALLEE_SUFFIX)
+    entry_library = next(iter(outer.overloads.values())).library
+    assert not isinstance(entry_library, jit._LinkedLibrary)
+    assert calls(entry_library, jit.CALLEE_SUFFIX) == []

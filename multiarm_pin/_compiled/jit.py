@@ -35,6 +35,13 @@ by the twin that serves other callers (a callee compiled without counting that r
 array would give its caller a reference it does not own). numba refuses to compile an
 allocation without reference counting, so a kernel that allocates cannot be marked so by
 mistake.
+
+numba compiles a callee into its own module, optimises that module, and links a copy of it
+into the module of every caller, which it optimises again as a whole (the callee's code is
+inlined there and optimised with its caller's). A twin's own module serves only that linking
+(and the disk cache): it is never run. So the twins are compiled by :class:`LinkedCompiler`,
+which skips the whole-module optimisation of that module: their functions are still
+optimised one by one, and every caller's module is optimised as before, callees included.
 """
 
 from __future__ import annotations
@@ -42,7 +49,8 @@ from __future__ import annotations
 import types as py_types
 
 from numba import njit, types
-from numba.core import config
+from numba.core import codegen, config
+from numba.core.compiler import Compiler
 from numba.core.targetconfig import ConfigStack
 
 OPTIONS = {"cache": True, "error_model": "numpy"}
@@ -103,6 +111,29 @@ class _Router:
         return self.serving().get_overload(sig)
 
 
+class _LinkedLibrary(codegen.JITCodeLibrary):
+    """A twin's code library: its module is optimised function by function only."""
+
+    def _optimize_final_module(self):
+        """Nothing: every caller optimises this code as part of its own module."""
+
+
+class LinkedCompiler(Compiler):
+    """numba's compiler, its code library a :class:`_LinkedLibrary` (a twin's ``pipeline_class``).
+
+    The library numba makes in its lowering pass (with its function's qualified name and
+    object caching on, for the disk cache) is made here instead, of the subclass.
+    """
+
+    def compile_extra(self, func):
+        """Compile ``func`` (numba's ``Compiler.compile_extra``) into a :class:`_LinkedLibrary`."""
+        made = self.state.targetctx.codegen()
+        if self.state.library is None and made._library_class is codegen.JITCodeLibrary:
+            self.state.library = _LinkedLibrary(made, func.__qualname__)
+            self.state.library.enable_object_caching()
+        return super().compile_extra(func)
+
+
 def _twin(function, suffix: str, **options):
     """``function`` compiled for calls from kernels only, its cache files named by ``suffix``."""
     twin = py_types.FunctionType(function.__code__, function.__globals__, function.__name__,
@@ -111,7 +142,8 @@ def _twin(function, suffix: str, **options):
     twin.__module__ = function.__module__
     twin.__doc__ = function.__doc__
     twin.__kwdefaults__ = function.__kwdefaults__
-    return njit(**OPTIONS, **options, no_cpython_wrapper=True, no_cfunc_wrapper=True)(twin)
+    return njit(**OPTIONS, **options, no_cpython_wrapper=True, no_cfunc_wrapper=True,
+                pipeline_class=LinkedCompiler)(twin)
 
 
 def kernel(function=None, *, refcounts: bool = True, **options):
@@ -150,4 +182,5 @@ def jit_disabled() -> bool:
     return bool(config.DISABLE_JIT)
 
 
-__all__ = ["BORROWED_SUFFIX", "CALLEE_SUFFIX", "OPTIONS", "jit_disabled", "kernel"]
+__all__ = ["BORROWED_SUFFIX", "CALLEE_SUFFIX", "OPTIONS", "LinkedCompiler", "jit_disabled",
+           "kernel"]
