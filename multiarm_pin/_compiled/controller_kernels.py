@@ -198,11 +198,13 @@ def planned_torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, N, nv_arm, obj_x, a_d,
     n, k, m = W.shape
     hold_kp, hold_kd = gains[GAIN_HOLD_KP], gains[GAIN_HOLD_KD]
     damping = gains[GAIN_DAMPING]
-    # 2. held points' desired accelerations, per arm
-    op = obj_x[OX_POSITION:OX_POSITION + 3]
-    oR = obj_x[OX_ROTATION:OX_ROTATION + 9].reshape((3, 3))
-    ov = obj_x[OX_TWIST:OX_TWIST + 3]
-    ow = obj_x[OX_TWIST + 3:OX_TWIST + 6]
+    # 2. held points' desired accelerations, per arm (3-vectors as scalars: ``d``, ``r``,
+    # ``e``, ``u`` of each point; the object's pose and twist, ``ω̇`` of ``a_d``)
+    op0, op1, op2 = obj_x[OX_POSITION], obj_x[OX_POSITION + 1], obj_x[OX_POSITION + 2]
+    oR = obj_x[OX_ROTATION:OX_ROTATION + 9]  # row-major
+    ov0, ov1, ov2 = obj_x[OX_TWIST], obj_x[OX_TWIST + 1], obj_x[OX_TWIST + 2]
+    ow0, ow1, ow2 = obj_x[OX_TWIST + 3], obj_x[OX_TWIST + 4], obj_x[OX_TWIST + 5]
+    al0, al1, al2 = a_d[3], a_d[4], a_d[5]
     hmax = hold_tool.shape[1]
     A = np.zeros((3 * hmax, k))
     rhs = np.zeros(3 * hmax)
@@ -213,42 +215,42 @@ def planned_torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, N, nv_arm, obj_x, a_d,
     beta = np.empty(m)
     gap = np.empty(m)
     x = np.empty(k)
-    d = np.empty(3)
-    r = np.empty(3)
-    u = np.empty(3)
-    e = np.empty(3)
-    t1 = np.empty(3)
     for i in range(n):
         R = tR[i]
-        wt = ttw[i, 3:6]
+        wt0, wt1, wt2 = ttw[i, 3], ttw[i, 4], ttw[i, 5]
         nh = hold_n[i]
         Ni = N[i]
         nvi = nv_arm[i]
         task = Ni != nvi  # else W_i square: the rows alone fix q̈_i (see the docstring)
         for p in range(nh):
-            for a in range(3):
-                d[a] = (R[a, 0] * hold_tool[i, p, 0] + R[a, 1] * hold_tool[i, p, 1]
-                        + R[a, 2] * hold_tool[i, p, 2])
-            for a in range(3):
-                xa = tp[i, a] + d[a]
-                r[a] = xa - op[a]
-                e[a] = (op[a] + oR[a, 0] * hold_obj[i, p, 0] + oR[a, 1] * hold_obj[i, p, 1]
-                        + oR[a, 2] * hold_obj[i, p, 2] - xa)
+            h0, h1, h2 = hold_tool[i, p, 0], hold_tool[i, p, 1], hold_tool[i, p, 2]
+            d0 = R[0, 0] * h0 + R[0, 1] * h1 + R[0, 2] * h2
+            d1 = R[1, 0] * h0 + R[1, 1] * h1 + R[1, 2] * h2
+            d2 = R[2, 0] * h0 + R[2, 1] * h1 + R[2, 2] * h2
+            g0, g1, g2 = hold_obj[i, p, 0], hold_obj[i, p, 1], hold_obj[i, p, 2]
+            xa = tp[i, 0] + d0
+            r0 = xa - op0
+            e0 = op0 + oR[0] * g0 + oR[1] * g1 + oR[2] * g2 - xa
+            xa = tp[i, 1] + d1
+            r1 = xa - op1
+            e1 = op1 + oR[3] * g0 + oR[4] * g1 + oR[5] * g2 - xa
+            xa = tp[i, 2] + d2
+            r2 = xa - op2
+            e2 = op2 + oR[6] * g0 + oR[7] * g1 + oR[8] * g2 - xa
             # u = v_t + ω_t × d - ẋ_o - ω_o × r
-            u[0] = ttw[i, 0] + wt[1] * d[2] - wt[2] * d[1] - ov[0] - (ow[1] * r[2] - ow[2] * r[1])
-            u[1] = ttw[i, 1] + wt[2] * d[0] - wt[0] * d[2] - ov[1] - (ow[2] * r[0] - ow[0] * r[2])
-            u[2] = ttw[i, 2] + wt[0] * d[1] - wt[1] * d[0] - ov[2] - (ow[0] * r[1] - ow[1] * r[0])
+            u0 = ttw[i, 0] + wt1 * d2 - wt2 * d1 - ov0 - (ow1 * r2 - ow2 * r1)
+            u1 = ttw[i, 1] + wt2 * d0 - wt0 * d2 - ov1 - (ow2 * r0 - ow0 * r2)
+            u2 = ttw[i, 2] + wt0 * d1 - wt1 * d0 - ov2 - (ow0 * r1 - ow1 * r0)
             # transport: ẍ_o + ω̇_o × r + ω_o × (ω_o × r) + 2 ω_o × u + (kp e - kd u)
-            t1[0] = ow[1] * r[2] - ow[2] * r[1]
-            t1[1] = ow[2] * r[0] - ow[0] * r[2]
-            t1[2] = ow[0] * r[1] - ow[1] * r[0]
-            al = a_d[3:6]
-            apt0 = (a_d[0] + (al[1] * r[2] - al[2] * r[1]) + (ow[1] * t1[2] - ow[2] * t1[1])
-                    + 2.0 * (ow[1] * u[2] - ow[2] * u[1]) + hold_kp * e[0] - hold_kd * u[0])
-            apt1 = (a_d[1] + (al[2] * r[0] - al[0] * r[2]) + (ow[2] * t1[0] - ow[0] * t1[2])
-                    + 2.0 * (ow[2] * u[0] - ow[0] * u[2]) + hold_kp * e[1] - hold_kd * u[1])
-            apt2 = (a_d[2] + (al[0] * r[1] - al[1] * r[0]) + (ow[0] * t1[1] - ow[1] * t1[0])
-                    + 2.0 * (ow[0] * u[1] - ow[1] * u[0]) + hold_kp * e[2] - hold_kd * u[2])
+            s0 = ow1 * r2 - ow2 * r1
+            s1 = ow2 * r0 - ow0 * r2
+            s2 = ow0 * r1 - ow1 * r0
+            apt0 = (a_d[0] + (al1 * r2 - al2 * r1) + (ow1 * s2 - ow2 * s1)
+                    + 2.0 * (ow1 * u2 - ow2 * u1) + hold_kp * e0 - hold_kd * u0)
+            apt1 = (a_d[1] + (al2 * r0 - al0 * r2) + (ow2 * s0 - ow0 * s2)
+                    + 2.0 * (ow2 * u0 - ow0 * u2) + hold_kp * e1 - hold_kd * u1)
+            apt2 = (a_d[2] + (al0 * r1 - al1 * r0) + (ow0 * s1 - ow1 * s0)
+                    + 2.0 * (ow0 * u1 - ow1 * u0) + hold_kp * e2 - hold_kd * u2)
             a_pts[i, p, 0] = apt0
             a_pts[i, p, 1] = apt1
             a_pts[i, p, 2] = apt2
@@ -256,18 +258,18 @@ def planned_torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, N, nv_arm, obj_x, a_d,
                 continue
             # task rows A = J_v + J_ω × d; a0 = J̇q̇_v + J̇q̇_ω × d + ω_t × (ω_t × d)
             for j in range(nvi):
-                A[3 * p + 0, j] = J[i, 0, j] + J[i, 4, j] * d[2] - J[i, 5, j] * d[1]
-                A[3 * p + 1, j] = J[i, 1, j] + J[i, 5, j] * d[0] - J[i, 3, j] * d[2]
-                A[3 * p + 2, j] = J[i, 2, j] + J[i, 3, j] * d[1] - J[i, 4, j] * d[0]
-            t1[0] = wt[1] * d[2] - wt[2] * d[1]
-            t1[1] = wt[2] * d[0] - wt[0] * d[2]
-            t1[2] = wt[0] * d[1] - wt[1] * d[0]
-            rhs[3 * p + 0] = apt0 - (Jdq[i, 0] + Jdq[i, 4] * d[2] - Jdq[i, 5] * d[1]
-                                     + wt[1] * t1[2] - wt[2] * t1[1])
-            rhs[3 * p + 1] = apt1 - (Jdq[i, 1] + Jdq[i, 5] * d[0] - Jdq[i, 3] * d[2]
-                                     + wt[2] * t1[0] - wt[0] * t1[2])
-            rhs[3 * p + 2] = apt2 - (Jdq[i, 2] + Jdq[i, 3] * d[1] - Jdq[i, 4] * d[0]
-                                     + wt[0] * t1[1] - wt[1] * t1[0])
+                A[3 * p + 0, j] = J[i, 0, j] + J[i, 4, j] * d2 - J[i, 5, j] * d1
+                A[3 * p + 1, j] = J[i, 1, j] + J[i, 5, j] * d0 - J[i, 3, j] * d2
+                A[3 * p + 2, j] = J[i, 2, j] + J[i, 3, j] * d1 - J[i, 4, j] * d0
+            s0 = wt1 * d2 - wt2 * d1
+            s1 = wt2 * d0 - wt0 * d2
+            s2 = wt0 * d1 - wt1 * d0
+            rhs[3 * p + 0] = apt0 - (Jdq[i, 0] + Jdq[i, 4] * d2 - Jdq[i, 5] * d1
+                                     + wt1 * s2 - wt2 * s1)
+            rhs[3 * p + 1] = apt1 - (Jdq[i, 1] + Jdq[i, 5] * d0 - Jdq[i, 3] * d2
+                                     + wt2 * s0 - wt0 * s2)
+            rhs[3 * p + 2] = apt2 - (Jdq[i, 2] + Jdq[i, 3] * d1 - Jdq[i, 4] * d0
+                                     + wt0 * s1 - wt1 * s0)
         # the right-hand side of the arm's rows W_iᵀ q̈_i = c_i - W_o,iᵀ a_d
         for s in range(Ni):
             acc = c[i, s]
