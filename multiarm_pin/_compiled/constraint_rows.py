@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.layout import (
     CF_CURVATURE_RADIUS,
@@ -38,6 +36,36 @@ from multiarm_pin._compiled.layout import (
 
 
 @kernel
+def _body(body, n, tool_p, tool_R, tool_twist, obj_p, obj_R, obj_twist):  # pragma: no cover
+    """Position, rotation and twist of a contact's body, as tuples of scalars.
+
+    Tool ``body`` or, past the ``n`` tools, the object: ``(3,)`` [m], the rotation's rows
+    ``((3,), (3,), (3,))``, ``(6,)`` [m/s, rad/s].
+    """
+    if body < n:
+        P, R, V = tool_p[body], tool_R[body], tool_twist[body]
+    else:
+        P, R, V = obj_p, obj_R, obj_twist
+    return ((P[0], P[1], P[2]),
+            ((R[0, 0], R[0, 1], R[0, 2]), (R[1, 0], R[1, 1], R[1, 2]), (R[2, 0], R[2, 1], R[2, 2])),
+            (V[0], V[1], V[2], V[3], V[4], V[5]))
+
+
+@kernel
+def _cross(a0, a1, a2, b0, b1, b2):  # pragma: no cover - compiled
+    """``a × b`` as a tuple."""
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@kernel
+def _rotate(R, v0, v1, v2):  # pragma: no cover - compiled
+    """``R v`` for ``R`` as rows (tuples), as a tuple."""
+    return (R[0][0] * v0 + R[0][1] * v1 + R[0][2] * v2,
+            R[1][0] * v0 + R[1][1] * v1 + R[1][2] * v2,
+            R[2][0] * v0 + R[2][1] * v1 + R[2][2] * v2)
+
+
+@kernel
 def constraint_rows(tool_p, tool_R, tool_twist, obj_p, obj_R, obj_twist, ints, floats,
                     rows):  # pragma: no cover - compiled
     """Every contact's row (``ConstraintSet.evaluate``), packed into ``rows`` (n, m, ROW_WIDTH).
@@ -53,118 +81,81 @@ def constraint_rows(tool_p, tool_R, tool_twist, obj_p, obj_R, obj_twist, ints, f
         floats: (K, CONTACT_FLOATS) float contact table.
         rows: output (n, m, ROW_WIDTH) packed rows (fields ``ROW_*`` of
             :mod:`~multiarm_pin._compiled.layout`); padded slots zeroed.
+
+    The 3-vectors are tuples of scalars (no work arrays): ``C`` is the carrier's side, ``S``
+    the surface body's.
     """
     n, m, width = rows.shape
     for i in range(n):
         for s in range(m):
             for f in range(width):
                 rows[i, s, f] = 0.0
-    X = np.empty((2, 3))
-    Rb = np.empty((2, 3, 3))
-    V = np.empty((2, 6))
-    r = np.empty((2, 3))
-    wr = np.empty((2, 3))
-    c = np.empty(3)
-    u = np.empty(3)
-    d = np.empty(3)
-    y = np.empty(3)
-    nu = np.empty(3)
-    yp = np.empty(3)
     for q in range(ints.shape[0]):
-        for side in range(2):
-            body = ints[q, CI_CARRIER] if side == 0 else ints[q, CI_SURFACE]
-            if body < n:
-                for a in range(3):
-                    X[side, a] = tool_p[body, a]
-                    for b in range(3):
-                        Rb[side, a, b] = tool_R[body, a, b]
-                for a in range(6):
-                    V[side, a] = tool_twist[body, a]
-            else:
-                for a in range(3):
-                    X[side, a] = obj_p[a]
-                    for b in range(3):
-                        Rb[side, a, b] = obj_R[a, b]
-                for a in range(6):
-                    V[side, a] = obj_twist[a]
+        XC, RC, VC = _body(ints[q, CI_CARRIER], n, tool_p, tool_R, tool_twist, obj_p, obj_R,
+                           obj_twist)
+        XS, RS, VS = _body(ints[q, CI_SURFACE], n, tool_p, tool_R, tool_twist, obj_p, obj_R,
+                           obj_twist)
         # tip centre c (world), lever arms from both bodies' origins, material velocities
-        for a in range(3):
-            c[a] = X[0, a] + (Rb[0, a, 0] * floats[q, CF_TIP] + Rb[0, a, 1] * floats[q, CF_TIP + 1]
-                              + Rb[0, a, 2] * floats[q, CF_TIP + 2])
-        for side in range(2):
-            for a in range(3):
-                r[side, a] = c[a] - X[side, a]
-            wx, wy, wz = V[side, 3], V[side, 4], V[side, 5]
-            wr[side, 0] = wy * r[side, 2] - wz * r[side, 1]
-            wr[side, 1] = wz * r[side, 0] - wx * r[side, 2]
-            wr[side, 2] = wx * r[side, 1] - wy * r[side, 0]
-        for a in range(3):
-            u[a] = (V[0, a] + wr[0, a]) - (V[1, a] + wr[1, a])
-        # surface in world axes: direction d, point s (surface body = side 1)
-        for a in range(3):
-            d[a] = (Rb[1, a, 0] * floats[q, CF_DIRECTION]
-                    + Rb[1, a, 1] * floats[q, CF_DIRECTION + 1]
-                    + Rb[1, a, 2] * floats[q, CF_DIRECTION + 2])
-            sp = (Rb[1, a, 0] * floats[q, CF_POINT] + Rb[1, a, 1] * floats[q, CF_POINT + 1]
-                  + Rb[1, a, 2] * floats[q, CF_POINT + 2])
-            y[a] = c[a] - X[1, a] - sp
-        dy = d[0] * y[0] + d[1] * y[1] + d[2] * y[2]
+        tip = _rotate(RC, floats[q, CF_TIP], floats[q, CF_TIP + 1], floats[q, CF_TIP + 2])
+        c0, c1, c2 = XC[0] + tip[0], XC[1] + tip[1], XC[2] + tip[2]
+        rC = (c0 - XC[0], c1 - XC[1], c2 - XC[2])
+        rS = (c0 - XS[0], c1 - XS[1], c2 - XS[2])
+        wrC = _cross(VC[3], VC[4], VC[5], rC[0], rC[1], rC[2])
+        wrS = _cross(VS[3], VS[4], VS[5], rS[0], rS[1], rS[2])
+        u0 = (VC[0] + wrC[0]) - (VS[0] + wrS[0])
+        u1 = (VC[1] + wrC[1]) - (VS[1] + wrS[1])
+        u2 = (VC[2] + wrC[2]) - (VS[2] + wrS[2])
+        # surface in world axes: direction d, point s (surface body = side S)
+        d0, d1, d2 = _rotate(RS, floats[q, CF_DIRECTION], floats[q, CF_DIRECTION + 1],
+                             floats[q, CF_DIRECTION + 2])
+        sp = _rotate(RS, floats[q, CF_POINT], floats[q, CF_POINT + 1], floats[q, CF_POINT + 2])
+        y0, y1, y2 = c0 - XS[0] - sp[0], c1 - XS[1] - sp[1], c2 - XS[2] - sp[2]
+        dy = d0 * y0 + d1 * y1 + d2 * y2
         if floats[q, CF_IS_PLANE] != 0.0:
-            for a in range(3):
-                nu[a] = d[a]
+            nu0, nu1, nu2 = d0, d1, d2
             g = dy
             quad = 0.0
         else:
-            for a in range(3):
-                yp[a] = y[a] - dy * d[a]
-            rho = max(math.sqrt(yp[0] * yp[0] + yp[1] * yp[1] + yp[2] * yp[2]), 1e-300)
+            yp0, yp1, yp2 = y0 - dy * d0, y1 - dy * d1, y2 - dy * d2
+            rho = max(math.sqrt(yp0 * yp0 + yp1 * yp1 + yp2 * yp2), 1e-300)
             sgn = floats[q, CF_CURVATURE_SIGN]
-            du = 0.0
-            eu = 0.0
-            uu = 0.0
-            for a in range(3):
-                e = yp[a] / rho
-                nu[a] = sgn * e
-                du += d[a] * u[a]
-                eu += e * u[a]
-                uu += u[a] * u[a]
+            e0, e1, e2 = yp0 / rho, yp1 / rho, yp2 / rho
+            nu0, nu1, nu2 = sgn * e0, sgn * e1, sgn * e2
+            du = ((0.0 + d0 * u0) + d1 * u1) + d2 * u2
+            eu = ((0.0 + e0 * u0) + e1 * u1) + e2 * u2
+            uu = ((0.0 + u0 * u0) + u1 * u1) + u2 * u2
             g = sgn * (rho - floats[q, CF_CURVATURE_RADIUS])
             quad = sgn * (uu - du * du - eu * eu) / rho
         # κ = uᵀHu + ν·(ω_C × (ω_C × r_C) - ω_S × (ω_S × r_S + 2u))
-        kappa = quad
-        for side in range(2):
-            bx, by, bz = wr[side, 0], wr[side, 1], wr[side, 2]
-            if side == 1:
-                bx += 2.0 * u[0]
-                by += 2.0 * u[1]
-                bz += 2.0 * u[2]
-            wx, wy, wz = V[side, 3], V[side, 4], V[side, 5]
-            t0 = wy * bz - wz * by
-            t1 = wz * bx - wx * bz
-            t2 = wx * by - wy * bx
-            sg = 1.0 if side == 0 else -1.0
-            kappa += sg * (nu[0] * t0 + nu[1] * t1 + nu[2] * t2)
+        t0, t1, t2 = _cross(VC[3], VC[4], VC[5], wrC[0], wrC[1], wrC[2])
+        kappa = quad + 1.0 * (nu0 * t0 + nu1 * t1 + nu2 * t2)
+        t0, t1, t2 = _cross(VS[3], VS[4], VS[5], wrS[0] + 2.0 * u0, wrS[1] + 2.0 * u1,
+                            wrS[2] + 2.0 * u2)
+        kappa += -1.0 * (nu0 * t0 + nu1 * t1 + nu2 * t2)
         slot = ints[q, CI_SLOT]
         i = slot // m
         s = slot - i * m
         rows[i, s, ROW_PHI] = g - floats[q, CF_TIP_RADIUS]
-        rows[i, s, ROW_PHI_DOT] = nu[0] * u[0] + nu[1] * u[1] + nu[2] * u[2]
+        rows[i, s, ROW_PHI_DOT] = nu0 * u0 + nu1 * u1 + nu2 * u2
         rows[i, s, ROW_KAPPA] = kappa
-        tool_side = 0 if ints[q, CI_TOOL_CARRIES] != 0 else 1
+        tool_carries = ints[q, CI_TOOL_CARRIES] != 0
         for side in range(2):
-            base = ROW_G_TOOL if side == tool_side else ROW_G_OBJECT
+            base = ROW_G_TOOL if (side == 0) == tool_carries else ROW_G_OBJECT
             sg = 1.0 if side == 0 else -1.0  # +1 carrier, -1 surface body
-            rx, ry, rz = r[side, 0], r[side, 1], r[side, 2]
-            rows[i, s, base + 0] = sg * nu[0]
-            rows[i, s, base + 1] = sg * nu[1]
-            rows[i, s, base + 2] = sg * nu[2]
-            rows[i, s, base + 3] = sg * (ry * nu[2] - rz * nu[1])
-            rows[i, s, base + 4] = sg * (rz * nu[0] - rx * nu[2])
-            rows[i, s, base + 5] = sg * (rx * nu[1] - ry * nu[0])
+            rx, ry, rz = rC if side == 0 else rS
+            rows[i, s, base + 0] = sg * nu0
+            rows[i, s, base + 1] = sg * nu1
+            rows[i, s, base + 2] = sg * nu2
+            rows[i, s, base + 3] = sg * (ry * nu2 - rz * nu1)
+            rows[i, s, base + 4] = sg * (rz * nu0 - rx * nu2)
+            rows[i, s, base + 5] = sg * (rx * nu1 - ry * nu0)
         push = floats[q, CF_PUSH_SIGN]
-        for a in range(3):
-            rows[i, s, ROW_POINT + a] = c[a] - g * nu[a]
-            rows[i, s, ROW_NORMAL + a] = push * nu[a]
+        rows[i, s, ROW_POINT + 0] = c0 - g * nu0
+        rows[i, s, ROW_POINT + 1] = c1 - g * nu1
+        rows[i, s, ROW_POINT + 2] = c2 - g * nu2
+        rows[i, s, ROW_NORMAL + 0] = push * nu0
+        rows[i, s, ROW_NORMAL + 1] = push * nu1
+        rows[i, s, ROW_NORMAL + 2] = push * nu2
 
 
 __all__ = ["constraint_rows"]
