@@ -38,10 +38,11 @@ mistake.
 
 numba compiles a callee into its own module, optimises that module, and links a copy of it
 into the module of every caller, which it optimises again as a whole (the callee's code is
-inlined there and optimised with its caller's). A twin's own module serves only that linking
-(and the disk cache): it is never run. So the twins are compiled by :class:`LinkedCompiler`,
-which skips the whole-module optimisation of that module: their functions are still
-optimised one by one, and every caller's module is optimised as before, callees included.
+inlined there and optimised with its caller's). A twin's own module is made for that linking
+and for the disk cache: a caller loaded from the cache carries its own optimised copy of its
+callees. So the twins are compiled by :class:`LinkedCompiler`, which skips the whole-module
+optimisation of a twin's module: its functions are still optimised one by one, and every
+caller's module is optimised as before, callees included.
 """
 
 from __future__ import annotations
