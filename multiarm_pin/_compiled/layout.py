@@ -469,17 +469,10 @@ def _dim(code, n, k, m):  # pragma: no cover - compiled
     return code
 
 
-def segment_offsets(n: int, k: int, m: int) -> np.ndarray:
-    """Start offsets (N_SEGMENTS + 1,) int64 of the segments; the last entry is the total size."""
-    shapes = segment_shapes(n, k, m)
-    sizes = [int(np.prod(shapes[name], dtype=np.int64)) for name in SEGMENTS]
-    return np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-
-
 # ------------------------------------------------------------------ dimensions
 DIMS_FIELDS = (("k", 1), ("m", 1), ("nv", 1), ("n", 1), ("offsets", N_SEGMENTS + 1))
 """The int64 vector ``dims``: ``nv_max``, ``N_max``, total joints, arms, then the buffer
-segments' start offsets for those (:func:`segment_offsets`), computed once with the
+segments' start offsets for those (:func:`buffer_layout`), computed once with the
 dimensions: the kernels read them (:func:`offsets`) and allocate nothing for them."""
 _D, DIMS_SIZE = _starts(DIMS_FIELDS)
 DIMS_K = _D["k"]
@@ -493,7 +486,7 @@ def dims_vector(k: int, m: int, nv: int, n: int) -> np.ndarray:
     """The ``dims`` vector (:data:`DIMS_FIELDS`)."""
     dims = np.zeros(DIMS_SIZE, dtype=np.int64)
     dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N] = k, m, nv, n
-    dims[DIMS_OFFSETS:] = segment_offsets(n, k, m)
+    dims[DIMS_OFFSETS:] = buffer_layout(n, k, m)[0]
     return dims
 
 
@@ -531,8 +524,13 @@ def segment_shapes(n: int, k: int, m: int) -> dict[str, tuple[int, ...]]:
 
 
 def buffer_layout(n: int, k: int, m: int) -> tuple[np.ndarray, int]:
-    """Start offsets (N_SEGMENTS + 1,) int64 of every segment, and the buffer's size."""
-    off = segment_offsets(n, k, m)
+    """Start offsets (N_SEGMENTS + 1,) int64 of every segment, and the buffer's size.
+
+    The last offset is the size.
+    """
+    shapes = segment_shapes(n, k, m)
+    sizes = [int(np.prod(shapes[name], dtype=np.int64)) for name in SEGMENTS]
+    off = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
     return off, int(off[-1])
 
 
