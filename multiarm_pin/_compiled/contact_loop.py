@@ -93,6 +93,7 @@ from multiarm_pin._compiled.function_pointers import (
     compile_all,
     compile_of,
     compiled,
+    numba_type,
     pointer,
     type_key,
 )
@@ -134,6 +135,7 @@ from multiarm_pin._compiled.phased import callee_compiles as phased_callee_compi
 from multiarm_pin._compiled.phased import phased_torques
 from multiarm_pin._compiled.rigid_body import difference
 from multiarm_pin._compiled.trajectory import reference_motion
+from multiarm_pin._compiled.tuple_address import address, address_type, tuple_at
 
 STAGE_TOO_MANY_EVENTS = 7
 """Status: more contact events in one step than the rules allow (the stepper raises)."""
@@ -247,9 +249,9 @@ def _rows_and_blocks(x, sy, wk, callees):  # pragma: no cover - compiled
     through its address: the other is not compiled).
     """
     (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
-     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
+     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = tuple_at(sy)
     (J, dJ, Mq, nle, H, energy, buf, Mc, hc, Wc, W_oc, cc, M_o, h_o, phi, phi_dot, pts,
-     nrm) = wk
+     nrm) = tuple_at(wk)
     k, m, nv, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_NV], dims[DIMS_N]
     B, kc, R = Wc.shape
     nq = x.shape[0] - OBJECT_STATE_SIZE - 2 * nv
@@ -299,9 +301,9 @@ def _object_rows_and_blocks(x, sy, wk, callees):  # pragma: no cover - compiled
 def _supports_and_check(x, sy, wk):  # pragma: no cover - compiled
     """The supports' block and rows after the arms' (:func:`_rows_and_blocks`); False on NaN."""
     (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
-     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
+     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = tuple_at(sy)
     (J, dJ, Mq, nle, H, energy, buf, Mc, hc, Wc, W_oc, cc, M_o, h_o, phi, phi_dot, pts,
-     nrm) = wk
+     nrm) = tuple_at(wk)
     n = dims[DIMS_N]
     B, kc, R = Wc.shape
     if B > n:  # the supports' zero-dof block: M = I, h = 0, W = 0
@@ -351,12 +353,12 @@ def _torques(t, x, active, sy, ctl, wk, out, callees):  # pragma: no cover - com
     Those two are ``callees[2]`` and ``callees[3]`` (:func:`stage_compiles`).
     """
     (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
-     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
+     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = tuple_at(sy)
     (control, traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, qp_active,
      unilateral, q_ref, q_hold, onsets, n_onsets, qp_active_r, touching, no_uni,
-     gains_free, no_wrench, _) = ctl
+     gains_free, no_wrench, _) = tuple_at(ctl)
     buf = wk[6]
-    (a_o, qdd_c, mu, phi_dd, Av, tau, err, z, ref, E, mu_p, qdd_p, a_pts, a_d) = out
+    (a_o, qdd_c, mu, phi_dd, Av, tau, err, z, ref, E, mu_p, qdd_p, a_pts, a_d) = tuple_at(out)
     k, n = dims[DIMS_K], dims[DIMS_N]
     for i in range(n):
         for a in range(k):
@@ -431,13 +433,13 @@ def _phased_torques(t, x, active, sy, ctl, wk, out, callees):  # pragma: no cove
     ``plan`` are ``callees[2]`` and ``callees[3]`` (:func:`stage_compiles`).
     """
     (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
-     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
+     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = tuple_at(sy)
     (control, traj, pd_gains, null_gains, hold_tool, grasp_obj, hold_n, gains, qp_active,
      unilateral, q_ref, q_hold, onsets, n_onsets, qp_active_r, touching, no_uni,
-     gains_free, _, ph) = ctl
+     gains_free, _, ph) = tuple_at(ctl)
     (phases, press, release, named, offs, margins, offset_start, lam, a_plan) = ph
     buf, W_oc, cc, phi, phi_dot = wk[6], wk[10], wk[11], wk[14], wk[15]
-    (a_o, qdd_c, mu, phi_dd, Av, tau, err, z, ref, E, mu_p, qdd_p, a_pts, a_d) = out
+    (a_o, qdd_c, mu, phi_dd, Av, tau, err, z, ref, E, mu_p, qdd_p, a_pts, a_d) = tuple_at(out)
     m, n = dims[DIMS_M], dims[DIMS_N]
     K = sp_p.shape[0]
     q0 = OBJECT_STATE_SIZE
@@ -529,10 +531,10 @@ def contact_stage(t, x, active, sy, ctl, wk, out, d, rows, torques, lcp,
         ``(status, solver code)``.
     """
     (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
-     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
+     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = tuple_at(sy)
     (J, dJ, Mq, nle, H, energy, buf, Mc, hc, Wc, W_oc, cc, M_o, h_o, phi, phi_dot, pts,
-     nrm) = wk
-    (a_o, qdd_c, mu, phi_dd, Av, tau, err, z, ref, E, mu_p, qdd_p, a_pts, a_d) = out
+     nrm) = tuple_at(wk)
+    (a_o, qdd_c, mu, phi_dd, Av, tau, err, z, ref, E, mu_p, qdd_p, a_pts, a_d) = tuple_at(out)
     if not rows(x, sy, wk, callees):
         return STAGE_NOT_FINITE, 0
     st = torques(t, x, active, sy, ctl, wk, out, callees)
@@ -645,7 +647,10 @@ def stage_compiles(x, active, sy, ctl, wk, out, d) -> tuple:
     callee_types = tuple(c.function_type for c in callees)
     torque_kernel = (_torques if mode == CONTROL_OBJECT_PD
                      else _phased_torques if mode == CONTROL_PHASED else _zero_torques)
-    torques = compile_of(torque_kernel, (0.0, x, active, sy, ctl, wk, out, callee_types), int64)
+    # the stages take the loop's tuples by their addresses (run_contact_rk4)
+    sy_at, ctl_at, wk_at, out_at = (address_type(numba_type(t)) for t in (sy, ctl, wk, out))
+    torques = compile_of(torque_kernel, (0.0, x, active, sy_at, ctl_at, wk_at, out_at,
+                                         callee_types), int64)
     a_o, qdd_c, mu, Av = out[0], out[1], out[2], out[4]
     lcp = compile_of(contact_kernel,
                      (wk[7], wk[8], wk[9], wk[10], wk[11], wk[12], a_o, sy[15], sy[16], sy[13],
@@ -653,10 +658,10 @@ def stage_compiles(x, active, sy, ctl, wk, out, d) -> tuple:
                       qdd_c, mu, Av),
                      numba.types.Tuple((int64, int64, int64, int64, numba.types.float64)))
     rows = compile_of(_rows_and_blocks if arms else _object_rows_and_blocks,
-                      (x, sy, wk, callee_types), numba.types.boolean)
-    stage = compile_of(contact_stage, (0.0, x, active, sy, ctl, wk, out, d, rows.function_type,
-                                       torques.function_type, lcp.function_type, callee_types),
-                       pair)
+                      (x, sy_at, wk_at, callee_types), numba.types.boolean)
+    stage = compile_of(contact_stage, (0.0, x, active, sy_at, ctl_at, wk_at, out_at, d,
+                                       rows.function_type, torques.function_type,
+                                       lcp.function_type, callee_types), pair)
     return stage, rows, torques, lcp, callees
 
 
@@ -681,9 +686,10 @@ def loop_functions(head: tuple) -> tuple:
     def each(f):  # f of every compile of fn, nested as fn
         return (f(stage), f(rows), f(torques), f(lcp), tuple(f(c) for c in callees))
 
+    at = tuple(address_type(numba_type(t)) for t in (sy, ctl, wk, out, rk, st0, loc, imp))
     advance = compile_of(_advance_with_events,
-                         (0.0, x, 0.0, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev,
-                          each(lambda c: c.function_type)), numba.types.int64)
+                         (0.0, x, 0.0, active, *at, ev, n_ev, each(lambda c: c.function_type)),
+                         numba.types.int64)
     loop = compile_of(run_contact_rk4,
                       (*head, each(lambda c: c.pointer_type), advance.pointer_type))
     # the larger first (by the code each compiles); object_pd_step and touching_torques share
@@ -723,7 +729,7 @@ def _step(t, x, d1, h, active, sy, ctl, wk, out, rk, x_new, fn):  # pragma: no c
     alone: :func:`~multiarm_pin._compiled.closed_loop._advance_semi_implicit`).
     """
     model_ints = sy[0]
-    d2, d3, d4, hd, xs, dsum, rot = rk
+    d2, d3, d4, hd, xs, dsum, rot = tuple_at(rk)
     if sy[6][P_SEMI_IMPLICIT] == 1.0:
         _advance_semi_implicit(model_ints, x, d1, h, hd[:sy[7][DIMS_NV]], rot, x_new)
         return STAGE_OK
@@ -822,7 +828,7 @@ def _evaluate_start(t, x, active, sy, ctl, wk, out, st0, keep, use_keep, ev, n_e
     """
     rules = sy[19]
     uni_c = sy[13]
-    d1, mu0, phi_dd0, phi0, memo = st0
+    d1, mu0, phi_dd0, phi0, memo = tuple_at(st0)
     solver = memo[1]
     for attempt in range(2):  # one call site of the stage
         if attempt > 0 or not reuse:
@@ -842,10 +848,10 @@ def _evaluate_start(t, x, active, sy, ctl, wk, out, st0, keep, use_keep, ev, n_e
 def _impact(t, x, watch, active, sy, wk, imp, ev, n_ev, joined, fn):  # pragma: no cover - compiled
     """``Stepper._impact``: the impact law at a touchdown, into ``x``; the active set updated."""
     (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
-     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
+     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = tuple_at(sy)
     (J, dJ, Mq, nle, H, energy, buf, Mc, hc, Wc, W_oc, cc, M_o, h_o, phi, phi_dot, pts,
-     nrm) = wk
-    touching, cand, uni, rhs, dv_o, dqd, P, Av, zero_h, zero6 = imp
+     nrm) = tuple_at(wk)
+    touching, cand, uni, rhs, dv_o, dqd, P, Av, zero_h, zero6 = tuple_at(imp)
     if not fn[1](x, sy, wk, fn[4]):
         return STAGE_NOT_FINITE
     B, R = phi.shape
@@ -920,9 +926,9 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
     """
     rules = sy[19]
     uni_c, mask_c = sy[13], sy[14]
-    d1, mu0, phi_dd0, phi0, memo = st0
+    d1, mu0, phi_dd0, phi0, memo = tuple_at(st0)
     (new, s_e, s_hi, mu_end, phi_dd_end, mu_hi, rows_sep, leaving, watch, joined, dtmp, _,
-     _, _) = loc
+     _, _) = tuple_at(loc)
     memo[0] = 0
     B, R = active.shape
     tol = rules[R_GAP]
@@ -1126,7 +1132,7 @@ def _locate_touchdown(t, x, d1, h, watch, g_hi, active, sy, ctl, wk, out, rk, lo
 def _record_sample(s, t, x, active, sy, wk, out, solver, Rec):  # pragma: no cover - compiled
     """Record sample ``s`` from its evaluation (``Recorder.record``)."""
     (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
-     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = sy
+     sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = tuple_at(sy)
     energy, phi, phi_dot, pts, nrm = wk[5], wk[14], wk[15], wk[16], wk[17]
     a_o, qdd_c, mu, tau = out[0], out[1], out[2], out[5]
     (r_q, r_v, r_p, r_quat, r_tw, r_tau, r_mu, r_phi, r_phi_dot, r_points, r_normals, r_a_o,
@@ -1210,6 +1216,10 @@ def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, im
         has a support point off its rectangle (at the sample: checked before its
         evaluation, nothing of it done).
     """
+    # every call below takes these tuples by their addresses (tuple_address)
+    sy, ctl, wk, out, rk, st0, loc, imp = (address(sy), address(ctl), address(wk), address(out),
+                                           address(rk), address(st0), address(loc),
+                                           address(imp))
     control, q_hold, n_onsets = ctl[0], ctl[11], ctl[13]
     fns = bind(fn)
     advance_fn = bind(advance)
