@@ -20,7 +20,9 @@ from __future__ import annotations
 from numba.core import cgutils, types
 from numba.core.imputils import impl_ret_borrowed, lower_builtin
 from numba.core.typing.templates import AbstractTemplate, infer, signature
-from numba.extending import intrinsic, models, overload, register_model
+from numba.extending import intrinsic, models, register_model
+
+from multiarm_pin._compiled.jit import jit_disabled
 
 
 class TupleAddress(types.Type):
@@ -40,49 +42,46 @@ class _AddressModel(models.PrimitiveModel):
         super().__init__(dmm, fe_type, pointee.as_pointer())
 
 
-def address(t):
-    """In a kernel: the :class:`TupleAddress` of the tuple ``t`` (an address: itself).
-
-    From Python (no JIT): ``t``.
-    """
-    return t
-
-
-def tuple_at(t):
-    """In a kernel: the tuple at the address ``t`` (a tuple: itself). From Python: ``t``."""
+def _identity(t):
     return t
 
 
 @intrinsic
-def _address(typingctx, tup):
+def _address(typingctx, t):
+    """In a kernel: the :class:`TupleAddress` of the tuple ``t`` (an address: itself)."""
+    if isinstance(t, TupleAddress):
+        return t(t), lambda context, builder, sig, args: args[0]
+    if not isinstance(t, types.BaseTuple):
+        return None
+
     def codegen(context, builder, sig, args):
         return cgutils.alloca_once_value(builder, args[0])  # in the caller's frame
-    return TupleAddress(tup)(tup), codegen
+
+    return TupleAddress(t)(t), codegen
 
 
 @intrinsic
-def _tuple_at(typingctx, at):
+def _tuple_at(typingctx, t):
+    """In a kernel: the tuple at the address ``t`` (a tuple: itself)."""
+    if isinstance(t, types.BaseTuple):
+        return t(t), lambda context, builder, sig, args: impl_ret_borrowed(
+            context, builder, sig.return_type, args[0])
+    if not isinstance(t, TupleAddress):
+        return None
+
     def codegen(context, builder, sig, args):
         return impl_ret_borrowed(context, builder, sig.return_type, builder.load(args[0]))
-    return at.tuple_type(at), codegen
+
+    return t.tuple_type(t), codegen
 
 
-@overload(address, inline="always")
-def _address_overload(t):
-    if isinstance(t, TupleAddress):
-        return lambda t: t
-    if isinstance(t, types.BaseTuple):
-        return lambda t: _address(t)
-    return None
+address = _identity if jit_disabled() else _address
+"""``address(t)``: the :class:`TupleAddress` of the tuple ``t`` in a kernel (an address:
+itself); ``t`` without the JIT."""
 
-
-@overload(tuple_at, inline="always")
-def _tuple_at_overload(t):
-    if isinstance(t, TupleAddress):
-        return lambda t: _tuple_at(t)
-    if isinstance(t, types.BaseTuple):
-        return lambda t: t
-    return None
+tuple_at = _identity if jit_disabled() else _tuple_at
+"""``tuple_at(t)``: the tuple at the address ``t`` in a kernel (a tuple: itself); ``t``
+without the JIT."""
 
 
 @infer
