@@ -17,9 +17,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from dynamics.synthetic import random_system
+from numba.core import config
 from system_builders import JOINT_KINDS, build_system, joint_spec, moving_state
 
 from multiarm_pin._compiled import controller_kernels, evaluate, layout, linalg, phased
+from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.object_first import (
     SOLVE_ARM_SINGULAR,
     SOLVE_OBJECT_SINGULAR,
@@ -545,6 +547,27 @@ def test_compiled_views_are_the_python_segments():
         np.testing.assert_array_equal(view, segments[name].view(buf), err_msg=name)
     assert layout.ROW_WIDTH == sum(w for _, w in layout.ROW_FIELDS) == 21
     assert layout.N_PARAMS == 19 and layout.CONTACT_FLOATS == 14
+
+
+@kernel
+def _shaped_and_reshaped(buf, start, n, k):  # pragma: no cover - compiled
+    return (layout.shaped(buf, start, (n, k)), buf[start:start + n * k].reshape((n, k)),
+            layout.shaped(buf, start + 1, (n * k - 1,)))
+
+
+@pytest.mark.skipif(config.DISABLE_JIT, reason="the compiled view's type needs the JIT")
+def test_shaped_is_the_slice_reshaped():
+    """``layout.shaped`` in a kernel: ``buf[start:start + size].reshape(shape)``, the same
+    memory, strides and numba type, and writable through it."""
+    buf = np.arange(20.0)
+    view, reshaped, flat = _shaped_and_reshaped(buf, 3, 2, 5)
+    np.testing.assert_array_equal(view, reshaped)
+    assert view.strides == reshaped.strides == (40, 8) and np.shares_memory(view, buf)
+    np.testing.assert_array_equal(flat, buf[4:13])
+    types = _shaped_and_reshaped.nopython_signatures[0].return_type.types
+    assert types[0] == types[1]
+    view[1, 2] = -1.0
+    assert buf[3 + 5 + 2] == -1.0
 
 
 def test_compiled_evaluation_is_read_only_views_of_one_buffer():

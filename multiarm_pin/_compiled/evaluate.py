@@ -79,6 +79,7 @@ from multiarm_pin._compiled.layout import (
     X_QUATERNION,
     X_TWIST,
     offsets,
+    shaped,
     view3,
 )
 from multiarm_pin._compiled.object_first import SOLVE_OK, object_first
@@ -122,35 +123,35 @@ def rotation_rows(quat):  # pragma: no cover - compiled
 def _arm_segments(buf, off, n, k, m):  # pragma: no cover - compiled
     """Views of the arm segments (inlined): M, nle, J, Jdot_qdot, position, rotation, twist, v."""
     three, six = np.int64(3), np.int64(6)
-    return (buf[off[SEG_M]:off[SEG_M + 1]].reshape((n, k, k)),
-            buf[off[SEG_NLE]:off[SEG_NLE + 1]].reshape((n, k)),
-            buf[off[SEG_J]:off[SEG_J + 1]].reshape((n, six, k)),
-            buf[off[SEG_JDOT_QDOT]:off[SEG_JDOT_QDOT + 1]].reshape((n, six)),
-            buf[off[SEG_POSITION]:off[SEG_POSITION + 1]].reshape((n, three)),
-            buf[off[SEG_ROTATION]:off[SEG_ROTATION + 1]].reshape((n, three, three)),
-            buf[off[SEG_TWIST]:off[SEG_TWIST + 1]].reshape((n, six)),
-            buf[off[SEG_V]:off[SEG_V + 1]].reshape((n, k)))
+    return (shaped(buf, off[SEG_M], (n, k, k)),
+            shaped(buf, off[SEG_NLE], (n, k)),
+            shaped(buf, off[SEG_J], (n, six, k)),
+            shaped(buf, off[SEG_JDOT_QDOT], (n, six)),
+            shaped(buf, off[SEG_POSITION], (n, three)),
+            shaped(buf, off[SEG_ROTATION], (n, three, three)),
+            shaped(buf, off[SEG_TWIST], (n, six)),
+            shaped(buf, off[SEG_V], (n, k)))
 
 
 @kernel(inline="always")
 def _block_segments(buf, off, n, k, m):  # pragma: no cover - compiled
     """Views of the rows and block segments (inlined): rows, h, W, W_o, c, M_o, h_o."""
     six = np.int64(6)
-    return (buf[off[SEG_ROWS]:off[SEG_ROWS + 1]].reshape((n, m, np.int64(ROW_WIDTH))),
-            buf[off[SEG_H]:off[SEG_H + 1]].reshape((n, k)),
-            buf[off[SEG_W]:off[SEG_W + 1]].reshape((n, k, m)),
-            buf[off[SEG_W_O]:off[SEG_W_O + 1]].reshape((n, six, m)),
-            buf[off[SEG_C]:off[SEG_C + 1]].reshape((n, m)),
-            buf[off[SEG_M_O]:off[SEG_M_O + 1]].reshape((six, six)),
-            buf[off[SEG_H_O]:off[SEG_H_O + 1]])
+    return (shaped(buf, off[SEG_ROWS], (n, m, np.int64(ROW_WIDTH))),
+            shaped(buf, off[SEG_H], (n, k)),
+            shaped(buf, off[SEG_W], (n, k, m)),
+            shaped(buf, off[SEG_W_O], (n, six, m)),
+            shaped(buf, off[SEG_C], (n, m)),
+            shaped(buf, off[SEG_M_O], (six, six)),
+            shaped(buf, off[SEG_H_O], (off[SEG_H_O + 1] - off[SEG_H_O],)))
 
 
 @kernel(inline="always")
 def _solution_segments(buf, off, n, k, m):  # pragma: no cover - compiled
     """Views of the solution segments (inlined): a_o, qdd, mu."""
-    return (buf[off[SEG_A_O]:off[SEG_A_O + 1]],
-            buf[off[SEG_QDD]:off[SEG_QDD + 1]].reshape((n, k)),
-            buf[off[SEG_MU]:off[SEG_MU + 1]].reshape((n, m)))
+    return (shaped(buf, off[SEG_A_O], (off[SEG_A_O + 1] - off[SEG_A_O],)),
+            shaped(buf, off[SEG_QDD], (n, k)),
+            shaped(buf, off[SEG_MU], (n, m)))
 
 
 @kernel

@@ -43,8 +43,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numba.core import types
+from numba.core.imputils import impl_ret_borrowed
+from numba.core.typing.templates import signature
+from numba.extending import intrinsic
+from numba.np.arrayobj import make_array, populate_array
 
-from multiarm_pin._compiled.jit import kernel
+from multiarm_pin._compiled.jit import jit_disabled, kernel
 
 
 def _starts(fields: Sequence[tuple[str, int]]) -> tuple[dict[str, int], int]:
@@ -496,25 +501,70 @@ def offsets(dims):  # pragma: no cover - compiled
     return dims[DIMS_OFFSETS:DIMS_OFFSETS + N_SEGMENTS + 1]
 
 
+def _shaped_python(buf, start, shape):
+    size = 1
+    for d in shape:
+        size *= d
+    return buf[start:start + size].reshape(shape)
+
+
+@intrinsic
+def _shaped(typingctx, buf, start, shape):
+    """The C-ordered view of ``shape`` in the one-axis array ``buf`` from element ``start``.
+
+    ``buf[start:start + prod(shape)].reshape(shape)``, made without the bounds arithmetic of
+    the slice and the checks of ``reshape`` (numba lowers each into code of its own, in
+    every kernel that takes a view): the segments' offsets and shapes agree by construction
+    (:func:`buffer_layout`). The same array type as that expression.
+    """
+    if not (isinstance(buf, types.Array) and buf.ndim == 1 and buf.layout == "C"
+            and isinstance(start, types.Integer) and isinstance(shape, types.BaseTuple)
+            and all(isinstance(d, types.Integer) for d in shape)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        whole = make_array(sig.args[0])(context, builder, args[0])
+        dims = [context.cast(builder, builder.extract_value(args[2], i), d, types.intp)
+                for i, d in enumerate(sig.args[2])]
+        strides = []
+        step = whole.itemsize
+        for d in reversed(dims):
+            strides.insert(0, step)
+            step = builder.mul(step, d)
+        first = context.cast(builder, args[1], sig.args[1], types.intp)
+        view = make_array(sig.return_type)(context, builder)
+        populate_array(view, data=builder.gep(whole.data, [first], inbounds=True), shape=dims,
+                       strides=strides, itemsize=whole.itemsize, meminfo=whole.meminfo,
+                       parent=whole.parent)
+        return impl_ret_borrowed(context, builder, sig.return_type, view._getvalue())
+
+    return signature(buf.copy(ndim=len(shape), layout="C"), buf, start, shape), codegen
+
+
+shaped = _shaped_python if jit_disabled() else _shaped
+"""``shaped(buf, start, shape)``: the view of ``shape`` in ``buf`` from element ``start``
+(:func:`_shaped` in a kernel; the slice and ``reshape`` without the JIT)."""
+
+
 @kernel(inline="always")
 def view1(buf, off, seg):  # pragma: no cover - compiled
     """The one-axis segment ``seg`` of ``buf`` (offsets ``off``)."""
-    return buf[off[seg]:off[seg + 1]]
+    return shaped(buf, off[seg], (off[seg + 1] - off[seg],))
 
 
 @kernel(inline="always")
 def view2(buf, off, seg, n, k, m):  # pragma: no cover - compiled
     """The two-axis segment ``seg`` of ``buf``, shaped as :data:`SEGMENT_TABLE` says."""
-    return buf[off[seg]:off[seg + 1]].reshape((_dim(SHAPE_CODES[seg, 0], n, k, m),
-                                               _dim(SHAPE_CODES[seg, 1], n, k, m)))
+    return shaped(buf, off[seg], (_dim(SHAPE_CODES[seg, 0], n, k, m),
+                                  _dim(SHAPE_CODES[seg, 1], n, k, m)))
 
 
 @kernel(inline="always")
 def view3(buf, off, seg, n, k, m):  # pragma: no cover - compiled
     """The three-axis segment ``seg`` of ``buf``, shaped as :data:`SEGMENT_TABLE` says."""
-    return buf[off[seg]:off[seg + 1]].reshape((_dim(SHAPE_CODES[seg, 0], n, k, m),
-                                               _dim(SHAPE_CODES[seg, 1], n, k, m),
-                                               _dim(SHAPE_CODES[seg, 2], n, k, m)))
+    return shaped(buf, off[seg], (_dim(SHAPE_CODES[seg, 0], n, k, m),
+                                  _dim(SHAPE_CODES[seg, 1], n, k, m),
+                                  _dim(SHAPE_CODES[seg, 2], n, k, m)))
 
 
 def segment_shapes(n: int, k: int, m: int) -> dict[str, tuple[int, ...]]:
