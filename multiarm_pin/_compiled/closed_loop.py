@@ -63,7 +63,6 @@ from multiarm_pin._compiled.layout import (
     P_GRAVITY,
     P_INERTIA,
     P_MASS,
-    P_SEMI_IMPLICIT,
     REFERENCE_SIZE,
     ROW_NORMAL,
     ROW_PHI,
@@ -489,15 +488,15 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
             hold_obj, hold_n, gains, active, wrenches, separation, work_J, work_dJ, work_M,
             work_nle, work_H, work_energy, buf, tau, mu, qdd, a_pts, a_d, r_q, r_v, r_p, r_quat,
             r_tw, r_tau, r_mu, r_phi, r_phi_dot, r_points, r_normals, r_a_o, r_qdd, r_violation,
-            r_wrench, r_kinetic, r_potential, r_momentum, evaluate,
+            r_wrench, r_kinetic, r_potential, r_momentum, semi, evaluate,
             callees):  # pragma: no cover - compiled
     """RK4 (or semi-implicit Euler) steps from sample ``k0``, recording samples ``k0 .. k1 - 1``.
 
     Sample ``k`` is evaluated (stage 1), recorded, and unless it is the grid's last, the state
     advances to sample ``k + 1`` by RK4 with ``h = times[k + 1] - times[k]`` (stages at
-    ``t + h/2``, ``t + h/2``, ``t + h``), exactly as ``Stepper.step``; when
-    ``params[P_SEMI_IMPLICIT]`` is 1, by one semi-implicit Euler step from that evaluation
-    alone (:func:`_advance_semi_implicit`, ``Stepper.step``'s other branch).
+    ``t + h/2``, ``t + h/2``, ``t + h``), exactly as ``Stepper.step``; when ``semi`` is given
+    (the run's ``params[P_SEMI_IMPLICIT]`` is then 1), by one semi-implicit Euler step from that
+    evaluation alone (:func:`_advance_semi_implicit`, ``Stepper.step``'s other branch).
 
     Args:
         k0: first sample.
@@ -559,6 +558,9 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
         r_potential: (T,) their potential energy ``-Σ m g·c`` [J] (zero at the origin).
         r_momentum: (T, 6) their total momentum ``[linear; angular about the world
             origin]`` [kg m/s, kg m²/s].
+        semi: (nv,) workspace of the semi-implicit step, or ``None`` for RK4. numba drops the
+            branch of the other integrator when it compiles the loop for its type: a run
+            compiles its own integrator only.
         evaluate: :func:`closed_loop_stage`, as :func:`loop_functions` makes it (compiled
             once, called through its address: its pointer,
             :func:`~multiarm_pin._compiled.function_pointers.pointer`) or the kernel itself.
@@ -586,9 +588,7 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
     E = np.empty((3, 3))
     z = np.empty((n, k))
     ds = (d1, d2, d3, d4)
-    semi_implicit = params[P_SEMI_IMPLICIT] != 0.0
-    stages = 1 if semi_implicit else 4
-    v_new = np.empty(nv)
+    stages = 1 if semi is not None else 4
     for s in range(k0, k1):
         t = times[s]
         h = times[s + 1] - t if s + 1 < times.shape[0] else 0.0
@@ -618,8 +618,8 @@ def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_start
                 return STAGE_SEPARATION, s
             if s == times.shape[0] - 1:
                 return STAGE_OK, s + 1
-        if semi_implicit:
-            _advance_semi_implicit(model_ints, x, d1, h, v_new, E, xs)
+        if semi is not None:
+            _advance_semi_implicit(model_ints, x, d1, h, semi, E, xs)
             for a in range(nx):
                 x[a] = xs[a]
             continue

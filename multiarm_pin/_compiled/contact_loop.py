@@ -112,7 +112,6 @@ from multiarm_pin._compiled.layout import (
     P_MASS,
     P_OBJECT_RCOND_TOL,
     P_RCOND_TOL,
-    P_SEMI_IMPLICIT,
     PLANE_HALF_EXTENT,
     PLANE_POINT,
     PLANE_X_AXIS,
@@ -722,15 +721,19 @@ def _illinois(theta, value, lo, f_lo, hi, f_hi, side):  # pragma: no cover - com
         f_lo *= 0.5
     return lo, f_lo, theta, value, -1
 @kernel
-def _step(t, x, d1, h, active, sy, ctl, wk, out, rk, x_new, fn):  # pragma: no cover - compiled
+def _step(t, x, d1, h, active, sy, ctl, wk, out, rk, x_new, fn,
+          rot):  # pragma: no cover - compiled
     """One step ``h`` [s] from ``x`` (tangent ``d1`` there) into ``x_new`` (``Stepper.step``).
 
-    RK4, or semi-implicit Euler when ``params[P_SEMI_IMPLICIT]`` is 1 (the step from ``d1``
-    alone: :func:`~multiarm_pin._compiled.closed_loop._advance_semi_implicit`).
+    RK4, or semi-implicit Euler (the step from ``d1`` alone:
+    :func:`~multiarm_pin._compiled.closed_loop._advance_semi_implicit`) when ``rot`` (``rk``'s
+    last element: its (3, 3) workspace, ``None`` in RK4 runs) is given. numba drops the branch
+    of the other integrator when it compiles the step for ``rot``'s type: a run compiles its
+    own integrator only.
     """
     model_ints = sy[0]
-    d2, d3, d4, hd, xs, dsum, rot = tuple_at(rk)
-    if sy[6][P_SEMI_IMPLICIT] == 1.0:
+    d2, d3, d4, hd, xs, dsum, _ = tuple_at(rk)
+    if rot is not None:
         _advance_semi_implicit(model_ints, x, d1, h, hd[:sy[7][DIMS_NV]], rot, x_new)
         return STAGE_OK
     for stage in range(3):  # one call site of the stage: t + h/2, t + h/2, t + h
@@ -935,7 +938,7 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
     max_events = int(rules[R_MAX_EVENTS])
     for _ in range(max_events):
         h = t_end - t
-        st = _step(t, x, d1, h, active, sy, ctl, wk, out, rk, new, fn)
+        st = _step(t, x, d1, h, active, sy, ctl, wk, out, rk, new, fn, rk[-1])
         if st != STAGE_OK:
             return st
         # locate_separation
@@ -978,7 +981,7 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
                         if it % 3 == 2 or not (lo < theta < hi):
                             theta = 0.5 * (lo + hi)
                         st = _step(t, x, d1, theta * h, active, sy, ctl, wk, out, rk, s_e,
-                                   fn)
+                                   fn, rk[-1])
                         if st != STAGE_OK:
                             return st
                         st = fn[0](t + theta * h, s_e, active, sy, ctl, wk, out, dtmp, fn[1],
@@ -1097,7 +1100,7 @@ def _locate_touchdown(t, x, d1, h, watch, g_hi, active, sy, ctl, wk, out, rk, lo
             theta *= 0.5
             if theta * h < rules[R_TIME]:
                 return STAGE_OK, 0.0
-            st = _step(t, x, d1, theta * h, active, sy, ctl, wk, out, rk, s_e, fn)
+            st = _step(t, x, d1, theta * h, active, sy, ctl, wk, out, rk, s_e, fn, rk[-1])
             if st != STAGE_OK:
                 return st, 0.0
             f = _min_gap(s_e, watch, sy, wk, fn) - target
@@ -1116,7 +1119,7 @@ def _locate_touchdown(t, x, d1, h, watch, g_hi, active, sy, ctl, wk, out, rk, lo
         theta = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
         if not (lo < theta < hi):
             theta = 0.5 * (lo + hi)
-        st = _step(t, x, d1, theta * h, active, sy, ctl, wk, out, rk, s_e, fn)
+        st = _step(t, x, d1, theta * h, active, sy, ctl, wk, out, rk, s_e, fn, rk[-1])
         if st != STAGE_OK:
             return st, 0.0
         value = _min_gap(s_e, watch, sy, wk, fn) - target

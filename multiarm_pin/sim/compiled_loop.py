@@ -64,6 +64,9 @@ class CompiledLoop:
         if stepper.baumgarte is not None:
             params = layout.with_baumgarte(params, *stepper.baumgarte)
         self.params = params
+        # the semi-implicit step's workspace, None for RK4: the integrator is then in the
+        # loop's argument types, and a run compiles the step of its integrator only
+        self._semi = np.zeros(s.nv) if integrator == "semi_implicit" else None
         n, k, m = s.n_arms, s.arm_set.nv_max, s.N_max
         self.work = (*self.model.outputs(), np.zeros(path.layout.size), np.zeros((n, k)),
                      np.zeros((n, m)), np.zeros((n, k)))
@@ -189,7 +192,7 @@ class CompiledLoop:
         head = (k0, k1, times, x, *system, self.separation, *work, rec.q, rec.v, rec.p,
                 rec.quat, rec.twist, rec.tau, rec.mu, rec.phi, rec.phi_dot, rec.points,
                 rec.normals, rec.a_o, rec.qdd, rec.violation, rec.wrench, rec.ke, rec.pe,
-                rec.momentum)
+                rec.momentum, self._semi)
         if self._kernel is None or self._kernel[0] is not traj:
             # the loop's entry point, its stage and the stage's callees for these types (made
             # once per controller input, whose arrays are the only ones that may change

@@ -166,8 +166,10 @@ class ContactLoop:
                   np.zeros((B, 6, R)), np.zeros((B, R)), np.zeros((6, 6)), np.zeros(6),
                   np.zeros((B, R)), np.zeros((B, R)), np.zeros((B, R, 3)),
                   np.zeros((B, R, 3)))
+        # the semi-implicit step's rotation workspace, None for RK4: the integrator is then in
+        # the loop's argument types, and a run compiles the step of its integrator only
         self.K = (np.zeros(nd), np.zeros(nd), np.zeros(nd), np.zeros(nd), np.zeros(nx),
-                  np.zeros(nd), np.zeros((3, 3)))
+                  np.zeros(nd), np.zeros((3, 3)) if integrator == "semi_implicit" else None)
         self.Z = (np.zeros(nd), np.zeros((B, R)), np.zeros((B, R)), np.zeros((B, R)),
                   np.zeros(2, np.int64))
         boolean = np.zeros((B, R), dtype=bool)
