@@ -11,7 +11,7 @@ from numba.core import config
 
 from multiarm_pin._compiled.function_pointers import compile_of, compiled
 from multiarm_pin._compiled.jit import kernel
-from multiarm_pin._compiled.tuple_address import address, address_type, tuple_at
+from multiarm_pin._compiled.tuple_address import TupleAddress, address, tuple_at
 
 needs_jit = pytest.mark.skipif(config.DISABLE_JIT, reason="addresses need the JIT")
 
@@ -87,6 +87,6 @@ def test_a_tuple_by_its_address_is_one_argument():
     where by value each array is its fields (seven or more each)."""
     t = _example()
     by_value = compile_of(_reads, (t,), numba.types.float64)
-    by_address = compile_of(_reads, (address_type(numba.typeof(t)),), numba.types.float64)
+    by_address = compile_of(_reads, (TupleAddress(numba.typeof(t)),), numba.types.float64)
     assert _parameters(by_address) == 1
     assert _parameters(by_value) >= 3 * 7

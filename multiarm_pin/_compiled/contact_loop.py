@@ -134,7 +134,7 @@ from multiarm_pin._compiled.phased import callee_compiles as phased_callee_compi
 from multiarm_pin._compiled.phased import phased_torques
 from multiarm_pin._compiled.rigid_body import difference
 from multiarm_pin._compiled.trajectory import reference_motion
-from multiarm_pin._compiled.tuple_address import address, address_type, tuple_at
+from multiarm_pin._compiled.tuple_address import TupleAddress, address, tuple_at
 
 STAGE_TOO_MANY_EVENTS = 7
 """Status: more contact events in one step than the rules allow (the stepper raises)."""
@@ -647,7 +647,7 @@ def stage_compiles(x, active, sy, ctl, wk, out, d) -> tuple:
     torque_kernel = (_torques if mode == CONTROL_OBJECT_PD
                      else _phased_torques if mode == CONTROL_PHASED else _zero_torques)
     # the stages take the loop's tuples by their addresses (run_contact_rk4)
-    sy_at, ctl_at, wk_at, out_at = (address_type(numba_type(t)) for t in (sy, ctl, wk, out))
+    sy_at, ctl_at, wk_at, out_at = (TupleAddress(numba_type(t)) for t in (sy, ctl, wk, out))
     torques = compile_of(torque_kernel, (0.0, x, active, sy_at, ctl_at, wk_at, out_at,
                                          callee_types), int64)
     a_o, qdd_c, mu, Av = out[0], out[1], out[2], out[4]
@@ -685,7 +685,7 @@ def loop_functions(head: tuple) -> tuple:
     def each(f):  # f of every compile of fn, nested as fn
         return (f(stage), f(rows), f(torques), f(lcp), tuple(f(c) for c in callees))
 
-    at = tuple(address_type(numba_type(t)) for t in (sy, ctl, wk, out, rk, st0, loc, imp))
+    at = tuple(TupleAddress(numba_type(t)) for t in (sy, ctl, wk, out, rk, st0, loc, imp))
     advance = compile_of(_advance_with_events,
                          (0.0, x, 0.0, active, *at, ev, n_ev, each(lambda c: c.function_type)),
                          numba.types.int64)

@@ -26,7 +26,10 @@ from multiarm_pin._compiled.jit import jit_disabled
 
 
 class TupleAddress(types.Type):
-    """The numba type of the address of a tuple of numba type ``tuple_type``."""
+    """The numba type of the address of a tuple of numba type ``tuple_type``.
+
+    What :func:`address` makes, and what a signature gives such an argument.
+    """
 
     def __init__(self, tuple_type: types.BaseTuple):
         self.tuple_type = tuple_type
@@ -106,9 +109,4 @@ def _static_getitem(context, builder, sig, args):
     return impl_ret_borrowed(context, builder, sig.return_type, element)
 
 
-def address_type(tuple_type) -> TupleAddress:
-    """The :class:`TupleAddress` of a tuple of numba type ``tuple_type`` (for a signature)."""
-    return TupleAddress(tuple_type)
-
-
-__all__ = ["TupleAddress", "address", "address_type", "tuple_at"]
+__all__ = ["TupleAddress", "address", "tuple_at"]
