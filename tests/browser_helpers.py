@@ -30,8 +30,9 @@ FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-
 
 
 TIMEOUT = 45
-"""Seconds one Chromium run may take (a run takes about 5 s, under the suite's load too; a
-rare one never ends, and each such hang costs the whole timeout)."""
+"""Seconds one Chromium run may take: a run takes about 5 s alone and 20-23 s with both
+cores kept busy beside it; a rare one never ends (more often on a loaded machine), and each
+such hang costs the whole timeout."""
 ATTEMPTS = 4
 """Runs tried before a hang is a failure (hangs come in runs on a loaded machine)."""
 
