@@ -1,17 +1,24 @@
 """Headless Chromium for the replay-page tests (a helper module, not a test file).
 
-The flags are the README's screenshot command: no sandbox (root in a container), software
-WebGL, no network services, a fresh profile per call.
+The flags are the README's screenshot command (no sandbox: root in a container; software
+WebGL; no network services; a fresh profile per call), but the page is driven over
+Chromium's DevTools pipe in real time instead of ``--virtual-time-budget``, whose runs on a
+loaded machine (both cores busy beside it) often never end (:func:`_load`).
 """
 
 from __future__ import annotations
 
+import base64
+import contextlib
+import json
 import os
 import re
+import select
 import shutil
 import signal
 import subprocess
 import tempfile
+import time
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -30,34 +37,157 @@ FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-
 
 
 TIMEOUT = 45
-"""Seconds one Chromium run may take: a run takes about 5 s alone and 20-23 s with both
-cores kept busy beside it; a rare one never ends (more often on a loaded machine), and each
-such hang costs the whole timeout."""
-ATTEMPTS = 6
-"""Runs tried before a hang is a failure (hangs come in runs on a loaded machine: three in a
-row have been seen)."""
+"""Seconds one Chromium run may take (about 2 s alone, 3 s with both cores kept busy beside
+it); a run that takes longer is killed and tried again."""
+ATTEMPTS = 3
+"""Runs tried before a run that does not finish is a failure."""
 
 
-def _run(args: list[str], url: str, budget_ms: int) -> subprocess.CompletedProcess:
-    """Run Chromium once; a run that hangs is killed with its process group and run again."""
+class _DevTools:
+    """One headless Chromium driven over its DevTools pipe (``--remote-debugging-pipe``).
+
+    Commands go to the browser's fd 3 and replies come from its fd 4, as NUL-terminated JSON
+    messages; every wait has the deadline ``TIMEOUT`` s after the start
+    (``subprocess.TimeoutExpired`` past it).
+    """
+
+    def __init__(self, profile: str, size: tuple[int, int]):
+        to_child, self._to = os.pipe()
+        self._from, from_child = os.pipe()
+
+        def pipes_at_3_and_4():  # to_child < from_child: made first, at the lowest free fd
+            os.dup2(to_child, 3)
+            os.dup2(from_child, 4)
+
+        self.proc = subprocess.Popen(
+            [CHROMIUM, *FLAGS, f"--user-data-dir={profile}", f"--window-size={size[0]},{size[1]}",
+             "--remote-debugging-pipe", "about:blank"],
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            pass_fds=(3, 4), preexec_fn=pipes_at_3_and_4, start_new_session=True)
+        os.close(to_child)
+        os.close(from_child)
+        self.deadline = time.monotonic() + TIMEOUT
+        self._buffer, self._id, self._events = b"", 0, []
+
+    def close(self) -> None:
+        """Stop the browser and its process group."""
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(self.proc.pid, signal.SIGKILL)
+        self.proc.wait()
+        os.close(self._to)
+        os.close(self._from)
+
+    def _message(self) -> dict:
+        while b"\0" not in self._buffer:
+            left = self.deadline - time.monotonic()
+            if left <= 0 or not select.select([self._from], [], [], left)[0]:
+                raise subprocess.TimeoutExpired(CHROMIUM, TIMEOUT)
+            chunk = os.read(self._from, 1 << 20)
+            if not chunk:
+                raise RuntimeError("chromium closed its DevTools pipe")
+            self._buffer += chunk
+        raw, self._buffer = self._buffer.split(b"\0", 1)
+        return json.loads(raw)
+
+    def send(self, method: str, session: str | None = None, **params) -> dict:
+        """The result of one command (events that arrive meanwhile are kept)."""
+        self._id += 1
+        message = {"id": self._id, "method": method, "params": params}
+        if session is not None:
+            message["sessionId"] = session
+        os.write(self._to, json.dumps(message).encode() + b"\0")
+        while True:
+            reply = self._message()
+            if reply.get("id") == self._id:
+                if "error" in reply:
+                    raise RuntimeError(f"{method}: {reply['error']}")
+                return reply["result"]
+            self._events.append(reply)
+
+    def wait_for(self, event: str) -> dict:
+        """The first event ``event`` (kept or coming)."""
+        for i, message in enumerate(self._events):
+            if message.get("method") == event:
+                return self._events.pop(i)
+        while True:
+            message = self._message()
+            if message.get("method") == event:
+                return message
+            self._events.append(message)
+
+
+SETTLED = """(async () => {
+  if (window.multiarmReplay) await window.multiarmReplay.ready;
+  if (window.viewer && window.viewer.connection) {
+    let seen = -1;
+    while (viewer.num_messages_received === 0 || viewer.num_messages_received !== seen) {
+      seen = viewer.num_messages_received;
+      await new Promise(r => setTimeout(r, 500));
+    }
+  }
+  for (let i = 0; i < 3; i++) await new Promise(r => requestAnimationFrame(r));
+})()"""
+"""The page's scripts are done: a replay page's replay loaded (``multiarmReplay.ready``), a
+live viewer's commands received (none new for 0.5 s), and three animation frames drawn since
+(the overlay draws in its frames)."""
+
+
+def _load(url: str, size: tuple[int, int], read) -> object:
+    """``read(devtools, session)`` on ``url`` once loaded and settled (:data:`SETTLED`).
+
+    Real time, not ``--virtual-time-budget``: on a loaded machine a virtual-time run often
+    stops drawing after its last page frame and never ends. A run that takes longer than
+    ``TIMEOUT`` is killed and tried again, ``ATTEMPTS`` times in all. The pages the tests
+    load show a fixed time (``#t=``) or do not move, so the moment they are read does not
+    matter.
+    """
     for attempt in range(ATTEMPTS):
         with tempfile.TemporaryDirectory(prefix="chromium-profile-") as profile:
-            cmd = [CHROMIUM, *FLAGS, f"--user-data-dir={profile}", *args,
-                   f"--virtual-time-budget={budget_ms}", url]
-            proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                    start_new_session=True)
+            dt = _DevTools(profile, size)
             try:
-                out, err = proc.communicate(timeout=TIMEOUT)
+                page = next(t for t in dt.send("Target.getTargets")["targetInfos"]
+                            if t["type"] == "page")
+                session = dt.send("Target.attachToTarget", targetId=page["targetId"],
+                                  flatten=True)["sessionId"]
+                dt.send("Page.enable", session)
+                dt.send("Emulation.setDeviceMetricsOverride", session, width=size[0],
+                        height=size[1], deviceScaleFactor=1, mobile=False)
+                dt.send("Page.navigate", session, url=url)
+                dt.wait_for("Page.loadEventFired")
+                settled = dt.send("Runtime.evaluate", session, expression=SETTLED,
+                                  awaitPromise=True)
+                if "exceptionDetails" in settled:
+                    raise RuntimeError(f"{url}: {settled['exceptionDetails']}")
+                return read(dt, session)
             except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.communicate()
                 if attempt == ATTEMPTS - 1:
                     raise
-                continue
-            if proc.returncode:
-                raise subprocess.CalledProcessError(proc.returncode, cmd, out, err)
-            return subprocess.CompletedProcess(cmd, 0, out, err)
+            finally:
+                dt.close()
     raise AssertionError("unreachable")
+
+
+def run_command(cmd: list[str], cwd: Path) -> None:
+    """Run a Chromium command line as written (the README's), in its own process group.
+
+    It uses virtual time, whose runs on a loaded machine may never end (:func:`_load`): one
+    that takes longer than ``TIMEOUT`` is killed with its group and run again, ``ATTEMPTS``
+    times in all. A run that fails raises ``subprocess.CalledProcessError``.
+    """
+    for attempt in range(ATTEMPTS):
+        proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                start_new_session=True)
+        try:
+            out, err = proc.communicate(timeout=TIMEOUT)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+            if attempt == ATTEMPTS - 1:
+                raise
+            continue
+        if proc.returncode:
+            raise subprocess.CalledProcessError(proc.returncode, cmd, out, err)
+        return
 
 
 def page_url(page: Path, fragment: str = "") -> str:
@@ -65,18 +195,24 @@ def page_url(page: Path, fragment: str = "") -> str:
     return f"file://{Path(page).resolve()}{fragment}"
 
 
-def screenshot(url: str, png: Path, size=(1280, 800), budget_ms: int = 15000) -> np.ndarray:
-    """(H, W, 3) int RGB screenshot of ``url`` after ``budget_ms`` of virtual time."""
+def screenshot(url: str, png: Path, size=(1280, 800)) -> np.ndarray:
+    """(H, W, 3) int RGB screenshot of ``url`` (its viewport, ``size`` pixels) once settled."""
     from PIL import Image
 
-    _run([f"--screenshot={png}", f"--window-size={size[0]},{size[1]}"], url, budget_ms)
+    def shot(dt, session):
+        return base64.b64decode(dt.send("Page.captureScreenshot", session, format="png")["data"])
+
+    png.write_bytes(_load(url, size, shot))
     return np.asarray(Image.open(png).convert("RGB"), dtype=int)
 
 
-def dump_dom(url: str, size=(1280, 800), budget_ms: int = 15000) -> str:
-    """The page's DOM (HTML) after its scripts ran for ``budget_ms`` of virtual time."""
-    out = _run(["--dump-dom", f"--window-size={size[0]},{size[1]}"], url, budget_ms)
-    return out.stdout.decode("utf-8", errors="replace")
+def dump_dom(url: str, size=(1280, 800)) -> str:
+    """The page's DOM (HTML) once settled (:data:`SETTLED`)."""
+    def dom(dt, session):
+        return dt.send("Runtime.evaluate", session, expression="document.documentElement.outerHTML",
+                       returnByValue=True)["result"]["value"]
+
+    return _load(url, size, dom)
 
 
 def element_text(dom: str, element_id: str) -> str:

@@ -5,8 +5,6 @@ from __future__ import annotations
 import contextlib
 import io
 import re
-import shutil
-import subprocess
 import urllib.request
 from pathlib import Path
 
@@ -15,6 +13,7 @@ import meshcat
 import numpy as np
 import pinocchio as pin
 import pytest
+from browser_helpers import needs_chromium, page_url, screenshot
 from meshcat import Visualizer
 
 from multiarm_pin.app.replay import (
@@ -34,9 +33,6 @@ from multiarm_pin.model.polyhedron import box
 from multiarm_pin.spatial import quaternion_to_rotation, rotation_to_quaternion
 
 MP6 = Path(__file__).resolve().parents[1] / "robots" / "mp6" / "mp6.urdf"
-CHROMIUM = shutil.which("chromium") or (
-    "/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None
-)
 
 DURATION = 2.0
 T_SAMPLES = 401  # 5 ms steps, as a simulation would record them
@@ -383,20 +379,10 @@ def test_write_replay_html_panda_and_mp6(tmp_path):
 
 
 # ------------------------------------------------------------------ browser
-def _screenshot(page: Path | str, png: Path, profile: Path) -> np.ndarray:
+def _screenshot(page: Path | str, png: Path) -> np.ndarray:
     """(768, 1024, 3) RGB screenshot of an HTML file or of a URL (str)."""
-    from PIL import Image
-
-    url = page if isinstance(page, str) else f"file://{page}"
-    cmd = [
-        CHROMIUM, "--headless", "--no-sandbox", "--use-angle=swiftshader",
-        "--enable-unsafe-swiftshader", "--disable-background-networking",
-        "--disable-component-update", "--disable-sync", "--no-first-run",
-        f"--user-data-dir={profile}", "--window-size=1024,768",
-        "--virtual-time-budget=15000", f"--screenshot={png}", url,
-    ]
-    subprocess.run(cmd, check=True, capture_output=True, timeout=180)
-    return np.asarray(Image.open(png).convert("RGB"), dtype=int)
+    url = page if isinstance(page, str) else page_url(page)
+    return screenshot(url, png, size=(1024, 768))
 
 
 def _object_pixels(img: np.ndarray) -> int:
@@ -413,8 +399,7 @@ def _arm_pixels(img: np.ndarray) -> int:
     return int(np.sum((img.min(axis=2) > 150) & (img.max(axis=2) - img.min(axis=2) < 40)))
 
 
-@pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed "
-                    "(apt-get install -y chromium); the browser test needs it")
+@needs_chromium
 def test_page_renders_arms_and_object_in_headless_chromium(ur5, tmp_path):
     # Light-grey arms (Pinocchio's default meshColor, the UR5's look before its COLLADA
     # materials were used), which _arm_pixels tells from the sky; the UR5's own dark and
@@ -422,8 +407,8 @@ def test_page_renders_arms_and_object_in_headless_chromium(ur5, tmp_path):
     arms, obj, contacts, t = _two_ur5_scene(ur5, color=LIGHT_GREY)
     scene = write_replay_html(tmp_path / "scene.html", arms, obj, t, contacts=contacts)
     empty = write_replay_html(tmp_path / "empty.html", [], None, t)
-    img = _screenshot(scene, tmp_path / "scene.png", tmp_path / "profile_scene")
-    ref = _screenshot(empty, tmp_path / "empty.png", tmp_path / "profile_empty")
+    img = _screenshot(scene, tmp_path / "scene.png")
+    ref = _screenshot(empty, tmp_path / "empty.png")
     assert img.shape == ref.shape == (768, 1024, 3)
     differ = np.any(np.abs(img - ref) > 30, axis=2).mean()
     assert differ > 0.03, f"only {differ:.1%} of the pixels differ from an empty scene"
@@ -448,7 +433,7 @@ def _ur5_screenshot(tmp_path: Path, name: str, arms) -> np.ndarray:
         close_visualizer(vis)
     page = tmp_path / f"{name}.html"
     page.write_text(html, encoding="utf-8")
-    return _screenshot(page, tmp_path / f"{name}.png", tmp_path / f"profile_{name}")
+    return _screenshot(page, tmp_path / f"{name}.png")
 
 
 def _blue_pixels(img: np.ndarray, mask: np.ndarray) -> int:
@@ -457,8 +442,7 @@ def _blue_pixels(img: np.ndarray, mask: np.ndarray) -> int:
     return int(np.sum(mask & (chroma > 40) & (img[..., 2] == img.max(axis=2))))
 
 
-@pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed "
-                    "(apt-get install -y chromium); the browser test needs it")
+@needs_chromium
 def test_page_shows_the_ur5_in_its_material_colours(ur5, tmp_path):
     """One UR5 in its COLLADA colours against the same UR5 in light grey, same camera.
 
@@ -508,11 +492,10 @@ def _project(point, eye, target, width=1024, height=768) -> np.ndarray:
     return np.array([width / 2 * (1 + x), height / 2 * (1 - y)])
 
 
-@pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed "
-                    "(apt-get install -y chromium); the browser test needs it")
+@needs_chromium
 def test_page_centres_content_far_from_the_origin(tmp_path):
     page = write_replay_html(tmp_path / "far.html", [], _far_box(), [0.0, 0.1])
-    img = _screenshot(page, tmp_path / "far.png", tmp_path / "profile_far")
+    img = _screenshot(page, tmp_path / "far.png")
     count, centroid = _red_centroid(img)
     assert count > 5000, f"the box covers only {count} pixels"
     centre = np.array([img.shape[1], img.shape[0]]) / 2
@@ -522,8 +505,7 @@ def test_page_centres_content_far_from_the_origin(tmp_path):
     assert offset < 0.05, f"box centroid {centroid} is {offset:.1%} of the width off-centre"
 
 
-@pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed "
-                    "(apt-get install -y chromium); the browser test needs it")
+@needs_chromium
 @pytest.mark.parametrize(("shift", "view"), [([0.5, -0.2, -0.45], [1.2, -1.8, 0.7]),
                                               ([-0.3, 0.4, 0.3], [-1.5, -1.0, 1.2])])
 def test_camera_view_matches_a_pinhole_projection(tmp_path, shift, view):
@@ -541,7 +523,7 @@ def test_camera_view_matches_a_pinhole_projection(tmp_path, shift, view):
         close_visualizer(vis)
     page = tmp_path / "pinhole.html"
     page.write_text(html, encoding="utf-8")
-    img = _screenshot(page, tmp_path / "pinhole.png", tmp_path / "profile_pinhole")
+    img = _screenshot(page, tmp_path / "pinhole.png")
     count, centroid = _red_centroid(img)
     assert count > 2000, f"the box covers only {count} pixels"
     expected = _project(FAR_BOX_CENTRE, eye, target)
@@ -565,12 +547,11 @@ def test_serve_replay_answers_http_and_closes(ur5):
     assert vis.window.server_proc.poll() is not None
 
 
-@pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed "
-                    "(apt-get install -y chromium); the browser test needs it")
+@needs_chromium
 def test_live_viewer_centres_content_far_from_the_origin(tmp_path):
     url, vis = serve_replay([], _far_box(), [0.0, 0.1])
     try:
-        img = _screenshot(url, tmp_path / "live.png", tmp_path / "profile_live")
+        img = _screenshot(url, tmp_path / "live.png")
     finally:
         close_visualizer(vis)
     count, centroid = _red_centroid(img)

@@ -383,7 +383,7 @@ def test_compact_page_draws_what_the_plain_page_draws(ur5, tmp_path):
         vis.set_animation(anim, play=True, repetitions=1)
         page = tmp_path / f"{name}.html"
         page.write_text(vis.static_html(), encoding="utf-8")
-        images[name] = screenshot(page_url(page), tmp_path / f"{name}.png", budget_ms=5000)
+        images[name] = screenshot(page_url(page), tmp_path / f"{name}.png")
     differ = np.any(np.abs(images["compact"] - images["plain"]) > 30, axis=2).mean()
     drawn = np.any(np.abs(images["plain"] - images["empty"]) > 30, axis=2).mean()
     assert drawn > 0.05, f"the arms cover only {drawn:.1%} of the view"

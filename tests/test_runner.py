@@ -3,13 +3,12 @@
 import io
 import json
 import os
-import shutil
 import signal
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
+from browser_helpers import needs_chromium, page_url, screenshot
 from run_helpers import Q0_UR5, one_arm_scenario, write
 
 from multiarm_pin.app import cli
@@ -19,7 +18,6 @@ from multiarm_pin.exceptions import InputError, ScenarioError
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT = REPO / "scenarios" / "two_ur5_box.yaml"
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 
 @pytest.fixture(scope="module")
@@ -187,19 +185,10 @@ def test_progress_bar_redraws_on_a_terminal_and_logs_tenths_elsewhere():
     assert lines[0].startswith("x [###") and "10.0%" in lines[0] and "100.0%" in lines[-1]
 
 
-@pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (make browser)")
+@needs_chromium
 def test_replay_page_renders_in_headless_chromium(run_dir, tmp_path):
-    from PIL import Image
-
     def shot(html, name):
-        png = tmp_path / f"{name}.png"
-        subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--use-angle=swiftshader",
-                        "--enable-unsafe-swiftshader", "--disable-background-networking",
-                        "--no-first-run", f"--user-data-dir={tmp_path / name}",
-                        "--window-size=1024,768", "--virtual-time-budget=15000",
-                        f"--screenshot={png}", f"file://{html}"],
-                       check=True, capture_output=True, timeout=180)
-        return np.asarray(Image.open(png).convert("RGB"), dtype=int)
+        return screenshot(page_url(html), tmp_path / f"{name}.png", size=(1024, 768))
 
     img = shot(run_dir / "replay.html", "scene")
     empty = shot(write_replay_html(tmp_path / "empty.html", [], None, [0.0, 0.1]), "empty")

@@ -193,7 +193,7 @@ def test_the_page_shows_the_phase_and_the_support_points(page):
     """In headless Chromium, paused at three times: the phase named (the YAML's intervals),
     the support points' states (the pivot pressing, the raised edge separated), the legend's
     phase table with the current phase highlighted."""
-    early = dump_dom(page_url(page, "#t=0.05"), budget_ms=3000)
+    early = dump_dom(page_url(page, "#t=0.05"))
     assert "phase 1/3: rest (hold), pusher, stop moving until 0.100 s" in element_text(
         early, "ma-phase")
     verts = element_text(early, "ma-vertices")
@@ -204,14 +204,14 @@ def test_the_page_shows_the_phase_and_the_support_points(page):
         assert words in legend, (words, legend)
     assert 'id="ma-phase-0" class="ma-now"' in early
 
-    mid = dump_dom(page_url(page, "#t=0.25"), budget_ms=3000)
+    mid = dump_dom(page_url(page, "#t=0.25"))
     assert "phase 2/3: tilt (tilt), moving until 0.400 s" in element_text(mid, "ma-phase")
     verts = element_text(mid, "ma-vertices")
     assert "[0] pressing" in verts and "[1] pressing" in verts, verts
     assert "[2] separated" in verts and "[3] separated" in verts, verts
     assert 'id="ma-phase-1" class="ma-now"' in mid and 'id="ma-phase-0" class=""' in mid
 
-    late = dump_dom(page_url(page, "#t=0.45"), budget_ms=3000)
+    late = dump_dom(page_url(page, "#t=0.45"))
     assert "phase 3/3: settle (hold), holding" in element_text(late, "ma-phase")
 
 
