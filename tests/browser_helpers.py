@@ -145,9 +145,11 @@ def _load(url: str, size: tuple[int, int], read) -> object:
         with tempfile.TemporaryDirectory(prefix="chromium-profile-") as profile:
             dt = _DevTools(profile, size)
             try:
-                page = next(t for t in dt.send("Target.getTargets")["targetInfos"]
-                            if t["type"] == "page")
-                session = dt.send("Target.attachToTarget", targetId=page["targetId"],
+                page = next((t["targetId"] for t in dt.send("Target.getTargets")["targetInfos"]
+                             if t["type"] == "page"), None)
+                if page is None:  # the first tab not open yet
+                    page = dt.send("Target.createTarget", url="about:blank")["targetId"]
+                session = dt.send("Target.attachToTarget", targetId=page,
                                   flatten=True)["sessionId"]
                 dt.send("Page.enable", session)
                 dt.send("Emulation.setDeviceMetricsOverride", session, width=size[0],
