@@ -370,7 +370,8 @@ def min_norm_forces(W, w, unilateral, margins, mu):  # pragma: no cover - compil
         not converge.
     """
     C = W.shape[1]
-    U, sv, Vt = np.linalg.svd(W)
+    # full_matrices given: the argument types of the thin SVDs below, one compile for all
+    U, sv, Vt = np.linalg.svd(W, full_matrices=True)
     rank = 0
     if sv.shape[0] and sv[0] > 0.0:
         for p in range(sv.shape[0]):
