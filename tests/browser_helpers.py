@@ -136,10 +136,10 @@ def _load(url: str, size: tuple[int, int], read) -> object:
     """``read(devtools, session)`` on ``url`` once loaded and settled (:data:`SETTLED`).
 
     Real time, not ``--virtual-time-budget``: on a loaded machine a virtual-time run often
-    stops drawing after its last page frame and never ends. A run that takes longer than
-    ``TIMEOUT`` is killed and tried again, ``ATTEMPTS`` times in all. The pages the tests
-    load show a fixed time (``#t=``) or do not move, so the moment they are read does not
-    matter.
+    never ends (its processes idle after the page's last WebGL frame). A run that takes
+    longer than ``TIMEOUT`` is killed and tried again, ``ATTEMPTS`` times in all. The pages
+    the tests load show a fixed time (``#t=``) or do not move, so the moment they are read
+    does not matter. A live viewer that receives no command is waited for until the timeout.
     """
     for attempt in range(ATTEMPTS):
         with tempfile.TemporaryDirectory(prefix="chromium-profile-") as profile:
