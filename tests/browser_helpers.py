@@ -132,16 +132,28 @@ live viewer's commands received (none new for 0.5 s), and three animation frames
 (the overlay draws in its frames)."""
 
 
+def _retried(once):
+    """``once()``, run again when it raises ``subprocess.TimeoutExpired`` (a Chromium run that
+    took longer than ``TIMEOUT``, killed with its process group), ``ATTEMPTS`` times in all."""
+    for attempt in range(ATTEMPTS):
+        try:
+            return once()
+        except subprocess.TimeoutExpired:
+            if attempt == ATTEMPTS - 1:
+                raise
+    raise AssertionError("unreachable")
+
+
 def _load(url: str, size: tuple[int, int], read) -> object:
     """``read(devtools, session)`` on ``url`` once loaded and settled (:data:`SETTLED`).
 
     Real time, not ``--virtual-time-budget``: on a loaded machine a virtual-time run often
     never ends (its processes idle after the page's last WebGL frame). A run that takes
-    longer than ``TIMEOUT`` is killed and tried again, ``ATTEMPTS`` times in all. The pages
-    the tests load show a fixed time (``#t=``) or do not move, so the moment they are read
-    does not matter. A live viewer that receives no command is waited for until the timeout.
+    longer than ``TIMEOUT`` is killed and tried again (:func:`_retried`). The pages the tests
+    load show a fixed time (``#t=``) or do not move, so the moment they are read does not
+    matter. A live viewer that receives no command is waited for until the timeout.
     """
-    for attempt in range(ATTEMPTS):
+    def once():
         with tempfile.TemporaryDirectory(prefix="chromium-profile-") as profile:
             dt = _DevTools(profile, size)
             try:
@@ -161,22 +173,20 @@ def _load(url: str, size: tuple[int, int], read) -> object:
                 if "exceptionDetails" in settled:
                     raise RuntimeError(f"{url}: {settled['exceptionDetails']}")
                 return read(dt, session)
-            except subprocess.TimeoutExpired:
-                if attempt == ATTEMPTS - 1:
-                    raise
             finally:
                 dt.close()
-    raise AssertionError("unreachable")
+
+    return _retried(once)
 
 
 def run_command(cmd: list[str], cwd: Path) -> None:
     """Run a Chromium command line as written (the README's), in its own process group.
 
     It uses virtual time, whose runs on a loaded machine may never end (:func:`_load`): one
-    that takes longer than ``TIMEOUT`` is killed with its group and run again, ``ATTEMPTS``
-    times in all. A run that fails raises ``subprocess.CalledProcessError``.
+    that takes longer than ``TIMEOUT`` is killed with its group and run again
+    (:func:`_retried`). A run that fails raises ``subprocess.CalledProcessError``.
     """
-    for attempt in range(ATTEMPTS):
+    def once():
         proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                 start_new_session=True)
         try:
@@ -184,12 +194,11 @@ def run_command(cmd: list[str], cwd: Path) -> None:
         except subprocess.TimeoutExpired:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.communicate()
-            if attempt == ATTEMPTS - 1:
-                raise
-            continue
+            raise
         if proc.returncode:
             raise subprocess.CalledProcessError(proc.returncode, cmd, out, err)
-        return
+
+    _retried(once)
 
 
 def page_url(page: Path, fragment: str = "") -> str:
