@@ -370,7 +370,8 @@ def min_norm_forces(W, w, unilateral, margins, mu):  # pragma: no cover - compil
         not converge.
     """
     C = W.shape[1]
-    # full_matrices given: the argument types of the thin SVDs below, one compile for all
+    # full_matrices given as a bool, as this module's thin SVDs give it: one numba compile of
+    # np.linalg.svd serves every call
     U, sv, Vt = np.linalg.svd(W, full_matrices=True)
     rank = 0
     if sv.shape[0] and sv[0] > 0.0:
