@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from numba.core import config
 
-from multiarm_pin._compiled.function_pointers import compile_of, compiled
+from multiarm_pin._compiled.function_pointers import compile_of
 from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.tuple_address import TupleAddress, address, tuple_at
 
@@ -73,8 +73,14 @@ def test_an_address_leaves_the_arrays_counts_as_they_were():
 
 
 def _parameters(job) -> int:
-    """Parameters of the LLVM function of ``job``'s first-class function (its C wrapper's)."""
-    ir = compiled(job).inspect_llvm()
+    """Parameters of the LLVM function of ``job``'s first-class function (its C wrapper's).
+
+    Compiled here without numba's disk cache: code loaded from the cache has no LLVM to
+    inspect (numba returns an empty text), as on any second run of the suite in one checkout.
+    """
+    made = numba.cfunc(job.result(*job.types), cache=False, error_model="numpy",
+                       _nrt=job.kernel.targetoptions.get("_nrt", True))(job.kernel.py_func)
+    ir = made.inspect_llvm()
     name = job.kernel.py_func.__name__
     line = next(ln for ln in ir.splitlines() if ln.startswith("define") and name in ln
                 and "cfunc." in ln)
