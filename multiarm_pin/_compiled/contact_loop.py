@@ -396,8 +396,8 @@ def _torques(t, x, active, sy, ctl, wk, out, callees):  # pragma: no cover - com
             else:
                 status, rank = callees[3](buf, dims, N, nv_arm, uni, touching,
                                           x[:OBJECT_STATE_SIZE], ref, pd_gains, z, hold_tool,
-                                          hold_obj, hold_n, g, qp_active_r, tau, mu_p, qdd_p,
-                                          a_pts, a_d)
+                                          hold_obj, hold_n, g, params, qp_active_r, tau, mu_p,
+                                          qdd_p, a_pts, a_d, callees[2])
             if status != PD_FORCES_FAILED:
                 if status == PD_OK:  # (ObjectPD.margin_kept: set by a plan, not by holding)
                     control[CTL_MARGIN_KEPT] = 1 if attempt == 0 else 0
@@ -629,15 +629,15 @@ def stage_compiles(x, active, sy, ctl, wk, out, d) -> tuple:
              _, _, _, qp_active_r, touching, _, _, _, _) = ctl
             (_, _, _, _, _, tau, _, z, ref, _, mu_p, qdd_p, a_pts, a_d) = out
             obj = x[:OBJECT_STATE_SIZE]
-            callees += (
-                compile_of(object_pd_step, (buf, dims, N, nv_arm, unilateral, obj, ref,
-                                            pd_gains, z, hold_tool, hold_obj, hold_n, gains,
-                                            params, qp_active, tau, mu_p, qdd_p, a_pts, a_d,
-                                            False, np.zeros(6)), pair),
-                compile_of(touching_torques, (buf, dims, N, nv_arm, unilateral, touching, obj,
-                                              ref, pd_gains, z, hold_tool, hold_obj, hold_n,
-                                              gains, qp_active_r, tau, mu_p, qdd_p, a_pts,
-                                              a_d), pair))
+            step = compile_of(object_pd_step, (buf, dims, N, nv_arm, unilateral, obj, ref,
+                                               pd_gains, z, hold_tool, hold_obj, hold_n, gains,
+                                               params, qp_active, tau, mu_p, qdd_p, a_pts,
+                                               a_d, False, np.zeros(6)), pair)
+            callees += (step, compile_of(
+                touching_torques, (buf, dims, N, nv_arm, unilateral, touching, obj, ref,
+                                   pd_gains, z, hold_tool, hold_obj, hold_n, gains, params,
+                                   qp_active_r, tau, mu_p, qdd_p, a_pts, a_d,
+                                   step.function_type), pair))
         elif mode == CONTROL_PHASED:
             (_, _, _, _, hold_tool, _, hold_n, gains, *_, ph) = ctl
             (_, _, _, _, _, tau, _, z, _, _, _, qdd_p, a_pts, a_d) = out
@@ -691,12 +691,10 @@ def loop_functions(head: tuple) -> tuple:
                          numba.types.int64)
     loop = compile_of(run_contact_rk4,
                       (*head, each(lambda c: c.pointer_type), advance.pointer_type))
-    # the larger first (by the code each compiles); object_pd_step and touching_torques share
-    # the controller's torques: one group; phased_pd's distribution and plan share nothing
-    controller = ([[c] for c in callees[2:]] if mode == CONTROL_PHASED
-                  else [[*callees[2:]]])
-    groups = [[advance], [loop], *controller, [lcp], [torques], [*callees[1:2]], [rows],
-              [stage], [*callees[:1]]]
+    # the larger first (by the code each compiles); the controller's callees share no code
+    # (touching_torques calls object_pd_step through its address)
+    groups = [[advance], [loop], *[[c] for c in callees[2:]], [lcp], [torques],
+              [*callees[1:2]], [rows], [stage], [*callees[:1]]]
     compile_all([g for g in groups if g])
     found = _loops[key] = (compiled(loop), each(pointer), pointer(advance))
     return found

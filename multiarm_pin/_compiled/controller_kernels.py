@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
 from multiarm_pin._compiled.evaluate import (
@@ -36,6 +37,7 @@ from multiarm_pin._compiled.evaluate import (
     quaternion_rotation,
 )
 from multiarm_pin._compiled.force_qp import QP_OK, least_norm_forces
+from multiarm_pin._compiled.function_pointers import bind, compile_of, pointer
 from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.layout import (
     DIMS_K,
@@ -498,10 +500,8 @@ def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold
     off = offsets(dims)
     M, _, J, Jdq, tp, tR, ttw, _ = _arm_segments(buf, off, n, k, m)
     _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
-    # N and unilateral as writable arrays, the type of the rows touching_torques compacts:
-    # one specialisation of _torques (and its force QP and plan) serves both
-    status = _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N.copy(), nv_arm,
-                      unilateral.copy(), obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains,
+    status = _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm,
+                      unilateral, obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains,
                       active, tau, mu, qdd, a_pts)
     if status != PD_OK or not solve:
         return status, -1
@@ -558,18 +558,22 @@ def touching_rank(W_o, N):  # pragma: no cover - compiled
 
 @kernel
 def touching_torques(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_gains, z,
-                     hold_tool, hold_obj, hold_n, gains, active_r, tau, mu, qdd, a_pts,
-                     a_d):  # pragma: no cover - compiled
+                     hold_tool, hold_obj, hold_n, gains, params, active_r, tau, mu, qdd, a_pts,
+                     a_d, pd_step):  # pragma: no cover - compiled
     """``ObjectPD`` torques planned on the touching contacts only (some have separated).
 
     What ``ObjectPD.reference`` computes on an evaluation whose active set leaves some
-    unilateral contacts out: each arm's touching rows are compacted to the front (kept rows
-    in order, zero padding, as :func:`multiarm_pin.dynamics.blocks.restrict_rows` does); the
-    grasp rank of those rows is decided first (:func:`touching_rank`; :data:`PD_HOLD` below
-    6: the caller holds the arms still, :func:`hold_still_torques`); then the desired
-    acceleration (:func:`desired_acceleration`) and :func:`object_pd_torques`'s torques on
-    the restricted rows (``M``, ``J``, ``J̇q̇``, tools, ``h``, ``M_o``, ``h_o`` unchanged);
-    the planned multipliers are put back at their full rows (zero on separated rows).
+    unilateral contacts out: each arm's touching rows are compacted to the front of a copy
+    of the buffer (kept rows in order, zero padding, as
+    :func:`multiarm_pin.dynamics.blocks.restrict_rows` does; ``M``, ``J``, ``J̇q̇``, tools,
+    ``h``, ``M_o``, ``h_o`` unchanged); the grasp rank of those rows is decided first
+    (:func:`touching_rank`; :data:`PD_HOLD` below 6: the caller holds the arms still,
+    :func:`hold_still_torques`); then ``pd_step`` (:func:`object_pd_step`, without the
+    forward dynamics) plans on the copy, and the planned multipliers are put back at their
+    full rows (zero on separated rows).
+
+    ``object_pd_step`` is called through its address, not compiled into this kernel: the
+    plan's code (force QP, task, torques) is compiled once, in ``object_pd_step``.
 
     The reference's fallbacks are not here: a force QP that fails (for instance a margin that
     no internal force keeps: the reference then plans least-norm forces), an arm whose rows
@@ -577,11 +581,12 @@ def touching_torques(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_ga
     caller runs the reference, which decides.
 
     Args:
-        buf: the flat buffer (blocks at zero torque).
+        buf: the flat buffer (blocks at zero torque; read only).
         dims: (DIMS_SIZE,) int ``(k, m, nv, n)``.
         N: (n,) int constraint rows per arm (all of them, touching or not).
         nv_arm: (n,) int joints per arm.
         unilateral: (n, m) bool mask of the unilateral rows (all of them).
+        touching: (n, m) bool, True on the rows that touch (padding ignored).
         obj: (OBJECT_STATE_SIZE,) object position, quaternion, twist (as
             :func:`object_pd_step`).
         ref: (REFERENCE_SIZE,) the reference (as :func:`object_pd_step`).
@@ -591,7 +596,7 @@ def touching_torques(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_ga
         hold_obj: (n, h, 3) their places in the object frame [m].
         hold_n: (n,) int held points per arm.
         gains: (HOLD_GAINS_SIZE,) ``hold_kp``, ``hold_kd``, Jacobian damping, margin.
-        touching: (n, m) bool, True on the rows that touch (padding ignored).
+        params: (N_PARAMS,) the parameter vector (passed on to ``pd_step``).
         active_r: (n, m) uint8 warm start of the force QP on the restricted rows (in and
             out; its own array, not the full rows' one: a warm start only, the QP's answer
             does not depend on it).
@@ -600,6 +605,9 @@ def touching_torques(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_ga
         qdd: output (n, k) planned joint accelerations.
         a_pts: output (n, h, 3) desired point accelerations [m/s²].
         a_d: output (6,) desired object acceleration [m/s², rad/s²].
+        pd_step: :func:`object_pd_step` for these arguments' types, as a first-class function
+            or its :func:`~multiarm_pin._compiled.function_pointers.pointer` (the function
+            itself without the JIT).
 
     Returns:
         ``(status, rank)``: :data:`PD_OK`, :data:`PD_HOLD` or the reason the caller must use
@@ -607,15 +615,19 @@ def touching_torques(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_ga
     """
     k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
     off = offsets(dims)
-    M, _, J, Jdq, tp, tR, ttw, _ = _arm_segments(buf, off, n, k, m)
-    _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
-    W_r = np.zeros((n, k, m))
-    W_o_r = np.zeros((n, 6, m))
-    c_r = np.zeros((n, m))
+    restricted = buf.copy()
+    _, _, W, W_o, c, _, _ = _block_segments(buf, off, n, k, m)
+    _, _, W_r, W_o_r, c_r, _, _ = _block_segments(restricted, off, n, k, m)
     unilateral_r = np.zeros((n, m), dtype=np.bool_)
     N_r = np.zeros(n, dtype=np.int64)
     index = np.empty((n, m), dtype=np.int64)
     for i in range(n):
+        for s in range(m):
+            for j in range(k):
+                W_r[i, j, s] = 0.0
+            for a in range(6):
+                W_o_r[i, a, s] = 0.0
+            c_r[i, s] = 0.0
         p = 0
         for s in range(N[i]):
             if not touching[i, s]:
@@ -632,13 +644,10 @@ def touching_torques(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_ga
     rank = touching_rank(W_o_r, N_r)
     if rank < 6:
         return PD_HOLD, rank
-    obj_x = np.empty(OX_TWIST + 6)
-    if not desired_acceleration(obj, ref, pd_gains, obj_x, a_d):
-        return PD_LARGE_ROTATION, rank
     mu_r = np.zeros((n, m))
-    status = _torques(M, J, Jdq, tp, tR, ttw, h, W_r, W_o_r, c_r, M_o, h_o, N_r, nv_arm,
-                      unilateral_r, obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains, active_r,
-                      tau, mu_r, qdd, a_pts)
+    status = bind(pd_step)(restricted, dims, N_r, nv_arm, unilateral_r, obj, ref, pd_gains, z,
+                           hold_tool, hold_obj, hold_n, gains, params, active_r, tau, mu_r,
+                           qdd, a_pts, a_d, False, np.zeros(6))[0]
     if status != PD_OK:
         return status, rank
     for i in range(n):
@@ -647,6 +656,24 @@ def touching_torques(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_ga
         for p in range(N_r[i]):
             mu[i, index[i, p]] = mu_r[i, p]
     return PD_OK, rank
+
+
+def touching_step(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_gains, z,
+                  hold_tool, hold_obj, hold_n, gains, params, active_r, tau, mu, qdd, a_pts,
+                  a_d):
+    """:func:`touching_torques`' last argument, from Python, for a call on these arguments.
+
+    The :func:`~multiarm_pin._compiled.function_pointers.pointer` of :func:`object_pd_step`
+    compiled for the arrays :func:`touching_torques` passes it: a copy of ``buf``, the
+    compacted rows (``N``, ``unilateral``) and the multipliers as new arrays, zero external
+    wrench. Depends only on the arguments' types: make it once per caller.
+    """
+    int64 = numba.types.int64
+    return pointer(compile_of(object_pd_step, (
+        buf.copy(), dims, np.zeros(N.shape, np.int64), nv_arm,
+        np.zeros(unilateral.shape, np.bool_), obj, ref, pd_gains, z, hold_tool, hold_obj,
+        hold_n, gains, params, active_r, tau, np.zeros(mu.shape), qdd, a_pts, a_d, False,
+        np.zeros(6)), numba.types.UniTuple(int64, 2)))
 
 
 @kernel
@@ -708,4 +735,5 @@ def solve_with_torques(buf, dims, N, params, tau):  # pragma: no cover - compile
 __all__ = ["GRASP_RANK_TOLERANCE", "PD_ARM_RANK", "PD_FORCES_FAILED", "PD_HOLD",
            "PD_LARGE_ROTATION", "PD_NOT_FINITE", "PD_OK", "desired_acceleration",
            "hold_still_torques", "log3", "min_norm_rows", "object_pd_step", "planned_torques",
-           "object_pd_torques", "solve_with_torques", "touching_rank", "touching_torques"]
+           "object_pd_torques", "solve_with_torques", "touching_rank", "touching_step",
+           "touching_torques"]

@@ -213,6 +213,7 @@ class ObjectPD(Controller):
         self.compiled = bool(compiled)
         self._forces: WarmForceDistribution | None = None
         self._motion_cache: dict = {}
+        self._pd_step = None  # object_pd_step's pointer for touching_torques (made once)
         self._null_gains = np.zeros(2)  # kernel_inputs()' (null_kp, null_kd), kept while equal
         self._kernel_inputs: tuple | None = None  # the same tuple while its arrays are
 
@@ -389,11 +390,13 @@ class ObjectPD(Controller):
         a_d = np.empty(6)
         obj = layout.object_state_vector(o.position, o.quaternion, o.twist)
         if active is not None:  # some contacts are separated: plan on the touching ones
-            status, rank = controller_kernels.touching_torques(
-                buffer, path.dims, path.N, path.nv_arm, self._unilateral,
-                np.ascontiguousarray(active, dtype=bool), obj, ref[1], self._pd_gains, z,
-                self.hold_points_in_tool, self.hold_points_in_object, self._hold_n,
-                self._gains, self._touching_active, tau, mu, qdd, a_pts, a_d)
+            args = (buffer, path.dims, path.N, path.nv_arm, self._unilateral,
+                    np.ascontiguousarray(active, dtype=bool), obj, ref[1], self._pd_gains, z,
+                    self.hold_points_in_tool, self.hold_points_in_object, self._hold_n,
+                    self._gains, path.params, self._touching_active, tau, mu, qdd, a_pts, a_d)
+            if self._pd_step is None:
+                self._pd_step = controller_kernels.touching_step(*args)
+            status, rank = controller_kernels.touching_torques(*args, self._pd_step)
             if status == controller_kernels.PD_HOLD:
                 z = self._hold_acceleration(t, state, _rank_reason(rank))
                 controller_kernels.hold_still_torques(buffer, path.dims, path.nv_arm, z, tau)
