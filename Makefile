@@ -6,11 +6,13 @@ STAMP := $(VENV)/.installed-$(shell cksum pyproject.toml | cut -d' ' -f1)
 
 .PHONY: demo test portability lint browser venv precompile clean
 
+# pip's --no-compile: the dependencies' bytecode is written when a module is first imported,
+# for the modules a run imports, instead of for every file of every package at install.
 $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "$(PYTHON) not found: install Python 3.11 or run make PYTHON=/path/to/python3.11"; exit 1; }
 	test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
 	$(VENV)/bin/python -m pip install --quiet --upgrade pip
-	$(VENV)/bin/python -m pip install --quiet -e '.[dev]'
+	$(VENV)/bin/python -m pip install --quiet --no-compile -e '.[dev]'
 	rm -f $(VENV)/.installed-*
 	touch $(STAMP)
 
@@ -39,11 +41,11 @@ KERNEL_TESTS := tests/test_kernels.py tests/test_arm_set_fast_path.py tests/test
 ## The whole test suite (installs headless Chromium for the browser test when it can), on two
 ## worker processes (pytest-xdist, a test file per worker at a time: numba compiles each
 ## kernel on one core, so two processes use both), then the compiled kernels' tests again
-## without compilation (bounds-checked). The first pass lists its 25 slowest tests, so that a
-## CI log shows where the suite's time goes.
+## without compilation (bounds-checked; also on two workers). The first pass lists its 25
+## slowest tests, so that a CI log shows where the suite's time goes.
 test: $(STAMP) browser
 	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile --durations=25
-	NUMBA_DISABLE_JIT=1 $(VENV)/bin/python -m pytest -q -p no:cacheprovider $(KERNEL_TESTS)
+	NUMBA_DISABLE_JIT=1 $(VENV)/bin/python -m pytest -q -n 2 --dist loadfile -p no:cacheprovider $(KERNEL_TESTS)
 
 ## The round-off-sensitive tests (grasp, solvers, unilateral contacts, events) under other
 ## CPUs' arithmetic: numba code-generation targets, OpenBLAS kernels and numpy SIMD paths that
