@@ -5,10 +5,20 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from closed_loop_cases import EPS, TOL, TOL_RANK_DEFICIENT_HOLD, hold_task_conditions, random_case
+from closed_loop_cases import (
+    EPS,
+    SCENARIOS,
+    TOL,
+    TOL_RANK_DEFICIENT_HOLD,
+    hold_task_conditions,
+    random_case,
+)
+from numba.core import config
 from system_builders import moving_state, two_gripper_system
 
-from multiarm_pin._compiled import controller_kernels
+from multiarm_pin._compiled import controller_kernels, function_pointers
+from multiarm_pin.app.runner import scenario_controller, simulate_built
+from multiarm_pin.app.scenario import build_scenario, load_scenario
 from multiarm_pin.dynamics.blocks import restrict_rows
 from multiarm_pin.sim.controllers import ObjectPD, grasp_rank
 from multiarm_pin.sim.controllers.object_pd import ObjectPDPlan
@@ -231,3 +241,26 @@ def test_a_failing_margin_goes_to_the_reference(two_gripper, statuses):
     assert statuses == [(controller_kernels.PD_FORCES_FAILED, 6)]
     assert not ctrl.margin_kept and not isinstance(ctrl.last, ObjectPDPlan)
     assert np.all(np.isfinite(tau))
+
+
+@pytest.mark.skipif(config.DISABLE_JIT, reason="compiled functions need the JIT")
+def test_the_python_path_plans_with_the_contact_loops_object_pd_step(statuses):
+    """After a contact-loop run (grasp_failure separates from 0.15 s), ``ObjectPD``'s Python
+    path on separated rows (what a step handed back runs) calls ``object_pd_step`` through
+    the loop's own compile of it: no second compile of the plan."""
+    sc = load_scenario(SCENARIOS / "grasp_failure.yaml")
+    built = build_scenario(sc, load_visuals=False)
+    ctrl = scenario_controller(built)
+    simulate_built(built, ctrl, 0.2, sc.simulation.dt, sc.simulation.solver)
+    step = controller_kernels.object_pd_step.py_func
+
+    def made():
+        return {key for key in function_pointers._by_signature if key[0] is step}
+
+    before = made()
+    assert before, "the contact loop did not compile object_pd_step"
+    system, state = built.system, built.initial_state
+    evaluation = system.blocks(state).with_active(touching(system, [(0, 0)]))
+    ctrl.closed_loop(0.2, state, evaluation, False)
+    assert statuses  # touching_torques ran, with object_pd_step's pointer made
+    assert made() == before

@@ -79,7 +79,7 @@ from multiarm_pin._compiled.controller_kernels import (
     PD_HOLD,
     PD_OK,
     hold_still_torques,
-    object_pd_step,
+    pd_step_compile,
     touching_torques,
 )
 from multiarm_pin._compiled.delassus import contact_kernel
@@ -346,10 +346,11 @@ def _all_touching(active, N):  # pragma: no cover - compiled
 def _torques(t, x, active, sy, ctl, wk, out, callees):  # pragma: no cover - compiled
     """The controller's torques ``out.tau`` (n, k) at ``(t, x)`` on the buffer at zero torque.
 
-    ``object_pd``: :func:`object_pd_step` when every arm row touches, else
-    :func:`touching_torques` on the touching rows, or, when they cannot make every object
-    wrench, the hold-still torques toward ``q_hold`` (set at the onset, which is recorded).
-    Those two are ``callees[2]`` and ``callees[3]`` (:func:`stage_compiles`).
+    ``object_pd``: :func:`~multiarm_pin._compiled.controller_kernels.object_pd_step` when
+    every arm row touches, else :func:`touching_torques` on the touching rows, or, when they
+    cannot make every object wrench, the hold-still torques toward ``q_hold`` (set at the
+    onset, which is recorded). Those two are ``callees[2]`` and ``callees[3]``
+    (:func:`stage_compiles`).
     """
     (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
      sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = tuple_at(sy)
@@ -629,10 +630,9 @@ def stage_compiles(x, active, sy, ctl, wk, out, d) -> tuple:
              _, _, _, qp_active_r, touching, _, _, _, _) = ctl
             (_, _, _, _, _, tau, _, z, ref, _, mu_p, qdd_p, a_pts, a_d) = out
             obj = x[:OBJECT_STATE_SIZE]
-            step = compile_of(object_pd_step, (buf, dims, N, nv_arm, unilateral, obj, ref,
-                                               pd_gains, z, hold_tool, hold_obj, hold_n, gains,
-                                               params, qp_active, tau, mu_p, qdd_p, a_pts,
-                                               a_d, False, np.zeros(6)), pair)
+            step = pd_step_compile(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z,
+                                   hold_tool, hold_obj, hold_n, gains, params, qp_active, tau,
+                                   mu_p, qdd_p, a_pts, a_d)
             callees += (step, compile_of(
                 touching_torques, (buf, dims, N, nv_arm, unilateral, touching, obj, ref,
                                    pd_gains, z, hold_tool, hold_obj, hold_n, gains, params,

@@ -658,22 +658,40 @@ def touching_torques(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_ga
     return PD_OK, rank
 
 
+def pd_step_compile(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold_tool,
+                    hold_obj, hold_n, gains, params, active, tau, mu, qdd, a_pts, a_d):
+    """The compile of :func:`object_pd_step` as a first-class function, for these arguments.
+
+    Its arguments as :func:`object_pd_step`'s, without ``solve`` (a bool) and ``wrench`` (a
+    (6,) array). ``N`` and ``unilateral`` are typed read-only, whatever the examples are: the
+    kernel only reads them, and a read-only type takes both the system's arrays (read-only
+    in the contact loop) and the rows :func:`touching_torques` compacts (new arrays), so
+    that the loop and ``ObjectPD``'s Python path share one compile.
+
+    Returns:
+        A :class:`~multiarm_pin._compiled.function_pointers.Compile` returning
+        ``(pd_status, solve_status)``.
+    """
+    int64 = numba.types.int64
+    return compile_of(object_pd_step, (
+        buf, dims, numba.typeof(N).copy(readonly=True), nv_arm,
+        numba.typeof(unilateral).copy(readonly=True), obj, ref, pd_gains, z, hold_tool,
+        hold_obj, hold_n, gains, params, active, tau, mu, qdd, a_pts, a_d, False, np.zeros(6)),
+        numba.types.UniTuple(int64, 2))
+
+
 def touching_step(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_gains, z,
                   hold_tool, hold_obj, hold_n, gains, params, active_r, tau, mu, qdd, a_pts,
                   a_d):
     """:func:`touching_torques`' last argument, from Python, for a call on these arguments.
 
-    The :func:`~multiarm_pin._compiled.function_pointers.pointer` of :func:`object_pd_step`
-    compiled for the arrays :func:`touching_torques` passes it: a copy of ``buf``, the
-    compacted rows (``N``, ``unilateral``) and the multipliers as new arrays, zero external
-    wrench. Depends only on the arguments' types: make it once per caller.
+    The :func:`~multiarm_pin._compiled.function_pointers.pointer` of
+    :func:`pd_step_compile`'s compile (the contact loop's own, for the same arrays).
+    Depends only on the arguments' types: make it once per caller.
     """
-    int64 = numba.types.int64
-    return pointer(compile_of(object_pd_step, (
-        buf.copy(), dims, np.zeros(N.shape, np.int64), nv_arm,
-        np.zeros(unilateral.shape, np.bool_), obj, ref, pd_gains, z, hold_tool, hold_obj,
-        hold_n, gains, params, active_r, tau, np.zeros(mu.shape), qdd, a_pts, a_d, False,
-        np.zeros(6)), numba.types.UniTuple(int64, 2)))
+    return pointer(pd_step_compile(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z,
+                                   hold_tool, hold_obj, hold_n, gains, params, active_r, tau,
+                                   mu, qdd, a_pts, a_d))
 
 
 @kernel
@@ -735,5 +753,5 @@ def solve_with_torques(buf, dims, N, params, tau):  # pragma: no cover - compile
 __all__ = ["GRASP_RANK_TOLERANCE", "PD_ARM_RANK", "PD_FORCES_FAILED", "PD_HOLD",
            "PD_LARGE_ROTATION", "PD_NOT_FINITE", "PD_OK", "desired_acceleration",
            "hold_still_torques", "log3", "min_norm_rows", "object_pd_step", "planned_torques",
-           "object_pd_torques", "solve_with_torques", "touching_rank", "touching_step",
-           "touching_torques"]
+           "object_pd_torques", "pd_step_compile", "solve_with_torques", "touching_rank",
+           "touching_step", "touching_torques"]
