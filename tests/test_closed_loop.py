@@ -121,7 +121,7 @@ def record_statuses(monkeypatch) -> list[int]:
 
     def recording(*args):
         out = step(*args)
-        statuses.append(int(out[0]))
+        statuses.append(int(out))
         return out
 
     monkeypatch.setattr(controller_kernels, "object_pd_step", recording)

@@ -39,7 +39,7 @@ import math
 import numba
 import numpy as np
 
-from multiarm_pin._compiled.controller_kernels import PD_OK, object_pd_step
+from multiarm_pin._compiled.controller_kernels import PD_OK, pd_step_compile, solve_compile
 from multiarm_pin._compiled.evaluate import evaluate_system, quaternion_rotation, rotation_rows
 from multiarm_pin._compiled.function_pointers import (
     Compile,
@@ -193,7 +193,8 @@ def closed_loop_stage(t, x, arm_pass, model_ints, model_floats, q_ref, err, J, d
     Pinocchio's). Then the blocks of the state at zero torque
     (:func:`~.evaluate.evaluate_system`), the reference motion at ``t``, the joint-space PD
     ``z = pad(null_kp (q_ref ⊖ q) - null_kd v)``, then
-    :func:`~.controller_kernels.object_pd_step` (torques and forward dynamics on the buffer).
+    :func:`~.controller_kernels.object_pd_step` (the torques), then
+    :func:`~.controller_kernels.solve_with_torques` (the forward dynamics on the buffer).
 
     Args:
         t: time [s].
@@ -239,10 +240,11 @@ def closed_loop_stage(t, x, arm_pass, model_ints, model_floats, q_ref, err, J, d
         E: workspace (3, 3).
         z: workspace (n, k).
         d: output (2 nv + 13,) the tangent.
-        callees: ``(arm pass, system, controller)``:
+        callees: ``(arm pass, system, controller, solve)``:
             :func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass`,
-            :func:`~.evaluate.evaluate_system` and
-            :func:`~.controller_kernels.object_pd_step` as :func:`callee_compiles` lists them
+            :func:`~.evaluate.evaluate_system`,
+            :func:`~.controller_kernels.object_pd_step` and
+            :func:`~.controller_kernels.solve_with_torques` as :func:`callee_compiles` lists them
             (each compiled once and called through its address), as functions or as
             pointers from Python (:func:`~multiarm_pin._compiled.function_pointers.pointer`),
             or those kernels.
@@ -266,12 +268,10 @@ def closed_loop_stage(t, x, arm_pass, model_ints, model_floats, q_ref, err, J, d
     w = np.empty(6)
     for a in range(6):
         w[a] = wrench_at(t, wrenches, a)
-    status, solved = fns[2](buf, dims, N, nv_arm, unilateral, x[:OBJECT_STATE_SIZE], ref,
-                            pd_gains, z, hold_tool, hold_obj, hold_n, gains, params, active, tau,
-                            mu, qdd, a_pts, a_d, True, w)
-    if status != PD_OK:
+    if fns[2](buf, dims, N, nv_arm, unilateral, x[:OBJECT_STATE_SIZE], ref, pd_gains, z,
+              hold_tool, hold_obj, hold_n, gains, active, tau, mu, qdd, a_pts, a_d) != PD_OK:
         return STAGE_CONTROLLER
-    if solved != SOLVE_OK:
+    if fns[3](buf, dims, N, params, tau, w) != SOLVE_OK:
         return STAGE_SOLVE
     mu_s = view2(buf, off, SEG_MU, n, k, m)
     for i in range(n):
@@ -302,7 +302,7 @@ def arm_compiles(x, model_ints, model_floats, J, dJ, M, nle, H, energy, arm_ints
                                          params, dims, buf), numba.types.boolean))
 
 
-def callee_compiles(stage_args: tuple) -> tuple[Compile, Compile, Compile]:
+def callee_compiles(stage_args: tuple) -> tuple[Compile, Compile, Compile, Compile]:
     """The compiles of the ``callees`` of :func:`closed_loop_stage`, for its other arguments.
 
     ``stage_args``: every argument of :func:`closed_loop_stage` before ``callees``, in its
@@ -316,11 +316,10 @@ def callee_compiles(stage_args: tuple) -> tuple[Compile, Compile, Compile]:
      hold_n, gains, active, _, buf, tau, mu, qdd, a_pts, a_d, ref, _, z, _) = stage_args
     return (*arm_compiles(x, model_ints, model_floats, J, dJ, M, nle, H, energy, arm_ints,
                           v_starts, ints, floats, params, dims, buf),
-            compile_of(object_pd_step, (buf, dims, N, nv_arm, unilateral,
-                                        x[:OBJECT_STATE_SIZE], ref, pd_gains, z, hold_tool,
-                                        hold_obj, hold_n, gains, params, active, tau, mu, qdd,
-                                        a_pts, a_d, True, np.zeros(6)),
-                       numba.types.UniTuple(numba.types.int64, 2)))
+            pd_step_compile(buf, dims, N, nv_arm, unilateral, x[:OBJECT_STATE_SIZE], ref,
+                            pd_gains, z, hold_tool, hold_obj, hold_n, gains, active, tau, mu, qdd,
+                            a_pts, a_d),
+            solve_compile(buf, dims, N, params, tau))
 
 
 def stage_entry(stage_args: tuple) -> tuple:
@@ -330,10 +329,10 @@ def stage_entry(stage_args: tuple) -> tuple:
     callees, and the callees are independent compiles:
     :func:`~multiarm_pin._compiled.function_pointers.compile_all` runs them at once.
     """
-    arm_pass, system, controller = callees = callee_compiles(stage_args)
+    arm_pass, system, controller, solve = callees = callee_compiles(stage_args)
     stage = compile_of(closed_loop_stage,
                        (*stage_args, tuple(c.pointer_type for c in callees)))
-    compile_all([[controller], [system], [stage], [arm_pass]])  # the larger first
+    compile_all([[controller], [system], [solve], [stage], [arm_pass]])  # the larger first
     return compiled(stage), tuple(pointer(c) for c in callees)
 
 
@@ -364,13 +363,13 @@ def loop_functions(head: tuple, x, model_ints, model_floats, q_ref, arm_ints, v_
                params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
                hold_obj, hold_n, gains, active, wrenches, buf, tau, mu, qdd, a_pts, a_d,
                np.empty(REFERENCE_SIZE), np.empty((3, 3)), np.empty((n, k)), np.empty(nd))
-    arm_pass, system, controller = callees = callee_compiles(example)
+    arm_pass, system, controller, solve = callees = callee_compiles(example)
     callee_types = tuple(c.function_type for c in callees)
     stage = compile_of(closed_loop_stage, (*example, callee_types), numba.types.int64)
     loop = compile_of(run_rk4, (*head, stage.pointer_type,
                                 tuple(c.pointer_type for c in callees)))
     # one group each, the larger first (by the code each compiles)
-    compile_all([[controller], [loop], [system], [stage], [arm_pass]])
+    compile_all([[controller], [loop], [system], [solve], [stage], [arm_pass]])
     found = _loops[key] = (compiled(loop), pointer(stage), tuple(pointer(c) for c in callees))
     return found
 

@@ -356,7 +356,7 @@ def _torques(t, x, active, sy, ctl, wk, out, callees):  # pragma: no cover - com
      sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = tuple_at(sy)
     (control, traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains, qp_active,
      unilateral, q_ref, q_hold, onsets, n_onsets, qp_active_r, touching, no_uni,
-     gains_free, no_wrench, _) = tuple_at(ctl)
+     gains_free, _) = tuple_at(ctl)
     buf = wk[6]
     (a_o, qdd_c, mu, phi_dd, Av, tau, err, z, ref, E, mu_p, qdd_p, a_pts, a_d) = tuple_at(out)
     k, n = dims[DIMS_K], dims[DIMS_N]
@@ -391,14 +391,14 @@ def _torques(t, x, active, sy, ctl, wk, out, callees):  # pragma: no cover - com
             g = gains if attempt == 0 else gains_free
             if full:
                 status = callees[2](buf, dims, N, nv_arm, uni, x[:OBJECT_STATE_SIZE], ref,
-                                    pd_gains, z, hold_tool, hold_obj, hold_n, g, params,
+                                    pd_gains, z, hold_tool, hold_obj, hold_n, g,
                                     qp_active if attempt == 0 else qp_active_r, tau, mu_p,
-                                    qdd_p, a_pts, a_d, False, no_wrench)[0]
+                                    qdd_p, a_pts, a_d)
             else:
                 status, rank = callees[3](buf, dims, N, nv_arm, uni, touching,
                                           x[:OBJECT_STATE_SIZE], ref, pd_gains, z, hold_tool,
-                                          hold_obj, hold_n, g, params, qp_active_r, tau, mu_p,
-                                          qdd_p, a_pts, a_d, callees[2])
+                                          hold_obj, hold_n, g, qp_active_r, tau, mu_p, qdd_p,
+                                          a_pts, a_d, callees[2])
             if status != PD_FORCES_FAILED:
                 if status == PD_OK:  # (ObjectPD.margin_kept: set by a plan, not by holding)
                     control[CTL_MARGIN_KEPT] = 1 if attempt == 0 else 0
@@ -436,7 +436,7 @@ def _phased_torques(t, x, active, sy, ctl, wk, out, callees):  # pragma: no cove
      sp_p, sp_n, sp_a, uni_c, mask_c, nv_c, N_c, rest_c, wrenches, rules) = tuple_at(sy)
     (control, traj, pd_gains, null_gains, hold_tool, grasp_obj, hold_n, gains, qp_active,
      unilateral, q_ref, q_hold, onsets, n_onsets, qp_active_r, touching, no_uni,
-     gains_free, _, ph) = tuple_at(ctl)
+     gains_free, ph) = tuple_at(ctl)
     (phases, press, release, named, offs, margins, offset_start, lam, a_plan) = ph
     buf, W_oc, cc, phi, phi_dot = wk[6], wk[10], wk[11], wk[14], wk[15]
     (a_o, qdd_c, mu, phi_dd, Av, tau, err, z, ref, E, mu_p, qdd_p, a_pts, a_d) = tuple_at(out)
@@ -627,17 +627,16 @@ def stage_compiles(x, active, sy, ctl, wk, out, d) -> tuple:
                                v_starts, ints, floats, params, dims, buf)
         if mode == CONTROL_OBJECT_PD:
             (_, _, pd_gains, _, hold_tool, hold_obj, hold_n, gains, qp_active, unilateral, _,
-             _, _, _, qp_active_r, touching, _, _, _, _) = ctl
+             _, _, _, qp_active_r, touching, _, _, _) = ctl
             (_, _, _, _, _, tau, _, z, ref, _, mu_p, qdd_p, a_pts, a_d) = out
             obj = x[:OBJECT_STATE_SIZE]
             step = pd_step_compile(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z,
-                                   hold_tool, hold_obj, hold_n, gains, params, qp_active, tau,
-                                   mu_p, qdd_p, a_pts, a_d)
+                                   hold_tool, hold_obj, hold_n, gains, qp_active, tau, mu_p,
+                                   qdd_p, a_pts, a_d)
             callees += (step, compile_of(
                 touching_torques, (buf, dims, N, nv_arm, unilateral, touching, obj, ref,
-                                   pd_gains, z, hold_tool, hold_obj, hold_n, gains, params,
-                                   qp_active_r, tau, mu_p, qdd_p, a_pts, a_d,
-                                   step.function_type), pair))
+                                   pd_gains, z, hold_tool, hold_obj, hold_n, gains, qp_active_r,
+                                   tau, mu_p, qdd_p, a_pts, a_d, step.function_type), pair))
         elif mode == CONTROL_PHASED:
             (_, _, _, _, hold_tool, _, hold_n, gains, *_, ph) = ctl
             (_, _, _, _, _, tau, _, z, _, _, _, qdd_p, a_pts, a_d) = out

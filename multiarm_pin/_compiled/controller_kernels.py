@@ -7,8 +7,8 @@ the force distribution and the inverse dynamics of thesis Eq 3.7-3.10. Its numpy
 arm by arm from the flat buffer of :mod:`multiarm_pin._compiled.evaluate` (no dense system over
 all arms, no SVD: the internal forces come from
 :func:`~multiarm_pin._compiled.force_qp.least_norm_forces`, each arm's constraint rows are met
-by a Householder QR of ``W_i``), and :func:`closed_loop_step` then solves the forward dynamics
-with these torques on the same blocks (one Pinocchio pass and one set of blocks per
+by a Householder QR of ``W_i``), and :func:`solve_with_torques` then solves the forward
+dynamics with these torques on the same blocks (one Pinocchio pass and one set of blocks per
 evaluation).
 With some unilateral contacts separated, :func:`touching_torques` plans on the touching rows
 only (or reports :data:`PD_HOLD` when they cannot make every object wrench, and
@@ -37,7 +37,7 @@ from multiarm_pin._compiled.evaluate import (
     quaternion_rotation,
 )
 from multiarm_pin._compiled.force_qp import QP_OK, least_norm_forces
-from multiarm_pin._compiled.function_pointers import bind, compile_of, pointer
+from multiarm_pin._compiled.function_pointers import Compile, bind, compile_of, pointer
 from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.layout import (
     DIMS_K,
@@ -405,8 +405,8 @@ def log3(R, out):  # pragma: no cover - compiled
 def desired_acceleration(obj, ref, pd_gains, obj_x, a_d):  # pragma: no cover - compiled
     """The PD on the object pose, ``a_d = a_ref + K_d (v_ref - v_o) + K_p e``.
 
-    ``e = [p_ref - p; log(R_ref Rᵀ)]``: the part of :func:`object_pd_step` and
-    :func:`touching_torques` before the torques.
+    ``e = [p_ref - p; log(R_ref Rᵀ)]``: the part of :func:`object_pd_step` before the
+    torques.
 
     Args:
         obj: (OBJECT_STATE_SIZE,) object position [m], quaternion ``[x, y, z, w]``, twist
@@ -451,16 +451,18 @@ def desired_acceleration(obj, ref, pd_gains, obj_x, a_d):  # pragma: no cover - 
 
 @kernel
 def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold_tool,
-                   hold_obj, hold_n, gains, params, active, tau, mu, qdd, a_pts, a_d, solve,
-                   wrench):  # pragma: no cover - compiled
-    """``ObjectPD`` (desired acceleration, torques) and, if ``solve``, the forward dynamics.
+                   hold_obj, hold_n, gains, active, tau, mu, qdd, a_pts,
+                   a_d):  # pragma: no cover - compiled
+    """``ObjectPD``'s torques on the buffer: the desired acceleration, then the plan.
 
-    One compiled call per closed-loop evaluation: the PD on the object pose
+    One compiled call per evaluation: the PD on the object pose
     ``a_d = a_ref + K_d (v_ref - v_o) + K_p [p_ref - p; log(R_ref Rᵀ)]``, then
-    :func:`object_pd_torques`, then :func:`solve_with_torques` on the same buffer.
+    :func:`object_pd_torques`. The forward dynamics with these torques is
+    :func:`solve_with_torques`, a separate compile (the contact loop and
+    :func:`touching_torques` never ask for it).
 
     Args:
-        buf: the flat buffer (blocks at zero torque).
+        buf: the flat buffer (blocks at zero torque; read only).
         dims: (DIMS_SIZE,) int ``(k, m, nv, n)``.
         N: (n,) int constraint rows per arm.
         nv_arm: (n,) int joints per arm.
@@ -475,42 +477,26 @@ def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold
         hold_obj: (n, h, 3).
         hold_n: (n,) int.
         gains: (HOLD_GAINS_SIZE,) ``hold_kp``, ``hold_kd``, Jacobian damping, margin.
-        params: (N_PARAMS,) the parameter vector (the solver thresholds are read).
         active: (n, m) uint8 warm start of the force QP (updated).
         tau: output (n, k) torques [N m].
         mu: output (n, m) planned multipliers [N].
         qdd: output (n, k) planned joint accelerations.
         a_pts: output (n, h, 3) desired point accelerations [m/s²].
         a_d: output (6,) desired object acceleration.
-        solve: also solve the forward dynamics into the buffer's solution segments.
-        wrench: (6,) external wrench ``[f; m]`` at the COM, world axes [N, N m], added to
-            ``h_o`` for the forward dynamics only (the controller does not know it;
-            zeros for none: a writable array, as every caller passes, so that one specialisation
-            serves them all; a module-level constant array would be typed read-only in a kernel).
 
     Returns:
-        ``(pd_status, solve_status)``: :data:`PD_OK` or the reason to use the reference;
-        the status of :func:`multiarm_pin._compiled.object_first.object_first` (-1 if not
-        solved).
+        :data:`PD_OK` or the reason to use the reference.
     """
     obj_x = np.empty(OX_TWIST + 6)
     if not desired_acceleration(obj, ref, pd_gains, obj_x, a_d):
-        return PD_LARGE_ROTATION, -1
+        return PD_LARGE_ROTATION
     k, m, n = dims[DIMS_K], dims[DIMS_M], dims[DIMS_N]
     off = offsets(dims)
     M, _, J, Jdq, tp, tR, ttw, _ = _arm_segments(buf, off, n, k, m)
     _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
-    status = _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm,
-                      unilateral, obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains,
-                      active, tau, mu, qdd, a_pts)
-    if status != PD_OK or not solve:
-        return status, -1
-    # solve_with_torques, written out: calling it would compile it and optimise object_first
-    # once more inside it
-    a_o, qdd_s, mu_s = _solution_segments(buf, off, n, k, m)
-    return status, object_first(M, h + tau, W, W_o, c, M_o, h_o + wrench, N,
-                                params[P_RCOND_TOL], params[P_OBJECT_RCOND_TOL], a_o, qdd_s,
-                                mu_s)
+    return _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilateral,
+                    obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains, active, tau, mu, qdd,
+                    a_pts)
 
 
 @kernel
@@ -558,8 +544,8 @@ def touching_rank(W_o, N):  # pragma: no cover - compiled
 
 @kernel
 def touching_torques(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_gains, z,
-                     hold_tool, hold_obj, hold_n, gains, params, active_r, tau, mu, qdd, a_pts,
-                     a_d, pd_step):  # pragma: no cover - compiled
+                     hold_tool, hold_obj, hold_n, gains, active_r, tau, mu, qdd, a_pts, a_d,
+                     pd_step):  # pragma: no cover - compiled
     """``ObjectPD`` torques planned on the touching contacts only (some have separated).
 
     What ``ObjectPD.reference`` computes on an evaluation whose active set leaves some
@@ -568,9 +554,9 @@ def touching_torques(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_ga
     :func:`multiarm_pin.dynamics.blocks.restrict_rows` does; ``M``, ``J``, ``J̇q̇``, tools,
     ``h``, ``M_o``, ``h_o`` unchanged); the grasp rank of those rows is decided first
     (:func:`touching_rank`; :data:`PD_HOLD` below 6: the caller holds the arms still,
-    :func:`hold_still_torques`); then ``pd_step`` (:func:`object_pd_step`, without the
-    forward dynamics) plans on the copy, and the planned multipliers are put back at their
-    full rows (zero on separated rows).
+    :func:`hold_still_torques`); then ``pd_step`` (:func:`object_pd_step`) plans on the
+    copy, and the planned multipliers are put back at their full rows (zero on separated
+    rows).
 
     ``object_pd_step`` is called through its address, not compiled into this kernel: the
     plan's code (force QP, task, torques) is compiled once, in ``object_pd_step``.
@@ -596,7 +582,6 @@ def touching_torques(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_ga
         hold_obj: (n, h, 3) their places in the object frame [m].
         hold_n: (n,) int held points per arm.
         gains: (HOLD_GAINS_SIZE,) ``hold_kp``, ``hold_kd``, Jacobian damping, margin.
-        params: (N_PARAMS,) the parameter vector (passed on to ``pd_step``).
         active_r: (n, m) uint8 warm start of the force QP on the restricted rows (in and
             out; its own array, not the full rows' one: a warm start only, the QP's answer
             does not depend on it).
@@ -646,8 +631,8 @@ def touching_torques(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_ga
         return PD_HOLD, rank
     mu_r = np.zeros((n, m))
     status = bind(pd_step)(restricted, dims, N_r, nv_arm, unilateral_r, obj, ref, pd_gains, z,
-                           hold_tool, hold_obj, hold_n, gains, params, active_r, tau, mu_r,
-                           qdd, a_pts, a_d, False, np.zeros(6))[0]
+                           hold_tool, hold_obj, hold_n, gains, active_r, tau, mu_r, qdd, a_pts,
+                           a_d)
     if status != PD_OK:
         return status, rank
     for i in range(n):
@@ -659,39 +644,43 @@ def touching_torques(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_ga
 
 
 def pd_step_compile(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold_tool,
-                    hold_obj, hold_n, gains, params, active, tau, mu, qdd, a_pts, a_d):
+                    hold_obj, hold_n, gains, active, tau, mu, qdd, a_pts, a_d) -> Compile:
     """The compile of :func:`object_pd_step` as a first-class function, for these arguments.
 
-    Its arguments as :func:`object_pd_step`'s, without ``solve`` (a bool) and ``wrench`` (a
-    (6,) array). ``N`` and ``unilateral`` are typed read-only, whatever the examples are: the
-    kernel only reads them, and a read-only type takes both the system's arrays (read-only
-    in the contact loop) and the rows :func:`touching_torques` compacts (new arrays), so
-    that the loop and ``ObjectPD``'s Python path share one compile.
+    ``N`` and ``unilateral`` are typed read-only, whatever the examples are: the kernel only
+    reads them, and a read-only type takes both the system's arrays (read-only in the loops)
+    and the rows :func:`touching_torques` compacts (new arrays), so that both loops and
+    ``ObjectPD``'s Python path share one compile.
 
     Returns:
-        A :class:`~multiarm_pin._compiled.function_pointers.Compile` returning
-        ``(pd_status, solve_status)``.
+        A :class:`~multiarm_pin._compiled.function_pointers.Compile` returning the status.
     """
-    int64 = numba.types.int64
     return compile_of(object_pd_step, (
         buf, dims, numba.typeof(N).copy(readonly=True), nv_arm,
         numba.typeof(unilateral).copy(readonly=True), obj, ref, pd_gains, z, hold_tool,
-        hold_obj, hold_n, gains, params, active, tau, mu, qdd, a_pts, a_d, False, np.zeros(6)),
-        numba.types.UniTuple(int64, 2))
+        hold_obj, hold_n, gains, active, tau, mu, qdd, a_pts, a_d), numba.types.int64)
+
+
+def solve_compile(buf, dims, N, params, tau) -> Compile:
+    """The compile of :func:`solve_with_torques` as a first-class function.
+
+    ``N`` typed read-only, as :func:`pd_step_compile` types it; it returns the solver's status.
+    """
+    return compile_of(solve_with_torques, (buf, dims, numba.typeof(N).copy(readonly=True),
+                                           params, tau, np.zeros(6)), numba.types.int64)
 
 
 def touching_step(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_gains, z,
-                  hold_tool, hold_obj, hold_n, gains, params, active_r, tau, mu, qdd, a_pts,
-                  a_d):
+                  hold_tool, hold_obj, hold_n, gains, active_r, tau, mu, qdd, a_pts, a_d):
     """:func:`touching_torques`' last argument, from Python, for a call on these arguments.
 
     The :func:`~multiarm_pin._compiled.function_pointers.pointer` of
-    :func:`pd_step_compile`'s compile (the contact loop's own, for the same arrays).
+    :func:`pd_step_compile`'s compile (the loops' own, for the same arrays).
     Depends only on the arguments' types: make it once per caller.
     """
     return pointer(pd_step_compile(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z,
-                                   hold_tool, hold_obj, hold_n, gains, params, active_r, tau,
-                                   mu, qdd, a_pts, a_d))
+                                   hold_tool, hold_obj, hold_n, gains, active_r, tau, mu, qdd,
+                                   a_pts, a_d))
 
 
 @kernel
@@ -725,7 +714,7 @@ def hold_still_torques(buf, dims, nv_arm, z, tau):  # pragma: no cover - compile
 
 
 @kernel
-def solve_with_torques(buf, dims, N, params, tau):  # pragma: no cover - compiled
+def solve_with_torques(buf, dims, N, params, tau, wrench):  # pragma: no cover - compiled
     """Object-first forward dynamics of the buffer's blocks with torques ``tau`` added to ``h``.
 
     The solution goes to the buffer's ``a_o``, ``qdd``, ``mu`` segments; its ``h`` segment
@@ -737,6 +726,9 @@ def solve_with_torques(buf, dims, N, params, tau):  # pragma: no cover - compile
         N: (n,) int constraint rows per arm.
         params: (N_PARAMS,) the parameter vector (the solver thresholds are read).
         tau: (n, k) joint torques [N m], zero on padding.
+        wrench: (6,) external wrench ``[f; m]`` at the COM, world axes [N, N m], added to
+            ``h_o`` (the controller does not know it; zeros for none: a writable array, as
+            every caller passes, so that one specialisation serves them all).
 
     Returns:
         The status of :func:`multiarm_pin._compiled.object_first.object_first`.
@@ -746,12 +738,12 @@ def solve_with_torques(buf, dims, N, params, tau):  # pragma: no cover - compile
     M = view3(buf, off, SEG_M, n, k, m)
     _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
     a_o, qdd, mu = _solution_segments(buf, off, n, k, m)
-    return object_first(M, h + tau, W, W_o, c, M_o, h_o, N, params[P_RCOND_TOL],
+    return object_first(M, h + tau, W, W_o, c, M_o, h_o + wrench, N, params[P_RCOND_TOL],
                         params[P_OBJECT_RCOND_TOL], a_o, qdd, mu)
 
 
 __all__ = ["GRASP_RANK_TOLERANCE", "PD_ARM_RANK", "PD_FORCES_FAILED", "PD_HOLD",
            "PD_LARGE_ROTATION", "PD_NOT_FINITE", "PD_OK", "desired_acceleration",
            "hold_still_torques", "log3", "min_norm_rows", "object_pd_step", "planned_torques",
-           "object_pd_torques", "pd_step_compile", "solve_with_torques", "touching_rank",
-           "touching_step", "touching_torques"]
+           "object_pd_torques", "pd_step_compile", "solve_compile", "solve_with_torques",
+           "touching_rank", "touching_step", "touching_torques"]

@@ -584,7 +584,8 @@ class CompiledSystem:
         """
         from multiarm_pin._compiled.controller_kernels import solve_with_torques
 
-        status = solve_with_torques(blocks.buffer, self.dims, self.N, self.params, tau_padded)
+        status = solve_with_torques(blocks.buffer, self.dims, self.N, self.params, tau_padded,
+                                    np.zeros(6))
         return self.with_torques(blocks, tau_padded, status)
 
     def with_torques(self, blocks: BufferBlocks, tau_padded: np.ndarray, status: int

@@ -314,7 +314,7 @@ class ContactLoop:
         C = (self.control, traj, pd_gains, null_gains, hold_tool, hold_obj, hold_n, gains,
              qp_active, unilateral, q_ref, self.q_hold, self.onsets, self.n_onsets,
              np.zeros((n, m), np.uint8), np.zeros((n, m), bool), np.zeros((n, m), bool),
-             self._free_gains(gains), np.zeros(6), phased)
+             self._free_gains(gains), phased)
         self._kept_controller = (inputs, C)
         return C
 

@@ -393,7 +393,7 @@ class ObjectPD(Controller):
             args = (buffer, path.dims, path.N, path.nv_arm, self._unilateral,
                     np.ascontiguousarray(active, dtype=bool), obj, ref[1], self._pd_gains, z,
                     self.hold_points_in_tool, self.hold_points_in_object, self._hold_n,
-                    self._gains, path.params, self._touching_active, tau, mu, qdd, a_pts, a_d)
+                    self._gains, self._touching_active, tau, mu, qdd, a_pts, a_d)
             if self._pd_step is None:
                 self._pd_step = controller_kernels.touching_step(*args)
             status, rank = controller_kernels.touching_torques(*args, self._pd_step)
@@ -403,11 +403,15 @@ class ObjectPD(Controller):
                 return s.unpad(tau), -1
             solved = -1
         else:
-            status, solved = controller_kernels.object_pd_step(
+            status = controller_kernels.object_pd_step(
                 buffer, path.dims, path.N, path.nv_arm, self._unilateral, obj, ref[1],
                 self._pd_gains, z,
                 self.hold_points_in_tool, self.hold_points_in_object, self._hold_n, self._gains,
-                path.params, self._forces.active, tau, mu, qdd, a_pts, a_d, solve, np.zeros(6))
+                self._forces.active, tau, mu, qdd, a_pts, a_d)
+            solved = -1
+            if status == controller_kernels.PD_OK and solve:
+                solved = controller_kernels.solve_with_torques(buffer, path.dims, path.N,
+                                                               path.params, tau, np.zeros(6))
         if status != controller_kernels.PD_OK:
             if status == controller_kernels.PD_FORCES_FAILED and active is None:
                 self._forces.cold_solves += 1
