@@ -606,13 +606,10 @@ def touching_torques(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_ga
     unilateral_r = np.zeros((n, m), dtype=np.bool_)
     N_r = np.zeros(n, dtype=np.int64)
     index = np.empty((n, m), dtype=np.int64)
+    W_r[:] = 0.0
+    W_o_r[:] = 0.0
+    c_r[:] = 0.0
     for i in range(n):
-        for s in range(m):
-            for j in range(k):
-                W_r[i, j, s] = 0.0
-            for a in range(6):
-                W_o_r[i, a, s] = 0.0
-            c_r[i, s] = 0.0
         p = 0
         for s in range(N[i]):
             if not touching[i, s]:
