@@ -37,7 +37,7 @@ from numba.core.caching import FunctionCache
 from numba.extending import intrinsic, overload
 
 from multiarm_pin._compiled.cache import compile_lock, index_key
-from multiarm_pin._compiled.jit import jit_disabled
+from multiarm_pin._compiled.jit import KernelCompiler, jit_disabled
 
 PROCESSES_VARIABLE = "MULTIARM_PIN_COMPILE_PROCESSES"
 """Environment variable: how many processes :func:`compile_all` may use (``1``: this one
@@ -198,7 +198,7 @@ def compiled(job: Compile):
     if made is None:
         with compile_lock(FunctionCache(kernel.py_func), key[1]):
             made = _by_signature[key] = numba.cfunc(  # without refcounts as the kernel says
-                key[1], cache=True, error_model="numpy",
+                key[1], cache=True, error_model="numpy", pipeline_class=KernelCompiler,
                 _nrt=kernel.targetoptions.get("_nrt", True))(kernel.py_func)
     return made
 

@@ -20,8 +20,10 @@ for its use as a first-class function. A kernel called from another kernel uses 
 calls from compiled code are served by a twin dispatcher of the same Python function compiled
 without them (``no_cpython_wrapper``, ``no_cfunc_wrapper``; its disk cache files are named by
 its ``__qualname__``, the kernel's and :data:`CALLEE_SUFFIX`). Calls from Python take the
-dispatcher :func:`kernel` returns, which compiles its own overloads with both wrappers: a
-twin's overload has no entry point for Python.
+dispatcher :func:`kernel` returns, which compiles its own overloads with the first wrapper only
+(a first-class function of a kernel is a ``cfunc`` of its own:
+:mod:`~multiarm_pin._compiled.function_pointers`): a twin's overload has no entry point for
+Python.
 
 numba counts the references to every array a function holds: an array argument is counted as
 the function starts and released on every path out of it, each array of a tuple argument
@@ -43,11 +45,20 @@ and for the disk cache: a caller loaded from the cache carries its own optimised
 callees. So the twins are compiled by :class:`LinkedCompiler`, which skips the whole-module
 optimisation of a twin's module: its functions are still optimised one by one, and every
 caller's module is optimised as before, callees included.
+
+LLVM optimises every kernel's code at level 2, without its loop vectoriser
+(:data:`LLVM_PASSES`), where numba's default is level 3 with it: the kernels work on small
+arrays (6-vectors, a few joints, a few contact rows), whose loops the vectoriser multiplies
+into vector, remainder and checking copies that such trip counts seldom run. Only the passes
+that rewrite code are chosen here (numba's ``NUMBA_OPT`` and ``NUMBA_LOOP_VECTORIZE`` still
+govern every other function of the process, and the machine code is made for this CPU as
+numba makes it): the results are the same bits, the code is smaller and compiles faster.
 """
 
 from __future__ import annotations
 
 import types as py_types
+from contextlib import contextmanager
 
 from numba import njit, types
 from numba.core import codegen, config
@@ -61,6 +72,10 @@ OPTIONS = {"cache": True, "error_model": "numpy"}
 CALLEE_SUFFIX = "__in_kernels"
 """Added to a kernel's ``__qualname__`` for the dispatcher that compiled callers call (its
 disk cache files are named by it)."""
+
+LLVM_PASSES = {"opt": 2, "loop_vectorize": False}
+"""LLVM's optimisation level and loop vectoriser for the kernels' code (see the module):
+numba's pass builder's arguments."""
 
 BORROWED_SUFFIX = "__borrowed"
 """Added after :data:`CALLEE_SUFFIX` for the twin that serves callers compiled without reference
@@ -112,27 +127,72 @@ class _Router:
         return self.serving().get_overload(sig)
 
 
-class _LinkedLibrary(codegen.JITCodeLibrary):
+@contextmanager
+def _kernel_passes(made):
+    """The pass managers of numba for the codegen ``made``, built with :data:`LLVM_PASSES`.
+
+    For the optimisation of one library's code: numba's compiler lock is held meanwhile, so
+    no other function's code is optimised with them.
+    """
+    if "_module_pass_manager" in vars(made):  # within another library's optimisation
+        yield
+        return
+    module, function = made._module_pass_manager, made._function_pass_manager
+
+    def with_passes(build):
+        return lambda **kwargs: build(**{**LLVM_PASSES, **kwargs})
+
+    made._module_pass_manager = with_passes(module)
+    made._function_pass_manager = with_passes(function)
+    try:
+        yield
+    finally:
+        del made._module_pass_manager, made._function_pass_manager
+
+
+class _KernelLibrary(codegen.JITCodeLibrary):
+    """A kernel's code library: optimised with :data:`LLVM_PASSES`."""
+
+    def _optimize_functions(self, ll_module):
+        """The function passes of numba, with :data:`LLVM_PASSES`."""
+        with _kernel_passes(self._codegen):
+            super()._optimize_functions(ll_module)
+
+    def _optimize_final_module(self):
+        """The module passes of numba, with :data:`LLVM_PASSES` (its first, cheap, pass as is)."""
+        with _kernel_passes(self._codegen):
+            super()._optimize_final_module()
+
+
+class _LinkedLibrary(_KernelLibrary):
     """A twin's code library: its module is optimised function by function only."""
 
     def _optimize_final_module(self):
         """Nothing: every caller optimises this code as part of its own module."""
 
 
-class LinkedCompiler(Compiler):
-    """numba's compiler, its code library a :class:`_LinkedLibrary` (a twin's ``pipeline_class``).
+class KernelCompiler(Compiler):
+    """numba's compiler, its code library a :class:`_KernelLibrary` (a kernel's ``pipeline_class``).
 
     The library numba makes in its lowering pass (with its function's qualified name and
     object caching on, for the disk cache) is made here instead, of the subclass.
     """
 
+    library_class = _KernelLibrary
+
     def compile_extra(self, func):
-        """Compile ``func`` (numba's ``Compiler.compile_extra``) into a :class:`_LinkedLibrary`."""
+        """Compile ``func`` (numba's ``Compiler.compile_extra``) into a :attr:`library_class`."""
         made = self.state.targetctx.codegen()
         if self.state.library is None and made._library_class is codegen.JITCodeLibrary:
-            self.state.library = _LinkedLibrary(made, func.__qualname__)
+            self.state.library = self.library_class(made, func.__qualname__)
             self.state.library.enable_object_caching()
         return super().compile_extra(func)
+
+
+class LinkedCompiler(KernelCompiler):
+    """:class:`KernelCompiler` with a :class:`_LinkedLibrary` (a twin's ``pipeline_class``)."""
+
+    library_class = _LinkedLibrary
 
 
 def _twin(function, suffix: str, **options):
@@ -164,7 +224,8 @@ def kernel(function=None, *, refcounts: bool = True, **options):
     """
     if function is None:
         return lambda f: kernel(f, refcounts=refcounts, **options)
-    dispatcher = njit(**OPTIONS, **options, **({} if refcounts else {"_nrt": False}))(function)
+    dispatcher = njit(**OPTIONS, **options, **({} if refcounts else {"_nrt": False}),
+                      no_cfunc_wrapper=True, pipeline_class=KernelCompiler)(function)
     if "inline" in options or not hasattr(dispatcher, "get_call_template"):
         return _typed_by_types(dispatcher)  # inlined (or no JIT): no call to serve
     callee = _twin(function, CALLEE_SUFFIX, **options, _nrt=True)
@@ -183,5 +244,5 @@ def jit_disabled() -> bool:
     return bool(config.DISABLE_JIT)
 
 
-__all__ = ["BORROWED_SUFFIX", "CALLEE_SUFFIX", "OPTIONS", "LinkedCompiler", "jit_disabled",
-           "kernel"]
+__all__ = ["BORROWED_SUFFIX", "CALLEE_SUFFIX", "LLVM_PASSES", "OPTIONS", "KernelCompiler",
+           "LinkedCompiler", "jit_disabled", "kernel"]
