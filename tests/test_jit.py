@@ -170,3 +170,33 @@ def test_a_twins_module_is_left_for_its_callers_to_optimise(monkeypatch):
     entry_library = next(iter(outer.overloads.values())).library
     assert not isinstance(entry_library, jit._LinkedLibrary)
     assert calls(entry_library, jit.CALLEE_SUFFIX) == []
+
+
+@needs_jit
+@pytest.mark.skipif(not config.LOOP_VECTORIZE, reason="numba's loop vectoriser is off here")
+def test_kernels_are_optimised_without_the_loop_vectoriser(monkeypatch):
+    """A kernel's loops stay scalar (``LLVM_PASSES``); numba's own ``njit`` still vectorises.
+
+    The same loop compiled both ways: numba's default pipeline makes vector instructions
+    of it, the kernel's none; both give the same sums.
+    """
+    monkeypatch.setattr(jit, "OPTIONS", {"error_model": "numpy"})  # no disk cache here
+
+    def add(a, b, out):
+        for i in range(out.shape[0]):
+            out[i] = a[i] + b[i]
+
+    a, b = np.arange(64.0), np.ones(64)
+    outs = [np.zeros(64), np.zeros(64)]
+    ours, numbas = jit.kernel(add), numba.njit(add)
+    ours(a, b, outs[0])
+    numbas(a, b, outs[1])
+    assert np.array_equal(outs[0], a + b) and np.array_equal(outs[1], a + b)
+
+    def vector_lines(dispatcher):
+        library = next(iter(dispatcher.overloads.values())).library
+        return [line for line in library.get_llvm_str().splitlines() if " x double>" in line]
+
+    assert isinstance(next(iter(ours.overloads.values())).library, jit._KernelLibrary)
+    assert vector_lines(numbas)
+    assert vector_lines(ours) == []
