@@ -46,13 +46,13 @@ callees. So the twins are compiled by :class:`LinkedCompiler`, which skips the w
 optimisation of a twin's module: its functions are still optimised one by one, and every
 caller's module is optimised as before, callees included.
 
-LLVM optimises every kernel's code at level 2, without its loop vectoriser
-(:data:`LLVM_PASSES`), where numba's default is level 3 with it: the kernels work on small
-arrays (6-vectors, a few joints, a few contact rows), whose loops the vectoriser multiplies
-into vector, remainder and checking copies that such trip counts seldom run. Only the passes
-that rewrite code are chosen here (numba's ``NUMBA_OPT`` and ``NUMBA_LOOP_VECTORIZE`` still
-govern every other function of the process, and the machine code is made for this CPU as
-numba makes it): the results are the same bits, the code is smaller and compiles faster.
+LLVM optimises every kernel's code without its loop vectoriser (:data:`LLVM_PASSES`), which
+numba runs by default: the kernels work on small arrays (6-vectors, a few joints, a few
+contact rows), whose loops the vectoriser multiplies into vector, remainder and checking
+copies that such trip counts seldom run. Only the kernels' passes are changed
+(``NUMBA_LOOP_VECTORIZE`` still governs every other function of the process; ``NUMBA_OPT``
+sets the level of all): the results are the same bits, the code is smaller and compiles
+faster.
 """
 
 from __future__ import annotations
@@ -73,9 +73,9 @@ CALLEE_SUFFIX = "__in_kernels"
 """Added to a kernel's ``__qualname__`` for the dispatcher that compiled callers call (its
 disk cache files are named by it)."""
 
-LLVM_PASSES = {"opt": 2, "loop_vectorize": False}
-"""LLVM's optimisation level and loop vectoriser for the kernels' code (see the module):
-numba's pass builder's arguments."""
+LLVM_PASSES = {"loop_vectorize": False}
+"""numba's pass builder's arguments for the kernels' code: LLVM's loop vectoriser off (see
+the module)."""
 
 BORROWED_SUFFIX = "__borrowed"
 """Added after :data:`CALLEE_SUFFIX` for the twin that serves callers compiled without reference
