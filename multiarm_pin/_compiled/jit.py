@@ -63,6 +63,7 @@ from contextlib import contextmanager
 from numba import njit, types
 from numba.core import codegen, config
 from numba.core.compiler import Compiler
+from numba.core.compiler_lock import global_compiler_lock
 from numba.core.targetconfig import ConfigStack
 
 OPTIONS = {"cache": True, "error_model": "numpy"}
@@ -131,23 +132,24 @@ class _Router:
 def _kernel_passes(made):
     """The pass managers of numba for the codegen ``made``, built with :data:`LLVM_PASSES`.
 
-    For the optimisation of one library's code: numba's compiler lock is held meanwhile, so
-    no other function's code is optimised with them.
+    For the optimisation of one library's code, under numba's compiler lock (re-entrant):
+    no other thread optimises a function's code with them meanwhile.
     """
-    if "_module_pass_manager" in vars(made):  # within another library's optimisation
-        yield
-        return
-    module, function = made._module_pass_manager, made._function_pass_manager
+    with global_compiler_lock:
+        if "_module_pass_manager" in vars(made):  # within another library's optimisation
+            yield
+            return
+        module, function = made._module_pass_manager, made._function_pass_manager
 
-    def with_passes(build):
-        return lambda **kwargs: build(**{**LLVM_PASSES, **kwargs})
+        def with_passes(build):
+            return lambda **kwargs: build(**{**LLVM_PASSES, **kwargs})
 
-    made._module_pass_manager = with_passes(module)
-    made._function_pass_manager = with_passes(function)
-    try:
-        yield
-    finally:
-        del made._module_pass_manager, made._function_pass_manager
+        made._module_pass_manager = with_passes(module)
+        made._function_pass_manager = with_passes(function)
+        try:
+            yield
+        finally:
+            del made._module_pass_manager, made._function_pass_manager
 
 
 class _KernelLibrary(codegen.JITCodeLibrary):
