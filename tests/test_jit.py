@@ -97,7 +97,8 @@ def test_a_kernel_without_refcounts_calls_its_callees_own_twin(monkeypatch):
     """Callers compiled without reference counting are served by a second twin, never the first.
 
     A callee compiled without counting that returned an array would give a counting caller a
-    reference it does not own: the two kinds of callers never share a compiled callee.
+    reference it does not own: unless the callee is marked ``refcounts=False`` (it then
+    returns no array), the two kinds of callers never share a compiled callee.
     """
     monkeypatch.setattr(jit, "OPTIONS", {"error_model": "numpy"})  # no disk cache here
 
@@ -125,6 +126,50 @@ def test_a_kernel_without_refcounts_calls_its_callees_own_twin(monkeypatch):
     assert len(twin.signatures) == 1 and twin.targetoptions["_nrt"] is True
     np.testing.assert_array_equal(a, np.full(3, 16.0))
     assert borrowed.targetoptions["_nrt"] is False and "_nrt" not in counted.targetoptions
+
+
+@needs_jit
+def test_a_kernel_without_refcounts_is_one_twin_for_every_caller(monkeypatch):
+    """A callee marked ``refcounts=False`` is compiled once, for counting callers and others."""
+    monkeypatch.setattr(jit, "OPTIONS", {"error_model": "numpy"})  # no disk cache here
+
+    def scale(a, s):
+        for j in range(a.shape[0]):
+            a[j] *= s
+
+    callee = jit.kernel(refcounts=False)(scale)
+
+    def twice(a):
+        callee(a, 2.0)
+        callee(a, 2.0)
+
+    counted = jit.kernel(twice)
+    borrowed = jit.kernel(refcounts=False)(twice)
+    a = np.ones(3)
+    counted(a)
+    borrowed(a)
+    router = callee.get_overload.__self__
+    assert router._borrowed is None  # no second twin
+    assert len(router.callee.signatures) == 1 and router.callee.targetoptions["_nrt"] is False
+    assert router.callee.py_func.__qualname__ == (scale.__qualname__ + jit.CALLEE_SUFFIX
+                                                  + jit.BORROWED_SUFFIX)
+    np.testing.assert_array_equal(a, np.full(3, 16.0))
+
+
+@needs_jit
+def test_a_kernel_without_refcounts_may_not_return_an_array(monkeypatch):
+    """Its caller would release a reference it was never given: the compile is refused."""
+    monkeypatch.setattr(jit, "OPTIONS", {"error_model": "numpy"})
+
+    def same(a):
+        return a  # numba compiles this without counting (the argument itself, no new array)
+
+    callee = jit.kernel(refcounts=False)(same)
+    with pytest.raises(TypeError) as refused:
+        jit.kernel(lambda a: callee(a).sum())(np.ones(3))
+    assert "which holds an array: its callers would release" in str(refused.value)
+    counted = jit.kernel(same)  # the default: a counting twin, which may return it
+    assert jit.kernel(lambda a: counted(a).sum())(np.ones(3)) == 3.0
 
 
 @needs_jit

@@ -110,7 +110,7 @@ NULL_KD = 1
 """``null_gains[NULL_KD]``: its damping ``null_kd`` [1/s]."""
 
 
-@kernel
+@kernel(refcounts=False)
 def wrench_at(t, wrenches, a):  # pragma: no cover - compiled
     """Component ``a`` of the external wrench at ``t`` [s] (``WrenchSchedule.__call__``).
 
@@ -123,7 +123,7 @@ def wrench_at(t, wrenches, a):  # pragma: no cover - compiled
     return out
 
 
-@kernel
+@kernel(refcounts=False)
 def joint_pd(err, x, v_starts, nv_arm, kp, kd, z):  # pragma: no cover - compiled
     """``object_pd``'s joint-space PD ``z = pad(kp err - kd v)`` (n, k) into ``z``.
 
@@ -377,7 +377,7 @@ def loop_functions(head: tuple, x, model_ints, model_floats, q_ref, arm_ints, v_
 _loops: dict = {}  # type_key of run_rk4's head -> loop_functions' tuple
 
 
-@kernel
+@kernel(refcounts=False)
 def _advance(model_ints, x, d, h, hd, out):  # pragma: no cover - compiled
     """The state ``h`` [s] along the tangent ``d`` into ``out`` (``Stepper.advance``)."""
     nv = (d.shape[0] - OBJECT_STATE_SIZE) // 2
@@ -668,7 +668,7 @@ def _record(s, t, x, nq, nv, N, nv_arm, v_starts, unilateral, wrenches, separati
     return True
 
 
-@kernel
+@kernel(refcounts=False)
 def record_state(s, t, x, nq, nv, nv_arm, v_starts, tau, qdd, a_o, wrenches, r_q, r_v, r_p,
                  r_quat, r_tw, r_tau, r_qdd, r_a_o, r_wrench):  # pragma: no cover - compiled
     """Record sample ``s``'s state ``x``, torques, accelerations and external wrench.
@@ -697,7 +697,7 @@ def record_state(s, t, x, nq, nv, nv_arm, v_starts, tau, qdd, a_o, wrenches, r_q
             r_qdd[s, j] = qdd[i, a]
 
 
-@kernel
+@kernel(refcounts=False)
 def record_energy(s, x, params, energy, arms, r_kinetic, r_potential, r_momentum
                   ):  # pragma: no cover - compiled
     """Record sample ``s``'s kinetic and potential energy and momentum.

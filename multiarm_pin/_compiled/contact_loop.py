@@ -187,7 +187,7 @@ the mixed LCP's tolerances)."""
 
 
 # ------------------------------------------------------------------ one evaluation
-@kernel
+@kernel(refcounts=False)
 def _support_rows(x, sp_p, sp_n, sp_a, params, b, rows_phi, rows_phi_dot, pts, nrm, W_o,
                   c):  # pragma: no cover - compiled
     """The support rows of block ``b`` at ``x`` (``SupportSet.evaluate`` and the stacking).
@@ -296,7 +296,7 @@ def _object_rows_and_blocks(x, sy, wk, callees):  # pragma: no cover - compiled
     return _supports_and_check(x, sy, wk)
 
 
-@kernel
+@kernel(refcounts=False)
 def _supports_and_check(x, sy, wk):  # pragma: no cover - compiled
     """The supports' block and rows after the arms' (:func:`_rows_and_blocks`); False on NaN."""
     (model_ints, model_floats, arm_ints, v_starts, ints, floats, params, dims, N, nv_arm,
@@ -332,7 +332,7 @@ def _supports_and_check(x, sy, wk):  # pragma: no cover - compiled
     return True
 
 
-@kernel
+@kernel(refcounts=False)
 def _all_touching(active, N):  # pragma: no cover - compiled
     """True when every arm row (``r < N[i]``) is active."""
     for i in range(N.shape[0]):

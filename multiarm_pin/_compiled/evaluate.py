@@ -102,7 +102,7 @@ def quaternion_rotation(quat, R):  # pragma: no cover - compiled
         R[a, 0], R[a, 1], R[a, 2] = rows[a]
 
 
-@kernel
+@kernel(refcounts=False)
 def rotation_rows(quat):  # pragma: no cover - compiled
     """Rotation matrix of a unit quaternion ``[x, y, z, w]`` as three row tuples ``R[a][c]``.
 

@@ -36,7 +36,11 @@ second twin compiled without it (its cache files named with :data:`BORROWED_SUFF
 by the twin that serves other callers (a callee compiled without counting that returned an
 array would give its caller a reference it does not own). numba refuses to compile an
 allocation without reference counting, so a kernel that allocates cannot be marked so by
-mistake.
+mistake. A kernel marked so returns no array (a caller's compile is refused otherwise,
+with a ``TypeError``), and its twin without counting serves every caller: a callee
+that neither allocates nor returns an array takes and gives no reference, so a caller
+that counts its own may call it. Such a callee is then compiled once, not once for the
+callers that count and again for those that do not.
 
 numba compiles a callee into its own module, optimises that module, and links a copy of it
 into the module of every caller, which it optimises again as a whole (the callee's code is
@@ -64,6 +68,7 @@ from numba import njit, types
 from numba.core import codegen, config
 from numba.core.compiler import Compiler
 from numba.core.compiler_lock import global_compiler_lock
+from numba.core.datamodel import default_manager
 from numba.core.targetconfig import ConfigStack
 
 OPTIONS = {"cache": True, "error_model": "numpy"}
@@ -83,7 +88,7 @@ BORROWED_SUFFIX = "__borrowed"
 counting (its disk cache files are named by it)."""
 
 
-def _typed_by_types(dispatcher, callee=None, borrowed=None):
+def _typed_by_types(dispatcher, callee=None, borrowed=None, name=None):
     """``dispatcher`` with its calls from compiled code typed by non-literal argument types.
 
     Args:
@@ -94,13 +99,15 @@ def _typed_by_types(dispatcher, callee=None, borrowed=None):
         borrowed: a function returning the dispatcher that serves the calls from a caller
             compiled without reference counting (the twin compiled without it); ``None``:
             ``callee`` serves them too.
+        name: the kernel's name when ``callee`` is compiled without reference counting
+            (``refcounts=False``): a call whose result would hold an array is then refused.
 
     Without the JIT (``NUMBA_DISABLE_JIT``) ``njit`` returns the Python function: returned as is.
     """
     own = getattr(dispatcher, "get_call_template", None)
     if own is None:
         return dispatcher
-    router = _Router(own, callee, borrowed)
+    router = _Router(own, callee, borrowed, name)
     dispatcher.get_call_template = router.get_call_template
     if callee is not None:  # the compiled call's implementation
         dispatcher.get_overload = router.get_overload
@@ -110,8 +117,8 @@ def _typed_by_types(dispatcher, callee=None, borrowed=None):
 class _Router:
     """Serves a kernel's calls from compiled code (:func:`_typed_by_types`'s arguments)."""
 
-    def __init__(self, own, callee, borrowed):
-        self.own, self.callee, self._borrowed = own, callee, borrowed
+    def __init__(self, own, callee, borrowed, name):
+        self.own, self.callee, self._borrowed, self.name = own, callee, borrowed, name
 
     def serving(self):
         """The twin for the caller being compiled (the top of numba's configuration stack)."""
@@ -121,8 +128,15 @@ class _Router:
 
     def get_call_template(self, args, kws):
         find = self.own if self.callee is None else self.serving().get_call_template
-        return find(tuple(types.unliteral(a) for a in args),
-                    {k: types.unliteral(v) for k, v in kws.items()})
+        found = find(tuple(types.unliteral(a) for a in args),
+                     {k: types.unliteral(v) for k, v in kws.items()})
+        if self.name is not None:  # refcounts=False: no array may come back (see the module)
+            result = self.callee.overloads[tuple(found[2])].signature.return_type
+            if default_manager.lookup(result).contains_nrt_meminfo():
+                raise TypeError(f"kernel {self.name!r} is compiled without reference counting "
+                                f"(refcounts=False) but returns {result}, which holds an "
+                                "array: its callers would release a reference not theirs")
+        return found
 
     def get_overload(self, sig):
         return self.serving().get_overload(sig)
@@ -214,9 +228,9 @@ def kernel(function=None, *, refcounts: bool = True, **options):
 
     Args:
         function: the Python function (numba's ``nopython`` subset).
-        refcounts: ``False``: compiled without reference counting (numba's ``_nrt=False``)
-            when called from Python or as a first-class function, and so are its callees
-            (see the module). For a kernel whose call tree allocates no array.
+        refcounts: ``False``: compiled without reference counting (numba's ``_nrt=False``),
+            and so are its callees; one twin serves every kernel that calls it (see the
+            module). For a kernel whose call tree allocates no array and which returns none.
         **options: further ``numba.njit`` options (``inline``, ``nogil``).
 
     Returns:
@@ -230,6 +244,9 @@ def kernel(function=None, *, refcounts: bool = True, **options):
                       no_cfunc_wrapper=True, pipeline_class=KernelCompiler)(function)
     if "inline" in options or not hasattr(dispatcher, "get_call_template"):
         return _typed_by_types(dispatcher)  # inlined (or no JIT): no call to serve
+    if not refcounts:  # one twin, without counting, serves every caller (see the module)
+        alone = _twin(function, CALLEE_SUFFIX + BORROWED_SUFFIX, **options, _nrt=False)
+        return _typed_by_types(dispatcher, alone, name=function.__qualname__)
     callee = _twin(function, CALLEE_SUFFIX, **options, _nrt=True)
     made = []
 

@@ -462,7 +462,7 @@ SHAPE_CODES = np.array([[_DIM_CODE.get(d, d) for d in shape] + [1] * (_MAX_NDIM 
 (padded with 1), the form in which the compiled code reads :data:`SEGMENT_TABLE`."""
 
 
-@kernel
+@kernel(refcounts=False)
 def _dim(code, n, k, m):  # pragma: no cover - compiled
     """A dimension of :data:`SHAPE_CODES` for ``n`` arms, ``k = nv_max``, ``m = N_max``."""
     if code == -1:

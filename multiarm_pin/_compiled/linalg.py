@@ -233,7 +233,7 @@ def singular_values(A, out):  # pragma: no cover - compiled
         out[j] = math.sqrt(acc)
 
 
-@kernel
+@kernel(refcounts=False)
 def copy1(dst, src):  # pragma: no cover - compiled
     """``dst[:] = src`` for two vectors of one length, element by element.
 
@@ -243,7 +243,7 @@ def copy1(dst, src):  # pragma: no cover - compiled
         dst[i] = src[i]
 
 
-@kernel
+@kernel(refcounts=False)
 def copy2(dst, src):  # pragma: no cover - compiled
     """``dst[:] = src`` for two matrices of one shape, element by element."""
     for i in range(src.shape[0]):

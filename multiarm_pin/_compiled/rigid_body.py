@@ -270,7 +270,7 @@ def rigid_body_pass(model_ints, model_floats, q, v, J, dJ, M, nle, H,
                 W[par, a] += W[i, a]
 
 
-@kernel
+@kernel(refcounts=False)
 def integrate(model_ints, q, dv, out):  # pragma: no cover - compiled
     """``out = q ⊕ dv``, equal to ``pin.integrate(model, q, dv)`` for the supported joints.
 
@@ -299,7 +299,7 @@ def integrate(model_ints, q, dv, out):  # pragma: no cover - compiled
             out[iq + 1] = s1 * scale
 
 
-@kernel
+@kernel(refcounts=False)
 def difference(model_ints, q0, q1, out):  # pragma: no cover - compiled
     """``out = q1 ⊖ q0``, equal to ``pin.difference(model, q0, q1)`` for the supported joints.
 

@@ -30,7 +30,7 @@ EXP3_TAYLOR = 1e-4
 """Below this angle [rad] :func:`exp3` uses Taylor series (as ``pin.exp3`` does near 0)."""
 
 
-@kernel
+@kernel(refcounts=False)
 def exp3(wx, wy, wz, R):  # pragma: no cover - compiled
     """Rotation matrix ``exp([w]×)`` of the rotation vector ``w`` [rad] into ``R`` (3, 3).
 
@@ -59,7 +59,7 @@ def exp3(wx, wy, wz, R):  # pragma: no cover - compiled
     R[2, 1] = b * wy * wz + a * wx
 
 
-@kernel
+@kernel(refcounts=False)
 def reference_motion(t, table, E, ref):  # pragma: no cover - compiled
     """The reference pose, twist and acceleration at time ``t`` [s] into ``ref``.
 
