@@ -48,7 +48,8 @@ inlined there and optimised with its caller's). A twin's own module is made for 
 and for the disk cache: a caller loaded from the cache carries its own optimised copy of its
 callees. So the twins are compiled by :class:`LinkedCompiler`, which skips the whole-module
 optimisation of a twin's module: its functions are still optimised one by one, and every
-caller's module is optimised as before, callees included.
+caller's module is optimised as before, callees included. Nor is a twin's own module made
+machine code: no caller calls it (each calls its own copy), so only its callers' code is.
 
 LLVM optimises every kernel's code without its loop vectoriser (:data:`LLVM_PASSES`), which
 numba runs by default: the kernels work on small arrays (6-vectors, a few joints, a few
@@ -64,6 +65,7 @@ from __future__ import annotations
 import types as py_types
 from contextlib import contextmanager
 
+from llvmlite import binding as llvm
 from numba import njit, types
 from numba.core import codegen, config
 from numba.core.compiler import Compiler
@@ -82,6 +84,9 @@ disk cache files are named by it)."""
 LLVM_PASSES = {"loop_vectorize": False}
 """numba's pass builder's arguments for the kernels' code: LLVM's loop vectoriser off (see
 the module)."""
+
+ENV_PREFIX = "_ZN08NumbaEnv"
+"""How numba's names of the functions' environment pointers (LLVM globals) begin."""
 
 BORROWED_SUFFIX = "__borrowed"
 """Added after :data:`CALLEE_SUFFIX` for the twin that serves callers compiled without reference
@@ -181,10 +186,36 @@ class _KernelLibrary(codegen.JITCodeLibrary):
 
 
 class _LinkedLibrary(_KernelLibrary):
-    """A twin's code library: its module is optimised function by function only."""
+    """A twin's code library: optimised function by function only, and made no machine code.
+
+    Its module is kept for its callers to link (numba's module for linking, its functions
+    ``linkonce_odr``): no caller calls a twin's own machine code, so numba's engine gets a
+    module in its place that holds only the function's environment pointer (a global that
+    numba sets by name once the function is compiled or loaded). Its object code, for the
+    disk cache, is that module's; the cache keeps the module for linking beside it.
+    """
 
     def _optimize_final_module(self):
         """Nothing: every caller optimises this code as part of its own module."""
+
+    def _finalize_final_module(self):
+        """The finalisation of numba, of an empty module; the full one kept for linking only."""
+        self._finalize_dynamic_globals()  # of the full module (numba's cache checks them)
+        self._verify_declare_only_symbols()
+        linked = self._final_module
+        for function in linked.functions:  # as numba's _get_module_for_linking makes them
+            if not function.is_declaration and function.linkage == llvm.Linkage.external:
+                function.linkage = "linkonce_odr"
+        self._shared_module = linked
+        # the engine's module: the environment pointers only, which numba sets by name
+        env = "".join(f"{v}\n" for v in linked.global_variables if v.name.startswith(ENV_PREFIX))
+        self._final_module = llvm.parse_assembly(
+            str(self._codegen._create_empty_module(self.name)) + env)
+        super()._finalize_final_module()
+
+    def get_llvm_str(self):
+        """The module its callers link (numba's own is the empty one)."""
+        return str(self._shared_module)
 
 
 class KernelCompiler(Compiler):
