@@ -214,8 +214,8 @@ class _LinkedLibrary(_KernelLibrary):
         super()._finalize_final_module()
 
     def get_llvm_str(self):
-        """The module its callers link (numba's own is the empty one)."""
-        return str(self._shared_module)
+        """The module its callers link, once finalised (the engine's holds no function)."""
+        return str(self._final_module if self._shared_module is None else self._shared_module)
 
 
 class KernelCompiler(Compiler):
