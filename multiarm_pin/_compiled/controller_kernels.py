@@ -152,9 +152,9 @@ def min_norm_rows(W, ncols, nrows, g, x, Q, beta):  # pragma: no cover - compile
 
 
 @kernel
-def _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilateral, obj_x,
-             a_d, z, hold_tool, hold_obj, hold_n, gains, active, tau, mu, qdd,
-             a_pts):  # pragma: no cover - compiled
+def _forces_and_torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilateral,
+                        obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains, active, tau, mu, qdd,
+                        a_pts):  # pragma: no cover - compiled
     """:func:`object_pd_torques` on the buffer views.
 
     An arm whose constraint rows fix its joint accelerations (``N_i = nv_i``: ``W_i`` square)
@@ -186,7 +186,7 @@ def _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilater
 @kernel
 def planned_torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, N, nv_arm, obj_x, a_d, z, hold_tool,
                     hold_obj, hold_n, gains, tau, mu, qdd, a_pts):  # pragma: no cover - compiled
-    """Steps 2-5 of :func:`_torques` with the multipliers ``mu`` planned already.
+    """Steps 2-5 of :func:`_forces_and_torques` with the multipliers ``mu`` planned already.
 
     The held points' tasks at the object acceleration ``a_d``, their joint accelerations and
     the inverse dynamics on the rows ``W``, ``W_o``, ``c`` (``N[i]`` per arm) with the
@@ -374,9 +374,9 @@ def object_pd_torques(buf, dims, N, nv_arm, unilateral, obj_x, a_d, z, hold_tool
     off = offsets(dims)
     M, _, J, Jdq, tp, tR, ttw, _ = _arm_segments(buf, off, n, k, m)
     _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
-    return _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilateral,
-                    obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains, active, tau, mu, qdd,
-                    a_pts)
+    return _forces_and_torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm,
+                               unilateral, obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains,
+                               active, tau, mu, qdd, a_pts)
 
 
 @kernel
@@ -494,9 +494,9 @@ def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold
     off = offsets(dims)
     M, _, J, Jdq, tp, tR, ttw, _ = _arm_segments(buf, off, n, k, m)
     _, h, W, W_o, c, M_o, h_o = _block_segments(buf, off, n, k, m)
-    return _torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm, unilateral,
-                    obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains, active, tau, mu, qdd,
-                    a_pts)
+    return _forces_and_torques(M, J, Jdq, tp, tR, ttw, h, W, W_o, c, M_o, h_o, N, nv_arm,
+                               unilateral, obj_x, a_d, z, hold_tool, hold_obj, hold_n, gains,
+                               active, tau, mu, qdd, a_pts)
 
 
 @kernel
