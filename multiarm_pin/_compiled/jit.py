@@ -65,7 +65,6 @@ from __future__ import annotations
 import types as py_types
 from contextlib import contextmanager
 
-from llvmlite import binding as llvm
 from numba import njit, types
 from numba.core import codegen, config
 from numba.core.compiler import Compiler
@@ -204,12 +203,12 @@ class _LinkedLibrary(_KernelLibrary):
         self._verify_declare_only_symbols()
         linked = self._final_module
         for function in linked.functions:  # as numba's _get_module_for_linking makes them
-            if not function.is_declaration and function.linkage == llvm.Linkage.external:
+            if not function.is_declaration and function.linkage == codegen.ll.Linkage.external:
                 function.linkage = "linkonce_odr"
         self._shared_module = linked
         # the engine's module: the environment pointers only, which numba sets by name
         env = "".join(f"{v}\n" for v in linked.global_variables if v.name.startswith(ENV_PREFIX))
-        self._final_module = llvm.parse_assembly(
+        self._final_module = codegen.ll.parse_assembly(  # numba's llvmlite binding
             str(self._codegen._create_empty_module(self.name)) + env)
         super()._finalize_final_module()
 
