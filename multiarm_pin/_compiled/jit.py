@@ -92,7 +92,7 @@ BORROWED_SUFFIX = "__borrowed"
 counting (its disk cache files are named by it)."""
 
 
-def _typed_by_types(dispatcher, callee=None, borrowed=None, name=None):
+def _typed_by_types(dispatcher, callee=None, borrowed=None):
     """``dispatcher`` with its calls from compiled code typed by non-literal argument types.
 
     Args:
@@ -102,16 +102,15 @@ def _typed_by_types(dispatcher, callee=None, borrowed=None, name=None):
             ``dispatcher`` itself.
         borrowed: a function returning the dispatcher that serves the calls from a caller
             compiled without reference counting (the twin compiled without it); ``None``:
-            ``callee`` serves them too.
-        name: the kernel's name when ``callee`` is compiled without reference counting
-            (``refcounts=False``): a call whose result would hold an array is then refused.
+            ``callee`` serves them too (with ``callee`` compiled without reference counting,
+            ``refcounts=False``, a call whose result would hold an array is refused).
 
     Without the JIT (``NUMBA_DISABLE_JIT``) ``njit`` returns the Python function: returned as is.
     """
     own = getattr(dispatcher, "get_call_template", None)
     if own is None:
         return dispatcher
-    router = _Router(own, callee, borrowed, name)
+    router = _Router(own, callee, borrowed)
     dispatcher.get_call_template = router.get_call_template
     if callee is not None:  # the compiled call's implementation
         dispatcher.get_overload = router.get_overload
@@ -121,8 +120,8 @@ def _typed_by_types(dispatcher, callee=None, borrowed=None, name=None):
 class _Router:
     """Serves a kernel's calls from compiled code (:func:`_typed_by_types`'s arguments)."""
 
-    def __init__(self, own, callee, borrowed, name):
-        self.own, self.callee, self._borrowed, self.name = own, callee, borrowed, name
+    def __init__(self, own, callee, borrowed):
+        self.own, self.callee, self._borrowed = own, callee, borrowed
 
     def serving(self):
         """The twin for the caller being compiled (the top of numba's configuration stack)."""
@@ -134,10 +133,13 @@ class _Router:
         find = self.own if self.callee is None else self.serving().get_call_template
         found = find(tuple(types.unliteral(a) for a in args),
                      {k: types.unliteral(v) for k, v in kws.items()})
-        if self.name is not None:  # refcounts=False: no array may come back (see the module)
+        if self.callee is not None and self.callee.targetoptions.get("_nrt") is False:
+            # refcounts=False: its one twin serves every caller, so no array may come back
             result = self.callee.overloads[tuple(found[2])].signature.return_type
             if default_manager.lookup(result).contains_nrt_meminfo():
-                raise TypeError(f"kernel {self.name!r} is compiled without reference counting "
+                name = self.callee.py_func.__qualname__.removesuffix(CALLEE_SUFFIX
+                                                                     + BORROWED_SUFFIX)
+                raise TypeError(f"kernel {name!r} is compiled without reference counting "
                                 f"(refcounts=False) but returns {result}, which holds an "
                                 "array: its callers would release a reference not theirs")
         return found
@@ -276,7 +278,7 @@ def kernel(function=None, *, refcounts: bool = True, **options):
         return _typed_by_types(dispatcher)  # inlined (or no JIT): no call to serve
     if not refcounts:  # one twin, without counting, serves every caller (see the module)
         alone = _twin(function, CALLEE_SUFFIX + BORROWED_SUFFIX, **options, _nrt=False)
-        return _typed_by_types(dispatcher, alone, name=function.__qualname__)
+        return _typed_by_types(dispatcher, alone)
     callee = _twin(function, CALLEE_SUFFIX, **options, _nrt=True)
     made = []
 
