@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import numba
@@ -215,6 +216,34 @@ def test_a_twins_module_is_left_for_its_callers_to_optimise(monkeypatch):
     entry_library = next(iter(outer.overloads.values())).library
     assert not isinstance(entry_library, jit._LinkedLibrary)
     assert calls(entry_library, jit.CALLEE_SUFFIX) == []
+
+
+@needs_jit
+def test_an_entry_points_python_wrapper_is_not_optimised(monkeypatch):
+    """The wrapper for calls from Python is ``optnone``; the kernel itself is optimised.
+
+    Read from the module's text: the attributes of the wrapper's definition hold
+    ``optnone`` and ``noinline``, those of the kernel's do not (LLVM's passes gave it
+    theirs, ``nounwind`` among them).
+    """
+    monkeypatch.setattr(jit, "OPTIONS", {"error_model": "numpy"})  # no disk cache here
+
+    def total(t):
+        return t[0][0] + t[1][1]
+
+    entry = jit.kernel(total)
+    assert entry((np.ones(2), np.arange(3.0))) == 2.0
+    text = next(iter(entry.overloads.values())).library.get_llvm_str()
+    groups = dict(re.findall(r"^attributes (#\d+) = \{([^}]*)\}", text, re.M))
+    defined = {name: set(" ".join(groups[g] for g in refs.split()).split())
+               for name, refs in re.findall(r"^define [^@]*@(\S+?)\(.*\)[^#]*((?:#\d+ ?)+)",
+                                            text, re.M)}
+    wrapper = [a for name, a in defined.items() if name.startswith(jit.WRAPPER_PREFIX)]
+    own = [a for name, a in defined.items()
+           if total.__name__ in name and not name.startswith(jit.WRAPPER_PREFIX)]
+    assert len(wrapper) == 1 and len(own) == 1
+    assert {"optnone", "noinline"} <= wrapper[0]
+    assert "optnone" not in own[0] and "nounwind" in own[0]
 
 
 @needs_jit

@@ -23,7 +23,8 @@ its ``__qualname__``, the kernel's and :data:`CALLEE_SUFFIX`). Calls from Python
 dispatcher :func:`kernel` returns, which compiles its own overloads with the first wrapper only
 (a first-class function of a kernel is a ``cfunc`` of its own:
 :mod:`~multiarm_pin._compiled.function_pointers`): a twin's overload has no entry point for
-Python.
+Python. That wrapper runs once per call from Python, never inside a kernel's loop: LLVM
+leaves it unoptimised (:class:`_KernelLibrary`).
 
 numba counts the references to every array a function holds: an array argument is counted as
 the function starts and released on every path out of it, each array of a tuple argument
@@ -86,6 +87,9 @@ the module)."""
 
 ENV_PREFIX = "_ZN08NumbaEnv"
 """How numba's names of the functions' environment pointers (LLVM globals) begin."""
+
+WRAPPER_PREFIX = "_ZN7cpython"
+"""How numba's names of the wrappers for calls from Python (LLVM functions) begin."""
 
 BORROWED_SUFFIX = "__borrowed"
 """Added after :data:`CALLEE_SUFFIX` for the twin that serves callers compiled without reference
@@ -173,7 +177,22 @@ def _kernel_passes(made):
 
 
 class _KernelLibrary(codegen.JITCodeLibrary):
-    """A kernel's code library: optimised with :data:`LLVM_PASSES`."""
+    """A kernel's code library: optimised with :data:`LLVM_PASSES`, its Python wrapper not at all.
+
+    The wrapper for calls from Python (:data:`WRAPPER_PREFIX`) unboxes each argument, calls
+    the kernel and boxes its result, once per call from Python: straight-line code as long
+    as the loops' tuples of arrays. It is marked ``optnone`` (with ``noinline``, which
+    ``optnone`` requires): LLVM's passes skip it and its machine code is made without
+    optimisation. The kernel it calls is optimised as before.
+    """
+
+    def add_ir_module(self, ir_module):
+        """Add ``ir_module`` (numba's ``add_ir_module``), its Python wrapper marked ``optnone``."""
+        for function in ir_module.functions:
+            if function.name.startswith(WRAPPER_PREFIX) and not function.is_declaration:
+                function.attributes.add("noinline")
+                function.attributes.add("optnone")
+        super().add_ir_module(ir_module)
 
     def _optimize_functions(self, ll_module):
         """The function passes of numba, with :data:`LLVM_PASSES`."""
