@@ -219,31 +219,37 @@ def test_a_twins_module_is_left_for_its_callers_to_optimise(monkeypatch):
 
 
 @needs_jit
-def test_an_entry_points_python_wrapper_is_not_optimised(monkeypatch):
-    """The wrapper for calls from Python is ``optnone``; the kernel itself is optimised.
+def test_a_loops_python_wrapper_is_not_optimised(monkeypatch):
+    """``loop=True``: the wrapper for calls from Python is ``optnone``, the kernel is not.
 
-    Read from the module's text: the attributes of the wrapper's definition hold
+    Read from the modules' text: the attributes of the wrapper's definition hold
     ``optnone`` and ``noinline``, those of the kernel's do not (LLVM's passes gave it
-    theirs, ``nounwind`` among them).
+    theirs, ``nounwind`` among them); without ``loop`` neither is ``optnone``.
     """
     monkeypatch.setattr(jit, "OPTIONS", {"error_model": "numpy"})  # no disk cache here
 
     def total(t):
         return t[0][0] + t[1][1]
 
-    entry = jit.kernel(total)
-    assert entry((np.ones(2), np.arange(3.0))) == 2.0
-    text = next(iter(entry.overloads.values())).library.get_llvm_str()
-    groups = dict(re.findall(r"^attributes (#\d+) = \{([^}]*)\}", text, re.M))
-    defined = {name: set(" ".join(groups[g] for g in refs.split()).split())
-               for name, refs in re.findall(r"^define [^@]*@(\S+?)\(.*\)[^#]*((?:#\d+ ?)+)",
-                                            text, re.M)}
-    wrapper = [a for name, a in defined.items() if name.startswith(jit.WRAPPER_PREFIX)]
-    own = [a for name, a in defined.items()
-           if total.__name__ in name and not name.startswith(jit.WRAPPER_PREFIX)]
-    assert len(wrapper) == 1 and len(own) == 1
-    assert {"optnone", "noinline"} <= wrapper[0]
-    assert "optnone" not in own[0] and "nounwind" in own[0]
+    def attributes(entry):
+        """(the wrapper's, the kernel's) attribute names, from the module's text."""
+        assert entry((np.ones(2), np.arange(3.0))) == 2.0
+        text = next(iter(entry.overloads.values())).library.get_llvm_str()
+        groups = dict(re.findall(r"^attributes (#\d+) = \{([^}]*)\}", text, re.M))
+        defined = {name: set(" ".join(groups[g] for g in refs.split()).split())
+                   for name, refs in re.findall(
+                       r"^define [^@]*@(\S+?)\(.*\)[^#]*((?:#\d+ ?)+)", text, re.M)}
+        wrapper = [a for name, a in defined.items() if name.startswith(jit.WRAPPER_PREFIX)]
+        own = [a for name, a in defined.items()
+               if total.__name__ in name and not name.startswith(jit.WRAPPER_PREFIX)]
+        assert len(wrapper) == 1 and len(own) == 1
+        return wrapper[0], own[0]
+
+    wrapper, own = attributes(jit.kernel(total, loop=True))
+    assert {"optnone", "noinline"} <= wrapper
+    assert "optnone" not in own and "nounwind" in own
+    wrapper, own = attributes(jit.kernel(total))
+    assert "optnone" not in wrapper and "optnone" not in own
 
 
 @needs_jit

@@ -481,7 +481,7 @@ def _advance_semi_implicit(model_ints, x, d, h, v_new, R, out):  # pragma: no co
             out[o + a] = -out[o + a]
 
 
-@kernel(nogil=True)  # monitors check beside it
+@kernel(nogil=True, loop=True)  # monitors check beside it
 def run_rk4(k0, k1, times, x, model_ints, model_floats, q_ref, arm_ints, v_starts, ints,
             floats, params, dims, N, nv_arm, unilateral, traj, pd_gains, null_gains, hold_tool,
             hold_obj, hold_n, gains, active, wrenches, separation, work_J, work_dJ, work_M,

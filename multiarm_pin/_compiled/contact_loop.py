@@ -1169,7 +1169,7 @@ def _record_sample(s, t, x, active, sy, wk, out, solver, Rec):  # pragma: no cov
     record_energy(s, x, params, energy, n > 0, r_kinetic, r_potential, r_momentum)
 
 
-@kernel(nogil=True, refcounts=False)  # monitors check beside it; it allocates nothing
+@kernel(nogil=True, refcounts=False, loop=True)  # monitors check beside it; allocates nothing
 def run_contact_rk4(k0, k1, times, x, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev,
                     reserve, Rec, fn, advance):  # pragma: no cover - compiled
     """RK4 with contact events from sample ``k0``, recording samples ``k0 .. k1 - 1``.

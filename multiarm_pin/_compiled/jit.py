@@ -23,8 +23,8 @@ its ``__qualname__``, the kernel's and :data:`CALLEE_SUFFIX`). Calls from Python
 dispatcher :func:`kernel` returns, which compiles its own overloads with the first wrapper only
 (a first-class function of a kernel is a ``cfunc`` of its own:
 :mod:`~multiarm_pin._compiled.function_pointers`): a twin's overload has no entry point for
-Python. That wrapper runs once per call from Python, never inside a kernel's loop: LLVM
-leaves it unoptimised (:class:`_KernelLibrary`).
+Python. A loop's entry point (``@kernel(loop=True)``) is called from Python once per run,
+or per stretch of samples: its wrapper is left unoptimised (:class:`_LoopLibrary`).
 
 numba counts the references to every array a function holds: an array argument is counted as
 the function starts and released on every path out of it, each array of a tuple argument
@@ -177,22 +177,7 @@ def _kernel_passes(made):
 
 
 class _KernelLibrary(codegen.JITCodeLibrary):
-    """A kernel's code library: optimised with :data:`LLVM_PASSES`, its Python wrapper not at all.
-
-    The wrapper for calls from Python (:data:`WRAPPER_PREFIX`) unboxes each argument, calls
-    the kernel and boxes its result, once per call from Python: straight-line code as long
-    as the loops' tuples of arrays. It is marked ``optnone`` (with ``noinline``, which
-    ``optnone`` requires): LLVM's passes skip it and its machine code is made without
-    optimisation. The kernel it calls is optimised as before.
-    """
-
-    def add_ir_module(self, ir_module):
-        """Add ``ir_module`` (numba's ``add_ir_module``), its Python wrapper marked ``optnone``."""
-        for function in ir_module.functions:
-            if function.name.startswith(WRAPPER_PREFIX) and not function.is_declaration:
-                function.attributes.add("noinline")
-                function.attributes.add("optnone")
-        super().add_ir_module(ir_module)
+    """A kernel's code library: optimised with :data:`LLVM_PASSES`."""
 
     def _optimize_functions(self, ll_module):
         """The function passes of numba, with :data:`LLVM_PASSES`."""
@@ -203,6 +188,28 @@ class _KernelLibrary(codegen.JITCodeLibrary):
         """The module passes of numba, with :data:`LLVM_PASSES` (its first, cheap, pass as is)."""
         with _kernel_passes(self._codegen):
             super()._optimize_final_module()
+
+
+class _LoopLibrary(_KernelLibrary):
+    """A loop's entry point's code library: its Python wrapper not optimised at all.
+
+    The wrapper for calls from Python (:data:`WRAPPER_PREFIX`) unboxes each argument, calls
+    the kernel and boxes its result: straight-line code as long as the loop's tuples of
+    arrays, run once per call from Python, which for a loop's entry point is once per run
+    (or per stretch of samples). It is marked ``optnone`` (with ``noinline``, which
+    ``optnone`` requires): LLVM's passes skip it and its machine code is made without
+    optimisation. The kernel it calls is optimised as every kernel is. (Unoptimised, the
+    wrapper takes a few nanoseconds more per array it unboxes: kernels called from Python at
+    every step keep the optimised one.)
+    """
+
+    def add_ir_module(self, ir_module):
+        """Add ``ir_module`` (numba's ``add_ir_module``), its Python wrapper marked ``optnone``."""
+        for function in ir_module.functions:
+            if function.name.startswith(WRAPPER_PREFIX) and not function.is_declaration:
+                function.attributes.add("noinline")
+                function.attributes.add("optnone")
+        super().add_ir_module(ir_module)
 
 
 class _LinkedLibrary(_KernelLibrary):
@@ -256,6 +263,12 @@ class KernelCompiler(Compiler):
         return super().compile_extra(func)
 
 
+class LoopCompiler(KernelCompiler):
+    """:class:`KernelCompiler` with a :class:`_LoopLibrary` (a loop's entry point's)."""
+
+    library_class = _LoopLibrary
+
+
 class LinkedCompiler(KernelCompiler):
     """:class:`KernelCompiler` with a :class:`_LinkedLibrary` (a twin's ``pipeline_class``)."""
 
@@ -274,7 +287,7 @@ def _twin(function, suffix: str, **options):
                 pipeline_class=LinkedCompiler)(twin)
 
 
-def kernel(function=None, *, refcounts: bool = True, **options):
+def kernel(function=None, *, refcounts: bool = True, loop: bool = False, **options):
     """Compile ``function`` as a kernel (``@kernel`` or ``@kernel(inline="always")``).
 
     Args:
@@ -282,6 +295,9 @@ def kernel(function=None, *, refcounts: bool = True, **options):
         refcounts: ``False``: compiled without reference counting (numba's ``_nrt=False``),
             and so are its callees; one twin serves every kernel that calls it (see the
             module). For a kernel whose call tree allocates no array and which returns none.
+        loop: ``True`` for a loop's entry point, called from Python once per run (or per
+            stretch of samples): its Python wrapper is compiled without optimisation
+            (:class:`_LoopLibrary`).
         **options: further ``numba.njit`` options (``inline``, ``nogil``).
 
     Returns:
@@ -290,9 +306,10 @@ def kernel(function=None, *, refcounts: bool = True, **options):
         module).
     """
     if function is None:
-        return lambda f: kernel(f, refcounts=refcounts, **options)
+        return lambda f: kernel(f, refcounts=refcounts, loop=loop, **options)
     dispatcher = njit(**OPTIONS, **options, **({} if refcounts else {"_nrt": False}),
-                      no_cfunc_wrapper=True, pipeline_class=KernelCompiler)(function)
+                      no_cfunc_wrapper=True,
+                      pipeline_class=LoopCompiler if loop else KernelCompiler)(function)
     if "inline" in options or not hasattr(dispatcher, "get_call_template"):
         return _typed_by_types(dispatcher)  # inlined (or no JIT): no call to serve
     if not refcounts:  # one twin, without counting, serves every caller (see the module)
