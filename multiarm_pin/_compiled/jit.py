@@ -199,8 +199,8 @@ class _LoopLibrary(_KernelLibrary):
     (or per stretch of samples). It is marked ``optnone`` (with ``noinline``, which
     ``optnone`` requires): LLVM's passes skip it and its machine code is made without
     optimisation. The kernel it calls is optimised as every kernel is. (Unoptimised, the
-    wrapper takes a few nanoseconds more per array it unboxes: kernels called from Python at
-    every step keep the optimised one.)
+    wrapper is slower at every call: kernels called from Python at every step keep the
+    optimised one.)
     """
 
     def add_ir_module(self, ir_module):
