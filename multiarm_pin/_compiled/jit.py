@@ -312,15 +312,18 @@ def kernel(function=None, *, refcounts: bool = True, loop: bool = False, **optio
                       pipeline_class=LoopCompiler if loop else KernelCompiler)(function)
     if "inline" in options or not hasattr(dispatcher, "get_call_template"):
         return _typed_by_types(dispatcher)  # inlined (or no JIT): no call to serve
+
+    def borrowed_twin():  # the twin compiled without reference counting
+        return _twin(function, CALLEE_SUFFIX + BORROWED_SUFFIX, **options, _nrt=False)
+
     if not refcounts:  # one twin, without counting, serves every caller (see the module)
-        alone = _twin(function, CALLEE_SUFFIX + BORROWED_SUFFIX, **options, _nrt=False)
-        return _typed_by_types(dispatcher, alone)
+        return _typed_by_types(dispatcher, borrowed_twin())
     callee = _twin(function, CALLEE_SUFFIX, **options, _nrt=True)
     made = []
 
     def borrowed():
         if not made:
-            made.append(_twin(function, CALLEE_SUFFIX + BORROWED_SUFFIX, **options, _nrt=False))
+            made.append(borrowed_twin())
         return made[0]
 
     return _typed_by_types(dispatcher, callee, borrowed)
@@ -332,4 +335,4 @@ def jit_disabled() -> bool:
 
 
 __all__ = ["BORROWED_SUFFIX", "CALLEE_SUFFIX", "LLVM_PASSES", "OPTIONS", "KernelCompiler",
-           "LinkedCompiler", "jit_disabled", "kernel"]
+           "LinkedCompiler", "LoopCompiler", "jit_disabled", "kernel"]
