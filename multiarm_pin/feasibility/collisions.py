@@ -135,6 +135,8 @@ class CollisionScene:
         category: (P,) index into :data:`CATEGORIES`.
         arm_of_pair: (P,) index of the pair's (first) arm.
         grasp_pair: (P,) True for a carrying link against the object.
+        convex_pair: (P,) True for two convex bodies (no BVH mesh): a pair that is its own
+            hull.
         names: name of each geometry object (``"<arm>/<link>"``, ``"object"``, ...).
     """
 
@@ -213,6 +215,8 @@ class CollisionScene:
         for req in self.mesh_data.collisionRequests:  # triangle contacts: depth and point
             req.enable_contact = True
             req.num_max_contacts = 64
+        for k in np.flatnonzero(self.convex_pair):  # measured as on the hulls
+            self.mesh_data.distanceRequests[int(k)].gjk_tolerance = GJK_TOLERANCE
 
     # ------------------------------------------------------------------ construction
     def _slabs(self, state) -> list[tuple[np.ndarray, pin.SE3]]:
@@ -279,6 +283,11 @@ class CollisionScene:
         self.category = np.array([meta[o][0] for o in order], dtype=int)
         self.arm_of_pair = np.array([meta[o][1] for o in order], dtype=int)
         self.grasp_pair = np.array([meta[o][2] for o in order], dtype=bool)
+        # two convex bodies (no BVH mesh among them): the pair is its own hull
+        convex = [not type(o.geometry).__name__.startswith("BVHModel")
+                  for o in self.mesh.geometryObjects]
+        self.convex_pair = np.array([convex[a] and convex[b] for a, b in self.pairs],
+                                    dtype=bool)
 
     def _stands_on_ground(self, arm) -> bool:
         """True if the arm's base origin is on the ground with its z axis up."""
@@ -316,7 +325,10 @@ class CollisionScene:
 
         ``depth`` [m] is negative: coal's signed distance where it gives one (a mesh against
         a convex shape), else the deepest of the triangle contacts' penetration depths (two
-        meshes, whose distance coal reports as 0 once they overlap).
+        meshes, whose distance coal reports as 0 once they overlap). A pair of two convex
+        bodies (:attr:`convex_pair`: primitives, the object, slabs, the ground) is its own
+        hull: its signed distance and nearest point on the first body, as on the hulls (the
+        same shapes and distance request).
         """
         return self.mesh_penetrations(q_scene, [k])[0]
 
@@ -327,6 +339,12 @@ class CollisionScene:
 
     def _placed_mesh_penetration(self, k: int):
         """:meth:`mesh_penetration` with the meshes already placed."""
+        if self.convex_pair[k]:
+            r = pin.computeDistance(self.mesh, self.mesh_data, int(k))
+            depth = float(r.min_distance)
+            if depth >= -PENETRATION_TOLERANCE:
+                return None
+            return depth, np.array(r.getNearestPoint1())
         if not pin.computeCollision(self.mesh, self.mesh_data, int(k)):
             return None
         res = self.mesh_data.collisionResults[int(k)]

@@ -68,7 +68,8 @@ measured."""
 
 ADVANCE_STRIDE = 16
 """A pair due at a later sample is measured at the last multiple of this many samples before
-it, so that pairs share their samples (one placement update for all of them)."""
+it (if that multiple is still ahead; else when due), so that pairs share their samples (one
+placement update for all of them)."""
 
 CLEARANCE_TOLERANCE = 1e-10
 """How far [m] above the exact minimum over the samples a reported clearance may be (a pair
@@ -263,6 +264,9 @@ class RunScan:
         self.last = np.full(P, -1)
         self.budget = np.zeros(P)
         self.hits: dict[int, list] = {}
+        # (sample, pair) -> (depth, point) of a convex pair's hull penetration: its hit
+        # (:meth:`CollisionScene.mesh_penetration`), not measured again
+        self._hull_hits: dict[tuple[int, int], tuple] = {}
         self._last_rel = None  # joints' (R (J, 3, 3), p (J, 3)) at sample n - 1
         J = scene.model.njoints
         # every joint's placement at every sample, for the clearances' separating-axis
@@ -324,8 +328,9 @@ class RunScan:
         if len(waiting):
             s2, found = self._first_exceeding(waiting, n0, n1)
             self.pending[waiting[found]] = False
-            self.due[waiting[found]] = np.maximum(n0, s2[found] // ADVANCE_STRIDE
-                                                  * ADVANCE_STRIDE)
+            s2 = s2[found]
+            shared = s2 // ADVANCE_STRIDE * ADVANCE_STRIDE
+            self.due[waiting[found]] = np.where(shared >= n0, shared, s2)
         live = (self.due >= n0) & (self.due < n1)
         self.due[live] = opens[self.due[live] - n0, np.flatnonzero(live)]
         self._advance(opens, n0, n1)
@@ -546,10 +551,14 @@ class RunScan:
                 break
             ks = np.flatnonzero(due == s)
             pin.updateGeometryPlacements(model, data, hull, hd, self.configs[s])
-            d = np.array([pin.computeDistance(hull, hd, int(k)).min_distance for k in ks])
+            d = np.array([pin.computeDistance(hull, hd, k).min_distance for k in ks.tolist()])
             self.exact[s, ks] = d
             self.last[ks] = s
             near = d < -tol  # penetrating: every sample (its hits)
+            for j in np.flatnonzero(near & scene.convex_pair[ks]).tolist():  # its own hull
+                k = int(ks[j])
+                self._hull_hits[s, k] = (float(d[j]),
+                                         np.array(hd.distanceResults[k].getNearestPoint1()))
             due[ks[near]] = opens[s + 1 - n0, ks[near]]
             far, dfar = ks[~near], d[~near]
             if not len(far):
@@ -562,8 +571,10 @@ class RunScan:
             self.pending[far[~found]] = True
             due[far[~found]] = self.T
             hit, at = far[found], s2[found]
-            # measured earlier than needed at a multiple of ADVANCE_STRIDE: pairs share samples
-            at = np.maximum(s + 1, at // ADVANCE_STRIDE * ADVANCE_STRIDE)
+            # measured earlier, at the last multiple of ADVANCE_STRIDE before it if that is
+            # after s: pairs share samples
+            shared = at // ADVANCE_STRIDE * ADVANCE_STRIDE
+            at = np.where(shared > s, shared, at)
             due[hit] = opens[at - n0, hit]
 
     def _check_hits(self, contact_points, n0: int, n1: int) -> int | None:
@@ -574,8 +585,11 @@ class RunScan:
         hits = []  # the meshes placed once per sample for all its pairs
         for i in np.unique(rows).tolist():
             ks = cols[rows == i].tolist()
-            hits += zip([i] * len(ks), ks, scene.mesh_penetrations(self.configs[n0 + i], ks),
-                        strict=True)
+            own = [self._hull_hits.pop((n0 + i, k), None) for k in ks]
+            mesh = [k for k, h in zip(ks, own, strict=True) if h is None]
+            found = iter(scene.mesh_penetrations(self.configs[n0 + i], mesh) if mesh else ())
+            hits += [(i, k, next(found) if h is None else h)
+                     for k, h in zip(ks, own, strict=True)]
         for i, k, hit in hits:
             s = n0 + i
             if hit is None:

@@ -11,7 +11,7 @@ from multiarm_pin.app.scenario import build_scenario
 from multiarm_pin.app.scenario.schema import parse_scenario
 from multiarm_pin.feasibility import feasibility_report
 from multiarm_pin.feasibility.collisions import PENETRATION_TOLERANCE
-from multiarm_pin.feasibility.scan import RunScan
+from multiarm_pin.feasibility.scan import ADVANCE_FRACTION, ADVANCE_STRIDE, RunScan
 from tests.feasibility.collision_cases import (
     ALONG_A_RUN,
     ALONG_A_RUN_LINK,
@@ -145,6 +145,54 @@ def test_the_compiled_stretches_equal_their_numpy_references(name):
     for cat, value in b.clearance.items():
         assert a.clearance[cat] == pytest.approx(value, abs=1e-10) if value is not None \
             else a.clearance[cat] is None
+
+
+def test_a_pair_is_measured_again_where_its_bound_fails_or_at_a_shared_sample():
+    # conservative advancement: after a measurement d at sample a (apart), the pair's next
+    # one is at the first sample b where its path bound C(b) - C(a) may eat d's budget, or
+    # earlier at a multiple of ADVANCE_STRIDE, never at an ordinary sample before that
+    built, scene, result = _run(ALONG_A_RUN["wrists_to_the_floor"][0])
+    run = RunScan(scene, len(result.t))
+    run.extend(result.q, result.object_position, result.object_quaternion, None)
+    tol, checked = run.tol, 0
+    for k in np.flatnonzero(~run.geo.ground):  # the ground's pairs: exact heights
+        at = np.flatnonzero(~np.isnan(run.exact[:, k]))
+        C = run._column_path(int(k))
+        for a, b in zip(at[:-1].tolist(), at[1:].tolist(), strict=True):
+            d = run.exact[a, k]
+            if d < -tol:  # penetrating: every sample
+                assert b == a + 1
+                continue
+            target = -tol if scene.grasp_pair[k] or d <= tol else ADVANCE_FRACTION * d
+            assert b % ADVANCE_STRIDE == 0 or C[b] > C[a] + (d - target), (k, a, b)
+            checked += 1
+    assert checked > 100
+
+
+def test_a_convex_pairs_hull_penetration_is_its_hit_without_a_second_check(monkeypatch):
+    # fingertip_into_the_table: mp6 links (coal cylinders and spheres, no meshes) against
+    # the table's slab: each such pair is its own hull, so the scan's hull measurement is
+    # the hit, as CollisionScene.mesh_penetration finds it, and nothing is measured twice
+    built, scene, result = _run(ALONG_A_RUN["fingertip_into_the_table"][0])
+    N = built.system.constraint_set.N
+    cps = [result.contact_points[:, i, :int(N[i])] for i in range(built.system.n_arms)]
+    second = []
+    placed = type(scene)._placed_mesh_penetration
+    monkeypatch.setattr(type(scene), "_placed_mesh_penetration",
+                        lambda self, k: second.append(k) or placed(self, k))
+    scan = scene.scan(result.q, result.object_position, result.object_quaternion, cps)
+    monkeypatch.undo()
+    ground = scene.pairs[:, 1] == scene.ground_index  # measured by their lowest point
+    own = [k for k in scan.hits if scene.convex_pair[k] and not ground[k]]
+    assert own and not set(own) & set(second)
+    for k in own:
+        for s, depth, point in scan.hits[k]:
+            qs = scene.configuration(result.q[s], result.object_position[s],
+                                     result.object_quaternion[s])
+            again = scene.mesh_penetration(qs, k)
+            # coal's EPA, warm-started from the pair's last query, agrees to its tolerance
+            assert again is not None and depth == pytest.approx(again[0], abs=1e-9)
+            np.testing.assert_allclose(point, again[1], rtol=0, atol=1e-6)
 
 
 def test_the_stable_order_is_numpys_stable_argsort():
