@@ -50,6 +50,11 @@ from multiarm_pin.feasibility.scan import (
     ScanResult,
 )
 
+CONVEX_SHAPES = (coal.Box, coal.Sphere, coal.Capsule, coal.Cone, coal.Cylinder, coal.Ellipsoid,
+                 coal.ConvexBase, coal.Halfspace)
+"""coal's solid convex shapes: a pair of two of them is its own hull (its penetration is
+measured once, :meth:`CollisionScene.mesh_penetration`)."""
+
 MOUNT_TOLERANCE = 0.01
 """Largest distance [m] between an arm's base origin and the ground for it to stand on it."""
 
@@ -135,8 +140,8 @@ class CollisionScene:
         category: (P,) index into :data:`CATEGORIES`.
         arm_of_pair: (P,) index of the pair's (first) arm.
         grasp_pair: (P,) True for a carrying link against the object.
-        convex_pair: (P,) True for two convex bodies (no BVH mesh): a pair that is its own
-            hull.
+        convex_pair: (P,) True for two bodies of :data:`CONVEX_SHAPES` (no mesh): a pair
+            that is its own hull.
         names: name of each geometry object (``"<arm>/<link>"``, ``"object"``, ...).
     """
 
@@ -283,9 +288,8 @@ class CollisionScene:
         self.category = np.array([meta[o][0] for o in order], dtype=int)
         self.arm_of_pair = np.array([meta[o][1] for o in order], dtype=int)
         self.grasp_pair = np.array([meta[o][2] for o in order], dtype=bool)
-        # two convex bodies (no BVH mesh among them): the pair is its own hull
-        convex = [not type(o.geometry).__name__.startswith("BVHModel")
-                  for o in self.mesh.geometryObjects]
+        # two convex bodies (no mesh, no height field among them): the pair is its own hull
+        convex = [isinstance(o.geometry, CONVEX_SHAPES) for o in self.mesh.geometryObjects]
         self.convex_pair = np.array([convex[a] and convex[b] for a, b in self.pairs],
                                     dtype=bool)
 
@@ -432,6 +436,7 @@ class CollisionScene:
 __all__ = [
     "CATEGORIES",
     "CLEARANCE_TOLERANCE",
+    "CONVEX_SHAPES",
     "JOINT_ZONE_RADIUS",
     "MOUNT_TOLERANCE",
     "PENETRATION_TOLERANCE",

@@ -182,6 +182,7 @@ def test_a_convex_pairs_hull_penetration_is_its_hit_without_a_second_check(monke
                         lambda self, k: second.append(k) or placed(self, k))
     scan = scene.scan(result.q, result.object_position, result.object_quaternion, cps)
     monkeypatch.undo()
+    assert scene.convex_pair.all()  # the mp6 arms, the box, the table's slab, the ground
     ground = scene.pairs[:, 1] == scene.ground_index  # measured by their lowest point
     own = [k for k in scan.hits if scene.convex_pair[k] and not ground[k]]
     assert own and not set(own) & set(second)
@@ -193,6 +194,23 @@ def test_a_convex_pairs_hull_penetration_is_its_hit_without_a_second_check(monke
             # coal's EPA, warm-started from the pair's last query, agrees to its tolerance
             assert again is not None and depth == pytest.approx(again[0], abs=1e-9)
             np.testing.assert_allclose(point, again[1], rtol=0, atol=1e-6)
+
+
+def test_a_pair_with_a_mesh_is_not_its_own_hull():
+    # the demo's UR5 links are meshes (their hulls only bound them) but for ee_link, a coal
+    # box: a pair with a mesh is checked again on its meshes, two boxes are their own hulls
+    from tests.feasibility.collision_cases import DEMO, demo_data
+
+    built = build_scenario(parse_scenario(demo_data(), str(DEMO)), load_visuals=False)
+    scene = check_initial_state(built)
+    names = [(scene.names[a], scene.names[b]) for a, b in scene.pairs.tolist()]
+    meshes = [k for k, (a, b) in enumerate(names)
+              if "/" in a and "/" in b and "ee_link" not in a + b]
+    assert len(meshes) > 50 and not scene.convex_pair[meshes].any()
+    boxes = [k for k, pair in enumerate(names)
+             if pair in {("left/ee_link", "right/ee_link"), ("left/ee_link", "object"),
+                         ("left/ee_link", "ground")}]
+    assert len(boxes) == 3 and scene.convex_pair[boxes].all()
 
 
 def test_the_stable_order_is_numpys_stable_argsort():
