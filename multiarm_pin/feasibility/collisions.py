@@ -21,7 +21,9 @@ half-space ``z <= height``. Its pairs, each in one category:
 Distances are coal's (``pin.computeDistances``, signed: negative = penetration depth [m]) on
 the convex hulls of the meshes, which are lower bounds of the meshes' distances. A pair
 whose hull penetrates is checked again on the meshes themselves (coal BVH models); only a
-mesh collision is a collision (its depth: :meth:`CollisionScene.mesh_penetration`).
+mesh collision is a collision (its depth: :meth:`CollisionScene.mesh_penetration`). A pair of
+two of coal's convex shapes (:data:`CONVEX_SHAPES`: primitives of a URDF, the object, slabs,
+the ground) is its own hull: its hull penetration is the collision.
 
 Slabs: a support's slab is a box of thickness :data:`SLAB_THICKNESS` under its plane, its
 sides along the support's axes (``x_axis``, ``n × x_axis``: the frame the dynamics measures

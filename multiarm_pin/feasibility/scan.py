@@ -18,7 +18,8 @@ touching one, which matter only once they may penetrate; at every sample while i
 found by a binary search of the monotone ``C``. A pair that stays far is measured once.
 Ground pairs: the lowest point of a round shape exactly, of a hull bounded by the lowest
 corner of its box and measured from its vertices (exact for a half-space). A hull
-penetration is checked on the meshes (:meth:`CollisionScene.mesh_penetration`); a carrying
+penetration is checked on the meshes (:meth:`CollisionScene.mesh_penetration`), but for a pair
+of two convex shapes, whose hull measurement is its hit (``convex_pair``); a carrying
 link within the grasp zone of its arm's contact points is skipped at those samples (the
 grasp, not a collision).
 
