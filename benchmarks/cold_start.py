@@ -77,9 +77,19 @@ print(json.dumps(out))
 """
 
 
+SHELL_ONLY = ("PYTHONPATH", "VIRTUAL_ENV", "PYTHONDONTWRITEBYTECODE")
+"""Variables of the caller's shell the measured processes do not get: a user's do not have
+them (with ``PYTHONDONTWRITEBYTECODE`` and a venv installed without bytecode, as pip's
+``--no-compile`` leaves it, every process compiles its dependencies' Python sources again)."""
+
+
+def _user_env() -> dict:
+    return {k: v for k, v in os.environ.items() if k not in SHELL_ONLY}
+
+
 def scenario_cold(path: Path) -> dict:
     """Compile and warm times of one scenario in a fresh process with an empty cache."""
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    env = dict(_user_env(), PYTHONPATH=str(ROOT))
     with tempfile.TemporaryDirectory(prefix="numba-cold-") as cache:
         env["NUMBA_CACHE_DIR"] = cache
         procs = [subprocess.run([sys.executable, "-c", CHILD, str(path), keys], env=env,
@@ -109,7 +119,7 @@ def fresh_clone(python: str) -> dict:
     try:
         repo = tmp / "repo"
         subprocess.run(["git", "clone", "-q", str(ROOT), str(repo)], check=True)
-        env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+        env = _user_env()
         env["NUMBA_CACHE_DIR"] = str(tmp / "numba-cache")
         out = {"install": _timed(["make", f"PYTHON={python}", "venv"], repo, env)}
         demo = [str(repo / ".venv" / "bin" / "multiarm-pin"), "demo"]
