@@ -268,6 +268,11 @@ class RunScan:
         # (sample, pair) -> (depth, point) of a convex pair's hull penetration: its hit
         # (:meth:`CollisionScene.mesh_penetration`), not measured again
         self._hull_hits: dict[tuple[int, int], tuple] = {}
+        # the measurements of the pairs apart from the ground since the last
+        # :meth:`_sum_measurements`, in sample order: (sample, pairs (K,)); and the
+        # penetrating ones of the stretch under way, for :meth:`_check_hits`
+        self._measured: list[tuple[int, np.ndarray]] = []
+        self._penetrating: list[tuple[int, np.ndarray]] = []
         self._last_rel = None  # joints' (R (J, 3, 3), p (J, 3)) at sample n - 1
         J = scene.model.njoints
         # every joint's placement at every sample, for the clearances' separating-axis
@@ -555,7 +560,10 @@ class RunScan:
             d = np.array([pin.computeDistance(hull, hd, k).min_distance for k in ks.tolist()])
             self.exact[s, ks] = d
             self.last[ks] = s
+            self._measured.append((s, ks))
             near = d < -tol  # penetrating: every sample (its hits)
+            if near.any():
+                self._penetrating.append((s, ks[near]))
             for j in np.flatnonzero(near & scene.convex_pair[ks]).tolist():  # its own hull
                 k = int(ks[j])
                 self._hull_hits[s, k] = (float(d[j]),
@@ -582,10 +590,19 @@ class RunScan:
         """The hull penetrations of the stretch checked on the meshes; the first hit's sample."""
         scene = self.scene
         first = None
-        rows, cols = np.nonzero(self.exact[n0:n1] < -self.tol)  # by sample, then by pair
+        g = self.geo.ground_columns  # the ground's pairs: from their heights (_ground)
+        rows, cols = np.nonzero(self.exact[n0:n1, g] < -self.tol)
+        pen, self._penetrating = self._penetrating, []  # the others: from _advance
+        rows = np.concatenate([rows, *(np.full(len(ks), s - n0) for s, ks in pen)])
+        cols = np.concatenate([g[cols], *(ks for _, ks in pen)]).astype(np.int64)
+        order = np.lexsort((cols, rows))  # by sample, then by pair
+        rows, cols = rows[order], cols[order]
+        edges = np.flatnonzero(np.diff(rows)) + 1
         hits = []  # the meshes placed once per sample for all its pairs
-        for i in np.unique(rows).tolist():
-            ks = cols[rows == i].tolist()
+        for a, b in zip([0, *edges.tolist()], [*edges.tolist(), len(rows)], strict=True):
+            if a == b:
+                continue
+            i, ks = int(rows[a]), cols[a:b].tolist()
             own = [self._hull_hits.pop((n0 + i, k), None) for k in ks]
             mesh = [k for k, h in zip(ks, own, strict=True) if h is None]
             found = iter(scene.mesh_penetrations(self.configs[n0 + i], mesh) if mesh else ())
@@ -677,19 +694,19 @@ class RunScan:
         if n0 >= n:
             return
         geo = self.geo
-        block = self.exact[n0:n]
         g = geo.ground_columns  # their smallest only: their bounds are ground_lower's
         if len(g):
-            near = np.where(np.isnan(block[:, g]), np.inf, block[:, g]).min(axis=0)
+            block = self.exact[n0:n, g]
+            near = np.where(np.isnan(block), np.inf, block).min(axis=0)
             self._smallest[g] = np.minimum(self._smallest[g], near)
-        s, k = np.nonzero(~np.isnan(block[:, geo.other_columns]))
-        k = geo.other_columns[k]
+        log, self._measured = self._measured, []  # the others' (_advance's), by sample
+        self._summed = n
+        if not log:
+            return
+        s = np.concatenate([np.full(len(ks), s) for s, ks in log])
+        k = np.concatenate([ks for _, ks in log]).astype(np.int64)
         by_pair = np.argsort(k, kind="stable")  # by pair, then by sample
         k, s = k[by_pair], s[by_pair]
-        self._summed = n
-        if not len(k):
-            return
-        s = s + n0
         d = self.exact[s, k]
         u, rho = geo.joint_pair[k], geo.rho[k]
         C = self.path_shift[s, u] + rho * self.path_turn[s, u]

@@ -83,6 +83,9 @@ def test_a_run_scanned_in_stretches_equals_one_scan():
     bounds = run.column_bounds(np.arange(len(scene.pairs)))
     assert np.all(bounds <= brute + 1e-12)
     assert np.all(run._column_minima() <= bounds.min(axis=0) + 1e-12)
+    # every measurement of every stretch summed up: each pair's smallest is its column's
+    column = np.where(np.isnan(run.exact[:run.n]), np.inf, run.exact[:run.n]).min(axis=0)
+    np.testing.assert_array_equal(run._smallest, column)
     parts = run.result()
     assert whole.hits and set(parts.hits) == set(whole.hits)
     for k, hits in whole.hits.items():
