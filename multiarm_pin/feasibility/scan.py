@@ -220,6 +220,24 @@ class _ScanGeometry:
         return out + r * np.linalg.norm(u, axis=1)
 
 
+def _shared_sample(due: np.ndarray, after: int) -> np.ndarray:
+    """The samples at which pairs due at samples ``due`` are measured.
+
+    At the last multiple of :data:`ADVANCE_STRIDE` before each if that is later than
+    ``after``, else when due.
+    """
+    shared = due // ADVANCE_STRIDE * ADVANCE_STRIDE
+    return np.where(shared > after, shared, due)
+
+
+def _unlogged(log: list[tuple[int, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """``(samples (K,), pairs (K,))`` of a log of ``(sample, pairs)`` (its order kept)."""
+    if not log:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    return (np.concatenate([np.full(len(ks), s) for s, ks in log]),
+            np.concatenate([ks for _, ks in log]))
+
+
 def scan_geometry(scene) -> _ScanGeometry:
     """The scene's run-independent scan data (built at the first scan, then kept)."""
     geo = getattr(scene, "_scan_geometry", None)
@@ -334,9 +352,7 @@ class RunScan:
         if len(waiting):
             s2, found = self._first_exceeding(waiting, n0, n1)
             self.pending[waiting[found]] = False
-            s2 = s2[found]
-            shared = s2 // ADVANCE_STRIDE * ADVANCE_STRIDE
-            self.due[waiting[found]] = np.where(shared >= n0, shared, s2)
+            self.due[waiting[found]] = _shared_sample(s2[found], n0 - 1)
         live = (self.due >= n0) & (self.due < n1)
         self.due[live] = opens[self.due[live] - n0, np.flatnonzero(live)]
         self._advance(opens, n0, n1)
@@ -580,11 +596,7 @@ class RunScan:
             self.pending[far[~found]] = True
             due[far[~found]] = self.T
             hit, at = far[found], s2[found]
-            # measured earlier, at the last multiple of ADVANCE_STRIDE before it if that is
-            # after s: pairs share samples
-            shared = at // ADVANCE_STRIDE * ADVANCE_STRIDE
-            at = np.where(shared > s, shared, at)
-            due[hit] = opens[at - n0, hit]
+            due[hit] = opens[_shared_sample(at, s) - n0, hit]  # pairs share samples
 
     def _check_hits(self, contact_points, n0: int, n1: int) -> int | None:
         """The hull penetrations of the stretch checked on the meshes; the first hit's sample."""
@@ -593,8 +605,8 @@ class RunScan:
         g = self.geo.ground_columns  # the ground's pairs: from their heights (_ground)
         rows, cols = np.nonzero(self.exact[n0:n1, g] < -self.tol)
         pen, self._penetrating = self._penetrating, []  # the others: from _advance
-        rows = np.concatenate([rows, *(np.full(len(ks), s - n0) for s, ks in pen)])
-        cols = np.concatenate([g[cols], *(ks for _, ks in pen)]).astype(np.int64)
+        at, ks = _unlogged(pen)
+        rows, cols = np.concatenate([rows, at - n0]), np.concatenate([g[cols], ks])
         order = np.lexsort((cols, rows))  # by sample, then by pair
         rows, cols = rows[order], cols[order]
         edges = np.flatnonzero(np.diff(rows)) + 1
@@ -703,8 +715,7 @@ class RunScan:
         self._summed = n
         if not log:
             return
-        s = np.concatenate([np.full(len(ks), s) for s, ks in log])
-        k = np.concatenate([ks for _, ks in log]).astype(np.int64)
+        s, k = _unlogged(log)
         by_pair = np.argsort(k, kind="stable")  # by pair, then by sample
         k, s = k[by_pair], s[by_pair]
         d = self.exact[s, k]
