@@ -68,7 +68,7 @@ from multiarm_pin.app.runner import scenario_controller  # noqa: E402
 from multiarm_pin.app.scenario import build_scenario, load_scenario  # noqa: E402
 from multiarm_pin.exceptions import MultiArmError  # noqa: E402
 from multiarm_pin.sim.closed_loop import closed_loop_evaluation  # noqa: E402
-from multiarm_pin.sim.compiled_loop import CompiledLoop  # noqa: E402
+from multiarm_pin.sim.contact_loop import ContactLoop  # noqa: E402
 from multiarm_pin.sim.controllers import ObjectPD  # noqa: E402
 from multiarm_pin.sim.simulation import partial_result, simulate  # noqa: E402
 from multiarm_pin.sim.stepper import Stepper  # noqa: E402
@@ -127,7 +127,7 @@ def measure(system, states, taus, make_ctrl, timer: Timer, peer=None, baumgarte=
     ctrl(0.0, states[0], system.blocks(states[0]))
     api = lambda k: closed_loop_evaluation(system, ctrl, 0.1, states[k],  # noqa: E731
                                            "object_first", baumgarte)
-    loop = CompiledLoop.for_run(Stepper(system, ctrl, "object_first", baumgarte), "rk4")
+    loop = ContactLoop.for_run(Stepper(system, ctrl, "object_first", baumgarte), "rk4")
     closed = api
     if loop is not None and loop.ready(states[0]):  # the evaluation of simulate's compiled loop
         closed = lambda k: loop.evaluate(0.1, states[k])  # noqa: E731
@@ -342,7 +342,8 @@ def write_report(path: Path, weld: Sequence[Row], scen: Sequence[Row], cold: dic
               "calls at 2 arms, by order alone). "
               "`closed` = one closed-loop evaluation as `simulate` runs it (the compiled "
               "loop's: arm terms, blocks, object_pd and forward dynamics in one compiled call, "
-              "`CompiledLoop.evaluate`), `closed API` = the same through the Python API "
+              "`ContactLoop.evaluate`, which unboxes the loop's arrays at every call), "
+              "`closed API` = the same through the Python API "
               "(`closed_loop_evaluation`, which returns the blocks' views), `in run` = the "
               "wall time of the whole `simulate` run divided by its evaluations (4 per RK4 "
               "step: everything a run does, per evaluation), `open` = the open-loop full step "

@@ -18,7 +18,6 @@ from multiarm_pin.app.runner import scenario_controller, simulate_built
 from multiarm_pin.app.scenario import build_scenario, load_scenario
 from multiarm_pin.model.arm import Arm
 from multiarm_pin.model.rigid_object import ObjectState, RigidObject
-from multiarm_pin.sim.compiled_loop import CompiledLoop
 from multiarm_pin.sim.contact_loop import ContactLoop
 from multiarm_pin.sim.controllers import ObjectPD
 from multiarm_pin.sim.trajectories import MinimumJerkTrajectory
@@ -111,14 +110,13 @@ def hold_task_conditions(ctrl, ev) -> np.ndarray:
 
 
 def run_scenario(name, duration, compiled, monkeypatch, integrator=None, **kw):
-    """A run of a shipped scenario, with or without the compiled loops.
+    """A run of a shipped scenario, with or without the compiled loop.
 
-    ``compiled`` False turns off both the compiled closed loop and the compiled contact loop;
-    ``"closed"`` or ``"contact"`` keeps only that one. ``integrator``: the scenario's own, or
-    this one.
+    ``compiled`` False turns the compiled loop off (the stepper takes every step; a
+    controller's own compiled path stays on). ``integrator``: the scenario's own, or this one.
 
     Returns ``(result, calls)``: ``calls`` lists the ``(k0, k1)`` of every stretch the
-    compiled loops were asked to run.
+    compiled loop was asked to run.
     """
     sc = load_scenario(SCENARIOS / f"{name}.yaml")
     if integrator is not None:
@@ -127,22 +125,16 @@ def run_scenario(name, duration, compiled, monkeypatch, integrator=None, **kw):
     built = build_scenario(sc, load_visuals=False)
     sim = sc.simulation
     calls = []
-    loops = (CompiledLoop, ContactLoop)
-    originals = [loop.run for loop in loops]
+    original = ContactLoop.run
 
-    def counter(original):
-        def counted(self, *args):
-            calls.append(args[3:5])
-            return original(self, *args)
-        return counted
+    def counted(self, *args):
+        calls.append(args[3:5])
+        return original(self, *args)
 
     with monkeypatch.context() as mp:
-        for loop, original in zip(loops, originals, strict=True):
-            mp.setattr(loop, "run", counter(original))
-            keep = compiled is True or compiled == {CompiledLoop: "closed",
-                                                    ContactLoop: "contact"}[loop]
-            if not keep:
-                mp.setattr(loop, "for_run", classmethod(lambda cls, *a: None))
+        mp.setattr(ContactLoop, "run", counted)
+        if not compiled:
+            mp.setattr(ContactLoop, "for_run", classmethod(lambda cls, *a: None))
         result = simulate_built(built, scenario_controller(built), duration, sim.dt, sim.solver,
                                 **kw)
     return result, calls

@@ -19,7 +19,6 @@ from closed_loop_cases import assert_same_contact_run
 from multiarm_pin.app.runner import simulate_built
 from multiarm_pin.app.scenario import build_scenario, load_scenario
 from multiarm_pin.exceptions import ConstraintError, ScenarioError
-from multiarm_pin.sim.compiled_loop import CompiledLoop
 from multiarm_pin.sim.contact_loop import ContactLoop
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
@@ -52,7 +51,6 @@ def _run(path, duration, contact_loop: bool, monkeypatch):
 
     with monkeypatch.context() as mp:
         mp.setattr(ContactLoop, "run", counted)
-        mp.setattr(CompiledLoop, "for_run", classmethod(lambda cls, *a: None))
         if not contact_loop:
             mp.setattr(ContactLoop, "for_run", classmethod(lambda cls, *a: None))
         # zero torque as None: the kind of controller the compiled contact loop takes

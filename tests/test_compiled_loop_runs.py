@@ -1,5 +1,5 @@
-"""Whole runs with the compiled closed loop (``sim.compiled_loop``) against the Python loop,
-sample by sample, including the steps the kernel hands back and an interrupted run."""
+"""Whole runs of systems whose rows all touch, on the compiled loop (``sim.contact_loop``),
+against the Python stepper, sample by sample; an interrupted run; ``compiled: false``."""
 
 from __future__ import annotations
 
@@ -10,12 +10,13 @@ import pytest
 from closed_loop_cases import RUN_FIELDS, rel_err, run_scenario, run_tolerance
 
 from multiarm_pin._compiled import controller_kernels
-from multiarm_pin.sim import compiled_loop
+from multiarm_pin.sim import contact_loop
 from multiarm_pin.sim.simulation import partial_result
 
 
 @pytest.mark.parametrize("name", ["two_ur5_box", "three_ur5_box", "revolute_handle",
-                                  "ur5_panda_box", "mp6_pair_box", "fingertips_form_closure"])
+                                  "ur5_panda_box", "mp6_pair_box", "fingertips_form_closure",
+                                  "two_gripper_form_closure"])
 def test_runs_equal_the_python_loop(name, monkeypatch):
     fast, calls = run_scenario(name, 0.1, True, monkeypatch)
     ref, _ = run_scenario(name, 0.1, False, monkeypatch)
@@ -45,21 +46,6 @@ def test_semi_implicit_runs_equal_the_python_loop(name, monkeypatch):
     assert rel_err(fast.q, rk4.q) > 1e-7
 
 
-def test_steps_handed_back_keep_the_events(monkeypatch):
-    """Fingertips that let go (grasp_failure): the kernel hands those steps back, the
-    stepper locates the same separations."""
-    fast, calls = run_scenario("grasp_failure", 0.6, "closed", monkeypatch)
-    ref, _ = run_scenario("grasp_failure", 0.6, False, monkeypatch)
-    assert calls, "the compiled loop did not run"
-    assert ref.events, "the scenario should separate"
-    assert [(e.kind, e.block, e.row) for e in fast.events] == \
-        [(e.kind, e.block, e.row) for e in ref.events]
-    for a, b in zip(fast.events, ref.events, strict=True):
-        assert abs(a.t - b.t) <= 1e-9
-    for field in RUN_FIELDS:
-        assert rel_err(getattr(fast, field), getattr(ref, field)) <= 1e-7, field
-
-
 def test_touching_contacts_kernel_leaves_the_run_unchanged(monkeypatch):
     """grasp_failure to 0.4 s: planning on the touching contacts (from 0.15 s) and holding
     the arms still (rank 5 from 0.243 s) by the compiled kernels gives the run of the numpy
@@ -76,12 +62,12 @@ def test_touching_contacts_kernel_leaves_the_run_unchanged(monkeypatch):
     def refusing(*args):
         return controller_kernels.PD_NOT_FINITE, 0
 
-    with monkeypatch.context() as mp:
+    with monkeypatch.context() as mp:  # (the compiled loop off: ObjectPD's Python path)
         mp.setattr(controller_kernels, "touching_torques", recording)
-        fast, _ = run_scenario("grasp_failure", 0.4, "closed", monkeypatch)
-    with monkeypatch.context() as mp:  # (the contact loop off: ObjectPD's Python path)
+        fast, _ = run_scenario("grasp_failure", 0.4, False, monkeypatch)
+    with monkeypatch.context() as mp:
         mp.setattr(controller_kernels, "touching_torques", refusing)
-        ref, _ = run_scenario("grasp_failure", 0.4, "closed", monkeypatch)
+        ref, _ = run_scenario("grasp_failure", 0.4, False, monkeypatch)
     assert controller_kernels.PD_OK in statuses and controller_kernels.PD_HOLD in statuses
     assert statuses.count(controller_kernels.PD_OK) + statuses.count(
         controller_kernels.PD_HOLD) == len(statuses)  # no evaluation went to the reference
@@ -110,17 +96,16 @@ def test_an_interrupt_keeps_the_samples_so_far(monkeypatch):
     assert 0 < n < len(full.t)
     for field in RUN_FIELDS:
         np.testing.assert_array_equal(getattr(part, field), getattr(full, field)[:n])
-    assert (part.solver == compiled_loop.RECORDED_SOLVER[False]).all()
+    assert (part.solver == contact_loop.RECORDED_SOLVERS[False][0]).all()
 
 
 def test_compiled_false_takes_every_step_on_the_reference(monkeypatch):
-    """``simulation: {compiled: false}``: neither compiled loop is asked for a stretch, and
-    the run is the reference run (the compiled loops switched off), sample for sample."""
+    """``simulation: {compiled: false}``: the compiled loop is not asked for a stretch, and
+    the run is the reference run (the compiled loop switched off), sample for sample."""
     from closed_loop_cases import SCENARIOS
 
     from multiarm_pin.app.runner import scenario_controller, simulate_built
     from multiarm_pin.app.scenario import build_scenario, load_scenario
-    from multiarm_pin.sim.compiled_loop import CompiledLoop
     from multiarm_pin.sim.contact_loop import ContactLoop
 
     ref, _ = run_scenario("box_on_table", 0.05, False, monkeypatch)
@@ -129,12 +114,37 @@ def test_compiled_false_takes_every_step_on_the_reference(monkeypatch):
     built = build_scenario(sc, load_visuals=False)
 
     def refused(*args, **kwargs):
-        raise AssertionError("a compiled loop was asked for a run")
+        raise AssertionError("the compiled loop was asked for a run")
 
-    monkeypatch.setattr(CompiledLoop, "for_run", refused)
     monkeypatch.setattr(ContactLoop, "for_run", refused)
     result = simulate_built(built, scenario_controller(built), 0.05, sc.simulation.dt,
                             sc.simulation.solver)
     for field in RUN_FIELDS:
         np.testing.assert_array_equal(getattr(result, field), getattr(ref, field), field)
     assert [(e.kind, e.t) for e in result.events] == [(e.kind, e.t) for e in ref.events]
+
+
+@pytest.mark.parametrize("seed,n_arms", [(seed, 1 + seed % 6) for seed in range(6)])
+def test_zero_torque_runs_of_random_systems_equal_the_stepper(seed, n_arms):
+    """Random systems of 1-6 UR5s and Pandas, every joint kind (bilateral rows, and the
+    fingertips' unilateral ones), falling from rest without torques: the loop takes the
+    runs that had no compiled loop before it served bilateral rows, and gives the stepper's
+    samples, events and warnings."""
+    from closed_loop_cases import random_case
+
+    from multiarm_pin.sim.contact_loop import ContactLoop
+    from multiarm_pin.sim.simulation import simulate
+    from multiarm_pin.sim.stepper import Stepper
+
+    system, state, _, _ = random_case(seed, n_arms)
+    assert ContactLoop.declines(Stepper(system, None, "auto", None), "rk4") is None
+    fast = simulate(system, state, None, 0.06, 0.005)
+    ref = simulate(system, state, None, 0.06, 0.005, compiled=False)
+    for field in RUN_FIELDS:
+        assert rel_err(getattr(fast, field), getattr(ref, field)) <= 1e-9, field
+    np.testing.assert_array_equal(fast.active, ref.active)
+    assert list(fast.solver) == list(ref.solver)
+    assert [(e.kind, e.block, e.row) for e in fast.events] == \
+        [(e.kind, e.block, e.row) for e in ref.events]
+    assert fast.warnings == ref.warnings
+    assert np.abs(ref.object_twist[-1]).max() > 0.1  # it fell

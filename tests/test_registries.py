@@ -27,8 +27,7 @@ from multiarm_pin.exceptions import InputError, RobotNotFoundError, ScenarioErro
 from multiarm_pin.model.arm import Arm
 from multiarm_pin.model.polyhedron import box
 from multiarm_pin.model.robots import ROBOTS, robot_entry
-from multiarm_pin.sim.compiled_loop import CompiledLoop, unsupported_joints_note
-from multiarm_pin.sim.contact_loop import ContactLoop
+from multiarm_pin.sim.contact_loop import ContactLoop, unsupported_joints_note
 from multiarm_pin.sim.controllers import (
     CONTROLLER_KERNELS,
     CONTROLLERS,
@@ -277,13 +276,12 @@ def test_object_pd_waypoints_through_make_controller(two_arms):
 def test_every_controller_kernel_is_one_the_loops_know():
     for entry in CONTROLLERS.values():
         assert entry.kernel is None or entry.kernel in CONTROLLER_KERNELS, entry.name
-    served = set(CompiledLoop.CONTROLLER_KERNELS) | set(ContactLoop.CONTROLLER_KERNELS)
-    assert served == set(CONTROLLER_KERNELS)
+    assert set(ContactLoop.CONTROLLER_KERNELS) == set(CONTROLLER_KERNELS)
 
 
 def test_the_loops_read_the_controller_registry(two_arms, monkeypatch):
     """Which kernel serves a controller is its registry entry's: with the entry of
-    ``object_pd`` saying none, neither loop takes an ``ObjectPD`` run, and the reason names it."""
+    ``object_pd`` saying none, the loop takes no ``ObjectPD`` run, and the reason names it."""
     system, _ = two_arms
     pd = make_controller("object_pd", system)
     assert controller_kernel(None) == ("zero_torque", "")
@@ -300,18 +298,18 @@ def test_the_loops_read_the_controller_registry(two_arms, monkeypatch):
     assert controller_kernel(Mine(system))[0] is None
     assert "Mine is not a type of the registry" in controller_kernel(Mine(system))[1]
     stepper = Stepper(system, pd, "object_first", None)
-    assert CompiledLoop.declines(stepper, "rk4") is None
+    assert ContactLoop.declines(stepper, "rk4") is None
     monkeypatch.setitem(CONTROLLERS, "object_pd",
                         dataclasses.replace(CONTROLLERS["object_pd"], kernel=None))
-    assert CompiledLoop.for_run(stepper, "rk4") is None
-    assert CompiledLoop.declines(stepper, "rk4") == "controller 'object_pd' has no compiled kernel"
+    assert ContactLoop.for_run(stepper, "rk4") is None
+    assert ContactLoop.declines(stepper, "rk4") == "controller 'object_pd' has no compiled kernel"
 
 
 def test_a_run_no_kernel_serves_says_so_once_and_runs_on_the_stepper(two_arms, monkeypatch):
     system, state = two_arms
     kernel_calls = []
-    run = CompiledLoop.run
-    monkeypatch.setattr(CompiledLoop, "run",
+    run = ContactLoop.run
+    monkeypatch.setattr(ContactLoop, "run",
                         lambda self, *a: kernel_calls.append(a[3]) or run(self, *a))
 
     def notes(r):
@@ -323,12 +321,12 @@ def test_a_run_no_kernel_serves_says_so_once_and_runs_on_the_stepper(two_arms, m
     r = simulate(system, state, make_controller("object_pd", system), 0.02, 0.01,
                  integrator="rk45")
     assert notes(r) == [REFERENCE_NOTE.format(why="integrator 'rk45' has no compiled loop (RK4 "
-                                                  "and semi-implicit only)")]
+                                                  "and semi-implicit Euler only)")]
     assert not kernel_calls
     for integrator in ("semi_implicit", "rk4"):
         r = simulate(system, state, make_controller("object_pd", system), 0.02, 0.01,
                      integrator=integrator)
-        assert notes(r) == [] and kernel_calls  # the compiled closed loop took it
+        assert notes(r) == [] and kernel_calls  # the compiled loop took it
         kernel_calls.clear()
 
 

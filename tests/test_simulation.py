@@ -177,7 +177,8 @@ def _failing_after(monkeypatch, calls: int, exc: BaseException):
     """Make the forward-dynamics solve raise ``exc`` from its ``calls``-th call on.
 
     The stepper solves once per closed-loop evaluation (fused with the blocks and the
-    controller, ``multiarm_pin.sim.closed_loop``), so the evaluation is what fails here.
+    controller, ``multiarm_pin.sim.closed_loop``), so the evaluation is what fails here: in
+    runs with ``compiled=False`` (the compiled loop would take the steps otherwise).
     """
     import multiarm_pin.sim.stepper as stepper
 
@@ -201,10 +202,10 @@ def test_singular_mid_run_keeps_the_samples_and_names_the_time(moving, monkeypat
     from multiarm_pin.sim.simulation import partial_result
 
     system, state = moving
-    full = simulate(system, state, None, 0.1, 0.01, integrator)
+    full = simulate(system, state, None, 0.1, 0.01, integrator, compiled=False)
     _failing_after(monkeypatch, calls, SingularityError("S_1", float("inf")))
     with pytest.raises(SingularityError, match=r"^t = [0-9.]+ s: S_1 is singular") as info:
-        simulate(system, state, None, 0.1, 0.01, integrator)
+        simulate(system, state, None, 0.1, 0.01, integrator, compiled=False)
     part = partial_result(info.value)
     T = len(part.t)
     assert 1 <= T < len(full.t)
@@ -222,7 +223,7 @@ def test_interrupt_keeps_the_samples(moving, monkeypatch):
     system, state = moving
     _failing_after(monkeypatch, 9, KeyboardInterrupt())
     with pytest.raises(KeyboardInterrupt) as info:
-        simulate(system, state, None, 0.1, 0.01, "rk4")
+        simulate(system, state, None, 0.1, 0.01, "rk4", compiled=False)
     part = partial_result(info.value)
     # rk4 solves 4 times a step (the sample's own evaluation, then 3 stages): solves 1-8 make
     # samples 0 and 1 and the step to 0.02; the 9th, sample 2's evaluation, is interrupted

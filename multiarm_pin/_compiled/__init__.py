@@ -8,11 +8,12 @@ module per reference: :mod:`.linalg` (Cholesky, Householder QR, singular values:
 (``ObjectPD.reference``), :mod:`.phased` (``PhasedPD.reference``),
 :mod:`.rigid_body` (Pinocchio's pass of ``ArmSet.pinocchio_pass``: ``J``, ``dJ``, ``M``,
 ``nle``, tool placements; ``integrate``, ``difference``), :mod:`.trajectory`
-(``MinimumJerkTrajectory.motion``), :mod:`.closed_loop` (the closed-loop evaluation and
-RK4 steps of ``simulate``), :mod:`.contact_loop` (RK4 with contact events) and :mod:`.scan`
+(``MinimumJerkTrajectory.motion``), :mod:`.integrator` (``Stepper``'s tangent and steps),
+:mod:`.contact_loop` (the loop of ``simulate``: RK4 or semi-implicit steps with contact events)
+and :mod:`.scan`
 (the collision scan's placements, path lengths and bounds: ``RunScan``'s numpy; ``nogil``).
 Every kernel is compiled by one decorator, :func:`.jit.kernel` (specialised by argument
-types, never by literal values). The loops call their stages through function pointers
+types, never by literal values). The loop calls its stages through function pointers
 (:mod:`.function_pointers`), so that each stage is compiled once.
 The layout of every array they exchange with Python is defined once in :mod:`.layout`.
 The kernels' on-disk cache is stamped with the contents of all kernel sources

@@ -1,7 +1,7 @@
 """numba's on-disk cache of the kernels, made safe against edits of the kernels they call.
 
 numba keeps a compiled kernel (``cache=True``) in an index stamped with its own source file
-only. A kernel that calls kernels of other files (the compiled closed loop calls nearly all
+only. A kernel that calls kernels of other files (the compiled loop calls nearly all
 of them) is compiled with their code inside, so after an edit of a callee, or of the layout
 constants it reads, the caller's cache entry stays "fresh" and runs the old code: wrong
 numbers, silently (seen here: a table layout changed under a cached caller). This module

@@ -1,6 +1,7 @@
-"""Compiled event-driven steps with unilateral contacts: the stepper's events in one call.
+"""The compiled loop of ``simulate``: RK4 or semi-implicit steps, contact events included.
 
-Mirrors, for RK4 and semi-implicit Euler, :class:`multiarm_pin.sim.stepper.Stepper`
+Every run the compiled path serves, whatever its rows (bilateral, unilateral, supports), is
+this loop. Mirrors, for RK4 and semi-implicit Euler, :class:`multiarm_pin.sim.stepper.Stepper`
 (``evaluate`` on the active set, ``separations``, ``advance_with_events``, ``_impact``,
 ``_separate``) and :mod:`multiarm_pin.sim.event_location` (``illinois``, ``release``,
 ``locate_separation``, ``locate_touchdown``), with the rules and tolerances of
@@ -8,7 +9,8 @@ Mirrors, for RK4 and semi-implicit Euler, :class:`multiarm_pin.sim.stepper.Stepp
 with fingertips or supports, separations, touchdowns and impacts is one compiled call per
 stretch of samples instead of thousands of Python evaluations. It takes:
 
-- systems with arms or without (an object on supports), with or without supports;
+- systems with arms or without (an object on supports), with or without supports, their rows
+  bilateral, unilateral or both;
 - zero torque, or ``object_pd`` on its compiled path: every contact touching
   (:func:`~multiarm_pin._compiled.controller_kernels.object_pd_step`), some separated
   (:func:`~multiarm_pin._compiled.controller_kernels.touching_torques`), and its hold-still
@@ -58,37 +60,26 @@ import numba
 import numpy as np
 
 from multiarm_pin._compiled.assembly import object_terms
-from multiarm_pin._compiled.closed_loop import (
+from multiarm_pin._compiled.controller_kernels import (
     NULL_KD,
     NULL_KP,
-    STAGE_CONTROLLER,
-    STAGE_NOT_FINITE,
-    STAGE_OK,
-    STAGE_SOLVE,
-    _advance,
-    _advance_semi_implicit,
-    arm_compiles,
-    joint_pd,
-    record_energy,
-    record_state,
-    tangent,
-    wrench_at,
-)
-from multiarm_pin._compiled.controller_kernels import (
     PD_FORCES_FAILED,
     PD_HOLD,
     PD_OK,
     hold_still_torques,
+    joint_pd,
     pd_step_compile,
     touching_torques,
 )
 from multiarm_pin._compiled.delassus import contact_kernel
 from multiarm_pin._compiled.evaluate import (
     _block_segments,
+    evaluate_system,
     quaternion_rotation,
     rotation_rows,
 )
 from multiarm_pin._compiled.function_pointers import (
+    Compile,
     bind,
     compile_all,
     compile_of,
@@ -97,12 +88,16 @@ from multiarm_pin._compiled.function_pointers import (
     pointer,
     type_key,
 )
+from multiarm_pin._compiled.integrator import advance, advance_semi_implicit, tangent
 from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.layout import (
     DIMS_K,
     DIMS_M,
     DIMS_N,
     DIMS_NV,
+    EN_KINETIC,
+    EN_MOMENTUM,
+    EN_POTENTIAL,
     OBJECT_STATE_SIZE,
     P_BAUMGARTE_ALPHA,
     P_BAUMGARTE_BETA,
@@ -121,6 +116,9 @@ from multiarm_pin._compiled.layout import (
     ROW_PHI_DOT,
     ROW_POINT,
     SEG_M,
+    WE_FROM,
+    WE_TO,
+    WE_WRENCH,
     X_POSITION,
     X_QUATERNION,
     X_TWIST,
@@ -132,10 +130,19 @@ from multiarm_pin._compiled.mlcp import OK as LCP_OK
 from multiarm_pin._compiled.object_first import SOLVE_OK, object_first
 from multiarm_pin._compiled.phased import callee_compiles as phased_callee_compiles
 from multiarm_pin._compiled.phased import phased_torques
-from multiarm_pin._compiled.rigid_body import difference
+from multiarm_pin._compiled.rigid_body import difference, rigid_body_pass
 from multiarm_pin._compiled.trajectory import reference_motion
 from multiarm_pin._compiled.tuple_address import TupleAddress, address, tuple_at
 
+STAGE_OK = 0
+"""Status of the kernels: every evaluation decided here."""
+STAGE_NOT_FINITE = 1
+"""Status: NaN or infinity in a state (the Python path raises, naming the field)."""
+STAGE_CONTROLLER = 2
+"""Status: the compiled controller reported a doubtful case (its reference decides)."""
+STAGE_SOLVE = 3
+"""Status: the object-first solve or the active-set kernel reported a singular or badly
+conditioned case."""
 STAGE_TOO_MANY_EVENTS = 7
 """Status: more contact events in one step than the rules allow (the stepper raises)."""
 STAGE_EVENTS_FULL = 8
@@ -144,6 +151,15 @@ step to take in Python)."""
 STAGE_OFF_RECTANGLE = 9
 """Status: at this sample some point of a finite support's row is not inside its rectangle
 (the stepper takes the step: off-edge events, fallen rows, rows not watched)."""
+STAGE_EVENTS_NOT_COMPILED = 10
+"""Status: the step needs what the loop was compiled without (:func:`loop_functions` with
+``events`` False): a row that may leave or touch down, or the active-set solve. Nothing of
+that sample's step is done; the caller makes the loop with its events and calls again from
+that sample."""
+NOT_COMPILED = -1
+"""What the stand-ins of the event machinery return (:func:`_no_active_set`, the active-set
+kernel's status; :func:`_no_touching`, ``touching_torques``' status): ``contact_stage`` and
+:func:`_torques` then return :data:`STAGE_EVENTS_NOT_COMPILED`."""
 
 CONTROL_NONE = 0
 """``control[CTL_MODE]``: zero torque."""
@@ -187,6 +203,105 @@ the mixed LCP's tolerances)."""
 
 
 # ------------------------------------------------------------------ one evaluation
+@kernel(refcounts=False)
+def wrench_at(t, wrenches, a):  # pragma: no cover - compiled
+    """Component ``a`` of the external wrench at ``t`` [s] (``WrenchSchedule.__call__``).
+
+    The sum over the intervals ``from <= t < to`` of the table (``WRENCH_FIELDS``).
+    """
+    out = 0.0
+    for e in range(wrenches.shape[0]):
+        if wrenches[e, WE_FROM] <= t < wrenches[e, WE_TO]:
+            out = out + wrenches[e, WE_WRENCH + a]
+    return out
+
+
+def arm_compiles(x, model_ints, model_floats, J, dJ, M, nle, H, energy, arm_ints, v_starts,
+                 ints, floats, params, dims, buf) -> tuple[Compile, Compile]:
+    """The compiles of the rigid-body pass and of the system's evaluation, as the stages call them.
+
+    The stage's rows (:func:`_rows_and_blocks`) and its controllers call
+    :func:`~multiarm_pin._compiled.rigid_body.rigid_body_pass` and
+    :func:`~multiarm_pin._compiled.evaluate.evaluate_system` through their addresses with
+    these arguments (``q`` and ``v`` are parts of the state vector ``x``, (13 + nq + 2 nv,)).
+    """
+    nv = J.shape[1]
+    q = x[OBJECT_STATE_SIZE:x.shape[0] - 2 * nv]
+    v = x[x.shape[0] - 2 * nv:x.shape[0] - nv]
+    return (compile_of(rigid_body_pass, (model_ints, model_floats, q, v, J, dJ, M, nle, H,
+                                         energy), numba.types.none),
+            compile_of(evaluate_system, (J, dJ, M, nle, H, x, arm_ints, v_starts, ints, floats,
+                                         params, dims, buf), numba.types.boolean))
+
+
+@kernel(refcounts=False)
+def record_state(s, t, x, nq, nv, nv_arm, v_starts, tau, qdd, a_o, wrenches, r_q, r_v, r_p,
+                 r_quat, r_tw, r_tau, r_qdd, r_a_o, r_wrench):  # pragma: no cover - compiled
+    """Record sample ``s``'s state ``x``, torques, accelerations and external wrench.
+
+    ``tau`` and ``qdd`` are padded per arm, ``(n, k)``; ``a_o`` (6,); the wrench is the one at
+    ``t``; the record arrays as :func:`run_contact_rk4`'s ``Rec``.
+    """
+    q0 = OBJECT_STATE_SIZE
+    v0 = q0 + nq
+    for j in range(nq):
+        r_q[s, j] = x[q0 + j]
+    for j in range(nv):
+        r_v[s, j] = x[v0 + j]
+    for a in range(3):
+        r_p[s, a] = x[X_POSITION + a]
+    for a in range(4):
+        r_quat[s, a] = x[X_QUATERNION + a]
+    for a in range(6):
+        r_tw[s, a] = x[X_TWIST + a]
+        r_a_o[s, a] = a_o[a]
+        r_wrench[s, a] = wrench_at(t, wrenches, a)
+    for i in range(nv_arm.shape[0]):
+        for a in range(nv_arm[i]):
+            j = v_starts[i] + a
+            r_tau[s, j] = tau[i, a]
+            r_qdd[s, j] = qdd[i, a]
+
+
+@kernel(refcounts=False)
+def record_energy(s, x, params, energy, arms, r_kinetic, r_potential, r_momentum
+                  ):  # pragma: no cover - compiled
+    """Record sample ``s``'s kinetic and potential energy and momentum.
+
+    The object's, plus the arms' ``energy`` (:func:`~.rigid_body.rigid_body_pass`'s) when
+    ``arms``. The object's: ``½ m |ẋ|² + ½ ωᵀ I_w ω``, ``-m g·x``, ``[m ẋ; I_w ω + x × m ẋ]``
+    (``I_w = R I_c Rᵀ``); the potential is zero at the origin.
+    """
+    R = rotation_rows(x[X_QUATERNION:X_QUATERNION + 4])
+    mass = params[P_MASS]
+    w = (x[X_TWIST + 3], x[X_TWIST + 4], x[X_TWIST + 5])
+    b = (R[0][0] * w[0] + R[1][0] * w[1] + R[2][0] * w[2],  # Rᵀ ω
+         R[0][1] * w[0] + R[1][1] * w[1] + R[2][1] * w[2],
+         R[0][2] * w[0] + R[1][2] * w[1] + R[2][2] * w[2])
+    i0 = P_INERTIA
+    c = (params[i0] * b[0] + params[i0 + 1] * b[1] + params[i0 + 2] * b[2],  # I_c Rᵀ ω
+         params[i0 + 3] * b[0] + params[i0 + 4] * b[1] + params[i0 + 5] * b[2],
+         params[i0 + 6] * b[0] + params[i0 + 7] * b[1] + params[i0 + 8] * b[2])
+    L = (R[0][0] * c[0] + R[0][1] * c[1] + R[0][2] * c[2],  # I_w ω = R I_c Rᵀ ω
+         R[1][0] * c[0] + R[1][1] * c[1] + R[1][2] * c[2],
+         R[2][0] * c[0] + R[2][1] * c[1] + R[2][2] * c[2])
+    p_lin = (mass * x[X_TWIST], mass * x[X_TWIST + 1], mass * x[X_TWIST + 2])
+    ke = energy[EN_KINETIC] if arms else 0.0
+    pe = energy[EN_POTENTIAL] if arms else 0.0
+    for a in range(3):
+        ke += 0.5 * (mass * x[X_TWIST + a] * x[X_TWIST + a] + w[a] * L[a])
+        pe -= mass * params[P_GRAVITY + a] * x[X_POSITION + a]
+    for a in range(3):
+        c1, c2 = (a + 1) % 3, (a + 2) % 3
+        lin = energy[EN_MOMENTUM + a] if arms else 0.0
+        ang = energy[EN_MOMENTUM + 3 + a] if arms else 0.0
+        r_momentum[s, a] = lin + p_lin[a]
+        r_momentum[s, 3 + a] = (ang + L[a] + x[X_POSITION + c1] * p_lin[c2]
+                                - x[X_POSITION + c2] * p_lin[c1])
+    r_kinetic[s] = ke
+    r_potential[s] = pe
+
+
 @kernel(refcounts=False)
 def _support_rows(x, sp_p, sp_n, sp_a, params, b, rows_phi, rows_phi_dot, pts, nrm, W_o,
                   c):  # pragma: no cover - compiled
@@ -406,6 +521,8 @@ def _torques(t, x, active, sy, ctl, wk, out, callees):  # pragma: no cover - com
     if status == PD_OK:
         control[CTL_HOLDING] = 0
         return STAGE_OK
+    if status == NOT_COMPILED:
+        return STAGE_EVENTS_NOT_COMPILED
     if status != PD_HOLD:
         return STAGE_CONTROLLER
     if control[CTL_HOLDING] == 0:  # the onset: hold the configuration of this state
@@ -583,7 +700,7 @@ def contact_stage(t, x, active, sy, ctl, wk, out, d, rows, torques, lcp,
         s = lcp(Mc, hc, Wc, W_oc, cc, M_o, hw, nv_c, N_c, uni_c, active, active, False,
                 rules[R_DEP], rules[R_VIOL], rules[R_CONS], a_o, qdd_c, mu, Av)[0]
         if s != LCP_OK:
-            return STAGE_SOLVE, 0
+            return (STAGE_EVENTS_NOT_COMPILED if s == NOT_COMPILED else STAGE_SOLVE), 0
         for b in range(B):
             for r in range(R):
                 phi_dd[b, r] = Av[b, r] - cc[b, r]
@@ -594,7 +711,31 @@ def contact_stage(t, x, active, sy, ctl, wk, out, d, rows, torques, lcp,
     return STAGE_OK, solver
 
 
-def stage_compiles(x, active, sy, ctl, wk, out, d) -> tuple:
+@kernel
+def _no_touching(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_gains, z, hold_tool,
+                 hold_obj, hold_n, gains, active_r, tau, mu, qdd, a_pts, a_d,
+                 step):  # pragma: no cover - compiled
+    """:func:`touching_torques`' stand-in in a loop made without its events.
+
+    :func:`_torques` calls it only when some row does not touch; it returns
+    :data:`NOT_COMPILED`: the loop is then made with its events.
+    """
+    return NOT_COMPILED, 0
+
+
+@kernel
+def _no_active_set(M, h, W, W_o, c, M_o, h_o, nv, N, uni, act, guess, use_guess, dep_rtol,
+                   viol_rtol, cons_rtol, a_o, qdd, mu, Av):  # pragma: no cover - compiled
+    """The active-set kernel's stand-in in a loop made without its events.
+
+    :func:`contact_stage` calls it only when its object-first path does not decide (a row not
+    active, a unilateral multiplier below zero, supports, an arm with fewer joints than
+    rows); it returns :data:`NOT_COMPILED`: the loop is then made with its events.
+    """
+    return NOT_COMPILED, 0, 0, 0, 0.0
+
+
+def stage_compiles(x, active, sy, ctl, wk, out, d, events: bool = True) -> tuple:
     """The compiles of the ``fn`` argument of :func:`run_contact_rk4`, for these arguments' types.
 
     ``(contact_stage, rows, torques, lcp, callees)``, each a
@@ -609,9 +750,9 @@ def stage_compiles(x, active, sy, ctl, wk, out, d) -> tuple:
     :func:`~multiarm_pin._compiled.controller_kernels.object_pd_step` and
     :func:`~multiarm_pin._compiled.controller_kernels.touching_torques`. Each is compiled once
     and called through its address (:mod:`~multiarm_pin._compiled.function_pointers`): the
-    loop's module, and the stage's, do not compile them again, and a kernel the closed loop
-    calls with the same types (:func:`~multiarm_pin._compiled.closed_loop.callee_compiles`) is
-    the same compiled function.
+    loop's module, and the stage's, do not compile them again. ``events`` False: stand-ins of
+    the same types take the places of the active-set kernel and ``touching_torques``
+    (:func:`_no_active_set`, :func:`_no_touching`), which only a step with events needs.
     """
     mode = int(ctl[0][CTL_MODE])
     arms = int(sy[7][DIMS_N]) > 0
@@ -634,7 +775,8 @@ def stage_compiles(x, active, sy, ctl, wk, out, d) -> tuple:
                                    hold_tool, hold_obj, hold_n, gains, qp_active, tau, mu_p,
                                    qdd_p, a_pts, a_d)
             callees += (step, compile_of(
-                touching_torques, (buf, dims, N, nv_arm, unilateral, touching, obj, ref,
+                touching_torques if events else _no_touching,
+                (buf, dims, N, nv_arm, unilateral, touching, obj, ref,
                                    pd_gains, z, hold_tool, hold_obj, hold_n, gains, qp_active_r,
                                    tau, mu_p, qdd_p, a_pts, a_d, step.function_type), pair))
         elif mode == CONTROL_PHASED:
@@ -650,7 +792,7 @@ def stage_compiles(x, active, sy, ctl, wk, out, d) -> tuple:
     torques = compile_of(torque_kernel, (0.0, x, active, sy_at, ctl_at, wk_at, out_at,
                                          callee_types), int64)
     a_o, qdd_c, mu, Av = out[0], out[1], out[2], out[4]
-    lcp = compile_of(contact_kernel,
+    lcp = compile_of(contact_kernel if events else _no_active_set,
                      (wk[7], wk[8], wk[9], wk[10], wk[11], wk[12], a_o, sy[15], sy[16], sy[13],
                       active, active, False, rules[R_DEP], rules[R_VIOL], rules[R_CONS], a_o,
                       qdd_c, mu, Av),
@@ -663,29 +805,35 @@ def stage_compiles(x, active, sy, ctl, wk, out, d) -> tuple:
     return stage, rows, torques, lcp, callees
 
 
-def loop_functions(head: tuple) -> tuple:
+def loop_functions(head: tuple, events: bool = True) -> tuple:
     """``(run_contact_rk4's entry point, fn, advance)`` for its arguments before ``fn``.
 
     ``fn`` is :func:`stage_compiles`' tuple compiled; ``advance`` is
     :func:`_advance_with_events`, compiled once for the types of ``head``'s arrays and ``fn``
-    and called through its address. The loop, the advance, the stages and their callees are
+    and called through its address. ``events`` False: the loop without its event machinery,
+    for the stretches where every row is active: :func:`_advance_touching` and the stand-ins
+    of :func:`stage_compiles`, which hand back :data:`STAGE_EVENTS_NOT_COMPILED` at the first
+    step that needs more; the loop, its stage, its rows and its controller are the same
+    compiles in both (the stand-ins have the types of what they stand for), so the events
+    add only their own three compiles. The loop, the advance, the stages and their callees are
     independent compiles (a caller needs only the type of a function it calls through its
     address): :func:`~multiarm_pin._compiled.function_pointers.compile_all` runs them at once.
     Made once per process for the types of ``head``.
     """
     (_, _, _, x, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev, _, _) = head
     mode = int(ctl[0][CTL_MODE])
-    key = (mode, int(sy[7][DIMS_N]) > 0, type_key(head))
+    key = (mode, int(sy[7][DIMS_N]) > 0, events, type_key(head))
     found = _loops.get(key)  # compile_of types every argument: once per types
     if found is not None:
         return found
-    stage, rows, torques, lcp, callees = stage_compiles(x, active, sy, ctl, wk, out, rk[0])
+    stage, rows, torques, lcp, callees = stage_compiles(x, active, sy, ctl, wk, out, rk[0],
+                                                        events)
 
     def each(f):  # f of every compile of fn, nested as fn
         return (f(stage), f(rows), f(torques), f(lcp), tuple(f(c) for c in callees))
 
     at = tuple(TupleAddress(numba_type(t)) for t in (sy, ctl, wk, out, rk, st0, loc, imp))
-    advance = compile_of(_advance_with_events,
+    advance = compile_of(_advance_with_events if events else _advance_touching,
                          (0.0, x, 0.0, active, *at, ev, n_ev, each(lambda c: c.function_type)),
                          numba.types.int64)
     loop = compile_of(run_contact_rk4,
@@ -699,7 +847,41 @@ def loop_functions(head: tuple) -> tuple:
     return found
 
 
-_loops: dict = {}  # (controller mode, arms?, type_key of the head) -> loop_functions' tuple
+_loops: dict = {}  # (controller mode, arms?, events?, type_key of the head) -> the tuple
+
+
+@kernel
+def evaluate_once(t, x, active, sy, ctl, wk, out, d, fn):  # pragma: no cover - compiled
+    """One evaluation at ``(t, x)`` on the active set, as the loop makes it (no event, no record).
+
+    :func:`contact_stage` through ``fn`` (:func:`stage_compiles`' tuple, as pointers), with
+    the loop's tuples (:func:`run_contact_rk4`'s ``sy``, ``ctl``, ``wk``, ``out``); the
+    tangent into ``d``, the rest into ``wk`` and ``out``. For an evaluation on its own from
+    Python (:meth:`multiarm_pin.sim.contact_loop.ContactLoop.evaluate`): every call unboxes the
+    tuples' arrays, which a run's loop does once per stretch.
+
+    Returns:
+        ``(status, solver code)``.
+    """
+    sy, ctl, wk, out = address(sy), address(ctl), address(wk), address(out)
+    fns = bind(fn)
+    return fns[0](t, x, active, sy, ctl, wk, out, d, fns[1], fns[2], fns[3], fns[4])
+
+
+def evaluate_functions(args: tuple, events: bool = True) -> tuple:
+    """``(evaluate_once's entry point, fn)`` for :func:`evaluate_once`'s arguments before ``fn``.
+
+    The stages as :func:`loop_functions` makes them for the same types (the same compiles).
+    """
+    (_, x, active, sy, ctl, wk, out, d) = args
+    stage, rows, torques, lcp, callees = stage_compiles(x, active, sy, ctl, wk, out, d, events)
+
+    def each(f):  # f of every compile of fn, nested as fn
+        return (f(stage), f(rows), f(torques), f(lcp), tuple(f(c) for c in callees))
+
+    entry = compile_of(evaluate_once, (*args, each(lambda c: c.pointer_type)))
+    compile_all([[c] for c in (entry, stage, rows, torques, lcp, *callees)])
+    return compiled(entry), each(pointer)
 
 
 # ------------------------------------------------------------------ steps and events
@@ -723,7 +905,7 @@ def _step(t, x, d1, h, active, sy, ctl, wk, out, rk, x_new, fn,
     """One step ``h`` [s] from ``x`` (tangent ``d1`` there) into ``x_new`` (``Stepper.step``).
 
     RK4, or semi-implicit Euler (the step from ``d1`` alone:
-    :func:`~multiarm_pin._compiled.closed_loop._advance_semi_implicit`) when ``rot`` (``rk``'s
+    :func:`~multiarm_pin._compiled.integrator.advance_semi_implicit`) when ``rot`` (``rk``'s
     last element: its (3, 3) workspace, ``None`` in RK4 runs) is given. numba drops the branch
     of the other integrator when it compiles the step for ``rot``'s type: a run compiles its
     own integrator only.
@@ -731,11 +913,11 @@ def _step(t, x, d1, h, active, sy, ctl, wk, out, rk, x_new, fn,
     model_ints = sy[0]
     d2, d3, d4, hd, xs, dsum, _ = tuple_at(rk)
     if rot is not None:
-        _advance_semi_implicit(model_ints, x, d1, h, hd[:sy[7][DIMS_NV]], rot, x_new)
+        advance_semi_implicit(model_ints, x, d1, h, hd[:sy[7][DIMS_NV]], rot, x_new)
         return STAGE_OK
     for stage in range(3):  # one call site of the stage: t + h/2, t + h/2, t + h
         hs = h if stage == 2 else 0.5 * h
-        _advance(model_ints, x, d1 if stage == 0 else (d2 if stage == 1 else d3), hs, hd, xs)
+        advance(model_ints, x, d1 if stage == 0 else (d2 if stage == 1 else d3), hs, hd, xs)
         st = fn[0](t + hs, xs, active, sy, ctl, wk, out,
                    d2 if stage == 0 else (d3 if stage == 1 else d4), fn[1], fn[2], fn[3],
                    fn[4])[0]
@@ -743,7 +925,7 @@ def _step(t, x, d1, h, active, sy, ctl, wk, out, rk, x_new, fn,
             return st
     for a in range(d1.shape[0]):  # (d1 + 2 d2 + 2 d3 + d4) / 6, numpy's order of operations
         dsum[a] = (((d1[a] + 2.0 * d2[a]) + 2.0 * d3[a]) + d4[a]) / 6.0
-    _advance(model_ints, x, dsum, h, hd, x_new)
+    advance(model_ints, x, dsum, h, hd, x_new)
     return STAGE_OK
 
 
@@ -1063,6 +1245,52 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
         if t_end - t <= rules[R_TIME]:
             return STAGE_OK
     return STAGE_TOO_MANY_EVENTS
+
+
+@kernel
+def _advance_touching(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, imp, ev, n_ev, fn
+                      ):  # pragma: no cover - compiled
+    """:func:`_advance_with_events` for a step from a state where every row is active.
+
+    The step and, when a unilateral row pushes, the evaluation at its end: the same
+    operations as :func:`_advance_with_events` while no row leaves in the step (the end's
+    evaluation kept for the next sample likewise). Returns :data:`STAGE_EVENTS_NOT_COMPILED`,
+    with nothing done, when some row is not active at the start (a touchdown may come) or a
+    row would leave in the step (a separation to locate): :func:`_advance_with_events` takes
+    those steps.
+    """
+    rules = sy[19]
+    uni_c, mask_c = sy[13], sy[14]
+    d1, mu0, phi_dd0, _, memo = tuple_at(st0)
+    new, dtmp = loc[0], loc[10]
+    B, R = active.shape
+    for b in range(B):
+        for r in range(R):
+            if mask_c[b, r] and not active[b, r]:
+                return STAGE_EVENTS_NOT_COMPILED
+    memo[0] = 0
+    st = _step(t, x, d1, t_end - t, active, sy, ctl, wk, out, rk, new, fn, rk[-1])
+    if st != STAGE_OK:
+        return st
+    any_push = False
+    for b in range(B):
+        for r in range(R):
+            if active[b, r] and uni_c[b, r] and mu0[b, r] > 0.0:
+                any_push = True
+    if any_push:
+        st, memo[1] = fn[0](t_end, new, active, sy, ctl, wk, out, dtmp, fn[1], fn[2], fn[3],
+                            fn[4])
+        if st != STAGE_OK:
+            return st
+        mu_end, phi_dd_end = out[2], out[3]
+        for b in range(B):
+            for r in range(R):
+                if (active[b, r] and uni_c[b, r] and mu_end[b, r] <= 0.0
+                        and phi_dd_end[b, r] > rules[R_SEP_ACC] and mu0[b, r] > 0.0):
+                    return STAGE_EVENTS_NOT_COMPILED
+    copy1(x, new)
+    memo[0] = 1 if any_push else 0
+    return STAGE_OK
 
 
 @kernel

@@ -98,6 +98,11 @@ GRASP_RANK_TOLERANCE = 1e-9
 """Relative singular value below which the touching contacts' wrench map is rank deficient
 (``object_pd.grasp_rank`` and :func:`touching_rank`)."""
 
+NULL_KP = 0
+"""``null_gains[NULL_KP]``: ``object_pd``'s joint-space stiffness ``null_kp`` [1/s²]."""
+NULL_KD = 1
+"""``null_gains[NULL_KD]``: its damping ``null_kd`` [1/s]."""
+
 RANK_MARGIN = 1e-7
 """``W_i`` counts as of full column rank when its smallest QR pivot is above this times the
 largest: three orders of magnitude above the reference's singular-value threshold
@@ -458,7 +463,7 @@ def object_pd_step(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hold
     One compiled call per evaluation: the PD on the object pose
     ``a_d = a_ref + K_d (v_ref - v_o) + K_p [p_ref - p; log(R_ref Rᵀ)]``, then
     :func:`object_pd_torques`. The forward dynamics with these torques is
-    :func:`solve_with_torques`, a separate compile (the contact loop and
+    :func:`solve_with_torques`, a separate compile (the compiled loop and
     :func:`touching_torques` never ask for it).
 
     Args:
@@ -646,7 +651,7 @@ def pd_step_compile(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hol
 
     ``N`` and ``unilateral`` are typed read-only, whatever the examples are: the kernel only
     reads them, and a read-only type takes both the system's arrays (read-only in the loops)
-    and the rows :func:`touching_torques` compacts (new arrays), so that both loops and
+    and the rows :func:`touching_torques` compacts (new arrays), so that the loop and
     ``ObjectPD``'s Python path share one compile.
 
     Returns:
@@ -656,15 +661,6 @@ def pd_step_compile(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z, hol
         buf, dims, numba.typeof(N).copy(readonly=True), nv_arm,
         numba.typeof(unilateral).copy(readonly=True), obj, ref, pd_gains, z, hold_tool,
         hold_obj, hold_n, gains, active, tau, mu, qdd, a_pts, a_d), numba.types.int64)
-
-
-def solve_compile(buf, dims, N, params, tau) -> Compile:
-    """The compile of :func:`solve_with_torques` as a first-class function.
-
-    ``N`` typed read-only, as :func:`pd_step_compile` types it; it returns the solver's status.
-    """
-    return compile_of(solve_with_torques, (buf, dims, numba.typeof(N).copy(readonly=True),
-                                           params, tau, np.zeros(6)), numba.types.int64)
 
 
 def touching_step(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_gains, z,
@@ -678,6 +674,30 @@ def touching_step(buf, dims, N, nv_arm, unilateral, touching, obj, ref, pd_gains
     return pointer(pd_step_compile(buf, dims, N, nv_arm, unilateral, obj, ref, pd_gains, z,
                                    hold_tool, hold_obj, hold_n, gains, active_r, tau, mu, qdd,
                                    a_pts, a_d))
+
+
+@kernel(refcounts=False)
+def joint_pd(err, x, v_starts, nv_arm, kp, kd, z):  # pragma: no cover - compiled
+    """``object_pd``'s joint-space PD ``z = pad(kp err - kd v)`` (n, k) into ``z``.
+
+    Args:
+        err: (nv,) ``q_target ⊖ q`` [rad, m].
+        x: the state vector (``v`` read).
+        v_starts: (n,) int first joint of each arm in ``v``.
+        nv_arm: (n,) int joints per arm.
+        kp: stiffness [1/s²].
+        kd: damping [1/s].
+        z: output (n, k), zero on padding.
+    """
+    nv = err.shape[0]
+    v0 = x.shape[0] - 2 * nv
+    for i in range(z.shape[0]):
+        for a in range(z.shape[1]):
+            if a < nv_arm[i]:
+                j = v_starts[i] + a
+                z[i, a] = kp * err[j] - kd * x[v0 + j]
+            else:
+                z[i, a] = 0.0
 
 
 @kernel
@@ -739,8 +759,8 @@ def solve_with_torques(buf, dims, N, params, tau, wrench):  # pragma: no cover -
                         params[P_OBJECT_RCOND_TOL], a_o, qdd, mu)
 
 
-__all__ = ["GRASP_RANK_TOLERANCE", "PD_ARM_RANK", "PD_FORCES_FAILED", "PD_HOLD",
-           "PD_LARGE_ROTATION", "PD_NOT_FINITE", "PD_OK", "desired_acceleration",
-           "hold_still_torques", "log3", "min_norm_rows", "object_pd_step", "planned_torques",
-           "object_pd_torques", "pd_step_compile", "solve_compile", "solve_with_torques",
+__all__ = ["GRASP_RANK_TOLERANCE", "NULL_KD", "NULL_KP", "PD_ARM_RANK", "PD_FORCES_FAILED",
+           "PD_HOLD", "PD_LARGE_ROTATION", "PD_NOT_FINITE", "PD_OK", "desired_acceleration",
+           "hold_still_torques", "joint_pd", "log3", "min_norm_rows", "object_pd_step",
+           "object_pd_torques", "pd_step_compile", "planned_torques", "solve_with_torques",
            "touching_rank", "touching_step", "touching_torques"]

@@ -304,7 +304,7 @@ def register_thread_owner(owner) -> None:
     A child process is forked to compile only while this process runs no other Python
     thread (:func:`processes`). A worker thread that checks a run's samples beside its loop
     (the simulation's monitors) would otherwise keep every compile after its start (the
-    contact loop's, once the closed loop hands a run over) to one process.
+    loop's, at the run's first stretch) to one process.
     ``owner.end_worker()`` must end its one worker thread before it returns, its work under
     way done and its results kept; the owner starts a new thread when it next needs one. Only
     a :func:`compile_all` of the thread that registered the owner (the run's own) ends it:

@@ -32,7 +32,7 @@ these arrays as a literal.
 - **Controller vectors** (``OX_*``, ``REF_*``, ``PD_*``, ``GAIN_*``): the object pose
   and the reference, gains of :mod:`multiarm_pin._compiled.controller_kernels`; the
   trajectory table (``TR_*``) of :mod:`multiarm_pin._compiled.trajectory`; the external
-  wrench intervals (``WE_*``) of :mod:`multiarm_pin._compiled.closed_loop`.
+  wrench intervals (``WE_*``) of :mod:`multiarm_pin._compiled.contact_loop`.
 
 Units are SI; spatial vectors ``[linear; angular]`` in world axes (``docs/ARCHITECTURE.md``).
 """

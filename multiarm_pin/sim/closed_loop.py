@@ -11,9 +11,8 @@ same buffer; no blocks are rebuilt or re-validated. The reference (numpy) path, 
 round-off, and is what a doubtful case (singular arm, badly conditioned object matrix) and
 every other solver run.
 
-Twins: ``multiarm_pin._compiled.closed_loop`` (the same concept at the compiled layer: its
-``closed_loop_stage`` mirrors :func:`closed_loop_evaluation` and its ``run_rk4`` the stepper's
-steps; :mod:`multiarm_pin.sim.compiled_loop`, not this module, calls it).
+The compiled loop's stage (:func:`multiarm_pin._compiled.contact_loop.contact_stage`) mirrors
+this evaluation, for the controllers that have a kernel.
 """
 
 from __future__ import annotations

@@ -1,11 +1,12 @@
-"""The compiled contact loop of :func:`~multiarm_pin.sim.simulation.simulate`: steps with events.
+"""The compiled loop of :func:`~multiarm_pin.sim.simulation.simulate`: steps and events in one call.
 
-When a run has unilateral rows (fingertips or supports), RK4 or semi-implicit Euler, arms the
-compiled rigid-body pass supports (or no arms), and zero torque, an
+Every arm–object joint is made of point contacts (the thesis's ch. 3): a run's rows are
+contact rows, bilateral or unilateral (fingertips, supports). When a run has RK4 or
+semi-implicit Euler, a compiled solver (:data:`~multiarm_pin.sim.closed_loop.FUSED_SOLVERS`),
+arms the compiled rigid-body pass supports (or no arms), and zero torque, an
 :class:`~multiarm_pin.sim.controllers.ObjectPD` on its compiled path or a
-:class:`~multiarm_pin.sim.controllers.PhasedPD`, :class:`ContactLoop`
-runs stretches of samples, separations, touchdowns
-and impacts included, in one call of
+:class:`~multiarm_pin.sim.controllers.PhasedPD`, :class:`ContactLoop` runs stretches of
+samples, separations, touchdowns and impacts included, in one call of
 :func:`multiarm_pin._compiled.contact_loop.run_contact_rk4`, which mirrors the
 :class:`~multiarm_pin.sim.stepper.Stepper` and :mod:`multiarm_pin.sim.event_location` step for
 step (the same evaluations in the same order, so the same event times to round-off). Its events
@@ -16,10 +17,12 @@ What the kernel cannot decide as the Python path would (a doubtful controller or
 NaN, too many events in one step, a step that starts or ends with a support point off its
 rectangle, a row fallen past an edge) it hands back with the sample whose step the stepper then
 takes in Python (which raises, falls back or decides exactly as before); the next stretch goes
-to the kernel again.
+to the kernel again. The results equal the stepper's to round-off (tests:
+``tests/test_contact_loop.py``, ``tests/test_compiled_loop.py``,
+``tests/test_compiled_loop_runs.py``).
 
 Twins: ``multiarm_pin._compiled.contact_loop`` (this module's kernel, the compiled layer's side
-of the same concept, the contact loop: :class:`ContactLoop` is its Python driver).
+of the same concept, the loop: :class:`ContactLoop` is its Python driver).
 """
 
 from __future__ import annotations
@@ -28,17 +31,23 @@ import numpy as np
 
 from multiarm_pin._compiled import contact_loop as kernels
 from multiarm_pin._compiled import layout, mlcp
+from multiarm_pin.dynamics.solve import SOLVERS
 from multiarm_pin.dynamics.unilateral import UNILATERAL_SOLVERS
+from multiarm_pin.model.rigid_object import ObjectState
 from multiarm_pin.sim import contact_events as ce
 from multiarm_pin.sim import event_location as el
-from multiarm_pin.sim.compiled_loop import state_from_vector, unsupported_joints_note
+from multiarm_pin.sim.closed_loop import FUSED_SOLVERS
 from multiarm_pin.sim.disturbances import WrenchSchedule
 from multiarm_pin.sim.result import Recorder
 from multiarm_pin.system import SystemState
 
-RECORDED_SOLVERS = UNILATERAL_SOLVERS
-"""The solver recorded at the kernel's samples, by the kernel's code (``SOLVER_BILATERAL``,
-``SOLVER_ACTIVE_SET``): the names ``solve_unilateral`` records."""
+RECORDED_SOLVERS = {True: UNILATERAL_SOLVERS,
+                    False: (SOLVERS["object_first"].name,) * len(UNILATERAL_SOLVERS)}
+"""The solver recorded at the kernel's samples, by whether the run has unilateral rows, then by
+the kernel's code (``SOLVER_BILATERAL``, ``SOLVER_ACTIVE_SET``): with unilateral rows the
+names ``solve_unilateral`` records; without, the object-first solve's registry name, which
+``solve`` records for ``auto`` and ``object_first`` (the kernel's code is then always
+``SOLVER_BILATERAL``)."""
 
 EVENT_KINDS = {kernels.EVENT_SEPARATION: "separation", kernels.EVENT_TOUCHDOWN: "touchdown"}
 """Event kind codes of the kernel's table."""
@@ -192,9 +201,14 @@ class ContactLoop:
         self.n_onsets = np.zeros(1, np.int64)
         self.q_hold = np.zeros(nq)
         self.last_status = kernels.STAGE_OK
-        # (controller tuple, the kernel's entry point, fn and advance for its types)
+        # (controller tuple, events, the kernel's entry point, fn and advance for its types)
         self._kernel = None
+        # the loop with its event machinery (separations, touchdowns, the active-set solve):
+        # from the start with supports or without arms (every evaluation may need the
+        # active-set solve), else from the first step that needs it (kernels.loop_functions)
+        self.with_events = bool(s.supports.n_rows) or not n
         self._kept_controller = None  # (controller inputs, the kernel's controller tuple)
+        self._evaluator = None  # (controller tuple, events, evaluate_once's entry point, its fn)
         self._zero_x = np.zeros(nv)
         self.beside = np.zeros((B, R), dtype=bool)  # the stepper's beside_start, in and out
 
@@ -206,9 +220,12 @@ class ContactLoop:
     def declines(cls, stepper, integrator: str) -> str | None:
         """Why a run is not of the kind the kernel does, or None when it is.
 
-        It does: RK4 or semi-implicit Euler, unilateral rows (fingertips or supports), arms
-        whose every joint the compiled rigid-body pass supports (or none), a controller whose
-        registry entry's kernel (:func:`~multiarm_pin.sim.controllers.controller_kernel`) is one of
+        It does: RK4 or semi-implicit Euler, a compiled solver
+        (:data:`~multiarm_pin.sim.closed_loop.FUSED_SOLVERS`: ``auto`` and ``object_first``,
+        the ones that also serve unilateral rows), rows bilateral or unilateral (fingertips,
+        supports), arms whose every joint the compiled rigid-body pass supports (or none), a
+        controller whose registry entry's kernel
+        (:func:`~multiarm_pin.sim.controllers.controller_kernel`) is one of
         :data:`CONTROLLER_KERNELS`, and no external wrench or a
         :class:`~multiarm_pin.sim.disturbances.WrenchSchedule` itself (its intervals are the
         kernel's table; a subclass with its own ``__call__`` is not), and no torque
@@ -216,7 +233,9 @@ class ContactLoop:
         inside its rectangle at a step's start and end (the kernel hands back the other
         steps, and the run then notes it: :data:`FINITE_SUPPORTS_NOTE`); fingertips that
         start beside their face are kept out of the recorded penetration as the stepper does
-        (:attr:`Stepper.beside_start`).
+        (:attr:`Stepper.beside_start`). Without unilateral rows, every arm has at least as
+        many joints as rows (the object-first solve's case; the kernel's mixed LCP would
+        otherwise take the step that ``solve`` gives the singular-arm variant).
         """
         from multiarm_pin.sim.controllers import controller_kernel
 
@@ -224,17 +243,20 @@ class ContactLoop:
         if integrator not in ("rk4", "semi_implicit"):
             return (f"integrator {integrator!r} has no compiled loop (RK4 and semi-implicit "
                     "Euler only)")
-        if not stepper.unilateral:
-            return "a system without unilateral rows is the closed loop's"
+        if stepper.solver not in FUSED_SOLVERS:
+            return f"solver {stepper.solver!r} has no compiled path"
         if stepper.torque_limit is not None:
             return "torque saturation"  # the kernel adds the controller's torque as it is
         if stepper.wrench is not None and type(stepper.wrench) is not WrenchSchedule:
             return f"the external wrench is a {type(stepper.wrench).__name__}"
         if s.n_arms and (s.compiled is None or s.arm_set.compiled_model is None):
             return unsupported_joints_note(s)
+        if not stepper.unilateral and np.any(s.compiled.nv_arm < s.compiled.N):
+            # solve_auto's singular-arm variant, or object_first's error, at every step
+            return "an arm has fewer joints than rows (a singular arm at every step)"
         kernel, why = controller_kernel(stepper.controller)
         if kernel not in cls.CONTROLLER_KERNELS:
-            return why or (f"the compiled contact loop runs the controllers "
+            return why or (f"the compiled loop runs the controllers "
                            f"{', '.join(cls.CONTROLLER_KERNELS)}, not {kernel}")
         if kernel != "zero_torque" and not s.n_arms:  # pragma: no cover - no arms, no control
             return "a controller without arms"
@@ -336,10 +358,11 @@ class ContactLoop:
                rec.wrench, rec.ke, rec.pe, rec.momentum, rec.active, codes, self.beside)
         head = (k0, k1, times, x, active, self.S, C, self.W, self._O, self.K, self.Z, self.L,
                 self.I, self.events, self.n_events, self.reserve, Rec)
-        if self._kernel is None or self._kernel[0] is not C:
+        if self._kernel is None or self._kernel[0] is not C or self._kernel[1] != self.with_events:
             # the loop's entry point and its stages, for these types (the entry point without
             # numba's dispatch, which would type the function pointers again at every call)
-            self._kernel = (C, *kernels.loop_functions(head))
+            self._kernel = (C, self.with_events,
+                            *kernels.loop_functions(head, self.with_events))
         return head
 
     def run(self, rec: Recorder, state: SystemState, times: np.ndarray, k0: int, k1: int
@@ -368,15 +391,16 @@ class ContactLoop:
         self.beside[:] = stepper.beside_start
         codes = np.zeros(len(times), np.int64)
         args = self._arguments(rec, x, times, k0, k1, C, active, codes)
-        status, k = self._kernel[1](*args, *self._kernel[2:])
+        status, k = self._kernel[2](*args, *self._kernel[3:])
         self.last_status = int(status)
         k = int(k)
         # the samples recorded: up to k, and k itself when its step failed (it is recorded
         # again by the stepper, with the same values)
         done = slice(k0, k)
         rec.t[done] = times[done]
+        names = RECORDED_SOLVERS[bool(stepper.unilateral)]
         for j in range(k0, k):
-            rec.solver[j] = RECORDED_SOLVERS[int(codes[j])]
+            rec.solver[j] = names[int(codes[j])]
         if k > k0:
             rec.mark_recorded(k)
         for row in self.events[:int(self.n_events[0])]:
@@ -394,7 +418,71 @@ class ContactLoop:
             ctrl.margin_kept = bool(self.control[kernels.CTL_MARGIN_KEPT])
             if ctrl.holding:
                 ctrl._q_hold = self.q_hold.copy()
-        return k, state_from_vector(x, s.nq, s.nv)
+        state = state_from_vector(x, s.nq, s.nv)
+        if self.last_status == kernels.STAGE_EVENTS_NOT_COMPILED:
+            self.with_events = True  # from here on the loop with its events
+            return self.run(rec, state, times, k, k1)
+        return k, state
+
+    def evaluate(self, t: float, state: SystemState) -> tuple[int, np.ndarray, np.ndarray]:
+        """One evaluation at ``(t, state)`` on the stepper's active set, as the loop makes it.
+
+        The compiled rigid-body pass, the rows and blocks, the controller's torques and the
+        solve (:func:`~multiarm_pin._compiled.contact_loop.contact_stage`), no separation, no
+        event, no record: what :func:`~multiarm_pin.sim.closed_loop.closed_loop_evaluation`
+        computes with Pinocchio and numpy (the stepper's evaluation). The loop must be
+        :meth:`ready` at ``state``. Every call unboxes the loop's arrays (a run's loop does
+        that once per stretch): for tests and benchmarks.
+
+        Returns:
+            ``(status, tangent (2 nv + 13,), tau (nv,) [N m])``: ``STAGE_OK`` or why the
+            stepper must decide; the tangent ``[q̇; v̇; ṗ; q̇uat; ȧ]`` as
+            ``Stepper.derivative``.
+        """
+        s = self.system
+        C = self._controller()
+        o = state.obj
+        x = layout.state_vector(o.position, o.quaternion, o.twist, state.q, state.v,
+                                self._zero_x)
+        active = np.array(self.stepper.active, dtype=bool)
+        d = np.empty(2 * s.nv + layout.OBJECT_STATE_SIZE)
+        args = (float(t), x, active, self.S, C, self.W, self._O, d)
+        if (self._evaluator is None or self._evaluator[0] is not C
+                or self._evaluator[1] != self.with_events):
+            self._evaluator = (C, self.with_events,
+                               *kernels.evaluate_functions(args, self.with_events))
+        status, _ = self._evaluator[2](*args, self._evaluator[3])
+        if status == kernels.STAGE_EVENTS_NOT_COMPILED:
+            self.with_events = True
+            return self.evaluate(t, state)
+        tau = self._O[5]  # (n, k) padded
+        return int(status), d, tau.take(np.flatnonzero(s.arm_set.dof_mask)) if s.n_arms \
+            else np.zeros(0)
 
 
-__all__ = ["EVENT_KINDS", "RECORDED_SOLVERS", "ContactLoop", "rules_vector"]
+def unsupported_joints_note(system) -> str:
+    """Why a system's arms are not on the compiled loop (a sentence).
+
+    It names the first joint whose kind the compiled rigid-body pass does not support.
+    """
+    from multiarm_pin.model.compiled_model import unsupported_joints
+
+    name, kind = unsupported_joints(system.arm_set.model)[0]
+    return (f"joint {name!r} is of kind {kind}, which the compiled rigid-body pass does not "
+            "support")
+
+
+def state_from_vector(x: np.ndarray, nq: int, nv: int) -> SystemState:
+    """The :class:`SystemState` (copies) of a kernels' state vector ``x``.
+
+    ``x`` in :func:`~multiarm_pin._compiled.layout.state_vector`'s layout.
+    """
+    q0 = layout.OBJECT_STATE_SIZE
+    return SystemState(x[q0:q0 + nq].copy(), x[q0 + nq:q0 + nq + nv].copy(),
+                       ObjectState(x[layout.X_POSITION:layout.X_POSITION + 3].copy(),
+                                   x[layout.X_QUATERNION:layout.X_QUATERNION + 4].copy(),
+                                   x[layout.X_TWIST:layout.X_TWIST + 6].copy()))
+
+
+__all__ = ["EVENT_KINDS", "RECORDED_SOLVERS", "ContactLoop", "rules_vector", "state_from_vector",
+           "unsupported_joints_note"]

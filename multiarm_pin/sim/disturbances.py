@@ -58,7 +58,7 @@ class WrenchSchedule:
         return out
 
     def table(self) -> np.ndarray:
-        """(K, WRENCH_WIDTH) the intervals as the compiled closed loop reads them.
+        """(K, WRENCH_WIDTH) the intervals as the compiled loop reads them.
 
         Columns :data:`multiarm_pin._compiled.layout.WRENCH_FIELDS` (``from``, ``to``, the
         wrench); K = 0 for an empty schedule.

@@ -232,8 +232,9 @@ class Recorder:
     def mark_recorded(self, count: int) -> None:
         """Samples up to ``count`` were recorded by the compiled loop.
 
-        (:mod:`multiarm_pin.sim.compiled_loop`: every row pushing, solver ``object_first``, so
-        no multiplier is negative and no solver switch is pending.)
+        (:mod:`multiarm_pin.sim.contact_loop`: no unilateral multiplier is negative, the mixed
+        LCP decides them, and no solve is the singular-arm variant, the stepper takes those
+        steps: so no warning and no solver switch is pending.)
         """
         self._negative[:] = False
         self._singular = False

@@ -29,14 +29,13 @@ event is in :attr:`SimulationResult.events`. ``rk45`` (adaptive, not event-aware
 systems without unilateral rows. Systems without unilateral rows use the bilateral solvers as
 before.
 
-With RK4 or semi-implicit Euler, runs of the kinds they take go to the compiled loops, which
-record the same samples and events: :class:`~multiarm_pin.sim.compiled_loop.CompiledLoop` while
-every contact touches (arms, no supports), :class:`~multiarm_pin.sim.contact_loop.ContactLoop`
-otherwise (separations, touchdowns and impacts in the kernel); a step either hands back is taken
-by the stepper. With a support of finite ``extent`` the steps with a support point off its
-rectangle at either end (off-edge events) are the stepper's; a run with such a step says so once
-in its warnings (``FINITE_SUPPORTS_NOTE``), a run whose points all stay on their rectangles does
-not.
+With RK4 or semi-implicit Euler, runs of the kind it takes go to the compiled loop,
+:class:`~multiarm_pin.sim.contact_loop.ContactLoop`, which records the same samples and events
+(bilateral and unilateral rows, separations, touchdowns and impacts in the kernel); a step it
+hands back is taken by the stepper. With a support of finite ``extent`` the steps with a
+support point off its rectangle at either end (off-edge events) are the stepper's; a run with
+such a step says so once in its warnings (``FINITE_SUPPORTS_NOTE``), a run whose points all
+stay on their rectangles does not.
 
 This module holds :func:`simulate` (input checks, the time grid, the rk45 driver); the
 evaluations, fixed steps and events are :class:`~multiarm_pin.sim.stepper.Stepper`'s, the
@@ -56,8 +55,7 @@ from typing import Protocol
 
 import numpy as np
 
-from multiarm_pin._compiled.closed_loop import STAGE_OK, STAGE_RELEASE
-from multiarm_pin._compiled.contact_loop import STAGE_EVENTS_FULL, STAGE_OFF_RECTANGLE
+from multiarm_pin._compiled.contact_loop import STAGE_EVENTS_FULL, STAGE_OFF_RECTANGLE, STAGE_OK
 from multiarm_pin._compiled.function_pointers import (
     WarmUp,
     compile_with_next,
@@ -69,7 +67,6 @@ from multiarm_pin.constraints.joint import INITIAL_GAP_TOLERANCE
 from multiarm_pin.dynamics.solve import solver_for_rows
 from multiarm_pin.exceptions import DynamicsError, InputError, RunStoppedError
 from multiarm_pin.model.rigid_object import ObjectState
-from multiarm_pin.sim.compiled_loop import CompiledLoop
 from multiarm_pin.sim.contact_events import ContactEvent
 from multiarm_pin.sim.contact_loop import FINITE_SUPPORTS_NOTE, ContactLoop
 from multiarm_pin.sim.controllers.base import ControllerFunction
@@ -115,7 +112,7 @@ INTEGRATORS: dict[str, IntegratorEntry] = {e.name: e for e in (
 """Every integrator, by name (the names :func:`simulate` and scenarios accept)."""
 
 MONITOR_STRETCH = 512
-"""Largest number of samples the compiled loops simulate in one call, and that a run's
+"""Largest number of samples the compiled loop simulates in one call, and that a run's
 monitors (:func:`simulate`'s ``monitors``) are shown at once: they see each stretch soon after
 it is done."""
 
@@ -181,7 +178,7 @@ def simulate(
         torque_limit: (nv,) bound [N m or N] of each joint's applied torque (``inf``: none),
             or None: the actuators saturate, ``τ = clip(τ_commanded, -limit, limit)`` inside
             the dynamics, and both are recorded (``tau``, ``tau_commanded``). A saturating run
-            is integrated by the numpy stepper (the compiled loops add the controller's
+            is integrated by the numpy stepper (the compiled loop adds the controller's
             torque as it is) and its result says so once in ``warnings``.
         monitors: checks made while the run runs (e.g. the ``stop`` policies of
             :mod:`multiarm_pin.feasibility.monitors`): each ``monitor.check(record, k0, k1)``
@@ -191,7 +188,7 @@ def simulate(
             sample or None. The run then ends: :class:`~multiarm_pin.exceptions.
             RunStoppedError` is raised, its partial result ending at that sample (the samples
             after it are dropped). Stretches hold at most :data:`MONITOR_STRETCH` samples.
-        compiled: True (default): the compiled loops take the steps they serve. False: every
+        compiled: True (default): the compiled loop takes the steps it serves. False: every
             step is taken by the numpy reference (the stepper), nothing is compiled for the
             loops; the results equal the compiled run's to rounding.
 
@@ -257,7 +254,7 @@ def simulate(
     if limit is not None:
         rec.start_saturation()
         rec.warnings.append("torque saturation: the run is integrated by the numpy stepper "
-                            "(the compiled loops do not clip torques)")
+                            "(the compiled loop does not clip torques)")
 
     def report(frac: float) -> None:
         if progress is not None:
@@ -268,7 +265,7 @@ def simulate(
                                     _normalised(initial_state.obj.quaternion),
                                     np.array(initial_state.obj.twist, float)))
     if stepper.unilateral:
-        # the gaps at t = 0 by the numpy reference: a run the compiled loops take never needs
+        # the gaps at t = 0 by the numpy reference: a run the compiled loop takes never needs
         # the Python path's compiled evaluation, which would be compiled for this one call
         stepper.init_active(stepper.blocks_at(0.0, state, reference=True)[1], initial_tol)
     watch = _Watch(monitors, rec, state)
@@ -295,7 +292,7 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
                compiled: bool = True) -> None:
     """Run the integrator over the time grid, recording every sample (and watching them).
 
-    ``compiled`` False: the compiled loops take no step (the numpy reference alone).
+    ``compiled`` False: the compiled loop takes no step (the numpy reference alone).
     """
     n_steps = len(times) - 1
     note = reference_note(stepper, integrator) if compiled else None
@@ -305,42 +302,26 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
         _run_rk45(stepper, rec, state, times, rtol, atol, report, watch)
     else:
         every = max(1, n_steps // 100)
-        loop = CompiledLoop.for_run(stepper, integrator) if compiled else None
-        events = ContactLoop.for_run(stepper, integrator) if compiled else None
+        loop = ContactLoop.for_run(stepper, integrator) if compiled else None
         off_rectangle = False  # a step was the stepper's for a support point off its rectangle
         stretch = _Stretch(every, n_steps, tapered=bool(watch.monitors))
         watch.longest_stretch(stretch.top)
-        k, retaken = 0, -1  # the sample whose step the stepper took last
+        k = 0
         while True:
             if loop is not None and loop.ready(state):
                 # a stretch of steps in one compiled call; the step it hands back, if any, is
-                # taken below by the contact loop or the stepper
+                # taken below by the stepper
                 with stretch:
                     k, state = loop.run(rec, state, times, k, stretch.end(k))
                 watch.recorded(rec, k)
                 report(k / n_steps)
                 if k > n_steps:
                     break
-                if loop.last_status == STAGE_OK:
+                if loop.last_status in (STAGE_OK, STAGE_EVENTS_FULL):
                     continue
-                if loop.last_status == STAGE_RELEASE and 0 < k and retaken != k - 1:
-                    # a contact lets go at sample k: it did inside the step to k, which the
-                    # kernel took as bilateral; that step is taken again with its events
-                    k -= 1
-                    state = rec.state(k)
-                retaken = k
-            if events is not None and events.ready(state):
-                with stretch:
-                    k, state = events.run(rec, state, times, k, stretch.end(k))
-                watch.recorded(rec, k)
-                report(k / n_steps)
-                if k > n_steps:
-                    break
-                if events.last_status in (STAGE_OK, STAGE_EVENTS_FULL):
-                    continue
-                handed_back = events.last_status == STAGE_OFF_RECTANGLE
-            else:  # not ready: a row fallen past its support's edge, or no contact loop
-                handed_back = events is not None and bool(stepper.fallen.any())
+                handed_back = loop.last_status == STAGE_OFF_RECTANGLE
+            else:  # not ready: a row fallen past its support's edge, or no compiled loop
+                handed_back = loop is not None and bool(stepper.fallen.any())
             if handed_back and not off_rectangle:
                 off_rectangle = True
                 stepper.notes.append(FINITE_SUPPORTS_NOTE)
@@ -360,18 +341,16 @@ def _integrate(stepper: Stepper, rec: Recorder, state: SystemState, times: np.nd
 
 
 REFERENCE_NOTE = "the run is taken by the reference (numpy) stepper, not a compiled loop: {why}"
-"""The note (once in a run's warnings) of a run that no compiled loop serves, and why."""
+"""The note (once in a run's warnings) of a run that the compiled loop does not serve, and why."""
 
 
 def reference_note(stepper: Stepper, integrator: str) -> str | None:
-    """The note of a run that the compiled loop of its kind declines, or None.
+    """The note of a run that the compiled loop declines, or None.
 
-    The loop of its kind is :class:`ContactLoop` with unilateral rows, :class:`CompiledLoop`
-    without; its ``declines`` gives the reason (the integrator, the solver, the controller's
-    registry entry, a joint kind...). Torque saturation has a warning of its own.
+    :meth:`ContactLoop.declines` gives the reason (the integrator, the solver, the
+    controller's registry entry, a joint kind...). Torque saturation has a warning of its own.
     """
-    loop = ContactLoop if stepper.unilateral else CompiledLoop
-    why = loop.declines(stepper, integrator)
+    why = ContactLoop.declines(stepper, integrator)
     if why is None or stepper.torque_limit is not None:
         return None
     return REFERENCE_NOTE.format(why=why)
@@ -456,7 +435,7 @@ class _Watch:
     again from it, which records it again.
 
     The checks of a stretch run on a worker thread while the loop simulates the next one (the
-    compiled loops release the GIL), so on a machine with a free core they add little to a
+    compiled loop releases the GIL), so on a machine with a free core they add little to a
     run's wall time. The monitors' ``prepare`` runs there first, as the run starts, while the
     loop is loaded or compiled. They stay in order (a stretch's checks start once the previous
     stretch's have ended) and read only samples that are settled (the loops write later ones). A
@@ -522,8 +501,9 @@ class _Watch:
         """End the worker thread now, its check under way done; its result is kept.
 
         Called by :func:`~multiarm_pin._compiled.function_pointers.compile_all` before a
-        loop compiles in the middle of a run (the contact loop, once the closed loop hands
-        over), so that it may fork children to compile: the next stretch starts a new thread.
+        loop compiles in the middle of a run (at its first stretch, the worker thread started
+        to prepare the checks), so that it may fork children to compile: the next stretch
+        starts a new thread.
         """
         self._close()
 

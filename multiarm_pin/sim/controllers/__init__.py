@@ -74,7 +74,7 @@ class ControllerType:
         follows_trajectory: it takes a desired object motion (``trajectory`` or
             ``waypoints``); the others hold or act in joint space.
         description: one line for humans.
-        kernel: the compiled controller that serves it in the compiled loops, a name of
+        kernel: the compiled controller that serves it in the compiled loop, a name of
             :data:`CONTROLLER_KERNELS`, or None: runs with it are the reference stepper's
             (and say so once, :func:`controller_kernel`).
     """
@@ -93,13 +93,12 @@ class ControllerType:
 
 
 CONTROLLER_KERNELS: dict[str, str] = {
-    "zero_torque": "zero torque (the contact loop's control mode CONTROL_NONE)",
+    "zero_torque": "zero torque (the compiled loop's control mode CONTROL_NONE)",
     "object_pd": "ObjectPD's compiled path (multiarm_pin._compiled.controller_kernels)",
     "phased_pd": "PhasedPD's compiled path (multiarm_pin._compiled.phased)",
 }
-"""The compiled controllers, by name: what :attr:`ControllerType.kernel` names. Each compiled
+"""The compiled controllers, by name: what :attr:`ControllerType.kernel` names. The compiled
 loop says which of them it runs (``CONTROLLER_KERNELS`` of
-:class:`~multiarm_pin.sim.compiled_loop.CompiledLoop` and
 :class:`~multiarm_pin.sim.contact_loop.ContactLoop`)."""
 
 CONTROLLERS: dict[str, ControllerType] = {e.name: e for e in (

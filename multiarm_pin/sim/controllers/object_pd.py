@@ -428,7 +428,7 @@ class ObjectPD(Controller):
         The reference configuration, the held points (from the tools' placements in
         ``evaluation``, compiled or reference), the trajectory from the first pose when it
         starts from there, the force QP's warm start and the kernels' gain vectors; calls
-        after the first change nothing. The compiled closed loop calls it on a reference
+        after the first change nothing. The compiled loop calls it on a reference
         evaluation of the initial state, so that a run needs no other compiled code.
 
         Args:
@@ -454,10 +454,10 @@ class ObjectPD(Controller):
             self._shapes = ((s.n_arms, s.arm_set.nv_max), (s.n_arms, s.N_max))
 
     def kernel_inputs(self) -> tuple | None:
-        """The controller's inputs of the compiled closed loop, or None before they exist.
+        """The controller's inputs of the compiled loop, or None before they exist.
 
-        :func:`multiarm_pin._compiled.closed_loop.run_rk4` runs this controller inside its
-        RK4 steps on the same state as :meth:`closed_loop` (the same arrays: the force QP's
+        :func:`multiarm_pin._compiled.contact_loop.run_contact_rk4` runs this controller inside
+        its steps on the same state as :meth:`closed_loop` (the same arrays: the force QP's
         warm start it updates is this controller's). They exist once the first call or
         :meth:`prepare` has fixed them (reference configuration, held points, trajectory, warm
         start); never with ``compiled=False``. The arrays are the same objects from call to
@@ -467,7 +467,7 @@ class ObjectPD(Controller):
         Returns:
             ``(trajectory table, pd gains, (null_kp, null_kd), hold_points_in_tool,
             hold_points_in_object, held points per arm, hold gains, warm start, unilateral,
-            q_ref)`` (see :func:`~multiarm_pin._compiled.closed_loop.closed_loop_stage`), or
+            q_ref)`` (see :func:`~multiarm_pin._compiled.contact_loop.contact_stage`), or
             None.
         """
         if not self.compiled or self._forces is None or self.trajectory is None:
@@ -487,17 +487,6 @@ class ObjectPD(Controller):
                                self._hold_n, self._gains, self._forces.active,
                                self._unilateral, self.q_ref)
         return self._kernel_inputs
-
-    def kernel_planned(self, tau: np.ndarray, mu: np.ndarray, qdd: np.ndarray,
-                       a_pts: np.ndarray, a_d: np.ndarray) -> None:
-        """Take the plan of the compiled closed loop's last evaluation as :attr:`last`.
-
-        Args: as :class:`ObjectPDPlan` (copied), ``a_pts`` the desired point accelerations.
-        """
-        self.last_point_acceleration = a_pts.copy()
-        self.last = ObjectPDPlan(tau.copy(), mu.copy(), qdd.copy(), a_d.copy())
-        self.margin_kept = True
-        self.holding = False
 
     def reference(self, t: float, state: SystemState, evaluation: Evaluation) -> np.ndarray:
         """(nv,) torques [N m] by the numpy reference (SVD basis, NNLS, batched numpy).
