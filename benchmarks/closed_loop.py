@@ -220,8 +220,8 @@ def scenario_rows(names: Sequence[str], timer: Timer, duration: float | None) ->
             print(f"{name}: {note}", flush=True)
         if not s.n_arms or s.supports.n_rows:  # no closed-loop evaluation: the run's RTF only
             note = note or (("no arms" if not s.n_arms else "supports")
-                            + f", {events} contact events: the compiled contact loop (no "
-                            "closed-loop evaluation to time alone)")
+                            + f", {events} contact events: the compiled loop's active-set "
+                            "solve (no closed-loop evaluation to time alone)")
             rows.append(Row(name, s.n_arms, s.nv, *[math.nan] * 9, simt, wall, simt / wall, 0,
                             note))
             print(f"{name:26s}: RTF {simt / wall:6.2f} ({simt:g} s in {wall:.2f} s); {note}",
@@ -229,7 +229,7 @@ def scenario_rows(names: Sequence[str], timer: Timer, duration: float | None) ->
             continue
         if events and not note:
             note = (f"{events} contact events: the steps with separated contacts and the "
-                    "events run on the compiled contact loop")
+                    "events run on the compiled loop with its events")
         # states and torques of a short run, for the per-call times
         res = simulate(s, built.initial_state, scenario_controller(built), 40 * sim.dt, sim.dt,
                        **kw)

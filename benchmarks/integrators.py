@@ -1,4 +1,4 @@
-"""Semi-implicit Euler against RK4 on the compiled closed loop, at the same ``dt`` (issue 24).
+"""Semi-implicit Euler against RK4 on the compiled loop, at the same ``dt`` (issue 24).
 
 For each scenario (default: the demo and the other weld scenarios), interleaved rounds of
 ``simulate_built`` with the scenario's settings, once with ``integrator: rk4`` and once with
