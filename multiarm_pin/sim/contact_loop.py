@@ -251,7 +251,7 @@ class ContactLoop:
             return f"the external wrench is a {type(stepper.wrench).__name__}"
         if s.n_arms and (s.compiled is None or s.arm_set.compiled_model is None):
             return unsupported_joints_note(s)
-        if not stepper.unilateral and np.any(s.compiled.nv_arm < s.compiled.N):
+        if not stepper.unilateral and s.n_arms and np.any(s.compiled.nv_arm < s.compiled.N):
             # solve_auto's singular-arm variant, or object_first's error, at every step
             return "an arm has fewer joints than rows (a singular arm at every step)"
         kernel, why = controller_kernel(stepper.controller)
