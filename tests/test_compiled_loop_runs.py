@@ -148,3 +148,45 @@ def test_zero_torque_runs_of_random_systems_equal_the_stepper(seed, n_arms):
         [(e.kind, e.block, e.row) for e in ref.events]
     assert fast.warnings == ref.warnings
     assert np.abs(ref.object_twist[-1]).max() > 0.1  # it fell
+
+
+@pytest.mark.parametrize("kinds", [("spherical", "spherical"), ("cylindrical", "prismatic")])
+def test_arms_of_every_supported_joint_type_run_on_the_loop_as_on_the_stepper(kinds,
+                                                                             monkeypatch):
+    """Two arms of ``every_joint_model`` (revolute, continuous and prismatic joints, aligned
+    and unaligned axes, two trees and a branch) holding a box, falling without torques: the
+    loop takes every stretch and gives the stepper's run."""
+    import pinocchio as pin
+    from rigid_body_models import every_joint_model, random_state
+    from system_builders import BOX_SIZE, joint_spec
+
+    from multiarm_pin.model.arm import Arm
+    from multiarm_pin.model.rigid_object import RigidObject
+    from multiarm_pin.sim.contact_loop import ContactLoop
+    from multiarm_pin.sim.simulation import simulate
+    from multiarm_pin.system import MultiArmSystem
+
+    rng = np.random.default_rng(3)
+    model, _ = every_joint_model(rng)
+    arms = [Arm.from_model(model, tool, name=name,
+                           base_placement=pin.SE3(np.eye(3), np.array([x, 0.0, 0.0])))
+            for name, tool, x in (("a", "l_a5", -0.6), ("b", "l_b5", 0.6))]
+    q0 = [random_state(model, rng)[0] for _ in arms]
+    system, state = MultiArmSystem.from_initial_state(
+        arms, RigidObject.box(BOX_SIZE, 2.0), [joint_spec(k) for k in kinds], q0,
+        pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.5])))
+    statuses, run = [], ContactLoop.run
+
+    def counted(self, *args):
+        out = run(self, *args)
+        statuses.append(self.last_status)
+        return out
+
+    monkeypatch.setattr(ContactLoop, "run", counted)
+    fast = simulate(system, state, None, 0.1, 0.005)
+    ref = simulate(system, state, None, 0.1, 0.005, compiled=False)
+    assert statuses and set(statuses) == {contact_loop.kernels.STAGE_OK}
+    for field in RUN_FIELDS:
+        assert rel_err(getattr(fast, field), getattr(ref, field)) <= 1e-9, field
+    assert list(fast.solver) == list(ref.solver) and fast.warnings == ref.warnings
+    assert np.abs(ref.v).max() > 0.1  # the arms moved
