@@ -546,7 +546,7 @@ def test_compiled_views_are_the_python_segments():
     for name, view in zip(names, (*arms, *blocks, *solution), strict=True):
         np.testing.assert_array_equal(view, segments[name].view(buf), err_msg=name)
     assert layout.ROW_WIDTH == sum(w for _, w in layout.ROW_FIELDS) == 21
-    assert layout.N_PARAMS == 19 and layout.CONTACT_FLOATS == 14
+    assert layout.N_PARAMS == 18 and layout.CONTACT_FLOATS == 14
 
 
 @kernel

@@ -10,9 +10,9 @@ these arrays as a literal.
   :func:`multiarm_pin._compiled.evaluate.evaluate_system`, one C-contiguous segment per
   quantity, shapes in terms of ``n`` arms, ``k = nv_max`` joints and ``m = N_max`` rows.
   :func:`offsets` (compiled, callable from Python) gives their start offsets; the kernels
-  take views with :func:`view1` / :func:`view2` / :func:`view3`, Python with
+  take views with :func:`view2` / :func:`view3`, Python with
   :func:`segment_slices`.
-  The three view helpers are inlined into their callers (``inline="always"``): called as
+  The view helpers are inlined into their callers (``inline="always"``): called as
   separate functions, numba compiled one specialisation per ``SEG_*`` constant (a literal).
   The kernels of :mod:`~multiarm_pin._compiled.evaluate` and
   :mod:`~multiarm_pin._compiled.controller_kernels` take their views through the inlined
@@ -264,11 +264,11 @@ def state_size(nq: int, nv: int) -> int:
 # ------------------------------------------------------------------ parameters
 PARAM_FIELDS = (("mass", 1), ("inertia", 9), ("gravity", 3), ("baumgarte_alpha", 1),
                 ("baumgarte_beta", 1), ("baumgarte_on", 1), ("rcond_tol", 1),
-                ("object_rcond_tol", 1), ("semi_implicit", 1))
+                ("object_rcond_tol", 1))
 """The float64 parameter vector: object mass [kg], inertia about the COM in object axes
-(row-major) [kg m²], gravity [m/s²], Baumgarte ``α``, ``β`` [1/s] and on-flag (1.0 = on), the
-solver thresholds on each ``S_i`` and on the reduced object matrix, and the integrator of the
-closed loop's steps (1.0 = semi-implicit Euler, 0.0 = RK4)."""
+(row-major) [kg m²], gravity [m/s²], Baumgarte ``α``, ``β`` [1/s] and on-flag (1.0 = on), and
+the solver thresholds on each ``S_i`` and on the reduced object matrix. (The loop's integrator
+is in its argument types: ``contact_loop._step``.)"""
 _P, N_PARAMS = _starts(PARAM_FIELDS)
 P_MASS = _P["mass"]
 P_INERTIA = _P["inertia"]
@@ -278,7 +278,6 @@ P_BAUMGARTE_BETA = _P["baumgarte_beta"]
 P_BAUMGARTE_ON = _P["baumgarte_on"]
 P_RCOND_TOL = _P["rcond_tol"]
 P_OBJECT_RCOND_TOL = _P["object_rcond_tol"]
-P_SEMI_IMPLICIT = _P["semi_implicit"]
 
 
 def parameter_vector(mass: float, inertia: np.ndarray, gravity: np.ndarray, rcond_tol: float,
@@ -291,13 +290,6 @@ def parameter_vector(mass: float, inertia: np.ndarray, gravity: np.ndarray, rcon
     params[P_RCOND_TOL] = rcond_tol
     params[P_OBJECT_RCOND_TOL] = object_rcond_tol
     return params
-
-
-def with_integrator(params: np.ndarray, integrator: str) -> np.ndarray:
-    """A copy of ``params`` whose steps are ``integrator``'s (``"rk4"`` or ``"semi_implicit"``)."""
-    out = params.copy()
-    out[P_SEMI_IMPLICIT] = 1.0 if integrator == "semi_implicit" else 0.0
-    return out
 
 
 def with_baumgarte(params: np.ndarray, alpha: float, beta: float) -> np.ndarray:
@@ -544,12 +536,6 @@ def _shaped(typingctx, buf, start, shape):
 shaped = _shaped_python if jit_disabled() else _shaped
 """``shaped(buf, start, shape)``: the view of ``shape`` in ``buf`` from element ``start``
 (:func:`_shaped` in a kernel; the slice and ``reshape`` without the JIT)."""
-
-
-@kernel(inline="always")
-def view1(buf, off, seg):  # pragma: no cover - compiled
-    """The one-axis segment ``seg`` of ``buf`` (offsets ``off``)."""
-    return shaped(buf, off[seg], (off[seg + 1] - off[seg],))
 
 
 @kernel(inline="always")

@@ -152,7 +152,7 @@ class ContactLoop:
             dims = _i64(layout.dims_vector(1, 0, 0, 0))
             N, nv_arm = np.zeros(0, np.int64), np.zeros(0, np.int64)
             buf = np.zeros(0)
-        params = layout.with_integrator(params, integrator)
+        params = params.copy()  # writable, as with_baumgarte's copy: one type for the kernels
         if stepper.baumgarte is not None:
             params = layout.with_baumgarte(params, *stepper.baumgarte)
         kc = k if n else table.nv_max_blocks
