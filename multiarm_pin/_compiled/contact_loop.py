@@ -805,6 +805,12 @@ def stage_compiles(x, active, sy, ctl, wk, out, d, events: bool = True) -> tuple
     return stage, rows, torques, lcp, callees
 
 
+def _each(fn: tuple, f) -> tuple:
+    """``f`` of every compile of :func:`stage_compiles`' tuple ``fn``, nested as ``fn``."""
+    stage, rows, torques, lcp, callees = fn
+    return (f(stage), f(rows), f(torques), f(lcp), tuple(f(c) for c in callees))
+
+
 def loop_functions(head: tuple, events: bool = True) -> tuple:
     """``(run_contact_rk4's entry point, fn, advance)`` for its arguments before ``fn``.
 
@@ -826,24 +832,20 @@ def loop_functions(head: tuple, events: bool = True) -> tuple:
     found = _loops.get(key)  # compile_of types every argument: once per types
     if found is not None:
         return found
-    stage, rows, torques, lcp, callees = stage_compiles(x, active, sy, ctl, wk, out, rk[0],
-                                                        events)
-
-    def each(f):  # f of every compile of fn, nested as fn
-        return (f(stage), f(rows), f(torques), f(lcp), tuple(f(c) for c in callees))
-
+    fn = stage_compiles(x, active, sy, ctl, wk, out, rk[0], events)
+    stage, rows, torques, lcp, callees = fn
     at = tuple(TupleAddress(numba_type(t)) for t in (sy, ctl, wk, out, rk, st0, loc, imp))
     advance = compile_of(_advance_with_events if events else _advance_touching,
-                         (0.0, x, 0.0, active, *at, ev, n_ev, each(lambda c: c.function_type)),
+                         (0.0, x, 0.0, active, *at, ev, n_ev, _each(fn, lambda c: c.function_type)),
                          numba.types.int64)
     loop = compile_of(run_contact_rk4,
-                      (*head, each(lambda c: c.pointer_type), advance.pointer_type))
+                      (*head, _each(fn, lambda c: c.pointer_type), advance.pointer_type))
     # the larger first (by the code each compiles); the controller's callees share no code
     # (touching_torques calls object_pd_step through its address)
     groups = [[advance], [loop], *[[c] for c in callees[2:]], [lcp], [torques],
               [*callees[1:2]], [rows], [stage], [*callees[:1]]]
     compile_all([g for g in groups if g])
-    found = _loops[key] = (compiled(loop), each(pointer), pointer(advance))
+    found = _loops[key] = (compiled(loop), _each(fn, pointer), pointer(advance))
     return found
 
 
@@ -874,14 +876,10 @@ def evaluate_functions(args: tuple, events: bool = True) -> tuple:
     The stages as :func:`loop_functions` makes them for the same types (the same compiles).
     """
     (_, x, active, sy, ctl, wk, out, d) = args
-    stage, rows, torques, lcp, callees = stage_compiles(x, active, sy, ctl, wk, out, d, events)
-
-    def each(f):  # f of every compile of fn, nested as fn
-        return (f(stage), f(rows), f(torques), f(lcp), tuple(f(c) for c in callees))
-
-    entry = compile_of(evaluate_once, (*args, each(lambda c: c.pointer_type)))
-    compile_all([[c] for c in (entry, stage, rows, torques, lcp, *callees)])
-    return compiled(entry), each(pointer)
+    fn = stage_compiles(x, active, sy, ctl, wk, out, d, events)
+    entry = compile_of(evaluate_once, (*args, _each(fn, lambda c: c.pointer_type)))
+    compile_all([[c] for c in (entry, *fn[:4], *fn[4])])
+    return compiled(entry), _each(fn, pointer)
 
 
 # ------------------------------------------------------------------ steps and events
@@ -899,6 +897,26 @@ def _illinois(theta, value, lo, f_lo, hi, f_hi, side):  # pragma: no cover - com
     if side == -1:
         f_lo *= 0.5
     return lo, f_lo, theta, value, -1
+@kernel(refcounts=False)
+def _any_push(active, uni_c, mu0):  # pragma: no cover - compiled
+    """True if an active unilateral row pushed at a step's start (``mu0 > 0``)."""
+    for b in range(active.shape[0]):
+        for r in range(active.shape[1]):
+            if active[b, r] and uni_c[b, r] and mu0[b, r] > 0.0:
+                return True
+    return False
+
+
+@kernel(refcounts=False)
+def _leaves(active, uni_c, mu_end, phi_dd_end, sep_acc, b, r):  # pragma: no cover - compiled
+    """True if row ``(b, r)`` leaves at a step's end (``locate_separation``'s rows).
+
+    Active, unilateral, ``μ <= 0`` and ``φ̈ > sep_acc`` there.
+    """
+    return (active[b, r] and uni_c[b, r] and mu_end[b, r] <= 0.0
+            and phi_dd_end[b, r] > sep_acc)
+
+
 @kernel
 def _step(t, x, d1, h, active, sy, ctl, wk, out, rk, x_new, fn,
           rot):  # pragma: no cover - compiled
@@ -1122,13 +1140,8 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
             return st
         # locate_separation
         sep = False
-        any_push = False
-        for b in range(B):
-            for r in range(R):
-                if active[b, r] and uni_c[b, r] and mu0[b, r] > 0.0:
-                    any_push = True
         end_eval = False  # wk and out hold the evaluation at (t_end, new)
-        if any_push:
+        if _any_push(active, uni_c, mu0):
             st, memo[1] = fn[0](t_end, new, active, sy, ctl, wk, out, dtmp, fn[1], fn[2],
                                 fn[3], fn[4])
             if st != STAGE_OK:
@@ -1139,8 +1152,8 @@ def _advance_with_events(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, im
             both = False
             for b in range(B):
                 for r in range(R):
-                    rows_sep[b, r] = (active[b, r] and uni_c[b, r] and mu_end[b, r] <= 0.0
-                                      and phi_dd_end[b, r] > rules[R_SEP_ACC])
+                    rows_sep[b, r] = _leaves(active, uni_c, mu_end, phi_dd_end,
+                                             rules[R_SEP_ACC], b, r)
                     if rows_sep[b, r] and mu0[b, r] > 0.0:
                         both = True
             if both:
@@ -1272,11 +1285,7 @@ def _advance_touching(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, imp, 
     st = _step(t, x, d1, t_end - t, active, sy, ctl, wk, out, rk, new, fn, rk[-1])
     if st != STAGE_OK:
         return st
-    any_push = False
-    for b in range(B):
-        for r in range(R):
-            if active[b, r] and uni_c[b, r] and mu0[b, r] > 0.0:
-                any_push = True
+    any_push = _any_push(active, uni_c, mu0)
     if any_push:
         st, memo[1] = fn[0](t_end, new, active, sy, ctl, wk, out, dtmp, fn[1], fn[2], fn[3],
                             fn[4])
@@ -1285,8 +1294,8 @@ def _advance_touching(t, x, t_end, active, sy, ctl, wk, out, rk, st0, loc, imp, 
         mu_end, phi_dd_end = out[2], out[3]
         for b in range(B):
             for r in range(R):
-                if (active[b, r] and uni_c[b, r] and mu_end[b, r] <= 0.0
-                        and phi_dd_end[b, r] > rules[R_SEP_ACC] and mu0[b, r] > 0.0):
+                if (_leaves(active, uni_c, mu_end, phi_dd_end, rules[R_SEP_ACC], b, r)
+                        and mu0[b, r] > 0.0):
                     return STAGE_EVENTS_NOT_COMPILED
     copy1(x, new)
     memo[0] = 1 if any_push else 0

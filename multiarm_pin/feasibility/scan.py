@@ -172,7 +172,6 @@ class _ScanGeometry:
             self.ground[k] = True
         self.boxed_ground = np.array(sorted(self.vertices), dtype=int)
         self.ground_columns = np.flatnonzero(self.ground)
-        self.other_columns = np.flatnonzero(~self.ground)
         # each ground pair's column of a scan's ground bounds (RunScan.ground_lower), -1 else
         self.ground_slot = np.full(P, -1, dtype=np.int64)
         self.ground_slot[self.ground_columns] = np.arange(len(self.ground_columns))
