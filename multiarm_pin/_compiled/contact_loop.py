@@ -88,6 +88,7 @@ from multiarm_pin._compiled.function_pointers import (
     pointer,
     type_key,
 )
+from multiarm_pin._compiled.held import hold
 from multiarm_pin._compiled.integrator import advance, advance_semi_implicit, tangent
 from multiarm_pin._compiled.jit import kernel
 from multiarm_pin._compiled.layout import (
@@ -853,33 +854,38 @@ _loops: dict = {}  # (controller mode, arms?, events?, type_key of the head) -> 
 
 
 @kernel
-def evaluate_once(t, x, active, sy, ctl, wk, out, d, fn):  # pragma: no cover - compiled
+def evaluate_once(t, x, active, held, d, fn):  # pragma: no cover - compiled
     """One evaluation at ``(t, x)`` on the active set, as the loop makes it (no event, no record).
 
     :func:`contact_stage` through ``fn`` (:func:`stage_compiles`' tuple, as pointers), with
-    the loop's tuples (:func:`run_contact_rk4`'s ``sy``, ``ctl``, ``wk``, ``out``); the
-    tangent into ``d``, the rest into ``wk`` and ``out``. For an evaluation on its own from
-    Python (:meth:`multiarm_pin.sim.contact_loop.ContactLoop.evaluate`): every call unboxes the
-    tuples' arrays, which a run's loop does once per stretch.
+    the loop's tuples (:func:`run_contact_rk4`'s ``sy``, ``ctl``, ``wk``, ``out``) held in
+    ``held`` (:func:`~multiarm_pin._compiled.held.hold`: a call from Python unboxes one
+    pointer for them); the tangent into ``d``, the rest into ``wk`` and ``out``. For an
+    evaluation on its own from Python
+    (:meth:`multiarm_pin.sim.contact_loop.ContactLoop.evaluate`).
 
     Returns:
         ``(status, solver code)``.
     """
-    sy, ctl, wk, out = address(sy), address(ctl), address(wk), address(out)
+    sy, ctl, wk, out = address(held.sy), address(held.ctl), address(held.wk), address(held.out)
     fns = bind(fn)
     return fns[0](t, x, active, sy, ctl, wk, out, d, fns[1], fns[2], fns[3], fns[4])
 
 
 def evaluate_functions(args: tuple, events: bool = True) -> tuple:
-    """``(evaluate_once's entry point, fn)`` for :func:`evaluate_once`'s arguments before ``fn``.
+    """``(evaluate_once's entry point, held, fn)`` for the loop's arguments ``args``.
 
-    The stages as :func:`loop_functions` makes them for the same types (the same compiles).
+    ``args``: ``(t, x, active, sy, ctl, wk, out, d)``; the entry point is called as
+    ``entry(t, x, active, held, d, fn)``. The stages as :func:`loop_functions` makes them for
+    the same types (the same compiles).
     """
-    (_, x, active, sy, ctl, wk, out, d) = args
+    (t, x, active, sy, ctl, wk, out, d) = args
     fn = stage_compiles(x, active, sy, ctl, wk, out, d, events)
-    entry = compile_of(evaluate_once, (*args, _each(fn, lambda c: c.pointer_type)))
+    held = hold(sy, ctl, wk, out)
+    entry = compile_of(evaluate_once, (t, x, active, held, d,
+                                       _each(fn, lambda c: c.pointer_type)))
     compile_all([[c] for c in (entry, *fn[:4], *fn[4])])
-    return compiled(entry), _each(fn, pointer)
+    return compiled(entry), held, _each(fn, pointer)
 
 
 # ------------------------------------------------------------------ steps and events
@@ -897,6 +903,8 @@ def _illinois(theta, value, lo, f_lo, hi, f_hi, side):  # pragma: no cover - com
     if side == -1:
         f_lo *= 0.5
     return lo, f_lo, theta, value, -1
+
+
 @kernel(refcounts=False)
 def _any_push(active, uni_c, mu0):  # pragma: no cover - compiled
     """True if an active unilateral row pushed at a step's start (``mu0 > 0``)."""

@@ -208,7 +208,8 @@ class ContactLoop:
         # active-set solve), else from the first step that needs it (kernels.loop_functions)
         self.with_events = bool(s.supports.n_rows) or not n
         self._kept_controller = None  # (controller inputs, the kernel's controller tuple)
-        self._evaluator = None  # (controller tuple, events, evaluate_once's entry point, its fn)
+        # (controller tuple, events, the arms' dofs in tau, evaluate_once's entry, held, fn)
+        self._evaluator = None
         self._zero_x = np.zeros(nv)
         self.beside = np.zeros((B, R), dtype=bool)  # the stepper's beside_start, in and out
 
@@ -446,18 +447,19 @@ class ContactLoop:
                                 self._zero_x)
         active = np.array(self.stepper.active, dtype=bool)
         d = np.empty(2 * s.nv + layout.OBJECT_STATE_SIZE)
-        args = (float(t), x, active, self.S, C, self.W, self._O, d)
-        if (self._evaluator is None or self._evaluator[0] is not C
-                or self._evaluator[1] != self.with_events):
-            self._evaluator = (C, self.with_events,
-                               *kernels.evaluate_functions(args, self.with_events))
-        status, _ = self._evaluator[2](*args, self._evaluator[3])
+        kept = self._evaluator
+        if kept is None or kept[0] is not C or kept[1] != self.with_events:
+            kept = self._evaluator = (
+                C, self.with_events, np.flatnonzero(s.arm_set.dof_mask) if s.n_arms else None,
+                *kernels.evaluate_functions((float(t), x, active, self.S, C, self.W, self._O,
+                                             d), self.with_events))
+        entry, held, fn = kept[3:]
+        status, _ = entry(float(t), x, active, held, d, fn)
         if status == kernels.STAGE_EVENTS_NOT_COMPILED:
             self.with_events = True
             return self.evaluate(t, state)
         tau = self._O[5]  # (n, k) padded
-        return int(status), d, tau.take(np.flatnonzero(s.arm_set.dof_mask)) if s.n_arms \
-            else np.zeros(0)
+        return int(status), d, tau.take(kept[2]) if s.n_arms else np.zeros(0)
 
 
 def unsupported_joints_note(system) -> str:
