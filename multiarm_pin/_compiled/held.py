@@ -17,10 +17,10 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from numba import njit, types
+from numba import types
 from numba.experimental import structref
 
-from multiarm_pin._compiled.jit import OPTIONS, jit_disabled
+from multiarm_pin._compiled.jit import jit_disabled, kernel
 
 
 class HeldTuples(NamedTuple):
@@ -47,7 +47,7 @@ class Held(structref.StructRefProxy):
 structref.define_proxy(Held, HeldType, list(HeldTuples._fields))
 
 
-@njit(**OPTIONS)
+@kernel
 def _make(sy, ctl, wk, out):  # pragma: no cover - compiled
     return Held(sy, ctl, wk, out)
 
