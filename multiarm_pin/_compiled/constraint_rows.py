@@ -35,29 +35,34 @@ from multiarm_pin._compiled.layout import (
 )
 
 
-@kernel
+@kernel(refcounts=False)
 def _body(body, n, tool_p, tool_R, tool_twist, obj_p, obj_R, obj_twist):  # pragma: no cover
     """Position, rotation and twist of a contact's body, as tuples of scalars.
 
     Tool ``body`` or, past the ``n`` tools, the object: ``(3,)`` [m], the rotation's rows
-    ``((3,), (3,), (3,))``, ``(6,)`` [m/s, rad/s].
+    ``((3,), (3,), (3,))``, ``(6,)`` [m/s, rad/s]. Read element by element (no view of a
+    tool's row).
     """
     if body < n:
-        P, R, V = tool_p[body], tool_R[body], tool_twist[body]
-    else:
-        P, R, V = obj_p, obj_R, obj_twist
+        P, R, V = tool_p, tool_R, tool_twist
+        return ((P[body, 0], P[body, 1], P[body, 2]),
+                ((R[body, 0, 0], R[body, 0, 1], R[body, 0, 2]),
+                 (R[body, 1, 0], R[body, 1, 1], R[body, 1, 2]),
+                 (R[body, 2, 0], R[body, 2, 1], R[body, 2, 2])),
+                (V[body, 0], V[body, 1], V[body, 2], V[body, 3], V[body, 4], V[body, 5]))
+    P, R, V = obj_p, obj_R, obj_twist
     return ((P[0], P[1], P[2]),
             ((R[0, 0], R[0, 1], R[0, 2]), (R[1, 0], R[1, 1], R[1, 2]), (R[2, 0], R[2, 1], R[2, 2])),
             (V[0], V[1], V[2], V[3], V[4], V[5]))
 
 
-@kernel
+@kernel(refcounts=False)
 def _cross(a0, a1, a2, b0, b1, b2):  # pragma: no cover - compiled
     """``a × b`` as a tuple."""
     return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
 
 
-@kernel
+@kernel(refcounts=False)
 def _rotate(R, v0, v1, v2):  # pragma: no cover - compiled
     """``R v`` for ``R`` as rows (tuples), as a tuple."""
     return (R[0][0] * v0 + R[0][1] * v1 + R[0][2] * v2,
