@@ -6,6 +6,7 @@ import contextlib
 import os
 import queue
 import shutil
+import signal
 import subprocess
 import sys
 import threading
@@ -16,6 +17,21 @@ REPO = Path(__file__).resolve().parent.parent
 
 Q0_UR5 = [0.0, -1.2, 1.6, -0.4, 1.57, 0.0]
 """A UR5 configuration well inside its limits, away from singularities [rad]."""
+
+
+@contextlib.contextmanager
+def python_sigint_handler():
+    """SIGINT to Python's own handler inside the block, then back to what it was.
+
+    A suite started with SIGINT ignored (a background job of a shell without job control,
+    ``nohup``) passes that on, and Python keeps an ignored SIGINT: a test of Ctrl-C sets the
+    handler it starts from.
+    """
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, inherited)
 
 
 def one_arm_scenario(name: str = "one_ur5", duration: float = 0.02, dt: float = 0.002,

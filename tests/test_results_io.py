@@ -22,6 +22,7 @@ from multiarm_pin.app.results_io import (
     write_atomic,
 )
 from multiarm_pin.exceptions import OutputError
+from tests.run_helpers import python_sigint_handler
 
 
 @pytest.mark.parametrize("name, expected", [
@@ -127,18 +128,13 @@ def test_write_atomic(tmp_path):
 
 def test_deferred_signals_deliver_after_the_block():
     done = []
-    # Python's own handler, even if this process was started with SIGINT ignored (a
-    # background job of a shell without job control)
-    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
+    with python_sigint_handler():  # even if the suite was started with SIGINT ignored
         with pytest.raises(KeyboardInterrupt):
             with deferred_signals():
                 os.kill(os.getpid(), signal.SIGINT)
                 done.append("block finished")  # not interrupted inside
         assert done == ["block finished"]
         assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
-    finally:
-        signal.signal(signal.SIGINT, inherited)
 
 
 def test_run_lock_refuses_a_second_holder_names_it_and_is_removed(tmp_path):

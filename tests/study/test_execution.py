@@ -16,6 +16,7 @@ import pytest
 from multiarm_pin.study import Study, read_table
 from multiarm_pin.study.execution import local_cluster
 from multiarm_pin.study.metrics import GRASP_METRICS, SIMULATION_METRICS
+from tests.run_helpers import python_sigint_handler
 from tests.study.helpers import rows_by_case, tiny_grasp_study, tiny_simulation_study
 
 pytestmark = pytest.mark.timeout(900)
@@ -179,24 +180,25 @@ def test_a_ctrl_c_swallowed_on_its_way_still_stops_the_driver():
     check raises it. Outside the block, SIGINT has Python's default handler again."""
     from multiarm_pin.study.execution import SigintLatch
 
-    latch = SigintLatch()
-    with latch.installed():
-        latch.check()  # nothing yet
-        try:  # the swallowing callback
-            os.kill(os.getpid(), signal.SIGINT)
-            time.sleep(1.0)  # the handler runs at the next bytecode boundary
-        except KeyboardInterrupt:
-            pass
-        with pytest.raises(KeyboardInterrupt):
-            latch.check()
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
-    latch2 = SigintLatch()
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # a caller's choice is kept
-    try:
-        with latch2.installed():
-            assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    with python_sigint_handler():  # even if the suite was started with SIGINT ignored
+        latch = SigintLatch()
+        with latch.installed():
+            latch.check()  # nothing yet
+            try:  # the swallowing callback
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(1.0)  # the handler runs at the next bytecode boundary
+            except KeyboardInterrupt:
+                pass
+            with pytest.raises(KeyboardInterrupt):
+                latch.check()
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+        latch2 = SigintLatch()
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # a caller's choice is kept
+        try:
+            with latch2.installed():
+                assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+        finally:
+            signal.signal(signal.SIGINT, previous)
 
 
 def test_a_ctrl_c_dropped_in_a_finaliser_is_not_printed_but_other_errors_are(monkeypatch):
@@ -208,30 +210,31 @@ def test_a_ctrl_c_dropped_in_a_finaliser_is_not_printed_but_other_errors_are(mon
 
     from multiarm_pin.study.execution import SigintLatch
 
-    seen = []
+    with python_sigint_handler():  # even if the suite was started with SIGINT ignored
+        seen = []
 
-    def record(unraisable):
-        seen.append(type(unraisable.exc_value))
+        def record(unraisable):
+            seen.append(type(unraisable.exc_value))
 
-    monkeypatch.setattr(sys, "unraisablehook", record)
-    latch = SigintLatch()
+        monkeypatch.setattr(sys, "unraisablehook", record)
+        latch = SigintLatch()
 
-    class Interrupted:
-        def __del__(self):
-            latch._handler(signal.SIGINT, None)  # the signal lands here
+        class Interrupted:
+            def __del__(self):
+                latch._handler(signal.SIGINT, None)  # the signal lands here
 
-    class Failing:
-        def __del__(self):
-            raise ValueError("kept")
+        class Failing:
+            def __del__(self):
+                raise ValueError("kept")
 
-    with latch.installed():
-        Interrupted()
-        Failing()
-        gc.collect()
-        with pytest.raises(KeyboardInterrupt):
-            latch.check()
-    assert seen == [ValueError]
-    assert sys.unraisablehook is record
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
-    Interrupted()  # outside the block the hook is the caller's again
-    assert seen == [ValueError, KeyboardInterrupt]
+        with latch.installed():
+            Interrupted()
+            Failing()
+            gc.collect()
+            with pytest.raises(KeyboardInterrupt):
+                latch.check()
+        assert seen == [ValueError]
+        assert sys.unraisablehook is record
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+        Interrupted()  # outside the block the hook is the caller's again
+        assert seen == [ValueError, KeyboardInterrupt]
