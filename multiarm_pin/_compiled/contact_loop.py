@@ -925,7 +925,7 @@ def _leaves(active, uni_c, mu_end, phi_dd_end, sep_acc, b, r):  # pragma: no cov
             and phi_dd_end[b, r] > sep_acc)
 
 
-@kernel
+@kernel(refcounts=False)  # allocates nothing: one twin for every advance
 def _step(t, x, d1, h, active, sy, ctl, wk, out, rk, x_new, fn,
           rot):  # pragma: no cover - compiled
     """One step ``h`` [s] from ``x`` (tangent ``d1`` there) into ``x_new`` (``Stepper.step``).
