@@ -841,9 +841,11 @@ def loop_functions(head: tuple, events: bool = True) -> tuple:
                          numba.types.int64)
     loop = compile_of(run_contact_rk4,
                       (*head, _each(fn, lambda c: c.pointer_type), advance.pointer_type))
-    # the larger first (by the code each compiles); the controller's callees share no code
-    # (touching_torques calls object_pd_step through its address)
-    groups = [[advance], [loop], *[[c] for c in callees[2:]], [lcp], [torques],
+    # the larger first (by the code each compiles): the active-set kernel before the
+    # controller's callees, which a run whose events come later compiles with it, so that the
+    # two processes finish together; the controller's callees share no code (touching_torques
+    # calls object_pd_step through its address)
+    groups = [[advance], [loop], [lcp], *[[c] for c in callees[2:]], [torques],
               [*callees[1:2]], [rows], [stage], [*callees[:1]]]
     compile_all([g for g in groups if g])
     found = _loops[key] = (compiled(loop), _each(fn, pointer), pointer(advance))
