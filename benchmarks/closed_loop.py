@@ -342,7 +342,7 @@ def write_report(path: Path, weld: Sequence[Row], scen: Sequence[Row], cold: dic
               "calls at 2 arms, by order alone). "
               "`closed` = one closed-loop evaluation as `simulate` runs it (the compiled "
               "loop's: arm terms, blocks, object_pd and forward dynamics in one compiled call, "
-              "`ContactLoop.evaluate`, which unboxes the loop's arrays at every call), "
+              "`ContactLoop.evaluate`, its tuples held in one numba structure), "
               "`closed API` = the same through the Python API "
               "(`closed_loop_evaluation`, which returns the blocks' views), `in run` = the "
               "wall time of the whole `simulate` run divided by its evaluations (4 per RK4 "

@@ -8,8 +8,8 @@ during the run weighs on both alike. Each process loads its kernels from its own
 numba cache (a first quick run of each fills it; its compile is not timed). The report gives
 each case's medians over the processes of each side and their ratio (this / base).
 
-Columns (``closed_loop.py``'s): ``closed`` = one evaluation called from Python (its
-arguments unboxed at each call), ``in run`` = the wall time of a whole ``simulate`` run
+Columns (``closed_loop.py``'s): ``closed`` = one evaluation called from Python
+(``ContactLoop.evaluate``), ``in run`` = the wall time of a whole ``simulate`` run
 divided by its evaluations (what a run costs per evaluation), ``RTF`` = simulated time /
 wall time of that run.
 

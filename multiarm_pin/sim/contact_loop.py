@@ -432,8 +432,9 @@ class ContactLoop:
         solve (:func:`~multiarm_pin._compiled.contact_loop.contact_stage`), no separation, no
         event, no record: what :func:`~multiarm_pin.sim.closed_loop.closed_loop_evaluation`
         computes with Pinocchio and numpy (the stepper's evaluation). The loop must be
-        :meth:`ready` at ``state``. Every call unboxes the loop's arrays (a run's loop does
-        that once per stretch): for tests and benchmarks.
+        :meth:`ready` at ``state``. The loop's tuples are held once with its entry point
+        (:func:`~multiarm_pin._compiled.held.hold`): a call unboxes one pointer for them. For
+        tests and benchmarks.
 
         Returns:
             ``(status, tangent (2 nv + 13,), tau (nv,) [N m])``: ``STAGE_OK`` or why the
